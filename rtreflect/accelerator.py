@@ -1,0 +1,55 @@
+"""Accelerator: one Embree BVH over every patch's triangles (embreex, used directly).
+
+trimesh's own ray wrapper drops the barycentrics, which are what turn a triangle
+hit into a starting (u, v) for the exact hit; so the Embree scene is built here.
+Embree works in float32; everything around it stays float64.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
+
+from .tessellation import Tessellation
+
+
+class MeshHits(NamedTuple):
+    prim: np.ndarray  # triangle index, −1 where the ray misses
+    b1: np.ndarray  # Embree barycentrics: point = (1 − b1 − b2)·v0 + b1·v1 + b2·v2
+    b2: np.ndarray
+    t: np.ndarray  # ray distance (float64 of Embree's float32)
+
+
+class Accelerator:
+    def __init__(self, tessellation: Tessellation):
+        self.scene = rtcore_scene.EmbreeScene()
+        # Keep references: embreex shares these buffers with Embree.
+        self._vertices = np.ascontiguousarray(tessellation.vertices, dtype=np.float32)
+        self._faces = np.ascontiguousarray(tessellation.faces, dtype=np.int32)
+        self._mesh = TriangleMesh(self.scene, self._vertices, self._faces)
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> MeshHits:
+        """Nearest triangle hit of each ray."""
+        result = self.scene.run(
+            np.ascontiguousarray(origins, dtype=np.float32),
+            np.ascontiguousarray(directions, dtype=np.float32),
+            query="INTERSECT",
+            output=1,
+        )
+        prim = np.where(result["geomID"] >= 0, result["primID"], -1).astype(np.int64)
+        return MeshHits(prim, result["u"].astype(np.float64), result["v"].astype(np.float64), result["tfar"].astype(np.float64))
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray, max_distance: np.ndarray) -> np.ndarray:
+        """True where a triangle lies on the segment from each origin to max_distance along its direction."""
+        if len(origins) == 0:
+            return np.zeros(0, dtype=bool)
+        result = self.scene.run(
+            np.ascontiguousarray(origins, dtype=np.float32),
+            np.ascontiguousarray(directions, dtype=np.float32),
+            dists=np.ascontiguousarray(np.minimum(max_distance, np.finfo(np.float32).max), dtype=np.float32),
+            query="OCCLUDED",
+        )
+        return np.asarray(result) >= 0

@@ -1,0 +1,94 @@
+"""Camera: pixel (and sub-pixel sample) rays, exactly as DESIGN.md's camera contract.
+
+forward w = normalize(look_at − eye), right r = normalize(w × up), image up q = r × w.
+For pixel (row i, column j) of a W×H image, x = 2(j + ½)/W − 1 and y = 1 − 2(i + ½)/H;
+sample offsets replace the ½ with the centres of an s×s grid inside the pixel.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .scene import CameraSpec
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def sample_offsets(samples: int) -> np.ndarray:
+    """(s², 2) offsets (dy, dx) in [0, 1): centres of an s×s grid, row-major. Fixed, so renders are deterministic."""
+    centres = (np.arange(samples) + 0.5) / samples
+    dy, dx = np.meshgrid(centres, centres, indexing="ij")
+    return np.stack([dy.ravel(), dx.ravel()], axis=1)
+
+
+@dataclass(frozen=True)
+class Camera:
+    spec: CameraSpec
+    width: int
+    height: int
+
+    @property
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(w, r, q): forward, right, image up."""
+        w = _unit(self.spec.look_at - self.spec.eye)
+        r = _unit(np.cross(w, self.spec.up))
+        return w, r, np.cross(r, w)
+
+    @property
+    def orthographic(self) -> bool:
+        return self.spec.projection == "orthographic"
+
+    def _half_extents(self) -> tuple[float, float]:
+        """Half the image plane's width and height at unit distance (perspective) or in model units (orthographic)."""
+        aspect = self.width / self.height
+        half_h = self.spec.view_height / 2 if self.orthographic else math.tan(math.radians(self.spec.fov) / 2)
+        return half_h * aspect, half_h
+
+    def rays(self, rows: np.ndarray, cols: np.ndarray, offsets: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Origins and unit directions (N, 3) for pixels (rows, cols) at sub-pixel offsets (dy, dx).
+
+        ``offsets`` defaults to the pixel centre (½, ½); it may be (N, 2) or broadcastable.
+        """
+        rows = np.asarray(rows, dtype=np.float64)
+        cols = np.asarray(cols, dtype=np.float64)
+        if offsets is None:
+            oy = ox = 0.5
+        else:
+            oy, ox = offsets[..., 0], offsets[..., 1]
+        x = 2.0 * (cols + ox) / self.width - 1.0
+        y = 1.0 - 2.0 * (rows + oy) / self.height
+        w, r, q = self.basis
+        half_w, half_h = self._half_extents()
+        x, y = (np.ravel(a) for a in np.broadcast_arrays(x, y))
+        if self.orthographic:
+            origins = self.spec.eye + (x * half_w)[:, None] * r + (y * half_h)[:, None] * q
+            directions = np.broadcast_to(w, origins.shape).copy()
+        else:
+            directions = w + (x * half_w)[:, None] * r + (y * half_h)[:, None] * q
+            directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+            origins = np.broadcast_to(self.spec.eye, directions.shape).copy()
+        return origins, directions
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Image coordinates (column, row) in pixels of 3D points — the inverse of `rays` at the centre convention.
+
+        Pixel centres sit at half-integers: pixel (i, j)'s centre projects to (j + ½, i + ½).
+        """
+        w, r, q = self.basis
+        half_w, half_h = self._half_extents()
+        rel = np.asarray(points, dtype=np.float64) - self.spec.eye
+        depth = rel @ w
+        if self.orthographic:
+            x = (rel @ r) / half_w
+            y = (rel @ q) / half_h
+        else:
+            x = (rel @ r) / (depth * half_w)
+            y = (rel @ q) / (depth * half_h)
+        col = (x + 1.0) * self.width / 2.0
+        row = (1.0 - y) * self.height / 2.0
+        return np.stack([col, row], axis=-1)

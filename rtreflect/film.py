@@ -1,0 +1,47 @@
+"""Film: the supersampled colour image and the per-pixel AOVs (DESIGN.md, "EXR channels").
+
+``R G B A`` come from the s×s samples of each pixel: the colour is line coverage
+blending ``line_color`` over ``surface_color``, with ``background`` where a sample
+hits nothing (so with a black background RGB is premultiplied by A). The AOVs
+come from the ray through the pixel centre.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+COLOR_CHANNELS = ("R", "G", "B", "A")
+AOV_CHANNELS = ("P.X", "P.Y", "P.Z", "N.X", "N.Y", "N.Z", "u", "v", "patch", "Z", "f", "line.id", "line.dist")
+CHANNELS = COLOR_CHANNELS + AOV_CHANNELS
+
+
+def aov_planes(aovs: dict[str, np.ndarray]) -> np.ndarray:
+    """(N, 13) AOV values in channel order from the named per-pixel arrays (P and N are (N, 3))."""
+    return np.column_stack([aovs["P"], aovs["N"], aovs["u"], aovs["v"], aovs["patch"], aovs["Z"], aovs["f"],
+                            aovs["line.id"], aovs["line.dist"]])
+
+
+def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, background) -> np.ndarray:
+    """(P, 4) linear RGBA from per-sample (P, s²) hit and lit flags."""
+    samples = hit.shape[1]
+    n_hit = hit.sum(axis=1)
+    n_lit = (hit & lit).sum(axis=1)
+    rgb = (n_lit[:, None] * np.asarray(line_color) + (n_hit - n_lit)[:, None] * np.asarray(surface_color)
+           + (samples - n_hit)[:, None] * np.asarray(background)) / samples
+    return np.column_stack([rgb, n_hit / samples])
+
+
+class Film:
+    def __init__(self, width: int, height: int):
+        self.width = width
+        self.height = height
+        self.pixels = np.empty((height, width, len(CHANNELS)), dtype=np.float32)
+
+    def put(self, row0: int, row1: int, rgba: np.ndarray, aovs: np.ndarray) -> None:
+        """Store rows [row0, row1): rgba (P, 4) and aovs (P, 13), P = (row1 − row0)·width pixels."""
+        block = self.pixels[row0:row1].reshape(-1, len(CHANNELS))
+        block[:, :4] = rgba
+        block[:, 4:] = aovs
+
+    def channel(self, name: str) -> np.ndarray:
+        return self.pixels[..., CHANNELS.index(name)]

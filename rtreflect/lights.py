@@ -1,0 +1,115 @@
+"""Lights and modes: parallel light tubes and the reflection-line mode (Ulmet, sections 3–4).
+
+Notation of the paper: surface point R, unit normal n, a towards the eye,
+s the reflected direction, light line k through B_k with unit direction c.
+The tubes lie in a plane through Q with unit normal m; e = (c × m)/|c × m|, and
+tube k passes through B_k = Q + c_k e.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .scene import LightSpec
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.einsum("...j,...j->...", a, b)
+
+
+def reflect(a: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Reflected direction, paper eq. (3): s = 2 (a·n) n − a, for unit a and n."""
+    return 2.0 * _dot(a, n)[:, None] * n - a
+
+
+@dataclass(frozen=True)
+class TubeDistances:
+    """Per point and tube (N, K): skew-line distance d, ray parameter t of closest approach, and reach."""
+
+    d: np.ndarray
+    t: np.ndarray
+    ahead: np.ndarray  # t > 0 and within the tube's length
+
+
+@dataclass(frozen=True)
+class TubeLights:
+    Q: np.ndarray
+    m: np.ndarray
+    c: np.ndarray
+    e: np.ndarray
+    c_k: np.ndarray
+    radius: float
+    length: float
+
+    @classmethod
+    def from_spec(cls, spec: LightSpec) -> "TubeLights":
+        e = np.cross(spec.direction, spec.normal)
+        return cls(spec.point, spec.normal, spec.direction, e / np.linalg.norm(e), np.asarray(spec.positions, float),
+                   float(spec.radius), float(spec.length))
+
+    @property
+    def points(self) -> np.ndarray:
+        """B_k = Q + c_k e: a point of each tube's axis, its centre for a finite tube."""
+        return self.Q + self.c_k[:, None] * self.e
+
+    def distances(self, R: np.ndarray, s: np.ndarray) -> TubeDistances:
+        """Skew-line distance d between the ray R + t s and every light line, paper eq. (4).
+
+        d = |(s × c)·b| / |s × c| with b = B_k − R; if s ∥ c, d = |b × c|. Since
+        b = (Q − R) + c_k e, everything reduces to per-point scalars and c_k.
+        """
+        rho = R - self.Q  # = −b − c_k e
+        sxc = np.cross(s, self.c)
+        sxc_norm = np.linalg.norm(sxc, axis=1)
+        g = _dot(sxc, rho)[:, None]
+        h = _dot(sxc, self.e)[:, None]
+        ck = self.c_k[None, :]
+        sc = _dot(s, self.c)[:, None]
+        se = _dot(s, self.e)[:, None]
+        s_rho = _dot(s, rho)[:, None]
+        c_rho = _dot(rho, self.c)[:, None]
+        parallel = (sxc_norm <= 1e-12)[:, None]
+        safe = np.where(parallel, 1.0, sxc_norm[:, None])
+        d = np.abs(g - ck * h) / safe
+        # Closest approach of R + t s and B_k + τ c, with w0 = R − B_k = rho − c_k e (and c ⊥ e):
+        denom = np.where(parallel, 1.0, 1.0 - sc**2)
+        s_w0 = s_rho - ck * se
+        t = (sc * c_rho - s_w0) / denom
+        tau = (c_rho - sc * s_w0) / denom
+        if np.any(parallel):
+            # s ∥ c: d = |b × c|, the point-to-line distance; the ray runs along the tube, never reaching a finite one.
+            w0 = rho[:, None, :] - ck[..., None] * self.e
+            d_par = np.linalg.norm(np.cross(w0, self.c), axis=2)
+            d = np.where(parallel, d_par, d)
+            t = np.where(parallel, np.inf, t)
+            tau = np.where(parallel, np.inf, tau)
+        ahead = (t > 0) & (np.abs(tau) <= 0.5 * self.length)
+        return TubeDistances(d, t, ahead)
+
+    def ulmet_f(self, R: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Ulmet's function, general form of paper eq. (5): the e-coordinate where the reflected ray meets the light plane.
+
+        t = m·(Q − R)/(m·s), f = e·(R + t s − Q); NaN where t ≤ 0 (the ray never reaches the plane).
+        For m = k, c = j this is f = [(s × r)·j + z0 (s·i)] / (s·k).
+        """
+        ms = _dot(s, self.m)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = _dot(self.Q - R, self.m) / ms
+            f = _dot(R + t[:, None] * s - self.Q, self.e)
+        return np.where(t > 0, f, np.nan)
+
+    def nearest(self, dist: TubeDistances) -> tuple[np.ndarray, np.ndarray]:
+        """Index and distance d of the nearest tube ahead of each point; −1 and NaN where none is."""
+        masked = np.where(dist.ahead, dist.d, np.inf)
+        k = np.argmin(masked, axis=1)
+        dk = masked[np.arange(len(k)), k]
+        found = np.isfinite(dk)
+        return np.where(found, k, -1), np.where(found, dk, np.nan)
+
+    def candidates(self, dist: TubeDistances) -> tuple[np.ndarray, np.ndarray]:
+        """Per point: whether some tube ahead is within the radius, and the ray distance to the nearest such."""
+        within = dist.ahead & (dist.d <= self.radius)
+        t_hit = np.where(within, dist.t, np.inf).min(axis=1)
+        return within.any(axis=1), t_hit

@@ -1,0 +1,422 @@
+"""Scene files (TOML) → a validated, immutable `Scene`.
+
+The schema is the contract in DESIGN.md ("Scene files"): tables ``[image]``,
+``[camera]``, ``[lights]``, one or more ``[[surface]]``, ``[render]``, ``[output]``.
+Every problem is reported as a `SceneError` naming the file and the field, so a
+user can fix it from a single line.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .bpt import read_bpt
+from .errors import SceneError
+from .surfaces import NurbsSurface
+
+#: Largest image side. The film keeps 17 float32 planes per pixel, and beyond this
+#: the planes alone pass the memory of a workstation.
+MAX_SIDE = 16384
+#: Largest pixel count (8192 × 16384): 17 planes × 4 bytes × 2^27 ≈ 9 GB of film.
+MAX_PIXELS = 1 << 27
+#: Largest s (s×s samples per pixel); 256 samples per pixel is far past visible gains.
+MAX_SAMPLES = 16
+#: Largest tessellation per knot span; hits are refined by Newton, so more buys nothing.
+MAX_TESSELLATION = 256
+#: |c·m| above this means the tube direction is not in the light plane.
+IN_PLANE_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class ImageSpec:
+    width: int = 960
+    height: int = 540
+    samples: int = 4  # s: s×s stratified samples per pixel
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    projection: str = "perspective"
+    eye: np.ndarray = field(default_factory=lambda: np.array([0.0, -3.2, 2.4]))
+    look_at: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    fov: float = 40.0
+    view_height: float = 3.0
+
+
+@dataclass(frozen=True)
+class LightSpec:
+    """Parallel tubes in one plane: through Q with unit normal m, along unit c, at c_k along e = c × m."""
+
+    point: np.ndarray  # Q
+    normal: np.ndarray  # m (unit)
+    direction: np.ndarray  # c (unit)
+    positions: np.ndarray  # c_k
+    radius: float
+    length: float = math.inf
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    tessellation: int = 16
+    surface_color: np.ndarray = field(default_factory=lambda: np.array([0.18, 0.18, 0.2]))
+    line_color: np.ndarray = field(default_factory=lambda: np.array([1.0, 1.0, 1.0]))
+    background: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+@dataclass(frozen=True)
+class OutputSpec:
+    name: str
+    exr: bool = True
+    png: bool = True
+
+
+@dataclass(frozen=True)
+class Scene:
+    path: Path
+    image: ImageSpec
+    camera: CameraSpec
+    lights: LightSpec
+    surfaces: tuple[NurbsSurface, ...]
+    render: RenderSettings
+    output: OutputSpec
+    sha256: str  # of the scene file's bytes
+    inputs_sha256: str  # of the scene file and every geometry file it reads
+
+    def with_image(self, width: int | None = None, height: int | None = None, samples: int | None = None) -> "Scene":
+        """The same scene with some `[image]` values overridden (command-line options), validated alike."""
+        values = {"width": width, "height": height, "samples": samples}
+        table = {k: v for k, v in vars(self.image).items()}
+        table.update({k: v for k, v in values.items() if v is not None})
+        return replace(self, image=_parse_image(_Table(self.path, "image", table)))
+
+
+class _Table:
+    """One TOML table being read: tracks which keys were used so unknown ones are errors."""
+
+    def __init__(self, file: Path, prefix: str, data: Any):
+        self.file = file
+        self.prefix = prefix
+        if not isinstance(data, dict):
+            raise SceneError(file, prefix, f"must be a table, got {_kind(data)}")
+        self.data = data
+        self.used: set[str] = set()
+
+    def name(self, key: str) -> str:
+        return f"{self.prefix}.{key}" if self.prefix else key
+
+    def error(self, key: str, message: str) -> SceneError:
+        return SceneError(self.file, self.name(key), message)
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str, default: Any = ..., required: bool = False) -> Any:
+        self.used.add(key)
+        if key in self.data:
+            return self.data[key]
+        if required or default is ...:
+            raise self.error(key, "required field is missing")
+        return default
+
+    def number(self, key: str, default: Any = ..., *, low: float | None = None, high: float | None = None,
+               open_low: bool = False, open_high: bool = False, integer: bool = False) -> Any:
+        value = self.raw(key, default)
+        if value is default and default is not ...:
+            return value
+        return _number(self, key, value, low, high, open_low, open_high, integer)
+
+    def boolean(self, key: str, default: bool) -> bool:
+        value = self.raw(key, default)
+        if not isinstance(value, bool):
+            raise self.error(key, f"must be true or false, got {_kind(value)}")
+        return value
+
+    def string(self, key: str, default: Any = ..., choices: tuple[str, ...] | None = None) -> str:
+        value = self.raw(key, default)
+        if not isinstance(value, str):
+            raise self.error(key, f"must be a string, got {_kind(value)}")
+        if choices and value not in choices:
+            raise self.error(key, f"must be one of {', '.join(repr(c) for c in choices)}, got {value!r}")
+        return value
+
+    def array(self, key: str, shape: tuple[int | None, ...], default: Any = ...) -> np.ndarray:
+        """A nested list of finite numbers with the given shape (None: any positive length)."""
+        value = self.raw(key, default)
+        if value is default and default is not ...:
+            return np.asarray(value, dtype=np.float64)
+        return _array(self, key, value, shape)
+
+    def vector(self, key: str, default: Any = ..., nonzero: bool = False) -> np.ndarray:
+        vec = self.array(key, (3,), default)
+        if nonzero and not np.linalg.norm(vec) > 0:
+            raise self.error(key, "must not be the zero vector")
+        return vec
+
+    def finish(self) -> None:
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            raise self.error(unknown[0], "unknown key (check the spelling; see DESIGN.md for the scene schema)")
+
+
+def _kind(value: Any) -> str:
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, (int, float)):
+        return f"the number {value!r}"
+    if isinstance(value, str):
+        return f"the string {value!r}"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, dict):
+        return "a table"
+    return type(value).__name__
+
+
+def _number(table: _Table, key: str, value: Any, low, high, open_low, open_high, integer) -> Any:
+    if integer:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise table.error(key, f"must be an integer, got {_kind(value)}")
+    else:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise table.error(key, f"must be a number, got {_kind(value)}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise table.error(key, f"must be finite, got {value}")
+    if low is not None and (value < low or (open_low and value == low)):
+        raise table.error(key, f"must be {'>' if open_low else '>='} {low:g}, got {value}")
+    if high is not None and (value > high or (open_high and value == high)):
+        raise table.error(key, f"must be {'<' if open_high else '<='} {high:g}, got {value}")
+    return value
+
+
+def _array(table: _Table, key: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarray:
+    def walk(item: Any, depth: int, where: str) -> None:
+        if depth == len(shape):
+            if isinstance(item, bool) or not isinstance(item, (int, float)):
+                raise table.error(key + where, f"must be a number, got {_kind(item)}")
+            if not math.isfinite(item):
+                raise table.error(key + where, f"must be finite, got {item}")
+            return
+        expected = shape[depth]
+        if not isinstance(item, list):
+            raise table.error(key + where, f"must be an array{f' of {expected}' if expected else ''}, got {_kind(item)}")
+        if expected is not None and len(item) != expected:
+            raise table.error(key + where, f"must have {expected} entries, got {len(item)}")
+        if expected is None and len(item) == 0:
+            raise table.error(key + where, "must not be empty")
+        for i, sub in enumerate(item):
+            walk(sub, depth + 1, f"{where}[{i}]")
+
+    walk(value, 0, "")
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim != len(shape):  # ragged nesting that walk() let through at a shallower level
+        raise table.error(key, "rows must all have the same length")
+    return arr
+
+
+def _ragged_checked(table: _Table, key: str, value: Any, depth: int) -> list:
+    """Reject ragged nested lists before numpy sees them; returns the value."""
+    if not isinstance(value, list) or not value:
+        raise table.error(key, f"must be a non-empty array, got {_kind(value)}")
+    if depth > 1:
+        lengths = set()
+        for i, row in enumerate(value):
+            _ragged_checked(table, f"{key}[{i}]", row, depth - 1)
+            lengths.add(len(row))
+        if len(lengths) > 1:
+            raise table.error(key, f"rows must all have the same length, got lengths {sorted(lengths)}")
+    return value
+
+
+def _parse_image(t: _Table) -> ImageSpec:
+    width = t.number("width", ImageSpec.width, low=1, high=MAX_SIDE, integer=True)
+    height = t.number("height", ImageSpec.height, low=1, high=MAX_SIDE, integer=True)
+    samples = t.number("samples", ImageSpec.samples, low=1, high=MAX_SAMPLES, integer=True)
+    t.finish()
+    if width * height > MAX_PIXELS:
+        raise t.error("width", f"{width}×{height} pixels is more than the {MAX_PIXELS} the film can hold in memory")
+    return ImageSpec(width, height, samples)
+
+
+def _parse_camera(t: _Table) -> CameraSpec:
+    projection = t.string("projection", "perspective", ("perspective", "orthographic"))
+    eye = t.vector("eye", CameraSpec().eye)
+    look_at = t.vector("look_at", CameraSpec().look_at)
+    up = t.vector("up", CameraSpec().up, nonzero=True)
+    fov = t.number("fov", 40.0, low=0, high=180, open_low=True, open_high=True)
+    view_height = t.number("view_height", 3.0, low=0, open_low=True)
+    t.finish()
+    forward = look_at - eye
+    if not np.linalg.norm(forward) > 0:
+        raise t.error("look_at", "must differ from camera.eye")
+    if np.linalg.norm(np.cross(forward / np.linalg.norm(forward), up / np.linalg.norm(up))) < 1e-9:
+        raise t.error("up", "must not be parallel to the view direction (look_at - eye)")
+    return CameraSpec(projection, eye, look_at, up, fov, view_height)
+
+
+def _parse_lights(t: _Table) -> LightSpec:
+    point = t.vector("point", required_default())
+    normal = t.vector("normal", required_default(), nonzero=True)
+    direction = t.vector("direction", required_default(), nonzero=True)
+    m = normal / np.linalg.norm(normal)
+    c = direction / np.linalg.norm(direction)
+    if abs(float(c @ m)) > IN_PLANE_TOLERANCE:
+        raise t.error("direction", f"must lie in the light plane (perpendicular to lights.normal); c·m = {float(c @ m):.3g}")
+    if t.has("positions"):
+        for key in ("spacing", "count"):
+            if t.has(key):
+                raise t.error(key, "give either lights.positions or lights.spacing with lights.count, not both")
+        positions = t.array("positions", (None,))
+    elif t.has("spacing") or t.has("count"):
+        spacing = t.number("spacing", required_default(), low=0, open_low=True)
+        count = t.number("count", required_default(), low=1, high=10000, integer=True)
+        positions = (np.arange(count) - 0.5 * (count - 1)) * spacing
+    else:
+        raise t.error("positions", "required field is missing (or give lights.spacing and lights.count)")
+    radius = t.number("radius", 0.05, low=0, open_low=True)
+    length = t.number("length", math.inf, low=0, open_low=True)
+    t.finish()
+    return LightSpec(point, m, c, positions, radius, length)
+
+
+def required_default() -> Any:
+    """Marker for `_Table` readers: the field has no default."""
+    return ...
+
+
+def _parse_render(t: _Table) -> RenderSettings:
+    defaults = RenderSettings()
+    tess = t.number("tessellation", defaults.tessellation, low=1, high=MAX_TESSELLATION, integer=True)
+    colors = {}
+    for key in ("surface_color", "line_color", "background"):
+        colors[key] = t.array(key, (3,), getattr(defaults, key))
+        if np.any(colors[key] < 0):
+            raise t.error(key, f"colour components must be >= 0, got {colors[key].tolist()}")
+    t.finish()
+    return RenderSettings(tess, **colors)
+
+
+def _parse_output(t: _Table, path: Path) -> OutputSpec:
+    name = t.string("name", path.stem)
+    if not name or name in (".", "..") or "/" in name or "\\" in name or "\0" in name:
+        raise t.error("name", f"must be a plain file stem without path separators, got {name!r}")
+    exr = t.boolean("exr", True)
+    png = t.boolean("png", True)
+    t.finish()
+    return OutputSpec(name, exr, png)
+
+
+def _check_knots(t: _Table, key: str, knots: np.ndarray, degree: int, n_ctrl: int) -> None:
+    if knots.size != n_ctrl + degree + 1:
+        raise t.error(key, f"needs {n_ctrl + degree + 1} knots for degree {degree} and {n_ctrl} control points, got {knots.size}")
+    if np.any(np.diff(knots) < 0):
+        i = int(np.flatnonzero(np.diff(knots) < 0)[0])
+        raise t.error(key, f"knots must not decrease (knot {i + 1} = {knots[i + 1]:g} < knot {i} = {knots[i]:g})")
+    _, counts = np.unique(knots, return_counts=True)
+    if counts.max() > degree + 1:
+        raise t.error(key, f"a knot is repeated {counts.max()} times; at most degree + 1 = {degree + 1} allowed")
+    if not knots[n_ctrl] > knots[degree]:
+        raise t.error(key, "the parameter domain is empty (knot[degree] == knot[count])")
+
+
+def _check_area(t: _Table, surface: NurbsSurface) -> None:
+    """A patch whose control points all lie on a point or a line has no area to reflect in."""
+    pts = surface.points.reshape(-1, 3)
+    centred = pts - pts.mean(axis=0)
+    sv = np.linalg.svd(centred, compute_uv=False)
+    if not sv[1] > 1e-12 * max(sv[0], 1e-300):
+        raise t.error("points", "the control points lie on a point or a line: the patch has zero area")
+
+
+def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
+    name = t.string("name", f"surface{index}")
+    degree = t.raw("degree", required=True)
+    if isinstance(degree, int) and not isinstance(degree, bool):
+        degree = [degree, degree]
+    if not (isinstance(degree, list) and len(degree) == 2 and all(isinstance(d, int) and not isinstance(d, bool) for d in degree)):
+        raise t.error("degree", f"must be an integer or [degree_u, degree_v], got {degree!r}")
+    p, q = degree
+    if p < 1 or q < 1 or p > 30 or q > 30:
+        raise t.error("degree", f"degrees must be between 1 and 30, got {degree}")
+    _ragged_checked(t, "points", t.raw("points", required=True), 3)
+    points = t.array("points", (None, None, 3))
+    nu, nv = points.shape[:2]
+    if nu < p + 1 or nv < q + 1:
+        raise t.error("points", f"degree {p}×{q} needs at least {p + 1}×{q + 1} control points, got {nu}×{nv}")
+    knots_u = t.array("knots_u", (None,))
+    knots_v = t.array("knots_v", (None,))
+    _check_knots(t, "knots_u", knots_u, p, nu)
+    _check_knots(t, "knots_v", knots_v, q, nv)
+    if t.has("weights"):
+        _ragged_checked(t, "weights", t.raw("weights"), 2)
+        weights = t.array("weights", (nu, nv))
+        if np.any(weights <= 0):
+            i, j = np.argwhere(weights <= 0)[0]
+            raise t.error(f"weights[{i}][{j}]", f"weights must be > 0, got {weights[i, j]:g}")
+    else:
+        weights = np.ones((nu, nv))
+    t.finish()
+    surface = NurbsSurface(p, q, knots_u, knots_v, points, weights, name)
+    _check_area(t, surface)
+    return surface
+
+
+def _hash_files(paths: list[Path]) -> tuple[str, str]:
+    digests = [hashlib.sha256(p.read_bytes()).hexdigest() for p in paths]
+    combined = hashlib.sha256("\n".join(digests).encode()).hexdigest()
+    return digests[0], combined
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene file; raises `SceneError` naming the file and field."""
+    path = Path(path)
+    try:
+        raw_bytes = path.read_bytes()
+    except FileNotFoundError:
+        raise SceneError(path, "", "scene file not found") from None
+    except OSError as exc:
+        raise SceneError(path, "", f"cannot read scene file ({exc.strerror or exc})") from None
+    try:
+        doc = tomllib.loads(raw_bytes.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise SceneError(path, "", f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(path, "", f"TOML syntax error: {exc}") from None
+
+    root = _Table(path, "", doc)
+    image = _parse_image(_Table(path, "image", root.raw("image", {})))
+    camera = _parse_camera(_Table(path, "camera", root.raw("camera", {})))
+    lights = _parse_lights(_Table(path, "lights", root.raw("lights", required=True)))
+    render = _parse_render(_Table(path, "render", root.raw("render", {})))
+    output = _parse_output(_Table(path, "output", root.raw("output", {})), path)
+
+    entries = root.raw("surface", required=True)
+    if not isinstance(entries, list) or not entries:
+        raise SceneError(path, "surface", "needs one or more [[surface]] tables")
+    surfaces: list[NurbsSurface] = []
+    geometry_files: list[Path] = []
+    for i, entry in enumerate(entries):
+        t = _Table(path, f"surface[{i}]", entry)
+        if t.has("file"):
+            file = (path.parent / t.string("file")).resolve()
+            name = t.string("name", "")
+            t.finish()
+            try:
+                patches = read_bpt(file, name)
+            except SceneError as exc:
+                raise SceneError(exc.file, exc.field, f"{exc.reason} (from {path}: {t.name('file')})") from None
+            surfaces.extend(patches)
+            geometry_files.append(file)
+        else:
+            surfaces.append(_parse_inline_surface(t, i))
+    root.finish()
+    sha, inputs = _hash_files([path, *geometry_files])
+    return Scene(path, image, camera, lights, tuple(surfaces), render, output, sha, inputs)

@@ -1,0 +1,280 @@
+"""NURBS surfaces: vectorised evaluation of points, derivatives and exact normals.
+
+A NURBS surface (Ulmet, section 2.6; Piegl & Tiller, *The NURBS Book*, eq. 4.15)
+
+    S(u, v) = Σ_i Σ_j N_i^p(u) N_j^q(v) w_ij D_ij / Σ_i Σ_j N_i^p(u) N_j^q(v) w_ij
+
+is evaluated for whole arrays of (u, v) at once: the B-spline basis functions and
+their derivatives come from a vectorised form of Piegl & Tiller's algorithm A2.3,
+the rational derivatives from their eq. 4.20 (algorithm A4.4). Work is done in
+chunks so memory stays bounded however many points are asked for.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+#: Points evaluated per chunk: bounds the (chunk, p+1, q+1, 4) gather of control points.
+CHUNK = 1 << 16
+
+#: |S_u × S_v| below this fraction of |S_u|² + |S_v|² marks a degenerate point
+#: (collapsed edge, pole), where the normal is taken as the limit from the interior.
+DEGENERATE_RATIO = 1e-10
+
+
+class SurfaceDerivatives(NamedTuple):
+    """S and its partial derivatives at N points; second derivatives when asked for."""
+
+    S: np.ndarray
+    Su: np.ndarray
+    Sv: np.ndarray
+    Suu: np.ndarray | None = None
+    Suv: np.ndarray | None = None
+    Svv: np.ndarray | None = None
+
+
+def find_span(knots: np.ndarray, degree: int, n_ctrl: int, t: np.ndarray) -> np.ndarray:
+    """Knot span index i with knots[i] <= t < knots[i+1] (Piegl & Tiller A2.1), vectorised.
+
+    The upper end of the domain belongs to the last non-empty span.
+    """
+    span = np.searchsorted(knots, t, side="right") - 1
+    return np.clip(span, degree, n_ctrl - 1)
+
+
+def basis_derivatives(knots: np.ndarray, degree: int, span: np.ndarray, t: np.ndarray, order: int) -> np.ndarray:
+    """Non-zero B-spline basis functions and derivatives (Piegl & Tiller A2.3), vectorised.
+
+    Returns an array (N, order+1, degree+1): ``[:, k, r]`` is the k-th derivative of
+    N_{span-degree+r}^degree at t.
+    """
+    p = degree
+    n = t.shape[0]
+    left = np.zeros((n, p + 1))
+    right = np.zeros((n, p + 1))
+    ndu = np.zeros((n, p + 1, p + 1))
+    ndu[:, 0, 0] = 1.0
+    for j in range(1, p + 1):
+        left[:, j] = t - knots[span + 1 - j]
+        right[:, j] = knots[span + j] - t
+        saved = np.zeros(n)
+        for r in range(j):
+            ndu[:, j, r] = right[:, r + 1] + left[:, j - r]  # knot differences, never 0 on a non-empty span
+            temp = ndu[:, r, j - 1] / ndu[:, j, r]
+            ndu[:, r, j] = saved + right[:, r + 1] * temp
+            saved = left[:, j - r] * temp
+        ndu[:, j, j] = saved
+
+    ders = np.zeros((n, order + 1, p + 1))
+    ders[:, 0, :] = ndu[:, :, p]
+    for r in range(p + 1):
+        a = np.zeros((2, n, p + 1))
+        a[0, :, 0] = 1.0
+        s1, s2 = 0, 1
+        for k in range(1, min(order, p) + 1):
+            d = np.zeros(n)
+            rk, pk = r - k, p - k
+            if r >= k:
+                a[s2, :, 0] = a[s1, :, 0] / ndu[:, pk + 1, rk]
+                d = a[s2, :, 0] * ndu[:, rk, pk]
+            j1 = 1 if rk >= -1 else -rk
+            j2 = k - 1 if r - 1 <= pk else p - r
+            for j in range(j1, j2 + 1):
+                a[s2, :, j] = (a[s1, :, j] - a[s1, :, j - 1]) / ndu[:, pk + 1, rk + j]
+                d = d + a[s2, :, j] * ndu[:, rk + j, pk]
+            if r <= pk:
+                a[s2, :, k] = -a[s1, :, k - 1] / ndu[:, pk + 1, r]
+                d = d + a[s2, :, k] * ndu[:, r, pk]
+            ders[:, k, r] = d
+            s1, s2 = s2, s1
+    factor = p
+    for k in range(1, order + 1):
+        ders[:, k, :] *= factor
+        factor *= p - k
+    return ders
+
+
+@dataclass(frozen=True, eq=False)
+class NurbsSurface:
+    """A tensor-product NURBS surface with full (clamped) knot vectors.
+
+    ``points`` is (nu, nv, 3): row i is u index i. ``weights`` is (nu, nv), all > 0.
+    """
+
+    degree_u: int
+    degree_v: int
+    knots_u: np.ndarray
+    knots_v: np.ndarray
+    points: np.ndarray
+    weights: np.ndarray
+    name: str = ""
+    _pw: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        pw = np.concatenate([self.points * self.weights[..., None], self.weights[..., None]], axis=-1)
+        object.__setattr__(self, "_pw", np.ascontiguousarray(pw, dtype=np.float64))
+
+    @classmethod
+    def bezier(cls, points: np.ndarray, weights: np.ndarray | None = None, name: str = "") -> "NurbsSurface":
+        """A single (rational) Bézier patch on [0, 1]²."""
+        points = np.asarray(points, dtype=np.float64)
+        nu, nv = points.shape[:2]
+        return cls(
+            nu - 1,
+            nv - 1,
+            np.r_[np.zeros(nu), np.ones(nu)],
+            np.r_[np.zeros(nv), np.ones(nv)],
+            points,
+            np.ones((nu, nv)) if weights is None else np.asarray(weights, dtype=np.float64),
+            name,
+        )
+
+    @property
+    def rational(self) -> bool:
+        return bool(np.any(self.weights != self.weights.flat[0]))
+
+    @property
+    def domain(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        nu, nv = self.weights.shape
+        return (
+            (float(self.knots_u[self.degree_u]), float(self.knots_u[nu])),
+            (float(self.knots_v[self.degree_v]), float(self.knots_v[nv])),
+        )
+
+    def span_breaks(self) -> tuple[np.ndarray, np.ndarray]:
+        """Distinct knot values inside the domain, ends included (the Bézier span limits)."""
+        (u0, u1), (v0, v1) = self.domain
+        ku, kv = self.knots_u, self.knots_v
+        return np.unique(ku[(ku >= u0) & (ku <= u1)]), np.unique(kv[(kv >= v0) & (kv <= v1)])
+
+    def evaluate(self, u: np.ndarray, v: np.ndarray, order: int = 1) -> SurfaceDerivatives:
+        """S and its partial derivatives up to ``order`` (1 or 2) at arrays u, v."""
+        u = np.asarray(u, dtype=np.float64).ravel()
+        v = np.asarray(v, dtype=np.float64).ravel()
+        n = u.shape[0]
+        outs = [np.empty((n, 3)) for _ in range(3 if order == 1 else 6)]
+        for lo in range(0, n, CHUNK):
+            hi = min(lo + CHUNK, n)
+            for out, part in zip(outs, self._evaluate_chunk(u[lo:hi], v[lo:hi], order)):
+                out[lo:hi] = part
+        return SurfaceDerivatives(*outs)
+
+    def _evaluate_chunk(self, u: np.ndarray, v: np.ndarray, order: int) -> tuple[np.ndarray, ...]:
+        p, q = self.degree_u, self.degree_v
+        nu, nv = self.weights.shape
+        (u0, u1), (v0, v1) = self.domain
+        u = np.clip(u, u0, u1)
+        v = np.clip(v, v0, v1)
+        span_u = find_span(self.knots_u, p, nu, u)
+        span_v = find_span(self.knots_v, q, nv, v)
+        Nu = basis_derivatives(self.knots_u, p, span_u, u, order)  # (n, order+1, p+1)
+        Nv = basis_derivatives(self.knots_v, q, span_v, v, order)  # (n, order+1, q+1)
+        iu = span_u[:, None] - p + np.arange(p + 1)
+        iv = span_v[:, None] - q + np.arange(q + 1)
+        C = self._pw[iu[:, :, None], iv[:, None, :]]  # (n, p+1, q+1, 4)
+        n = u.shape[0]
+        # Aw[n, k, l, c] = Σ_ij Nu[n,k,i] Nv[n,l,j] C[n,i,j,c]: two batched matrix products.
+        tmp = np.matmul(Nu, C.reshape(n, p + 1, (q + 1) * 4)).reshape(n, order + 1, q + 1, 4)
+        Aw = np.matmul(tmp.transpose(0, 1, 3, 2), Nv.transpose(0, 2, 1)[:, None])  # (n, k, c, l)
+        Aw = Aw.transpose(0, 1, 3, 2)  # (n, k, l, c)
+        A, w = Aw[..., :3], Aw[..., 3:]
+        # Rational derivatives, Piegl & Tiller eq. 4.20 written out for k + l <= 2.
+        w00 = w[:, 0, 0]
+        S = A[:, 0, 0] / w00
+        Su = (A[:, 1, 0] - w[:, 1, 0] * S) / w00
+        Sv = (A[:, 0, 1] - w[:, 0, 1] * S) / w00
+        if order == 1:
+            return S, Su, Sv
+        Suu = (A[:, 2, 0] - 2 * w[:, 1, 0] * Su - w[:, 2, 0] * S) / w00
+        Suv = (A[:, 1, 1] - w[:, 1, 1] * S - w[:, 1, 0] * Sv - w[:, 0, 1] * Su) / w00
+        Svv = (A[:, 0, 2] - 2 * w[:, 0, 1] * Sv - w[:, 0, 2] * S) / w00
+        return S, Su, Sv, Suu, Suv, Svv
+
+    def normals(self, u: np.ndarray, v: np.ndarray, derivs: SurfaceDerivatives | None = None) -> np.ndarray:
+        """Unit normals n = (S_u × S_v)/|S_u × S_v| at arrays u, v.
+
+        Where S_u × S_v vanishes (a collapsed edge, a pole) the normal is the limit
+        from the interior along the line towards the domain centre: the first
+        non-vanishing term of the Taylor expansion of S_u × S_v. Never NaN.
+        """
+        u = np.asarray(u, dtype=np.float64).ravel()
+        v = np.asarray(v, dtype=np.float64).ravel()
+        d = derivs if derivs is not None else self.evaluate(u, v, order=1)
+        cross = np.cross(d.Su, d.Sv)
+        norm = np.linalg.norm(cross, axis=1)
+        scale = np.einsum("ij,ij->i", d.Su, d.Su) + np.einsum("ij,ij->i", d.Sv, d.Sv)
+        degenerate = ~(norm > DEGENERATE_RATIO * scale)
+        if np.any(degenerate):
+            cross[degenerate] = self._limit_cross(u[degenerate], v[degenerate])
+            norm[degenerate] = np.linalg.norm(cross[degenerate], axis=1)
+        still = ~(norm > 0)
+        if np.any(still):  # a fully flat point in every direction: fall back to the patch's mean normal
+            cross[still] = self._mean_normal()
+            norm[still] = np.linalg.norm(cross[still], axis=1)
+        return cross / norm[:, None]
+
+    def _limit_cross(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Leading Taylor term of S_u × S_v at (u + h δu, v + h δv) as h → 0+."""
+        (u0, u1), (v0, v1) = self.domain
+        du = 0.5 * (u0 + u1) - u
+        dv = 0.5 * (v0 + v1) - v
+        length = np.hypot(du, dv)
+        length[length == 0] = 1.0
+        du, dv = du / length, dv / length
+        d = self.evaluate(u, v, order=2)
+        Su_h = d.Suu * du[:, None] + d.Suv * dv[:, None]  # d/dh of S_u along (δu, δv)
+        Sv_h = d.Suv * du[:, None] + d.Svv * dv[:, None]
+        first = np.cross(Su_h, d.Sv) + np.cross(d.Su, Sv_h)
+        second = np.cross(Su_h, Sv_h)
+        ref = np.einsum("ij,ij->i", d.Suu, d.Suu) + np.einsum("ij,ij->i", d.Svv, d.Svv) + np.einsum("ij,ij->i", d.Suv, d.Suv)
+        ref = np.sqrt(ref * (np.einsum("ij,ij->i", d.Su, d.Su) + np.einsum("ij,ij->i", d.Sv, d.Sv)) + ref)
+        use_first = np.linalg.norm(first, axis=1) > DEGENERATE_RATIO * ref
+        return np.where(use_first[:, None], first, second)
+
+    def _mean_normal(self) -> np.ndarray:
+        P = self.points
+        n = np.cross(P[-1, -1] - P[0, 0], P[0, -1] - P[-1, 0])
+        return n if np.linalg.norm(n) > 0 else np.array([0.0, 0.0, 1.0])
+
+
+class SurfaceSet:
+    """All patches of a scene, numbered from 0; evaluation by (patch, u, v) arrays."""
+
+    def __init__(self, patches: list[NurbsSurface]):
+        self.patches = list(patches)
+
+    def __len__(self) -> int:
+        return len(self.patches)
+
+    def _by_patch(self, patch: np.ndarray):
+        patch = np.asarray(patch).ravel()
+        for k in np.unique(patch):
+            if k < 0:
+                continue
+            yield int(k), np.flatnonzero(patch == k)
+
+    def evaluate(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, order: int = 1) -> SurfaceDerivatives:
+        """S and derivatives for points given by patch index and (u, v); rows with patch < 0 stay NaN."""
+        n = np.asarray(patch).size
+        outs = [np.full((n, 3), np.nan) for _ in range(3 if order == 1 else 6)]
+        for k, idx in self._by_patch(patch):
+            for out, part in zip(outs, self.patches[k].evaluate(u[idx], v[idx], order)):
+                out[idx] = part
+        return SurfaceDerivatives(*outs)
+
+    def normals(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, derivs: SurfaceDerivatives | None = None) -> np.ndarray:
+        n = np.asarray(patch).size
+        out = np.full((n, 3), np.nan)
+        for k, idx in self._by_patch(patch):
+            sub = None if derivs is None else SurfaceDerivatives(derivs.S[idx], derivs.Su[idx], derivs.Sv[idx])
+            out[idx] = self.patches[k].normals(u[idx], v[idx], sub)
+        return out
+
+    def domains(self, patch: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per-point parameter domain bounds (u0, u1, v0, v1)."""
+        table = np.array([[*p.domain[0], *p.domain[1]] for p in self.patches])
+        rows = table[np.asarray(patch)]
+        return rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]

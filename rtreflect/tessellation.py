@@ -1,0 +1,87 @@
+"""Tessellation: each patch to a trimesh mesh whose vertices carry (u, v) and the patch index.
+
+The mesh only *finds* hits (DESIGN.md); the exact point and normal come from the
+NURBS evaluator afterwards. Each knot span gets ``tessellation`` segments per
+direction, so the mesh follows the surface's own pieces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from .surfaces import NurbsSurface
+
+
+def span_samples(breaks: np.ndarray, per_span: int) -> np.ndarray:
+    """Parameter values: ``per_span`` equal segments inside every span between distinct knots."""
+    parts = [np.linspace(a, b, per_span + 1)[:-1] for a, b in zip(breaks[:-1], breaks[1:])]
+    return np.concatenate([*parts, breaks[-1:]])
+
+
+def grid_faces(nu: int, nv: int) -> np.ndarray:
+    """Two triangles per cell of an nu×nv vertex grid (vertex (i, j) has index i·nv + j)."""
+    i, j = np.meshgrid(np.arange(nu - 1), np.arange(nv - 1), indexing="ij")
+    a = (i * nv + j).ravel()
+    b, c, d = a + nv, a + nv + 1, a + 1
+    return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int64)
+
+
+def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int) -> trimesh.Trimesh:
+    """A mesh of one patch; ``vertex_attributes`` hold ``uv`` (V, 2) and ``patch`` (V,)."""
+    breaks_u, breaks_v = surface.span_breaks()
+    us, vs = span_samples(breaks_u, per_span), span_samples(breaks_v, per_span)
+    uu, vv = np.meshgrid(us, vs, indexing="ij")
+    uv = np.stack([uu.ravel(), vv.ravel()], axis=1)
+    points = surface.evaluate(uv[:, 0], uv[:, 1]).S
+    return trimesh.Trimesh(
+        vertices=points,
+        faces=grid_faces(len(us), len(vs)),
+        vertex_attributes={"uv": uv, "patch": np.full(len(uv), patch_index)},
+        process=False,  # keep the grid as built: merging would mix vertices of different (u, v)
+        validate=False,
+    )
+
+
+@dataclass(frozen=True)
+class Tessellation:
+    """All patches' meshes in one vertex/face array, as Embree wants them."""
+
+    vertices: np.ndarray  # (V, 3) float64
+    faces: np.ndarray  # (F, 3)
+    vertex_uv: np.ndarray  # (V, 2)
+    face_patch: np.ndarray  # (F,)
+    chord_error: np.ndarray  # per patch: largest mesh-to-surface distance found at face centroids
+    meshes: tuple[trimesh.Trimesh, ...]
+
+    @property
+    def extent(self) -> float:
+        """Diagonal of the bounding box of all patches."""
+        return float(np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)))
+
+    def start_parameters(self, prim: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(patch, u, v) interpolated from a triangle's vertices with Embree's barycentrics."""
+        corners = self.vertex_uv[self.faces[prim]]  # (N, 3, 2)
+        uv = (1.0 - b1 - b2)[:, None] * corners[:, 0] + b1[:, None] * corners[:, 1] + b2[:, None] * corners[:, 2]
+        return self.face_patch[prim], uv[:, 0], uv[:, 1]
+
+
+def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:
+    uv = mesh.vertex_attributes["uv"][mesh.faces].mean(axis=1)
+    exact = surface.evaluate(uv[:, 0], uv[:, 1]).S
+    return float(np.max(np.linalg.norm(exact - mesh.triangles_center, axis=1)))
+
+
+def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span: int) -> Tessellation:
+    meshes = tuple(tessellate_patch(s, k, per_span) for k, s in enumerate(surfaces))
+    offsets = np.cumsum([0] + [len(m.vertices) for m in meshes])
+    return Tessellation(
+        vertices=np.concatenate([m.vertices for m in meshes]),
+        faces=np.concatenate([m.faces + off for m, off in zip(meshes, offsets)]),
+        vertex_uv=np.concatenate([m.vertex_attributes["uv"] for m in meshes]),
+        face_patch=np.concatenate([np.full(len(m.faces), k) for k, m in enumerate(meshes)]),
+        chord_error=np.array([_chord_error(s, m) for s, m in zip(surfaces, meshes)]),
+        meshes=meshes,
+    )
