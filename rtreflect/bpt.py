@@ -24,8 +24,10 @@ def read_bpt(path: Path, name: str = "") -> list[NurbsSurface]:
         text = path.read_text()
     except FileNotFoundError:
         raise SceneError(path, "", "geometry file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError(path, "", f"cannot read geometry file ({exc.__class__.__name__}: {exc})") from None
+    except OSError as exc:
+        raise SceneError(path, "", f"cannot read geometry file ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(path, "", f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
 
     tokens: list[tuple[str, int]] = [(tok, number) for number, line in enumerate(text.splitlines(), 1) for tok in line.split()]
     position = 0

@@ -86,6 +86,8 @@ def write_png(path: Path, rgba: np.ndarray, final: Path | None = None) -> None:
     spec = oiio.ImageSpec(width, height, 4, oiio.UINT8)
     spec.channelnames = ("R", "G", "B", "A")
     spec.alpha_channel = 3
+    # Store the encoded colour verbatim: without this OpenImageIO would un-premultiply it by alpha.
+    spec.attribute("oiio:UnassociatedAlpha", 1)
     _write(path, spec, encode_srgb(rgba), final)
 
 
@@ -117,8 +119,10 @@ def save_render(result: "RenderResult", outdir: Path) -> list[Path]:
 
 
 def read_image(path: Path) -> tuple[np.ndarray, tuple[str, ...], dict[str, object]]:
-    """Pixels (H, W, C) as float32, channel names and header attributes of an image file."""
-    buf = oiio.ImageBuf(str(path))
+    """Pixels (H, W, C) as float32 exactly as stored, channel names and header attributes of an image file."""
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)  # as stored: do not premultiply a PNG's colour by its alpha
+    buf = oiio.ImageBuf(str(path), 0, 0, config)
     if buf.has_error:
         raise RtreflectError(f"{path}: cannot read image ({buf.geterror()})")
     spec = buf.spec()

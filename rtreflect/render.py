@@ -18,8 +18,9 @@ import numpy as np
 
 from .accelerator import Accelerator
 from .camera import Camera, sample_offsets
+from .clock import StageClock
 from .film import Film, aov_planes, coverage_color
-from .lights import TubeLights, reflect
+from .lights import TubeDistances, TubeLights, reflect
 from .scene import Scene
 from .surfaces import SurfaceSet
 from .tessellation import tessellate
@@ -27,6 +28,23 @@ from .tracing import Hits, trace
 
 #: Rays per tile: bounds memory (a few hundred bytes a ray) while keeping numpy's per-call overhead small.
 RAYS_PER_TILE = 1 << 16
+
+
+@dataclass
+class Shading:
+    """Everything known about a batch of rays after shading: hits, s, tube distances, lit flags."""
+
+    hits: Hits
+    origins: np.ndarray
+    directions: np.ndarray
+    s: np.ndarray  # reflected directions (NaN where no hit)
+    distances: TubeDistances  # (N, K); d = inf and ahead = False where no hit
+    lit: np.ndarray
+
+    def take(self, rows: np.ndarray) -> "Shading":
+        pick = lambda obj: type(obj)(**{k: getattr(obj, k)[rows] for k in obj.__dataclass_fields__})  # noqa: E731
+        return Shading(pick(self.hits), self.origins[rows], self.directions[rows], self.s[rows], pick(self.distances),
+                       self.lit[rows])
 
 
 @dataclass
@@ -61,50 +79,53 @@ class Renderer:
         self.accelerator = Accelerator(self.tessellation)
         self.camera = Camera(scene.camera, scene.image.width, scene.image.height)
         self.lights = TubeLights.from_spec(scene.lights)
+        self.clock = StageClock()
 
     # -- one batch of rays ---------------------------------------------------------------
-    def shade(self, origins: np.ndarray, directions: np.ndarray) -> tuple[Hits, np.ndarray, np.ndarray]:
-        """Exact hits, reflected directions s and 'lit' flags (some tube within its radius, unoccluded)."""
-        hits = trace(self.accelerator, self.tessellation, self.surfaces, origins, directions)
+    def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
+        """Exact hits, reflected directions s, tube distances and 'lit' flags (a tube within its radius, unoccluded)."""
+        hits = trace(self.accelerator, self.tessellation, self.surfaces, origins, directions, self.clock)
+        n_rays, n_tubes = len(origins), len(self.lights.c_k)
         s = np.full_like(directions, np.nan)
-        lit = np.zeros(len(origins), dtype=bool)
+        lit = np.zeros(n_rays, dtype=bool)
+        dist = TubeDistances(np.full((n_rays, n_tubes), np.inf), np.full((n_rays, n_tubes), np.nan),
+                             np.zeros((n_rays, n_tubes), dtype=bool))
         idx = np.flatnonzero(hits.hit)
+        shading = Shading(hits, origins, directions, s, dist, lit)
         if len(idx) == 0:
-            return hits, s, lit
+            return shading
         R, n = hits.P[idx], hits.N[idx]
-        # a, the unit vector towards the eye, is the reversed ray direction for either camera.
-        s[idx] = reflect(-directions[idx], n)
-        candidate, t_tube = self.lights.candidates(self.lights.distances(R, s[idx]))
-        cand = np.flatnonzero(candidate)
+        with self.clock.stage("tubes (eq. 3, 4)"):
+            # a, the unit vector towards the eye, is the reversed ray direction for either camera.
+            s[idx] = reflect(-directions[idx], n)
+            hit_dist = self.lights.distances(R, s[idx])
+            dist.d[idx], dist.t[idx], dist.ahead[idx] = hit_dist.d, hit_dist.t, hit_dist.ahead
+            candidate, t_tube = self.lights.candidates(hit_dist)
+            cand = np.flatnonzero(candidate)
         if len(cand):
             # Start the occlusion ray off the surface by more than the mesh's chord error, so the
             # mesh standing in for the surface does not shadow the point it approximates.
             eps = (2.0 * self.tessellation.chord_error[hits.patch[idx[cand]]]
                    + 1e-6 * (self.tessellation.extent + np.abs(R[cand]).max(axis=1)))
-            blocked = self.accelerator.occluded(R[cand] + eps[:, None] * n[cand], s[idx[cand]], t_tube[cand])
+            with self.clock.stage("occlusion (Embree)"):
+                blocked = self.accelerator.occluded(R[cand] + eps[:, None] * n[cand], s[idx[cand]], t_tube[cand])
             lit[idx[cand]] = ~blocked
-        return hits, s, lit
+        return shading
 
     def pixel_aovs(self, rows: np.ndarray, cols: np.ndarray) -> dict[str, np.ndarray]:
-        """Float64 AOVs of the pixel-centre rays (DESIGN.md channel list), plus the hits themselves."""
-        origins, directions = self.camera.rays(rows, cols)
-        hits, s, lit = self.shade(origins, directions)
-        return self._aovs(hits, s, lit, origins, directions)
+        """Float64 AOVs of the pixel-centre rays (DESIGN.md channel list), plus the shading behind them."""
+        return self.aovs(self.shade(*self.camera.rays(rows, cols)))
 
-    def _aovs(self, hits: Hits, s, lit, origins, directions) -> dict[str, np.ndarray]:
-        n = len(hits.hit)
-        f = np.full(n, np.nan)
-        line_id = np.full(n, -1.0)
-        line_dist = np.full(n, np.nan)
-        idx = np.flatnonzero(hits.hit)
-        if len(idx):
-            R, si = hits.P[idx], s[idx]
-            f[idx] = self.lights.ulmet_f(R, si)
-            k, d = self.lights.nearest(self.lights.distances(R, si))
-            line_id[idx], line_dist[idx] = k, d
+    def aovs(self, shading: Shading) -> dict[str, np.ndarray]:
+        hits = shading.hits
+        with self.clock.stage("AOVs"):
+            f = np.full(len(hits.hit), np.nan)
+            idx = np.flatnonzero(hits.hit)
+            f[idx] = self.lights.ulmet_f(hits.P[idx], shading.s[idx])
+            line_id, line_dist = self.lights.nearest(shading.distances)
         return {"P": hits.P, "N": hits.N, "u": hits.u, "v": hits.v, "patch": hits.patch.astype(np.float64),
-                "Z": hits.t, "f": f, "line.id": line_id, "line.dist": line_dist, "s": s, "lit": lit,
-                "hit": hits.hit, "fallback": hits.fallback, "origins": origins, "directions": directions}
+                "Z": hits.t, "f": f, "line.id": line_id.astype(np.float64), "line.dist": line_dist,
+                "shading": shading}
 
     # -- tiles ---------------------------------------------------------------------------
     def render_rows(self, row0: int, row1: int) -> tuple[np.ndarray, np.ndarray, int, int]:
@@ -113,17 +134,15 @@ class Renderer:
         rows, cols = np.divmod(np.arange(row0 * width, row1 * width), width)
         offsets = sample_offsets(s)
         ns = len(offsets)
-        centre = ns // 2 if s % 2 == 1 else None  # for odd s the centre sample is the pixel centre
-        origins, directions = self.camera.rays(np.repeat(rows, ns), np.repeat(cols, ns), np.tile(offsets, (len(rows), 1)))
-        hits, refl, lit = self.shade(origins, directions)
-        rgba = coverage_color(hits.hit.reshape(-1, ns), lit.reshape(-1, ns), self.scene.render.surface_color,
-                              self.scene.render.line_color, self.scene.render.background)
-        fallbacks = int(hits.fallback.sum())
+        with self.clock.stage("camera rays"):
+            origins, directions = self.camera.rays(np.repeat(rows, ns), np.repeat(cols, ns), np.tile(offsets, (len(rows), 1)))
+        shading = self.shade(origins, directions)
+        rgba = coverage_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
+                              self.scene.render.surface_color, self.scene.render.line_color, self.scene.render.background)
+        fallbacks = int(shading.hits.fallback.sum())
         rays = len(origins)
-        if centre is not None:
-            pick = np.arange(len(rows)) * ns + centre
-            sub = Hits(*(getattr(hits, k)[pick] for k in Hits.__dataclass_fields__))
-            aovs = self._aovs(sub, refl[pick], lit[pick], origins[pick], directions[pick])
+        if s % 2 == 1:  # the middle sample of an odd s×s grid is the pixel-centre ray
+            aovs = self.aovs(shading.take(np.arange(len(rows)) * ns + ns // 2))
         else:
             aovs = self.pixel_aovs(rows, cols)
             rays += len(rows)
@@ -141,6 +160,7 @@ class Renderer:
         film = Film(image.width, image.height)
         stats = RenderStats(image.width, image.height, image.samples)
         threads = threads or min(2, os.cpu_count() or 1)
+        self.clock = StageClock()
 
         def work(tile: tuple[int, int]) -> tuple[int, int]:
             rgba, aovs, rays, fallbacks = self.render_rows(*tile)
@@ -155,6 +175,7 @@ class Renderer:
                 if progress:
                     progress((tile[1] - tile[0]) * image.width)
         stats.seconds = time.perf_counter() - start
+        stats.stages = dict(self.clock.seconds)
         return RenderResult(self.scene, film, stats)
 
 

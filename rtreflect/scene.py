@@ -32,6 +32,10 @@ MAX_SAMPLES = 16
 MAX_TESSELLATION = 256
 #: |c·m| above this means the tube direction is not in the light plane.
 IN_PLANE_TOLERANCE = 1e-6
+#: Largest magnitude of any number in a scene. Embree intersects in float32 and forms
+#: products of up to three coordinates (a triangle's plane offset); beyond this they
+#: overflow float32's 3.4e38 and the image turns to noise without any error.
+MAX_MAGNITUDE = 1e12
 
 
 @dataclass(frozen=True)
@@ -127,10 +131,14 @@ class _Table:
         return default
 
     def number(self, key: str, default: Any = ..., *, low: float | None = None, high: float | None = None,
-               open_low: bool = False, open_high: bool = False, integer: bool = False) -> Any:
+               open_low: bool = False, open_high: bool = False, integer: bool = False,
+               infinite_ok: bool = False) -> Any:
+        """``infinite_ok``: +inf is accepted as "unbounded" (the default of such fields)."""
         value = self.raw(key, default)
         if value is default and default is not ...:
             return value
+        if infinite_ok and value == math.inf:
+            return math.inf
         return _number(self, key, value, low, high, open_low, open_high, integer)
 
     def boolean(self, key: str, default: bool) -> bool:
@@ -156,7 +164,7 @@ class _Table:
 
     def vector(self, key: str, default: Any = ..., nonzero: bool = False) -> np.ndarray:
         vec = self.array(key, (3,), default)
-        if nonzero and not np.linalg.norm(vec) > 0:
+        if nonzero and not np.any(vec != 0):
             raise self.error(key, "must not be the zero vector")
         return vec
 
@@ -180,6 +188,19 @@ def _kind(value: Any) -> str:
     return type(value).__name__
 
 
+def _unit(vec: np.ndarray) -> np.ndarray:
+    """vec / |vec| for a non-zero vec; scaled first so tiny components do not underflow to a zero norm."""
+    scaled = vec / np.max(np.abs(vec))
+    return scaled / np.linalg.norm(scaled)
+
+
+def _check_bounded(table: _Table, key: str, value: float) -> None:
+    if not math.isfinite(value):
+        raise table.error(key, f"must be finite, got {value}")
+    if abs(value) > MAX_MAGNITUDE:
+        raise table.error(key, f"must be at most {MAX_MAGNITUDE:g} in magnitude (float32 tracing and images overflow beyond it), got {value:g}")
+
+
 def _number(table: _Table, key: str, value: Any, low, high, open_low, open_high, integer) -> Any:
     if integer:
         if isinstance(value, bool) or not isinstance(value, int):
@@ -188,8 +209,7 @@ def _number(table: _Table, key: str, value: Any, low, high, open_low, open_high,
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise table.error(key, f"must be a number, got {_kind(value)}")
         value = float(value)
-        if not math.isfinite(value):
-            raise table.error(key, f"must be finite, got {value}")
+        _check_bounded(table, key, value)
     if low is not None and (value < low or (open_low and value == low)):
         raise table.error(key, f"must be {'>' if open_low else '>='} {low:g}, got {value}")
     if high is not None and (value > high or (open_high and value == high)):
@@ -198,42 +218,34 @@ def _number(table: _Table, key: str, value: Any, low, high, open_low, open_high,
 
 
 def _array(table: _Table, key: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarray:
+    """A nested list of numbers with the given shape; a None length is set by the first list at that depth.
+
+    Every list at one depth must have the same length, so numpy never sees a ragged
+    nesting (which it refuses with a ValueError) and the message names the odd row.
+    """
+    lengths = list(shape)
+
     def walk(item: Any, depth: int, where: str) -> None:
         if depth == len(shape):
             if isinstance(item, bool) or not isinstance(item, (int, float)):
                 raise table.error(key + where, f"must be a number, got {_kind(item)}")
-            if not math.isfinite(item):
-                raise table.error(key + where, f"must be finite, got {item}")
+            _check_bounded(table, key + where, item)
             return
-        expected = shape[depth]
         if not isinstance(item, list):
+            expected = shape[depth]
             raise table.error(key + where, f"must be an array{f' of {expected}' if expected else ''}, got {_kind(item)}")
-        if expected is not None and len(item) != expected:
-            raise table.error(key + where, f"must have {expected} entries, got {len(item)}")
-        if expected is None and len(item) == 0:
+        if not item:
             raise table.error(key + where, "must not be empty")
+        if lengths[depth] is None:
+            lengths[depth] = len(item)
+        elif len(item) != lengths[depth]:
+            like = "" if shape[depth] else f" like {table.name(key)}{where[:where.rfind('[')]}[0]"
+            raise table.error(key + where, f"must have {lengths[depth]} entries{like}, got {len(item)}")
         for i, sub in enumerate(item):
             walk(sub, depth + 1, f"{where}[{i}]")
 
     walk(value, 0, "")
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.ndim != len(shape):  # ragged nesting that walk() let through at a shallower level
-        raise table.error(key, "rows must all have the same length")
-    return arr
-
-
-def _ragged_checked(table: _Table, key: str, value: Any, depth: int) -> list:
-    """Reject ragged nested lists before numpy sees them; returns the value."""
-    if not isinstance(value, list) or not value:
-        raise table.error(key, f"must be a non-empty array, got {_kind(value)}")
-    if depth > 1:
-        lengths = set()
-        for i, row in enumerate(value):
-            _ragged_checked(table, f"{key}[{i}]", row, depth - 1)
-            lengths.add(len(row))
-        if len(lengths) > 1:
-            raise table.error(key, f"rows must all have the same length, got lengths {sorted(lengths)}")
-    return value
+    return np.asarray(value, dtype=np.float64)
 
 
 def _parse_image(t: _Table) -> ImageSpec:
@@ -250,14 +262,14 @@ def _parse_camera(t: _Table) -> CameraSpec:
     projection = t.string("projection", "perspective", ("perspective", "orthographic"))
     eye = t.vector("eye", CameraSpec().eye)
     look_at = t.vector("look_at", CameraSpec().look_at)
-    up = t.vector("up", CameraSpec().up, nonzero=True)
+    up = _unit(t.vector("up", CameraSpec().up, nonzero=True))
     fov = t.number("fov", 40.0, low=0, high=180, open_low=True, open_high=True)
     view_height = t.number("view_height", 3.0, low=0, open_low=True)
     t.finish()
     forward = look_at - eye
     if not np.linalg.norm(forward) > 0:
         raise t.error("look_at", "must differ from camera.eye")
-    if np.linalg.norm(np.cross(forward / np.linalg.norm(forward), up / np.linalg.norm(up))) < 1e-9:
+    if np.linalg.norm(np.cross(_unit(forward), up)) < 1e-9:
         raise t.error("up", "must not be parallel to the view direction (look_at - eye)")
     return CameraSpec(projection, eye, look_at, up, fov, view_height)
 
@@ -266,8 +278,8 @@ def _parse_lights(t: _Table) -> LightSpec:
     point = t.vector("point", required_default())
     normal = t.vector("normal", required_default(), nonzero=True)
     direction = t.vector("direction", required_default(), nonzero=True)
-    m = normal / np.linalg.norm(normal)
-    c = direction / np.linalg.norm(direction)
+    m = _unit(normal)
+    c = _unit(direction)
     if abs(float(c @ m)) > IN_PLANE_TOLERANCE:
         raise t.error("direction", f"must lie in the light plane (perpendicular to lights.normal); c·m = {float(c @ m):.3g}")
     if t.has("positions"):
@@ -282,7 +294,7 @@ def _parse_lights(t: _Table) -> LightSpec:
     else:
         raise t.error("positions", "required field is missing (or give lights.spacing and lights.count)")
     radius = t.number("radius", 0.05, low=0, open_low=True)
-    length = t.number("length", math.inf, low=0, open_low=True)
+    length = t.number("length", math.inf, low=0, open_low=True, infinite_ok=True)
     t.finish()
     return LightSpec(point, m, c, positions, radius, length)
 
@@ -311,6 +323,8 @@ def _parse_output(t: _Table, path: Path) -> OutputSpec:
     exr = t.boolean("exr", True)
     png = t.boolean("png", True)
     t.finish()
+    if not (exr or png):
+        raise SceneError(t.file, t.prefix, "exr and png are both false: the render would write nothing")
     return OutputSpec(name, exr, png)
 
 
@@ -327,13 +341,25 @@ def _check_knots(t: _Table, key: str, knots: np.ndarray, degree: int, n_ctrl: in
         raise t.error(key, "the parameter domain is empty (knot[degree] == knot[count])")
 
 
-def _check_area(t: _Table, surface: NurbsSurface) -> None:
-    """A patch whose control points all lie on a point or a line has no area to reflect in."""
+ZERO_AREA = "the control points lie on a point or a line: the patch has zero area"
+
+
+def _has_area(surface: NurbsSurface) -> bool:
+    """False when the control points all lie on a point or a line: no area to reflect in."""
     pts = surface.points.reshape(-1, 3)
     centred = pts - pts.mean(axis=0)
     sv = np.linalg.svd(centred, compute_uv=False)
-    if not sv[1] > 1e-12 * max(sv[0], 1e-300):
-        raise t.error("points", "the control points lie on a point or a line: the patch has zero area")
+    return bool(sv[1] > 1e-12 * max(sv[0], 1e-300))
+
+
+def _check_geometry_patch(file: Path, index: int, surface: NurbsSurface) -> None:
+    """What `_parse_inline_surface` checks of its numbers, for a patch read from a geometry file."""
+    largest = float(np.max(np.abs(surface.points)))
+    if largest > MAX_MAGNITUDE:
+        raise SceneError(file, f"patch {index}", f"coordinates must be at most {MAX_MAGNITUDE:g} in magnitude "
+                                                 f"(float32 tracing overflows beyond it), got {largest:g}")
+    if not _has_area(surface):
+        raise SceneError(file, f"patch {index}", ZERO_AREA)
 
 
 def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
@@ -346,7 +372,6 @@ def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
     p, q = degree
     if p < 1 or q < 1 or p > 30 or q > 30:
         raise t.error("degree", f"degrees must be between 1 and 30, got {degree}")
-    _ragged_checked(t, "points", t.raw("points", required=True), 3)
     points = t.array("points", (None, None, 3))
     nu, nv = points.shape[:2]
     if nu < p + 1 or nv < q + 1:
@@ -356,7 +381,6 @@ def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
     _check_knots(t, "knots_u", knots_u, p, nu)
     _check_knots(t, "knots_v", knots_v, q, nv)
     if t.has("weights"):
-        _ragged_checked(t, "weights", t.raw("weights"), 2)
         weights = t.array("weights", (nu, nv))
         if np.any(weights <= 0):
             i, j = np.argwhere(weights <= 0)[0]
@@ -365,7 +389,8 @@ def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
         weights = np.ones((nu, nv))
     t.finish()
     surface = NurbsSurface(p, q, knots_u, knots_v, points, weights, name)
-    _check_area(t, surface)
+    if not _has_area(surface):
+        raise t.error("points", ZERO_AREA)
     return surface
 
 
@@ -411,6 +436,8 @@ def load_scene(path: str | Path) -> Scene:
             t.finish()
             try:
                 patches = read_bpt(file, name)
+                for k, patch in enumerate(patches):
+                    _check_geometry_patch(file, k, patch)
             except SceneError as exc:
                 raise SceneError(exc.file, exc.field, f"{exc.reason} (from {path}: {t.name('file')})") from None
             surfaces.extend(patches)

@@ -53,7 +53,7 @@ class Tessellation:
     faces: np.ndarray  # (F, 3)
     vertex_uv: np.ndarray  # (V, 2)
     face_patch: np.ndarray  # (F,)
-    chord_error: np.ndarray  # per patch: largest mesh-to-surface distance found at face centroids
+    chord_error: np.ndarray  # per patch: largest mesh-to-surface distance found at edge midpoints
     meshes: tuple[trimesh.Trimesh, ...]
 
     @property
@@ -69,9 +69,15 @@ class Tessellation:
 
 
 def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:
-    uv = mesh.vertex_attributes["uv"][mesh.faces].mean(axis=1)
+    """Largest distance between the mesh and the surface, sampled at the midpoints of every triangle edge.
+
+    Edge midpoints, not centroids: a chord strays farthest from the surface at its middle.
+    """
+    edges = mesh.edges_unique
+    uv = mesh.vertex_attributes["uv"][edges].mean(axis=1)
     exact = surface.evaluate(uv[:, 0], uv[:, 1]).S
-    return float(np.max(np.linalg.norm(exact - mesh.triangles_center, axis=1)))
+    chord_mid = mesh.vertices[edges].mean(axis=1)
+    return float(np.max(np.linalg.norm(exact - chord_mid, axis=1)))
 
 
 def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span: int) -> Tessellation:

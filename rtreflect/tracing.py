@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .accelerator import Accelerator
-from .surfaces import SurfaceSet
+from .clock import NULL_CLOCK, StageClock
+from .surfaces import SurfaceDerivatives, SurfaceSet
 from .tessellation import Tessellation
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance.
@@ -50,7 +51,10 @@ def _across(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, tolerance_distance):
-    """Newton on S(u, v) = O + tD from the mesh hit. Returns (u, v, S, converged)."""
+    """Newton on S(u, v) = O + tD from the mesh hit.
+
+    Returns (u, v, derivatives at the final (u, v), converged); the derivatives serve the normals.
+    """
     u, v = u.copy(), v.copy()
     u0, u1, v0, v1 = surfaces.domains(patch)
     e1, e2 = _across(directions)
@@ -58,10 +62,10 @@ def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, toler
     converged = np.zeros(len(u), dtype=bool)
     singular = np.zeros(len(u), dtype=bool)
     active = np.arange(len(u))
-    S = np.empty((len(u), 3))
+    S, Su_all, Sv_all = (np.empty((len(u), 3)) for _ in range(3))
     for step in range(NEWTON_MAX_STEPS + 1):
         d = surfaces.evaluate(patch[active], u[active], v[active])
-        S[active] = d.S
+        S[active], Su_all[active], Sv_all[active] = d.S, d.Su, d.Sv
         rel = d.S - origins[active]
         r1 = np.einsum("ij,ij->i", e1[active], rel)
         r2 = np.einsum("ij,ij->i", e2[active], rel)
@@ -86,14 +90,15 @@ def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, toler
         u[active] = np.clip(u[active] - (dd * r1 - b * r2) / det, u0[active], u1[active])
         v[active] = np.clip(v[active] - (a * r2 - c * r1) / det, v0[active], v1[active])
     converged &= ~singular
-    return u, v, S, converged
+    return u, v, SurfaceDerivatives(S, Su_all, Sv_all), converged
 
 
 def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet,
-          origins: np.ndarray, directions: np.ndarray) -> Hits:
+          origins: np.ndarray, directions: np.ndarray, clock: StageClock = NULL_CLOCK) -> Hits:
     """Exact hits of rays (origins, unit directions), both (N, 3) float64."""
     n = len(origins)
-    mesh = accelerator.intersect(origins, directions)
+    with clock.stage("intersect (Embree)"):
+        mesh = accelerator.intersect(origins, directions)
     hit = mesh.prim >= 0
     idx = np.flatnonzero(hit)
     patch = np.full(n, -1)
@@ -107,7 +112,9 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
         O, D, tm = origins[idx], directions[idx], mesh.t[idx]
         pk, us, vs = tessellation.start_parameters(mesh.prim[idx], mesh.b1[idx], mesh.b2[idx])
         chord = tessellation.chord_error[pk]
-        ur, vr, S, ok = refine(surfaces, pk, us, vs, O, D, tm, tessellation.extent)
+        with clock.stage("newton (exact hit)"):
+            ur, vr, derivs, ok = refine(surfaces, pk, us, vs, O, D, tm, tessellation.extent)
+        S = derivs.S
         tr = np.einsum("ij,ij->i", S - O, D)
         jump = np.linalg.norm(S - (O + tm[:, None] * D), axis=1)
         ok &= (tr > 0) & (jump <= JUMP_LIMIT * chord + 1e-6 * tessellation.extent)
@@ -117,7 +124,13 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
         v[idx] = np.where(ok, vr, vs)
         t[idx] = np.where(ok, tr, tm)
         P[idx] = np.where(ok[:, None], S, mesh_point)
-        nrm = surfaces.normals(pk, u[idx], v[idx])
+        with clock.stage("exact normals"):
+            lost = np.flatnonzero(~ok)  # fallbacks: derivatives at the mesh hit's (u, v) instead
+            if len(lost):
+                again = surfaces.evaluate(pk[lost], us[lost], vs[lost])
+                for have, new in zip(derivs[:3], again):
+                    have[lost] = new
+            nrm = surfaces.normals(pk, u[idx], v[idx], derivs)
         # Two-sided mirror: the normal faces the incoming ray.
         flip = np.einsum("ij,ij->i", nrm, D) > 0
         nrm[flip] *= -1.0
