@@ -33,6 +33,12 @@ INPUTS_HASH_ATTRIBUTE = "rtreflect:inputs_sha256"
 VERSION_ATTRIBUTE = "rtreflect:version"
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_path(final: Path) -> Iterator[Path]:
     """A temporary path beside ``final`` (same extension, so OpenImageIO picks the format), renamed on success."""
@@ -41,6 +47,7 @@ def atomic_path(final: Path) -> Iterator[Path]:
     os.close(fd)
     try:
         yield Path(tmp)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; a finished image gets the usual permissions
         os.replace(tmp, final)
     except BaseException:
         with contextlib.suppress(OSError):

@@ -61,9 +61,20 @@ def reference_f(renderer: Renderer, P: np.ndarray, s: np.ndarray) -> np.ndarray:
     return (P + t[:, None] * s - Q) @ e
 
 
-@pytest.fixture(scope="module", params=SCENE_FILES, ids=lambda p: p.stem)
+def orthographic(scene):
+    return replace(scene, camera=replace(scene.camera, projection="orthographic", view_height=2.4))
+
+
+# Every shipped scene, plus the hood through an orthographic camera (parallel rays, a = −w).
+CASES = [(path, None) for path in SCENE_FILES] + [(SCENES / "hood.toml", orthographic)]
+
+
+@pytest.fixture(scope="module", params=CASES, ids=lambda case: case[0].stem + ("-ortho" if case[1] else ""))
 def rendered(request):
-    scene = load_scene(request.param).with_image(WIDTH, HEIGHT, 1)
+    path, variant = request.param
+    scene = load_scene(path).with_image(WIDTH, HEIGHT, 1)
+    if variant:
+        scene = variant(scene)
     renderer = Renderer(scene)
     rows, cols = np.divmod(np.arange(WIDTH * HEIGHT), WIDTH)
     aovs = renderer.pixel_aovs(rows, cols)
