@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import SceneError, read_text
 from .surfaces import NurbsSurface
 
 #: Degrees above this are refused: no real file has them and they would only cost memory.
@@ -20,14 +20,7 @@ MAX_DEGREE = 30
 
 def read_bpt(path: Path, name: str = "") -> list[NurbsSurface]:
     """All patches of a `.bpt` file, in file order, as NURBS surfaces on [0, 1]²."""
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise SceneError(path, "", "geometry file not found") from None
-    except OSError as exc:
-        raise SceneError(path, "", f"cannot read geometry file ({exc.strerror or exc})") from None
-    except UnicodeDecodeError as exc:
-        raise SceneError(path, "", f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    text = read_text(path, "geometry file")
 
     tokens: list[tuple[str, int]] = [(tok, number) for number, line in enumerate(text.splitlines(), 1) for tok in line.split()]
     position = 0

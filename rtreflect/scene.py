@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from .bpt import read_bpt
-from .errors import SceneError
+from .errors import SceneError, read_text
 from .surfaces import NurbsSurface
 
 #: Largest image side. The film keeps 17 float32 planes per pixel, and beyond this
@@ -404,15 +404,7 @@ def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file; raises `SceneError` naming the file and field."""
     path = Path(path)
     try:
-        raw_bytes = path.read_bytes()
-    except FileNotFoundError:
-        raise SceneError(path, "", "scene file not found") from None
-    except OSError as exc:
-        raise SceneError(path, "", f"cannot read scene file ({exc.strerror or exc})") from None
-    try:
-        doc = tomllib.loads(raw_bytes.decode("utf-8"))
-    except UnicodeDecodeError as exc:
-        raise SceneError(path, "", f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        doc = tomllib.loads(read_text(path, "scene file"))
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(path, "", f"TOML syntax error: {exc}") from None
 
