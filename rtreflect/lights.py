@@ -58,34 +58,35 @@ class TubeLights:
         """Skew-line distance d between the ray R + t s and every light line, paper eq. (4).
 
         d = |(s × c)·b| / |s × c| with b = B_k − R; if s ∥ c, d = |b × c|. Since
-        b = (Q − R) + c_k e, everything reduces to per-point scalars and c_k.
+        b = (Q − R) + c_k e, d and the ray parameter t of closest approach are
+        per-point scalars combined with c_k: d = |g − c_k h| / |s × c|, t = α + β c_k.
         """
         rho = R - self.Q  # = −b − c_k e
         sxc = np.cross(s, self.c)
         sxc_norm = np.linalg.norm(sxc, axis=1)
-        g = _dot(sxc, rho)[:, None]
-        h = _dot(sxc, self.e)[:, None]
+        parallel = sxc_norm <= 1e-12
         ck = self.c_k[None, :]
-        sc = _dot(s, self.c)[:, None]
-        se = _dot(s, self.e)[:, None]
-        s_rho = _dot(s, rho)[:, None]
-        c_rho = _dot(rho, self.c)[:, None]
-        parallel = (sxc_norm <= 1e-12)[:, None]
-        safe = np.where(parallel, 1.0, sxc_norm[:, None])
-        d = np.abs(g - ck * h) / safe
-        # Closest approach of R + t s and B_k + τ c, with w0 = R − B_k = rho − c_k e (and c ⊥ e):
-        denom = np.where(parallel, 1.0, 1.0 - sc**2)
-        s_w0 = s_rho - ck * se
-        t = (sc * c_rho - s_w0) / denom
-        tau = (c_rho - sc * s_w0) / denom
-        if np.any(parallel):
+        sc = _dot(s, self.c)
+        se = _dot(s, self.e)
+        s_rho = _dot(s, rho)
+        c_rho = _dot(rho, self.c)
+        with np.errstate(divide="ignore", invalid="ignore"):  # s ∥ c rows are replaced below
+            inv_sxc = 1.0 / sxc_norm
+            inv_denom = inv_sxc**2  # 1 − (s·c)² = |s × c|² for unit s and c
+            d = np.abs(_dot(sxc, rho)[:, None] - ck * _dot(sxc, self.e)[:, None]) * inv_sxc[:, None]
+            # Closest approach of R + t s and B_k + τ c, with w0 = R − B_k = rho − c_k e (and c ⊥ e).
+            t = ((sc * c_rho - s_rho) * inv_denom)[:, None] + ck * (se * inv_denom)[:, None]
+            ahead = t > 0
+            if np.isfinite(self.length):
+                tau = ((c_rho - sc * s_rho) * inv_denom)[:, None] + ck * (sc * se * inv_denom)[:, None]
+                ahead &= np.abs(tau) <= 0.5 * self.length
+        par = np.flatnonzero(parallel)
+        if len(par):
             # s ∥ c: d = |b × c|, the point-to-line distance; the ray runs along the tube, never reaching a finite one.
-            w0 = rho[:, None, :] - ck[..., None] * self.e
-            d_par = np.linalg.norm(np.cross(w0, self.c), axis=2)
-            d = np.where(parallel, d_par, d)
-            t = np.where(parallel, np.inf, t)
-            tau = np.where(parallel, np.inf, tau)
-        ahead = (t > 0) & (np.abs(tau) <= 0.5 * self.length)
+            w0 = rho[par, None, :] - ck[..., None] * self.e
+            d[par] = np.linalg.norm(np.cross(w0, self.c), axis=2)
+            t[par] = np.inf
+            ahead[par] = not np.isfinite(self.length)
         return TubeDistances(d, t, ahead)
 
     def ulmet_f(self, R: np.ndarray, s: np.ndarray) -> np.ndarray:

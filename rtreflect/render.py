@@ -20,7 +20,7 @@ from .accelerator import Accelerator
 from .camera import Camera, sample_offsets
 from .clock import StageClock
 from .film import Film, aov_planes, coverage_color
-from .lights import TubeDistances, TubeLights, reflect
+from .lights import TubeLights, reflect
 from .scene import Scene
 from .surfaces import SurfaceSet
 from .tessellation import tessellate
@@ -32,19 +32,20 @@ RAYS_PER_TILE = 1 << 16
 
 @dataclass
 class Shading:
-    """Everything known about a batch of rays after shading: hits, s, tube distances, lit flags."""
+    """Everything known about a batch of rays after shading: hits, s, the nearest tube ahead, lit flags."""
 
     hits: Hits
     origins: np.ndarray
     directions: np.ndarray
     s: np.ndarray  # reflected directions (NaN where no hit)
-    distances: TubeDistances  # (N, K); d = inf and ahead = False where no hit
+    line_id: np.ndarray  # nearest tube ahead, −1 where none (or no hit)
+    line_dist: np.ndarray  # its skew-line distance d, NaN where none
     lit: np.ndarray
 
     def take(self, rows: np.ndarray) -> "Shading":
-        pick = lambda obj: type(obj)(**{k: getattr(obj, k)[rows] for k in obj.__dataclass_fields__})  # noqa: E731
-        return Shading(pick(self.hits), self.origins[rows], self.directions[rows], self.s[rows], pick(self.distances),
-                       self.lit[rows])
+        hits = Hits(**{k: getattr(self.hits, k)[rows] for k in Hits.__dataclass_fields__})
+        return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
+                       self.line_dist[rows], self.lit[rows])
 
 
 @dataclass
@@ -85,13 +86,13 @@ class Renderer:
     def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
         """Exact hits, reflected directions s, tube distances and 'lit' flags (a tube within its radius, unoccluded)."""
         hits = trace(self.accelerator, self.tessellation, self.surfaces, origins, directions, self.clock)
-        n_rays, n_tubes = len(origins), len(self.lights.c_k)
+        n_rays = len(origins)
         s = np.full_like(directions, np.nan)
         lit = np.zeros(n_rays, dtype=bool)
-        dist = TubeDistances(np.full((n_rays, n_tubes), np.inf), np.full((n_rays, n_tubes), np.nan),
-                             np.zeros((n_rays, n_tubes), dtype=bool))
+        line_id = np.full(n_rays, -1)
+        line_dist = np.full(n_rays, np.nan)
         idx = np.flatnonzero(hits.hit)
-        shading = Shading(hits, origins, directions, s, dist, lit)
+        shading = Shading(hits, origins, directions, s, line_id, line_dist, lit)
         if len(idx) == 0:
             return shading
         R, n = hits.P[idx], hits.N[idx]
@@ -99,7 +100,7 @@ class Renderer:
             # a, the unit vector towards the eye, is the reversed ray direction for either camera.
             s[idx] = reflect(-directions[idx], n)
             hit_dist = self.lights.distances(R, s[idx])
-            dist.d[idx], dist.t[idx], dist.ahead[idx] = hit_dist.d, hit_dist.t, hit_dist.ahead
+            line_id[idx], line_dist[idx] = self.lights.nearest(hit_dist)
             candidate, t_tube = self.lights.candidates(hit_dist)
             cand = np.flatnonzero(candidate)
         if len(cand):
@@ -122,9 +123,8 @@ class Renderer:
             f = np.full(len(hits.hit), np.nan)
             idx = np.flatnonzero(hits.hit)
             f[idx] = self.lights.ulmet_f(hits.P[idx], shading.s[idx])
-            line_id, line_dist = self.lights.nearest(shading.distances)
         return {"P": hits.P, "N": hits.N, "u": hits.u, "v": hits.v, "patch": hits.patch.astype(np.float64),
-                "Z": hits.t, "f": f, "line.id": line_id.astype(np.float64), "line.dist": line_dist,
+                "Z": hits.t, "f": f, "line.id": shading.line_id.astype(np.float64), "line.dist": shading.line_dist,
                 "shading": shading}
 
     # -- tiles ---------------------------------------------------------------------------

@@ -12,13 +12,14 @@ chunks so memory stays bounded however many points are asked for.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
-#: Points evaluated per chunk: bounds the (chunk, p+1, q+1, 4) gather of control points.
-CHUNK = 1 << 14
+#: Points evaluated per chunk: bounds the (chunk, p+1, q+1, 4) gather of control points and keeps it in cache.
+CHUNK = 1 << 12
 
 #: Power (Taylor) form per span is used up to this degree and table size; beyond, the B-spline recurrences.
 #: Its rounding error grows with degree: ~1e-13 of the net's size at degree 5, 4e-12 at 7 (tests/test_surfaces.py).
@@ -90,22 +91,41 @@ def basis_derivatives(knots: np.ndarray, degree: int, span: np.ndarray, t: np.nd
 
 
 def _power_rows(tau: np.ndarray, length: np.ndarray, degree: int, order: int) -> np.ndarray:
-    """(N, order+1, degree+1): d^m/dt^m of τ^k for t = start + τ·length, m = 0..order."""
+    """(order+1, degree+1, N): d^m/dt^m of τ^k for t = start + τ·length, m = 0..order.
+
+    Points run along the last axis (structure of arrays), so every arithmetic step below and
+    in `NurbsSurface._power_homogeneous` is one long contiguous vector operation.
+    """
     n = tau.shape[0]
-    powers = np.ones((n, degree + 1))
+    powers = np.empty((degree + 1, n))
+    powers[0] = 1.0
     for k in range(1, degree + 1):
-        powers[:, k] = powers[:, k - 1] * tau
-    rows = np.zeros((n, order + 1, degree + 1))
-    rows[:, 0] = powers
-    k = np.arange(degree + 1)
-    falling = np.ones(degree + 1)
+        np.multiply(powers[k - 1], tau, out=powers[k])
+    rows = np.zeros((order + 1, degree + 1, n))
+    rows[0] = powers
     inv_len = 1.0 / length
-    scale = np.ones(n)
     for m in range(1, order + 1):
-        falling = falling * np.maximum(k - (m - 1), 0)  # k (k−1) … (k−m+1)
-        scale = scale * inv_len
-        rows[:, m, m:] = falling[m:] * powers[:, : degree + 1 - m] * scale[:, None]
+        for k in range(m, degree + 1):
+            falling = math.perm(k, m)  # k (k−1) … (k−m+1)
+            rows[m, k] = falling * powers[k - m]
+        rows[m, m:] *= inv_len**m
     return rows
+
+
+def _rational_derivatives(H: list[list[np.ndarray]], order: int) -> tuple[np.ndarray, ...]:
+    """S and its derivatives from the homogeneous ones H[k][l] = (A, w) (Piegl & Tiller eq. 4.20, k + l <= 2)."""
+    A = [[h[:, :3] for h in row] for row in H]
+    w = [[h[:, 3:] for h in row] for row in H]
+    w00 = w[0][0]
+    S = A[0][0] / w00
+    Su = (A[1][0] - w[1][0] * S) / w00
+    Sv = (A[0][1] - w[0][1] * S) / w00
+    if order == 1:
+        return S, Su, Sv
+    Suu = (A[2][0] - 2 * w[1][0] * Su - w[2][0] * S) / w00
+    Suv = (A[1][1] - w[1][1] * S - w[1][0] * Sv - w[0][1] * Su) / w00
+    Svv = (A[0][2] - 2 * w[0][1] * Sv - w[0][2] * S) / w00
+    return S, Su, Sv, Suu, Suv, Svv
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,7 +180,10 @@ class NurbsSurface:
         start_v, len_v, Mv = taylor(self.knots_v, q, nv)
         windows = np.lib.stride_tricks.sliding_window_view(pw, (p + 1, q + 1), axis=(0, 1))  # (Su, Sv, 4, p+1, q+1)
         coef = np.einsum("aki,blj,abcij->abklc", Mu, Mv, windows, optimize=True)
-        return start_u, len_u, start_v, len_v, np.ascontiguousarray(coef)
+        # One column per span (span_u · n_spans_v + span_v), rows (k, l, c): a gather of columns
+        # gives the structure-of-arrays layout `_power_homogeneous` computes in.
+        table = coef.reshape(coef.shape[0] * coef.shape[1], -1).T
+        return start_u, len_u, start_v, len_v, np.ascontiguousarray(table)
 
     @classmethod
     def bezier(cls, points: np.ndarray, weights: np.ndarray | None = None, name: str = "") -> "NurbsSurface":
@@ -208,42 +231,41 @@ class NurbsSurface:
         return SurfaceDerivatives(*outs)
 
     def _evaluate_chunk(self, u: np.ndarray, v: np.ndarray, order: int) -> tuple[np.ndarray, ...]:
-        p, q = self.degree_u, self.degree_v
-        nu, nv = self.weights.shape
         (u0, u1), (v0, v1) = self.domain
         u = np.clip(u, u0, u1)
         v = np.clip(v, v0, v1)
+        homogeneous = self._power_homogeneous if self._power is not None else self._basis_homogeneous
+        return _rational_derivatives(homogeneous(u, v, order), order)
+
+    def _power_homogeneous(self, u: np.ndarray, v: np.ndarray, order: int) -> list[list[np.ndarray]]:
+        """H[k][l] (N, 4) = ∂^(k+l) S_w / ∂u^k ∂v^l, for k + l <= order, from the per-span power form."""
+        p, q = self.degree_u, self.degree_v
+        start_u, len_u, start_v, len_v, coef = self._power
+        su = find_span(self.knots_u, p, self.weights.shape[0], u) - p
+        sv = find_span(self.knots_v, q, self.weights.shape[1], v) - q
+        a = _power_rows((u - start_u[su]) / len_u[su], len_u[su], p, order)  # (order+1, p+1, N)
+        b = _power_rows((v - start_v[sv]) / len_v[sv], len_v[sv], q, order)
+        C = np.take(coef, su * len(start_v) + sv, axis=1).reshape(p + 1, q + 1, 4, -1)  # (k, l, c, N)
+        T = [np.einsum("kn,klcn->lcn", a[i], C) for i in range(order + 1)]  # u-derivative i, contracted over k
+        return [[np.einsum("ln,lcn->nc", b[j], T[i]) for j in range(order + 1 - i)] for i in range(order + 1)]
+
+    def _basis_homogeneous(self, u: np.ndarray, v: np.ndarray, order: int) -> list[list[np.ndarray]]:
+        """H[k][l] as `_power_homogeneous`, from the B-spline basis functions (any degree)."""
+        p, q = self.degree_u, self.degree_v
+        nu, nv = self.weights.shape
         span_u = find_span(self.knots_u, p, nu, u)
         span_v = find_span(self.knots_v, q, nv, v)
-        if self._power is not None:
-            start_u, len_u, start_v, len_v, coef = self._power
-            Nu = _power_rows((u - start_u[span_u - p]) / len_u[span_u - p], len_u[span_u - p], p, order)
-            Nv = _power_rows((v - start_v[span_v - q]) / len_v[span_v - q], len_v[span_v - q], q, order)
-            C = coef[span_u - p, span_v - q]  # (n, p+1, q+1, 4)
-        else:
-            Nu = basis_derivatives(self.knots_u, p, span_u, u, order)  # (n, order+1, p+1)
-            Nv = basis_derivatives(self.knots_v, q, span_v, v, order)  # (n, order+1, q+1)
-            iu = span_u[:, None] - p + np.arange(p + 1)
-            iv = span_v[:, None] - q + np.arange(q + 1)
-            flat = (iu[:, :, None] * nv + iv[:, None, :]).reshape(len(u), -1)
-            C = np.take(self._pw.reshape(-1, 4), flat, axis=0).reshape(len(u), p + 1, q + 1, 4)
+        Nu = basis_derivatives(self.knots_u, p, span_u, u, order)  # (n, order+1, p+1)
+        Nv = basis_derivatives(self.knots_v, q, span_v, v, order)  # (n, order+1, q+1)
+        iu = span_u[:, None] - p + np.arange(p + 1)
+        iv = span_v[:, None] - q + np.arange(q + 1)
+        flat = (iu[:, :, None] * nv + iv[:, None, :]).reshape(len(u), -1)
+        C = np.take(self._pw.reshape(-1, 4), flat, axis=0).reshape(len(u), p + 1, q + 1, 4)
         n = u.shape[0]
         # Aw[n, k, l, c] = Σ_ij Nu[n,k,i] Nv[n,l,j] C[n,i,j,c]: two batched matrix products.
         tmp = np.matmul(Nu, C.reshape(n, p + 1, (q + 1) * 4)).reshape(n, order + 1, q + 1, 4)
-        Aw = np.matmul(tmp.transpose(0, 1, 3, 2), Nv.transpose(0, 2, 1)[:, None])  # (n, k, c, l)
-        Aw = Aw.transpose(0, 1, 3, 2)  # (n, k, l, c)
-        A, w = Aw[..., :3], Aw[..., 3:]
-        # Rational derivatives, Piegl & Tiller eq. 4.20 written out for k + l <= 2.
-        w00 = w[:, 0, 0]
-        S = A[:, 0, 0] / w00
-        Su = (A[:, 1, 0] - w[:, 1, 0] * S) / w00
-        Sv = (A[:, 0, 1] - w[:, 0, 1] * S) / w00
-        if order == 1:
-            return S, Su, Sv
-        Suu = (A[:, 2, 0] - 2 * w[:, 1, 0] * Su - w[:, 2, 0] * S) / w00
-        Suv = (A[:, 1, 1] - w[:, 1, 1] * S - w[:, 1, 0] * Sv - w[:, 0, 1] * Su) / w00
-        Svv = (A[:, 0, 2] - 2 * w[:, 0, 1] * Sv - w[:, 0, 2] * S) / w00
-        return S, Su, Sv, Suu, Suv, Svv
+        Aw = np.matmul(tmp.transpose(0, 1, 3, 2), Nv.transpose(0, 2, 1)[:, None]).transpose(0, 1, 3, 2)
+        return [[Aw[:, k, l] for l in range(order + 1 - k)] for k in range(order + 1)]
 
     def normals(self, u: np.ndarray, v: np.ndarray, derivs: SurfaceDerivatives | None = None) -> np.ndarray:
         """Unit normals n = (S_u × S_v)/|S_u × S_v| at arrays u, v.
