@@ -52,9 +52,11 @@ class Tessellation:
     vertices: np.ndarray  # (V, 3) float64
     faces: np.ndarray  # (F, 3)
     vertex_uv: np.ndarray  # (V, 2)
+    vertex_patch: np.ndarray  # (V,)
     face_patch: np.ndarray  # (F,)
     chord_error: np.ndarray  # per patch: largest mesh-to-surface distance found at edge midpoints
     meshes: tuple[trimesh.Trimesh, ...]
+    boundary: np.ndarray  # indices of the vertices on a patch's domain boundary (where a neighbour may join)
 
     @property
     def extent(self) -> float:
@@ -66,6 +68,33 @@ class Tessellation:
         corners = self.vertex_uv[self.faces[prim]]  # (N, 3, 2)
         uv = (1.0 - b1 - b2)[:, None] * corners[:, 0] + b1[:, None] * corners[:, 1] + b2[:, None] * corners[:, 2]
         return self.face_patch[prim], uv[:, 0], uv[:, 1]
+
+    def across_seam(self, points: np.ndarray, patch: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """For points on the boundary of ``patch``: the nearest boundary vertex of another patch.
+
+        Returns (patch, u, v) of that vertex, where a hit that ran off one patch's edge
+        can restart on its neighbour, and the distance to it (patch −1 and inf where there
+        is no other patch).
+        Brute force over boundary vertices, in row chunks: it serves the few hits at seams.
+        """
+        patch_out = np.full(len(points), -1)
+        uv_out = np.full((len(points), 2), np.nan)
+        dist_out = np.full(len(points), np.inf)
+        candidates = self.boundary
+        if len(candidates) == 0:
+            return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
+        cand_xyz, cand_patch = self.vertices[candidates], self.vertex_patch[candidates]
+        rows = max(1, (1 << 22) // len(candidates))
+        for lo in range(0, len(points), rows):
+            hi = min(lo + rows, len(points))
+            d2 = ((points[lo:hi, None, :] - cand_xyz[None]) ** 2).sum(axis=2)
+            d2[cand_patch[None, :] == patch[lo:hi, None]] = np.inf
+            best = np.argmin(d2, axis=1)
+            dist_out[lo:hi] = np.sqrt(d2[np.arange(hi - lo), best])
+            found = np.isfinite(dist_out[lo:hi])
+            patch_out[lo:hi] = np.where(found, cand_patch[best], -1)
+            uv_out[lo:hi] = self.vertex_uv[candidates[best]]
+        return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
 
 
 def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:
@@ -87,7 +116,16 @@ def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span
         vertices=np.concatenate([m.vertices for m in meshes]),
         faces=np.concatenate([m.faces + off for m, off in zip(meshes, offsets)]),
         vertex_uv=np.concatenate([m.vertex_attributes["uv"] for m in meshes]),
+        vertex_patch=np.concatenate([m.vertex_attributes["patch"] for m in meshes]),
         face_patch=np.concatenate([np.full(len(m.faces), k) for k, m in enumerate(meshes)]),
         chord_error=np.array([_chord_error(s, m) for s, m in zip(surfaces, meshes)]),
         meshes=meshes,
+        boundary=np.concatenate([_boundary_vertices(m) + off for m, off in zip(meshes, offsets)]),
     )
+
+
+def _boundary_vertices(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Indices of the grid vertices on the patch's parameter-domain boundary."""
+    uv = mesh.vertex_attributes["uv"]
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    return np.flatnonzero(np.any((uv == lo) | (uv == hi), axis=1))

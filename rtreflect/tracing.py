@@ -5,8 +5,9 @@ The BVH hit on the mesh gives a triangle and barycentrics, hence a starting
 The ray condition is written as two equations across the ray,
 e1·(S − O) = 0 and e2·(S − O) = 0 with e1, e2 ⊥ D, whose Jacobian is
 [[e1·S_u, e1·S_v], [e2·S_u, e2·S_v]]; t = D·(S − O) follows. Where Newton fails
-(grazing rays, degenerate points, a hit across a patch edge) the mesh hit is
-kept and flagged.
+(grazing rays, degenerate points, silhouettes) the mesh hit is kept and flagged.
+A refinement that runs off its patch's edge restarts once on the neighbouring patch
+across the seam, where the exact hit then lies.
 """
 
 from __future__ import annotations
@@ -24,7 +25,10 @@ from .tessellation import Tessellation
 NEWTON_TOLERANCE = 1e-12
 NEWTON_MAX_STEPS = 8
 #: A refined hit farther than this many chord errors (plus a little) from the mesh hit went to another sheet.
+#: Along a ray meeting the surface at angle θ to the normal, the mesh-to-surface gap grows as 1/cos θ:
+#: the limit grows with it, up to GRAZING_ALLOWANCE times.
 JUMP_LIMIT = 8.0
+GRAZING_ALLOWANCE = 10.0
 
 
 @dataclass
@@ -93,6 +97,23 @@ def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, toler
     return u, v, SurfaceDerivatives(S, Su_all, Sv_all), converged
 
 
+def _near_mesh_hit(derivs: SurfaceDerivatives, O, D, t_mesh, chord) -> np.ndarray:
+    """Whether refined hits lie ahead and within reach of the mesh hit (not on another sheet)."""
+    S = derivs.S
+    cross = np.cross(derivs.Su, derivs.Sv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos = np.abs(np.einsum("ij,ij->i", cross, D)) / np.linalg.norm(cross, axis=1)
+    allowance = np.clip(np.nan_to_num(1.0 / cos, nan=1.0), 1.0, GRAZING_ALLOWANCE)
+    ahead = np.einsum("ij,ij->i", S - O, D) > 0
+    jump = np.linalg.norm(S - (O + t_mesh[:, None] * D), axis=1)
+    return ahead & (jump <= JUMP_LIMIT * chord * allowance)
+
+
+def _on_domain_edge(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    return (u == u0) | (u == u1) | (v == v0) | (v == v1)
+
+
 def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet,
           origins: np.ndarray, directions: np.ndarray, clock: StageClock = NULL_CLOCK) -> Hits:
     """Exact hits of rays (origins, unit directions), both (N, 3) float64."""
@@ -111,13 +132,22 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     if len(idx):
         O, D, tm = origins[idx], directions[idx], mesh.t[idx]
         pk, us, vs = tessellation.start_parameters(mesh.prim[idx], mesh.b1[idx], mesh.b2[idx])
-        chord = tessellation.chord_error[pk]
         with clock.stage("newton (exact hit)"):
             ur, vr, derivs, ok = refine(surfaces, pk, us, vs, O, D, tm, tessellation.extent)
+            ok &= _near_mesh_hit(derivs, O, D, tm, tessellation.chord_error[pk] + 1e-6 * tessellation.extent)
+            seam = np.flatnonzero(~ok & _on_domain_edge(surfaces, pk, ur, vr))
+            if len(seam):
+                pn, un, vn, _ = tessellation.across_seam(derivs.S[seam], pk[seam])
+                seam, pn, un, vn = (x[pn >= 0] for x in (seam, pn, un, vn))
+                u2, v2, d2, ok2 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
+                ok2 &= _near_mesh_hit(d2, O[seam], D[seam], tm[seam],
+                                      tessellation.chord_error[pn] + 1e-6 * tessellation.extent)
+                won = seam[ok2]
+                pk[won], ur[won], vr[won], ok[won] = pn[ok2], u2[ok2], v2[ok2], True
+                for have, new in zip(derivs[:3], d2[:3]):
+                    have[won] = new[ok2]
         S = derivs.S
         tr = np.einsum("ij,ij->i", S - O, D)
-        jump = np.linalg.norm(S - (O + tm[:, None] * D), axis=1)
-        ok &= (tr > 0) & (jump <= JUMP_LIMIT * chord + 1e-6 * tessellation.extent)
         mesh_point = O + tm[:, None] * D
         patch[idx] = pk
         u[idx] = np.where(ok, ur, us)

@@ -216,3 +216,21 @@ def test_command_line_render_writes_exr_and_png(tmp_path):
 
     expected = encode_srgb(np.stack([exr[..., exr_names.index(c)] for c in "RGBA"], axis=-1))
     assert np.array_equal(np.round(png * 255).astype(np.uint8), expected)
+
+
+def test_hits_across_teapot_seams_refine_on_the_neighbour_patch():
+    """A mesh hit near a patch edge whose exact hit lies on the neighbouring patch restarts Newton there.
+
+    Without the seam restart 0.42% of the teapot's hits at this size fell back to the mesh
+    (120 of 28,826); what remains are silhouette and grazing rays (0.11%).
+    """
+    width, height = 480, 270
+    renderer = Renderer(load_scene(SCENES / "teapot.toml").with_image(width, height, 1))
+    rows, cols = np.divmod(np.arange(width * height), width)
+    aovs = renderer.pixel_aovs(rows, cols)
+    hits = aovs["shading"].hits
+    assert hits.fallback.sum() <= 0.002 * hits.hit.sum()
+    # The restarted hits are exact: on the ray and on the (new) patch's surface.
+    exact = hits.hit & ~hits.fallback
+    P_ref = renderer.surfaces.evaluate(hits.patch[exact], hits.u[exact], hits.v[exact]).S
+    assert np.max(np.linalg.norm(aovs["P"][exact] - P_ref, axis=1)) <= 1e-9 * renderer.tessellation.extent
