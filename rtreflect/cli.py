@@ -153,8 +153,6 @@ def diff(a: Path, b: Path, fail, failrelative, failpercent, hardfail, warn, warn
             report.write_json(json_path)
     except RtreflectError as exc:
         fail_with(str(exc))
-    except OSError as exc:
-        fail_with(f"{exc.filename}: cannot write ({exc.strerror or exc})")
     click.echo("\n".join(report.summary()))
     sys.exit(0 if report.passed else EXIT_MISMATCH)
 

@@ -124,12 +124,12 @@ class DiffReport:
             f"{self.a} vs {self.b}: {self.width}×{self.height}, channels {','.join(self.channels)}",
             f"  mean error {self.mean_error:.6g}, RMS error {self.rms_error:.6g}, PSNR {self.psnr:.2f} dB",
             f"  max error {self.max_error}" if self.max_error else "  max error 0 (identical)",
-            f"  failing pixels (error > {_threshold(self.fail, self.failrelative)}): {self.failing_pixels} of {self.pixels} "
-            f"({pct(self.failing_pixels):.4g}%, allowed {self.failpercent:g}%)",
+            f"  failing pixels (error > {_threshold(self.fail, self.failrelative)}): {self.failing_pixels} "
+            f"of {self.pixels} ({pct(self.failing_pixels):.4g}%, allowed {self.failpercent:g}%)",
         ]
         if self.warn != self.fail or self.warnrelative != self.failrelative or self.warnpercent:
-            lines.append(f"  warning pixels (error > {_threshold(self.warn, self.warnrelative)}): {self.warning_pixels} "
-                         f"({pct(self.warning_pixels):.4g}%, allowed {self.warnpercent:g}%)")
+            lines.append(f"  warning pixels (error > {_threshold(self.warn, self.warnrelative)}): "
+                         f"{self.warning_pixels} ({pct(self.warning_pixels):.4g}%, allowed {self.warnpercent:g}%)")
         if self.nonfinite_mismatch_pixels:
             lines.append(f"  NaN/Inf in one image only: {self.nonfinite_mismatch_pixels} pixels, first "
                          f"(x={self.first_nonfinite_mismatch.x}, y={self.first_nonfinite_mismatch.y}) "
@@ -160,13 +160,21 @@ class DiffReport:
         }
 
     def write_json(self, path: Path) -> None:
-        with atomic_path(Path(path)) as tmp:
-            tmp.write_text(json.dumps(self.to_json(), indent=2) + "\n")
+        """The report as JSON, written atomically (its folder is created if missing)."""
+        _write(Path(path), lambda tmp: tmp.write_text(json.dumps(self.to_json(), indent=2) + "\n"))
 
     def write_diff_image(self, path: Path) -> None:
-        """A PNG showing where A and B differ (see `diff_image`), written atomically."""
-        with atomic_path(Path(path)) as tmp:
-            write_png(tmp, diff_image(self.background, self.excess), final=Path(path))
+        """A PNG showing where A and B differ (see `diff_image`), written atomically (folder created)."""
+        _write(Path(path), lambda tmp: write_png(tmp, diff_image(self.background, self.excess), final=Path(path)))
+
+
+def _write(path: Path, writer) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            writer(tmp)
+    except OSError as exc:
+        raise RtreflectError(f"{path}: cannot write ({exc.strerror or exc})") from None
 
 
 def _threshold(absolute: float, relative: float) -> str:
@@ -313,8 +321,9 @@ def compare_images(a_path: Path, b_path: Path, channels: tuple[str, ...] | None 
     return DiffReport(
         a=a.path, b=b.path, width=a.pixels.shape[1], height=a.pixels.shape[0], channels=names,
         fail=fail, failrelative=failrelative, failpercent=tolerance.failpercent, hardfail=tolerance.hardfail,
-        warn=warn, warnrelative=warnrelative, warnpercent=tolerance.warnpercent, mean_error=float(stats.meanerror), rms_error=float(stats.rms_error),
-        psnr=float(stats.PSNR), max_error=max_error, failing_pixels=int(failing), warning_pixels=int(warning),
+        warn=warn, warnrelative=warnrelative, warnpercent=tolerance.warnpercent,
+        mean_error=float(stats.meanerror), rms_error=float(stats.rms_error), psnr=float(stats.PSNR),
+        max_error=max_error, failing_pixels=int(failing), warning_pixels=int(warning),
         nonfinite_mismatch_pixels=mismatch_pixels, first_nonfinite_mismatch=first_mismatch, status=status,
         excess=_excess(finite_a, finite_b, mismatch, thresholds), background=_greyscale(a, names),
     )

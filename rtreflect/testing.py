@@ -41,10 +41,10 @@ def golden_scene(path: str | Path) -> Scene:
 
 def render_golden(path: str | Path, outdir: str | Path, threads: int | None = None) -> Path:
     """Render a scene file at golden size into ``outdir``; returns the EXR's path (the PNG is beside it)."""
-    return render_scene_files(golden_scene(path), outdir, threads)
+    return render_exr(golden_scene(path), outdir, threads)
 
 
-def render_scene_files(scene: Scene, outdir: str | Path, threads: int | None = None) -> Path:
+def render_exr(scene: Scene, outdir: str | Path, threads: int | None = None) -> Path:
     """Render a loaded scene into ``outdir`` as NAME.exr and NAME.png; returns the EXR's path."""
     written = save_render(Renderer(scene).render(threads=threads), Path(outdir))
     return next(p for p in written if p.suffix == ".exr")
@@ -73,7 +73,7 @@ def golden_reports(actual: str | Path, golden: str | Path) -> dict[str, DiffRepo
     for check, options in GOLDEN_CHECKS.items():
         if check == "AOVs" and not aovs:
             continue
-        tolerance = Tolerance(**{k: v for k, v in options.items()})
+        tolerance = Tolerance(**options)
         reports[check] = compare_images(Path(actual), Path(golden), aovs if check == "AOVs" else None, tolerance)
     return reports
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -88,7 +89,8 @@ def test_golden_with_one_pixel_changed(tmp_path):
     changed = write_exr(tmp_path / "hood.exr", pixels, channels)
     result = run(changed, GOLDEN_HOOD)
     assert result.exit_code == 1
-    assert "at pixel (x=200, y=100) channel B" in result.output and "failing pixels (error > 1e-06): 1 of" in result.output
+    assert "at pixel (x=200, y=100) channel B" in result.output
+    assert "failing pixels (error > 1e-06): 1 of" in result.output
     assert run(changed, GOLDEN_HOOD, "--channels", "N.X,N.Y,N.Z").exit_code == 0  # the AOVs are untouched
 
 
@@ -234,7 +236,7 @@ def test_diff_image_highlights_the_changed_region(tmp_path):
     changed[10:14, 40:46, :3] = 0.9  # a 6×4 block
     changed[2, 2, 0] = 0.5 + 5e-7  # below --fail: not marked
     a, b = write_exr(tmp_path / "a.exr", grey), write_exr(tmp_path / "b.exr", changed)
-    out = tmp_path / "diff.png"
+    out = tmp_path / "new folder" / "diff.png"  # the folder is created
     assert run(a, b, "--diff-image", out).exit_code == 1
     picture, channels, _ = read_image(out)
     assert picture.shape == (30, 60, 4) and channels == RGBA
@@ -301,3 +303,14 @@ def test_assert_images_match_bad_input(tmp_path, pair):
 def test_channels_as_comma_string(tmp_path, pair):
     copy = shutil.copy(pair[0], tmp_path / "copy.exr")
     assert assert_images_match(copy, pair[0], channels="R,G").channels == ("R", "G")
+
+
+def test_console_script_exit_codes(pair, tmp_path):
+    """The installed command, not just the click group: stdout report, stderr error line, exit codes."""
+    command = [shutil.which("rtreflect") or "rtreflect"]
+    same = subprocess.run(command + ["diff", str(pair[0]), str(pair[0])], capture_output=True, text=True)
+    differ = subprocess.run(command + ["diff", *map(str, pair)], capture_output=True, text=True)
+    missing = subprocess.run(command + ["diff", str(pair[0]), str(tmp_path / "x.exr")], capture_output=True, text=True)
+    assert (same.returncode, differ.returncode, missing.returncode) == (0, 1, 2)
+    assert "MISMATCH" in differ.stdout and missing.stdout == ""
+    assert missing.stderr.strip().endswith("x.exr: no such file") and len(missing.stderr.strip().splitlines()) == 1
