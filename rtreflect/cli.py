@@ -80,5 +80,82 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
         )
 
 
+# -- rtreflect diff (issue 4): logic in rtreflect/diff.py ---------------------------------------
+EXIT_MISMATCH = 1
+fail_with = fail  # `diff` has a --fail option, which shadows the helper's name inside it
+
+
+def _channel_list(ctx, param, value: str | None) -> tuple[str, ...] | None:
+    if value is None:
+        return None
+    names = tuple(name.strip() for name in value.split(","))
+    if not all(names):
+        raise click.BadParameter(f"{value!r}: give channel names separated by commas, e.g. R,G,B,A or N.X,N.Y,N.Z")
+    return names
+
+
+@cli.command()
+@click.argument("a", type=click.Path(path_type=Path))
+@click.argument("b", type=click.Path(path_type=Path))
+@click.option("--fail", type=click.FloatRange(min=0), default=None, metavar="T",
+              help="A pixel fails when any compared channel differs by more than T "
+                   "[default: 1e-6 for float images (EXR), one code value (1/255) for 8-bit images (PNG)].")
+@click.option("--failrelative", type=click.FloatRange(0, 2, max_open=True), default=0.0, metavar="R",
+              help="If not 0, a value fails only when it also differs by more than R times the mean of the two "
+                   "values' magnitudes (for AOVs with large values, e.g. f near grazing reflections).")
+@click.option("--failpercent", type=click.FloatRange(0, 100), default=0.0, show_default=True, metavar="P",
+              help="Percent of pixels allowed to fail before the images mismatch.")
+@click.option("--hardfail", type=click.FloatRange(min=0), default=float("inf"), metavar="T",
+              help="Mismatch if any single difference exceeds T, whatever --failpercent allows [default: off].")
+@click.option("--warn", type=click.FloatRange(min=0), default=None, metavar="T",
+              help="A pixel warns when a channel differs by more than T [default: the --fail value].")
+@click.option("--warnrelative", type=click.FloatRange(0, 2, max_open=True), default=None, metavar="R",
+              help="Relative part of the warning test [default: the --failrelative value].")
+@click.option("--warnpercent", type=click.FloatRange(0, 100), default=0.0, show_default=True, metavar="P",
+              help="Percent of pixels allowed to warn before the result is a warning (exit 0 still).")
+@click.option("--channels", callback=_channel_list, metavar="LIST",
+              help="Comma-separated channels to compare, e.g. R,G,B,A or N.X,N.Y,N.Z,f "
+                   "[default: the colour channels R,G,B,A; both images must then have the same channel set].")
+@click.option("--diff-image", "diff_png", type=click.Path(path_type=Path), metavar="OUT.png",
+              help="Write a picture of the differences: A dimmed to grey, differing pixels coloured red "
+                   "(just above the threshold) to yellow (the largest error).")
+@click.option("--json", "json_path", type=click.Path(path_type=Path), metavar="REPORT",
+              help="Also write the report as JSON to REPORT.")
+def diff(a: Path, b: Path, fail, failrelative, failpercent, hardfail, warn, warnrelative, warnpercent, channels,
+         diff_png, json_path) -> None:
+    """Compare images A and B (EXR or PNG) for CI, with OpenImageIO's compare.
+
+    Prints mean, RMS and max error (with its pixel and channel), PSNR and the
+    number of failing pixels. The rule follows OpenImageIO's idiff: the images
+    MISMATCH when more than --failpercent of the pixels differ by more than
+    --fail in some channel (or one value by more than --hardfail); NaN against
+    NaN is equal, NaN against a number fails.
+
+    \b
+    Exit status: 0 match (or a warning within tolerance), 1 mismatch,
+    2 bad input: a missing file, different sizes or channel sets.
+
+    \b
+    Examples:
+      rtreflect diff out/hood.exr golden_images/hood.exr --diff-image hood.diff.png
+      rtreflect diff out/hood.exr golden_images/hood.exr --channels N.X,N.Y,N.Z --fail 1e-5
+      rtreflect diff out/hood.png golden_images/hood.png --failpercent 0.05 --json report.json
+    """
+    from .diff import Tolerance, compare_images
+
+    tolerance = Tolerance(fail=fail, failrelative=failrelative, failpercent=failpercent, hardfail=hardfail, warn=warn,
+                          warnrelative=warnrelative, warnpercent=warnpercent)
+    try:
+        report = compare_images(a, b, channels, tolerance)
+        if diff_png:
+            report.write_diff_image(diff_png)
+        if json_path:
+            report.write_json(json_path)
+    except RtreflectError as exc:
+        fail_with(str(exc))
+    click.echo("\n".join(report.summary()))
+    sys.exit(0 if report.passed else EXIT_MISMATCH)
+
+
 def main() -> None:
     cli(prog_name="rtreflect")

@@ -98,8 +98,10 @@ def write_png(path: Path, rgba: np.ndarray, final: Path | None = None) -> None:
     _write(path, spec, encode_srgb(rgba), final)
 
 
-def save_render(result: "RenderResult", outdir: Path) -> list[Path]:
-    """The render's EXR and/or PNG in ``outdir`` as its `[output]` table says; all files appear together or none."""
+def save_render(result: "RenderResult", outdir: Path, extra_attributes: dict[str, str] | None = None) -> list[Path]:
+    """The render's EXR and/or PNG in ``outdir`` as its `[output]` table says; all files appear together or none.
+
+    ``extra_attributes`` go into the EXR header too (golden images fix ``DateTime`` with them)."""
     from . import __version__
 
     scene = result.scene
@@ -110,7 +112,7 @@ def save_render(result: "RenderResult", outdir: Path) -> list[Path]:
     if scene.output.png:
         targets.append(outdir / f"{scene.output.name}.png")
     attributes = {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
-                  VERSION_ATTRIBUTE: __version__}
+                  VERSION_ATTRIBUTE: __version__, **(extra_attributes or {})}
     try:
         outdir.mkdir(parents=True, exist_ok=True)
         with contextlib.ExitStack() as stack:
