@@ -98,8 +98,13 @@ def write_png(path: Path, rgba: np.ndarray, final: Path | None = None) -> None:
     _write(path, spec, encode_srgb(rgba), final)
 
 
-def save_render(result: "RenderResult", outdir: Path) -> list[Path]:
-    """The render's EXR and/or PNG in ``outdir`` as its `[output]` table says; all files appear together or none."""
+def save_render(result: "RenderResult", outdir: Path, png_rgba: np.ndarray | None = None,
+                extra_files: dict[str, str] | None = None) -> list[Path]:
+    """The render's EXR and/or PNG in ``outdir`` as its `[output]` table says; all files appear together or none.
+
+    ``png_rgba``: linear RGBA for the PNG instead of the film's (the overlay); ``extra_files``:
+    text files to write beside them, by file name (the contours JSON).
+    """
     from . import __version__
 
     scene = result.scene
@@ -119,7 +124,12 @@ def save_render(result: "RenderResult", outdir: Path) -> list[Path]:
                 if target.suffix == ".exr":
                     write_exr(tmp, result.film, attributes, final=target)
                 else:
-                    write_png(tmp, result.film.pixels[..., :4], final=target)
+                    write_png(tmp, result.film.pixels[..., :4] if png_rgba is None else png_rgba, final=target)
+            for name, text in (extra_files or {}).items():
+                target = outdir / name
+                tmp = stack.enter_context(atomic_path(target))
+                tmp.write_text(text, encoding="utf-8")
+                targets.append(target)
     except OSError as exc:
         raise RtreflectError(f"{exc.filename or outdir}: cannot write output ({exc.strerror or exc})") from None
     return targets
