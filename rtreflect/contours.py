@@ -41,10 +41,12 @@ MAX_GRID = 2048
 #: Points evaluated per chunk of the grid: bounds memory for huge patches.
 GRID_CHUNK = 1 << 16
 #: Subdivide a contour segment while it projects longer than this ...
-MAX_SEGMENT_PX = 1.0
+MAX_SEGMENT_PX = 2.0
 #: ... or while its polished midpoint lies farther than this from the chord.
 CHORD_TOLERANCE_PX = 0.005
 SUBDIVISION_ROUNDS = 12
+#: Segments farther than this outside the image are not refined (a huge patch stays cheap).
+IMAGE_MARGIN_PX = 8.0
 #: Bisection steps that locate where a contour is cut (visibility, tube end): 2^-10 of a ≤ 1 px segment.
 BISECTION_STEPS = 10
 NEWTON_STEPS = 8
@@ -248,9 +250,13 @@ def _grid_size(field: UlmetField, k: int) -> tuple[int, int]:
     px, depth = field.project(np.full(uu.size, k), uu.ravel(), vv.ravel())
     px = px.reshape(probe, probe, 2)
     front = (depth.reshape(probe, probe) > 0) | field.camera.orthographic
-    px = np.where(front[..., None], px, np.nan)
-    step_u = np.nanmax(np.linalg.norm(np.diff(px, axis=0), axis=2), initial=0.0)
-    step_v = np.nanmax(np.linalg.norm(np.diff(px, axis=1), axis=2), initial=0.0)
+    # Size the grid for what the image shows: probe points in front of the camera and near the image.
+    margin = 0.25 * max(field.camera.width, field.camera.height)
+    near = front & np.all((px >= -margin) & (px <= np.array([field.camera.width, field.camera.height]) + margin), axis=2)
+    px = np.where(near[..., None], px, np.nan)
+    with np.errstate(invalid="ignore"):
+        step_u = np.nanmax(np.linalg.norm(np.diff(px, axis=0), axis=2), initial=0.0)
+        step_v = np.nanmax(np.linalg.norm(np.diff(px, axis=1), axis=2), initial=0.0)
     breaks_u, breaks_v = field.surfaces.patches[k].span_breaks()
     n_u = int(np.clip(math.ceil((probe - 1) * step_u / GRID_CELL_PX), MIN_GRID, MAX_GRID))
     n_v = int(np.clip(math.ceil((probe - 1) * step_v / GRID_CELL_PX), MIN_GRID, MAX_GRID))
@@ -316,17 +322,24 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
     chains.u, chains.v, chains.ok = field.polish(pk, chains.u, chains.v, c_of(every), np.full(len(pk), cell))
 
     # Subdivide until every segment is short and straight in the image.
-    px, _ = field.project(np.full(len(chains.u), k), chains.u, chains.v)
+    px, depth = field.project(np.full(len(chains.u), k), chains.u, chains.v)
+    front = (depth > 0) | field.camera.orthographic
+    width, height = field.camera.width, field.camera.height
     for _ in range(SUBDIVISION_ROUNDS):
         seg = chains.segments()
-        seg = seg[chains.ok[seg] & chains.ok[seg + 1]]
+        # Only what can be seen needs refining: both ends polished and in front, the segment near the image.
+        lo = np.minimum(px[seg], px[seg + 1])
+        hi = np.maximum(px[seg], px[seg + 1])
+        near_image = ((hi[:, 0] >= -IMAGE_MARGIN_PX) & (lo[:, 0] <= width + IMAGE_MARGIN_PX)
+                      & (hi[:, 1] >= -IMAGE_MARGIN_PX) & (lo[:, 1] <= height + IMAGE_MARGIN_PX))
+        seg = seg[chains.ok[seg] & chains.ok[seg + 1] & front[seg] & front[seg + 1] & near_image]
         if len(seg) == 0:
             break
         mid_u = 0.5 * (chains.u[seg] + chains.u[seg + 1])
         mid_v = 0.5 * (chains.v[seg] + chains.v[seg + 1])
         half = 0.5 * np.hypot(chains.u[seg + 1] - chains.u[seg], chains.v[seg + 1] - chains.v[seg])
         mu, mv, mok = field.polish(np.full(len(seg), k), mid_u, mid_v, c_of(seg), np.maximum(half, 1e-3 * cell))
-        mpx, _ = field.project(np.full(len(seg), k), mu, mv)
+        mpx, mdepth = field.project(np.full(len(seg), k), mu, mv)
         chord_mid = 0.5 * (px[seg] + px[seg + 1])
         length = np.linalg.norm(px[seg + 1] - px[seg], axis=1)
         off = np.linalg.norm(mpx - chord_mid, axis=1)
@@ -334,9 +347,10 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
         split &= half > 1e-9 * cell  # nothing left to split
         if not split.any():
             break
-        seg, mu, mv, mok, mpx = seg[split], mu[split], mv[split], mok[split], mpx[split]
+        seg, mu, mv, mok, mpx, mdepth = seg[split], mu[split], mv[split], mok[split], mpx[split], mdepth[split]
         chains.insert(seg, mu, mv, mok)
         px = np.insert(px, seg + 1, mpx, axis=0)
+        front = np.insert(front, seg + 1, (mdepth > 0) | field.camera.orthographic)
 
     light = chain_light[chains.chain]
     good = chains.ok & field.seen(np.full(len(chains.u), k), chains.u, chains.v, light)

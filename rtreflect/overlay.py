@@ -22,14 +22,34 @@ PIECE_PX = 0.5
 CHUNK = 1 << 15
 
 
+def clip_segments(a: np.ndarray, b: np.ndarray, low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The parts of segments (a, b) inside the box [low, high] (Liang–Barsky); segments outside are dropped."""
+    d = b - a
+    t0 = np.zeros(len(a))
+    t1 = np.ones(len(a))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for axis in (0, 1):
+            ta = (low[axis] - a[:, axis]) / d[:, axis]
+            tb = (high[axis] - a[:, axis]) / d[:, axis]
+            parallel = d[:, axis] == 0
+            inside = (a[:, axis] >= low[axis]) & (a[:, axis] <= high[axis])
+            t0 = np.where(parallel, np.where(inside, t0, 1.0), np.maximum(t0, np.minimum(ta, tb)))
+            t1 = np.where(parallel, np.where(inside, t1, 0.0), np.minimum(t1, np.maximum(ta, tb)))
+    keep = t0 <= t1
+    return a[keep] + t0[keep, None] * d[keep], a[keep] + t1[keep, None] * d[keep]
+
+
 def _pieces(contours: ContourLines) -> tuple[np.ndarray, np.ndarray]:
-    """Segments (a, b) in pixels, each at most PIECE_PX long."""
+    """Segments (a, b) in pixels, clipped to just beyond the image, each at most PIECE_PX long."""
     starts, ends = [], []
+    margin = 2.0 + LINE_WIDTH_PX
+    low = np.array([-margin, -margin])
+    high = np.array([contours.width + margin, contours.height + margin])
     for line in contours.lines:
         for poly in line.polylines:
             a, b = poly.px[:-1], poly.px[1:]
             ok = np.all(np.isfinite(a), axis=1) & np.all(np.isfinite(b), axis=1)
-            a, b = a[ok], b[ok]
+            a, b = clip_segments(a[ok], b[ok], low, high)
             parts = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / PIECE_PX)).astype(int)
             seg = np.repeat(np.arange(len(a)), parts)
             first = np.arange(len(seg)) - np.repeat(np.cumsum(parts) - parts, parts)

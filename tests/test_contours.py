@@ -18,7 +18,7 @@ import pytest
 from click.testing import CliRunner
 
 from rtreflect.cli import cli
-from rtreflect.contours import ContourLine, ContourLines, Polyline, UlmetField, analytic_contours
+from rtreflect.contours import MAX_SEGMENT_PX, ContourLine, ContourLines, Polyline, UlmetField, analytic_contours
 from rtreflect.lights import TubeLights
 from rtreflect.overlay import coverage
 from rtreflect.render import Renderer
@@ -87,7 +87,7 @@ def test_contour_points_lie_on_their_level_set_and_project_with_the_camera(hood)
             S = renderer.surfaces.evaluate(patch, poly.uv[:, 0], poly.uv[:, 1]).S
             np.testing.assert_allclose(poly.px, renderer.camera.project(S), atol=1e-9)
             steps = np.linalg.norm(np.diff(poly.px, axis=0), axis=1)
-            assert steps.max() <= 1.0 + 1e-9  # short enough to be straight at a pixel's scale
+            assert steps.max() <= MAX_SEGMENT_PX + 1e-9  # short enough to be straight at a pixel's scale
 
 
 def test_reflection_lines_on_a_cylinder_are_rulings():
