@@ -157,7 +157,9 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
     if report_path is not None:
         document = {"scenes": {}}
         for report in reports:
-            document["scenes"][report.name] = report.to_json()
+            # Keyed by [output] name; two scenes sharing a name are told apart by their paths.
+            key = report.name if report.name not in document["scenes"] else report.path
+            document["scenes"][key] = report.to_json()
         try:
             report_path.parent.mkdir(parents=True, exist_ok=True)
             with atomic_path(report_path) as tmp:

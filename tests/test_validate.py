@@ -38,6 +38,19 @@ def test_shipped_scene_validates(path: Path):
     assert report.passed
 
 
+def test_orthographic_camera_tilted_light_plane_and_short_tubes_validate():
+    """The general case: parallel rays (a = −w), a light plane not parallel to the xy-plane, finite tubes."""
+    scene = load_scene(SCENES / "hood.toml").with_image(WIDTH, HEIGHT, 1)
+    normal = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    direction = np.cross(normal, [1.0, 0.0, 0.0])
+    scene = replace(scene, camera=replace(scene.camera, projection="orthographic", view_height=2.6),
+                    lights=replace(scene.lights, normal=normal, direction=direction / np.linalg.norm(direction),
+                                   length=3.0))
+    report = validate_scene(scene)
+    assert report.points >= 100
+    assert report.passed and report.p95_px <= 0.1
+
+
 def hood_with_tessellation(normals: str, tessellation: int = 4):
     scene = load_scene(SCENES / "hood.toml").with_image(WIDTH, HEIGHT, 1)
     return replace(scene, render=replace(scene.render, tessellation=tessellation, normals=normals))
