@@ -150,7 +150,9 @@ class UlmetField:
         hold_v = (v <= v0) | (v >= v1)
         hu = 1e-7 * (u1 - u0)
         hv = 1e-7 * (v1 - v0)
-        scale = max(float(np.min(np.diff(np.sort(self.lights.c_k)))) if len(self.lights.c_k) > 1 else 1.0, 1e-300)
+        gaps = np.diff(np.unique(self.lights.c_k))
+        scale = float(gaps.min()) if len(gaps) else 1.0  # the tube spacing: f's natural unit
+        scale = max(scale, 1e-9 * (self.tessellation.extent + float(np.abs(self.lights.c_k).max())))
         ok = np.zeros(len(u), dtype=bool)
         active = np.arange(len(u))
         for _ in range(NEWTON_STEPS):

@@ -4,13 +4,17 @@ The render's `f` AOV (from the ray through each pixel centre) and the analytic l
 sets must agree: the traced line of tube k is centred where f = c_k.
 
 **Traced centres.** Between two neighbouring pixel centres (horizontal or vertical)
-where f − c_k changes sign, the centre is placed by linear interpolation of f. A pair
-counts only when it lies inside one smooth, visible piece of surface and tube k is
-really seen there: both pixels hit the same patch with a converged exact hit (no
-Newton fallback), f is finite at both, the two hit points are no farther apart than
-`JUMP_FOOTPRINTS` pixel footprints (so no silhouette or occlusion edge lies between
-them), both pixels have ``line.id == k`` (tube k is the nearest tube ahead, within its
-length) and neither pixel's reflected ray is blocked before the light plane.
+where f − c_k changes sign, the centre is placed on the cubic through f at the four
+pixel centres around the crossing (linear interpolation would err by up to
+|f''|/(8|f'|) px where lines bend tightly). A pair counts only when it lies inside one
+smooth, visible piece of surface where the pixels resolve the lines, and tube k is
+really seen there: the pair and the pairs before and after it hit the same patch with
+converged exact hits (no Newton fallback) and finite f, neighbouring hit points are no
+farther apart than `JUMP_FOOTPRINTS` pixel footprints (so no silhouette or occlusion
+edge lies between them), f changes by less than 1/`MIN_LINE_GAP_PX` of the tube spacing
+per pixel (lines at least that many pixels apart), both pixels have ``line.id == k``
+(tube k, or one at the same position, is the nearest tube ahead, within its length) and
+neither pixel's reflected ray is blocked before the light plane.
 
 **Deviation.** Each traced centre's distance in pixels to the nearest segment of tube
 k's projected analytic polylines. A centre whose nearest contour point is the open end
@@ -218,7 +222,10 @@ def traced_centres(renderer: Renderer, aovs: PixelAOVs) -> TracedCentres:
         which = np.arange(len(pair)) - np.repeat(np.cumsum(count) - count, count) + first[pair]
         k = order[which]
         a, b = a[pair], b[pair]
-        keep = (line_id[a] == k) & (line_id[b] == k)
+        # line.id names the nearest tube ahead; a tube at the same position as k counts as k.
+        pos_a = np.where(line_id[a] >= 0, c_k[np.maximum(line_id[a], 0).astype(int)], np.nan)
+        pos_b = np.where(line_id[b] >= 0, c_k[np.maximum(line_id[b], 0).astype(int)], np.nan)
+        keep = (pos_a == c_k[k]) & (pos_b == c_k[k])
         a, b, k = a[keep], b[keep], k[keep]
         delta, resolved = _crossing(f, a, b, c_k[k], smooth_next, step=1 if axis == 1 else width)
         a, k, delta = a[resolved], k[resolved], delta[resolved]
@@ -227,12 +234,11 @@ def traced_centres(renderer: Renderer, aovs: PixelAOVs) -> TracedCentres:
         y = row + 0.5 + (delta if axis == 0 else 0.0)
         pos.append(np.column_stack([x, y]))
         light.append(k)
-    px, light = np.concatenate(pos), np.concatenate(light)
-    # The pixels on either side must see tube k: reflected rays unblocked (line.id already says it is ahead).
-    return TracedCentres(px, light)
+    return TracedCentres(np.concatenate(pos), np.concatenate(light))
 
 
 def _filter_unblocked(renderer: Renderer, aovs: PixelAOVs, centres: TracedCentres) -> TracedCentres:
+    """The centres whose two pixels see the tube: reflected rays unblocked (line.id already says it is ahead)."""
     width = aovs.f.shape[1]
     x, y = centres.px[:, 0], centres.px[:, 1]
     # The two pixels of each pair: the centre lies between them, so floor/ceil of (pos − ½) give them.
