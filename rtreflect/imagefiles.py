@@ -98,10 +98,14 @@ def write_png(path: Path, rgba: np.ndarray, final: Path | None = None) -> None:
     _write(path, spec, encode_srgb(rgba), final)
 
 
-def save_render(result: "RenderResult", outdir: Path, extra_attributes: dict[str, str] | None = None) -> list[Path]:
+def save_render(result: "RenderResult", outdir: Path, png_rgba: np.ndarray | None = None,
+                extra_files: dict[str, str] | None = None, extra_attributes: dict[str, str] | None = None) -> list[Path]:
     """The render's EXR and/or PNG in ``outdir`` as its `[output]` table says; all files appear together or none.
 
-    ``extra_attributes`` go into the EXR header too (golden images fix ``DateTime`` with them)."""
+    ``png_rgba``: linear RGBA for the PNG instead of the film's (the overlay); ``extra_files``:
+    text files to write beside them, by file name (the contours JSON); ``extra_attributes`` go
+    into the EXR header too (golden images fix ``DateTime`` with them).
+    """
     from . import __version__
 
     scene = result.scene
@@ -121,7 +125,12 @@ def save_render(result: "RenderResult", outdir: Path, extra_attributes: dict[str
                 if target.suffix == ".exr":
                     write_exr(tmp, result.film, attributes, final=target)
                 else:
-                    write_png(tmp, result.film.pixels[..., :4], final=target)
+                    write_png(tmp, result.film.pixels[..., :4] if png_rgba is None else png_rgba, final=target)
+            for name, text in (extra_files or {}).items():
+                target = outdir / name
+                tmp = stack.enter_context(atomic_path(target))
+                tmp.write_text(text, encoding="utf-8")
+                targets.append(target)
     except OSError as exc:
         raise RtreflectError(f"{exc.filename or outdir}: cannot write output ({exc.strerror or exc})") from None
     return targets

@@ -21,6 +21,7 @@ from .camera import Camera, sample_offsets
 from .clock import StageClock
 from .film import Film, aov_planes, coverage_color
 from .lights import TubeLights, reflect
+from .meshnormals import trace_mesh, vertex_normals
 from .scene import Scene
 from .surfaces import SurfaceSet
 from .tessellation import tessellate
@@ -81,11 +82,18 @@ class Renderer:
         self.camera = Camera(scene.camera, scene.image.width, scene.image.height)
         self.lights = TubeLights.from_spec(scene.lights)
         self.clock = StageClock()
+        # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
+        self.vertex_normals = vertex_normals(self.tessellation, self.surfaces) if scene.render.normals == "mesh" else None
+
+    def trace(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
+        if self.vertex_normals is not None:
+            return trace_mesh(self.accelerator, self.tessellation, self.vertex_normals, origins, directions, self.clock)
+        return trace(self.accelerator, self.tessellation, self.surfaces, origins, directions, self.clock)
 
     # -- one batch of rays ---------------------------------------------------------------
     def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
         """Exact hits, reflected directions s, tube distances and 'lit' flags (a tube within its radius, unoccluded)."""
-        hits = trace(self.accelerator, self.tessellation, self.surfaces, origins, directions, self.clock)
+        hits = self.trace(origins, directions)
         n_rays = len(origins)
         s = np.full_like(directions, np.nan)
         lit = np.zeros(n_rays, dtype=bool)

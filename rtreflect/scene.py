@@ -32,6 +32,8 @@ MAX_SAMPLES = 16
 MAX_TESSELLATION = 256
 #: |c·m| above this means the tube direction is not in the light plane.
 IN_PLANE_TOLERANCE = 1e-6
+#: `[render] normals`: the exact NURBS normal, or the analysis-mesh normal CAD tools use (for comparison).
+NORMALS_MODES = ("exact", "mesh")
 #: Largest magnitude of any number in a scene. Embree intersects in float32 and forms
 #: products of up to three coordinates (a triangle's plane offset); beyond this they
 #: overflow float32's 3.4e38 and the image turns to noise without any error.
@@ -73,6 +75,9 @@ class RenderSettings:
     surface_color: np.ndarray = field(default_factory=lambda: np.array([0.18, 0.18, 0.2]))
     line_color: np.ndarray = field(default_factory=lambda: np.array([1.0, 1.0, 1.0]))
     background: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    overlay: bool = False  # draw the analytic contours over the PNG, write NAME.contours.json
+    overlay_color: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.2, 0.1]))
+    normals: str = "exact"  # "exact": NURBS normal at the exact hit; "mesh": interpolated vertex normals on the mesh
 
 
 @dataclass(frozen=True)
@@ -100,6 +105,13 @@ class Scene:
         table = {k: v for k, v in vars(self.image).items()}
         table.update({k: v for k, v in values.items() if v is not None})
         return replace(self, image=_parse_image(_Table(self.path, "image", table)))
+
+    def with_render(self, overlay: bool | None = None, normals: str | None = None) -> "Scene":
+        """The same scene with `[render] overlay` and/or `normals` overridden (command-line options)."""
+        if normals is not None and normals not in NORMALS_MODES:
+            raise SceneError(self.path, "render.normals", f"must be one of {', '.join(map(repr, NORMALS_MODES))}, got {normals!r}")
+        values = {k: v for k, v in {"overlay": overlay, "normals": normals}.items() if v is not None}
+        return replace(self, render=replace(self.render, **values))
 
 
 class _Table:
@@ -312,8 +324,13 @@ def _parse_render(t: _Table) -> RenderSettings:
         colors[key] = t.array(key, (3,), getattr(defaults, key))
         if np.any(colors[key] < 0):
             raise t.error(key, f"colour components must be >= 0, got {colors[key].tolist()}")
+    overlay = t.boolean("overlay", defaults.overlay)
+    colors["overlay_color"] = t.array("overlay_color", (3,), defaults.overlay_color)
+    if np.any(colors["overlay_color"] < 0):
+        raise t.error("overlay_color", f"colour components must be >= 0, got {colors['overlay_color'].tolist()}")
+    normals = t.string("normals", defaults.normals, NORMALS_MODES)
     t.finish()
-    return RenderSettings(tess, **colors)
+    return RenderSettings(tess, **colors, overlay=overlay, normals=normals)
 
 
 def _parse_output(t: _Table, path: Path) -> OutputSpec:

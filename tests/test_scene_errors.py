@@ -310,6 +310,12 @@ CASES = [
     Case("negative colour", put("render.line_color", [1.0, -0.5, 1.0]), "render.line_color"),
     Case("tessellation zero", put("render.tessellation", 0), "render.tessellation"),
     Case("colour beyond float32 range", put("render.background", [1e308, 0.0, 0.0]), "render.background"),
+    Case("overlay not a boolean", put("render.overlay", "yes"), "render.overlay"),
+    Case("overlay colour too short", put("render.overlay_color", [1.0, 0.2]), "render.overlay_color"),
+    Case("overlay colour negative", put("render.overlay_color", [1.0, -0.2, 0.1]), "render.overlay_color"),
+    Case("overlay colour not numbers", put("render.overlay_color", ["red", 0.2, 0.1]), "render.overlay_color[0]"),
+    Case("normals unknown mode", put("render.normals", "smooth"), "render.normals"),
+    Case("normals not a string", put("render.normals", 1), "render.normals"),
     Case("no output format", together(put("output.exr", False), put("output.png", False)), "output"),
     Case("output name climbs out", put("output.name", "../escape"), "output.name"),
     Case("output name with slash", put("output.name", "sub/base"), "output.name"),
@@ -382,6 +388,8 @@ VALID_VARIANTS = [
          together(put(f"{S}.degree", 3), put(f"{S}.knots_v", [0.0] * 4 + [1.0] * 4)), ""),
     Case("no weights", drop(f"{S}.weights"), ""),
     Case("exr only", put("output.png", False), ""),
+    Case("mesh normals with overlay", together(put("render.normals", "mesh"), put("render.overlay", True),
+                                               put("render.overlay_color", [0.0, 1.0, 0.0])), ""),
 ]
 
 

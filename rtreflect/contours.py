@@ -1,0 +1,401 @@
+"""Analytic reflection lines: the level sets f(u, v) = c_k of Ulmet's function (paper section 4, eq. 5–6).
+
+The paper's theorem: the reflection line of light line k is the image of the level
+set f(u, v) = c_k, where f is the e-coordinate at which the reflected ray R + t s
+meets the light plane (general form in DESIGN.md: t = m·(Q − R)/(m·s),
+f = e·(R + t s − Q), defined where t > 0). Per patch:
+
+1. f on a (u, v) grid whose cells project to about `GRID_CELL_PX` pixels;
+2. the level sets f = c_k on that grid by contourpy (cells touching t ≤ 0 are masked);
+3. every vertex polished onto f = c_k by Newton along ∇f (finite differences);
+4. segments subdivided (midpoints polished) until each projects to at most
+   `MAX_SEGMENT_PX` and its chord strays less than `CHORD_TOLERANCE_PX` from the curve;
+5. each vertex classified: in front of the camera, seen from the eye (Embree occlusion
+   towards A), its reflected ray unblocked up to the light plane, and on the tube
+   (|τ| ≤ length/2 for a finite tube); the polylines are cut where the class changes,
+   the cut located by bisection to a small fraction of a pixel;
+6. the surviving pieces are mapped to 3D by the exact evaluator and projected with the camera.
+
+The result, `ContourLines`, holds per light line the polylines in (u, v) and in
+pixels (x = column, y = row, pixel centres at half-integers, like `Camera.project`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import contourpy
+import numpy as np
+
+from .accelerator import Accelerator
+from .camera import Camera
+from .lights import TubeLights, reflect
+from .surfaces import SurfaceSet
+from .tessellation import Tessellation
+
+#: Target size in pixels of one cell of the (u, v) grid that contourpy sees.
+GRID_CELL_PX = 2.0
+MIN_GRID = 16
+MAX_GRID = 2048
+#: Points evaluated per chunk of the grid: bounds memory for huge patches.
+GRID_CHUNK = 1 << 16
+#: Subdivide a contour segment while it projects longer than this ...
+MAX_SEGMENT_PX = 2.0
+#: ... or while its polished midpoint lies farther than this from the chord.
+CHORD_TOLERANCE_PX = 0.005
+SUBDIVISION_ROUNDS = 12
+#: Segments farther than this outside the image are not refined (a huge patch stays cheap).
+IMAGE_MARGIN_PX = 8.0
+#: Bisection steps that locate where a contour is cut (visibility, tube end): 2^-10 of a ≤ 1 px segment.
+BISECTION_STEPS = 10
+NEWTON_STEPS = 8
+#: Newton is done when |f − c_k| is below this fraction of the tube spacing (or of 1 when there is one tube).
+NEWTON_TOLERANCE = 1e-11
+
+
+@dataclass(frozen=True)
+class Polyline:
+    patch: int
+    uv: np.ndarray  # (n, 2)
+    px: np.ndarray  # (n, 2) image (x = column, y = row), pixel centres at half-integers
+
+
+@dataclass(frozen=True)
+class ContourLine:
+    light: int  # index k of the tube
+    position: float  # c_k
+    polylines: list[Polyline]
+
+
+@dataclass(frozen=True)
+class ContourLines:
+    width: int
+    height: int
+    lines: list[ContourLine]
+
+    def to_json(self) -> dict:
+        """The `NAME.contours.json` document: per line the light index and polylines in pixels and in (u, v)."""
+        return {
+            "width": self.width,
+            "height": self.height,
+            "pixel_convention": "x = column, y = row from the top-left corner; pixel (i, j) has its centre at (j + 0.5, i + 0.5)",
+            "lines": [{"light": line.light, "position": line.position,
+                       "polylines": [{"patch": p.patch, "pixels": np.round(p.px, 4).tolist(), "uv": p.uv.tolist()}
+                                     for p in line.polylines]}
+                      for line in self.lines],
+        }
+
+
+class UlmetField:
+    """f(u, v) and the visibility of contour points, for one scene's surfaces, camera, tubes and BVH."""
+
+    def __init__(self, surfaces: SurfaceSet, tessellation: Tessellation, accelerator: Accelerator, camera: Camera,
+                 lights: TubeLights):
+        self.surfaces = surfaces
+        self.tessellation = tessellation
+        self.accelerator = accelerator
+        self.camera = camera
+        self.lights = lights
+
+    @classmethod
+    def of(cls, renderer) -> "UlmetField":
+        """The field of a `render.Renderer`'s scene, sharing its patches, mesh, BVH, camera and tubes."""
+        return cls(renderer.surfaces, renderer.tessellation, renderer.accelerator, renderer.camera, renderer.lights)
+
+    # -- the function ----------------------------------------------------------------------
+    def eye_vectors(self, R: np.ndarray) -> np.ndarray:
+        """a: unit vectors from R towards the eye A (the reversed view direction for an orthographic camera)."""
+        if self.camera.orthographic:
+            return np.broadcast_to(-self.camera.basis[0], R.shape).copy()
+        a = self.camera.spec.eye - R
+        return a / np.linalg.norm(a, axis=1, keepdims=True)
+
+    def geometry(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray):
+        """R = S(u, v), the exact unit normal n, a and s = 2(a·n)n − a (paper eq. 3)."""
+        derivs = self.surfaces.evaluate(patch, u, v)
+        n = self.surfaces.normals(patch, u, v, derivs)
+        a = self.eye_vectors(derivs.S)
+        return derivs.S, n, a, reflect(a, n)
+
+    def f(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Ulmet's f at (patch, u, v), paper eq. (5) in the general form; NaN where t ≤ 0."""
+        R, _, _, s = self.geometry(patch, u, v)
+        return self.lights.ulmet_f(R, s)
+
+    def f_grid(self, k: int, us: np.ndarray, vs: np.ndarray) -> np.ndarray:
+        """f on the tensor grid us × vs of patch k, shape (len(us), len(vs)), evaluated in chunks."""
+        uu, vv = np.meshgrid(us, vs, indexing="ij")
+        uu, vv = uu.ravel(), vv.ravel()
+        out = np.empty(len(uu))
+        for lo in range(0, len(uu), GRID_CHUNK):
+            hi = min(lo + GRID_CHUNK, len(uu))
+            out[lo:hi] = self.f(np.full(hi - lo, k), uu[lo:hi], vv[lo:hi])
+        return out.reshape(len(us), len(vs))
+
+    # -- Newton onto f = c -----------------------------------------------------------------
+    def polish(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, c: np.ndarray,
+               max_move: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Newton on f(u, v) − c = 0 along ∇f (the contour's normal in (u, v)); returns u, v, converged.
+
+        ∇f by one-sided differences stepped into the domain. A point on an edge of the
+        domain stays on it (the edge's own parameter is held fixed), so contours end
+        exactly on patch boundaries. Points that would move farther than ``max_move``
+        (in the (u, v) metric) jumped to another branch and are reported unconverged.
+        """
+        u0, u1, v0, v1 = self.surfaces.domains(patch)
+        u, v = u.astype(np.float64).copy(), v.astype(np.float64).copy()
+        start_u, start_v = u.copy(), v.copy()
+        hold_u = (u <= u0) | (u >= u1)
+        hold_v = (v <= v0) | (v >= v1)
+        hu = 1e-7 * (u1 - u0)
+        hv = 1e-7 * (v1 - v0)
+        gaps = np.diff(np.unique(self.lights.c_k))
+        scale = float(gaps.min()) if len(gaps) else 1.0  # the tube spacing: f's natural unit
+        scale = max(scale, 1e-9 * (self.tessellation.extent + float(np.abs(self.lights.c_k).max())))
+        ok = np.zeros(len(u), dtype=bool)
+        active = np.arange(len(u))
+        for _ in range(NEWTON_STEPS):
+            if len(active) == 0:
+                break
+            p, ua, va = patch[active], u[active], v[active]
+            su = np.where(ua + hu[active] <= u1[active], hu[active], -hu[active])
+            sv = np.where(va + hv[active] <= v1[active], hv[active], -hv[active])
+            values = self.f(np.concatenate([p, p, p]), np.concatenate([ua, ua + su, ua]),
+                            np.concatenate([va, va, va + sv])).reshape(3, -1)
+            r = values[0] - c[active]
+            gu = np.where(hold_u[active], 0.0, (values[1] - values[0]) / su)
+            gv = np.where(hold_v[active], 0.0, (values[2] - values[0]) / sv)
+            done = np.abs(r) <= NEWTON_TOLERANCE * scale
+            ok[active[done]] = True
+            g2 = gu * gu + gv * gv
+            step = ~done & np.isfinite(r) & np.isfinite(g2) & (g2 > 0)
+            active, r, gu, gv, g2 = (x[step] for x in (active, r, gu, gv, g2))
+            u[active] = np.clip(u[active] - r * gu / g2, u0[active], u1[active])
+            v[active] = np.clip(v[active] - r * gv / g2, v0[active], v1[active])
+        if len(active):  # the last step's result
+            r = self.f(patch[active], u[active], v[active]) - c[active]
+            ok[active] = np.abs(r) <= 1e3 * NEWTON_TOLERANCE * scale
+        ok &= np.hypot(u - start_u, v - start_v) <= max_move
+        return u, v, ok
+
+    # -- where a contour is seen --------------------------------------------------------------
+    def project(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Image positions (n, 2) and depth along the view direction of S(u, v)."""
+        R = self.surfaces.evaluate(patch, u, v).S
+        depth = (R - self.camera.spec.eye) @ self.camera.basis[0]
+        return self.camera.project(R), depth
+
+    def seen(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """True where S(u, v) on tube k's contour shows the tube: visible, unblocked, on the tube.
+
+        In front of the camera; no triangle between the point and the eye; no triangle on
+        the reflected ray before it reaches the light plane; for a finite tube, the ray meets
+        the plane within the tube's length. Rays start off the surface along the normal
+        turned towards the eye by more than the mesh's chord error, as the renderer's do.
+        """
+        R, n, a, s = self.geometry(patch, u, v)
+        lights = self.lights
+        w = self.camera.basis[0]
+        depth = (R - self.camera.spec.eye) @ w
+        good = (depth > 0) | self.camera.orthographic
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((lights.Q - R) @ lights.m) / (s @ lights.m)
+        good &= t > 0
+        tau = (R + np.where(np.isfinite(t), t, 0.0)[:, None] * s - lights.Q) @ lights.c
+        if math.isfinite(lights.length):
+            good &= np.abs(tau) <= 0.5 * lights.length
+        n = np.where((np.einsum("ij,ij->i", n, a) < 0)[:, None], -n, n)
+        eps = (2.0 * self.tessellation.chord_error[patch] + 1e-6 * (self.tessellation.extent + np.abs(R).max(axis=1)))
+        origin = R + eps[:, None] * n
+        if self.camera.orthographic:
+            to_eye = np.full(len(R), np.inf)
+        else:
+            to_eye = np.linalg.norm(self.camera.spec.eye - origin, axis=1)
+        idx = np.flatnonzero(good)
+        good[idx] &= ~self.accelerator.occluded(origin[idx], a[idx], to_eye[idx])
+        idx = np.flatnonzero(good)
+        good[idx] &= ~self.accelerator.occluded(origin[idx], s[idx], t[idx])
+        return good
+
+
+# -- polylines as flat arrays -------------------------------------------------------------------
+
+
+@dataclass
+class _Chains:
+    """Many polylines as flat arrays: vertex rows, chain id per vertex (chains are contiguous)."""
+
+    u: np.ndarray
+    v: np.ndarray
+    chain: np.ndarray
+    ok: np.ndarray  # vertex polished onto its level set
+
+    def segments(self) -> np.ndarray:
+        """Index i of segments (i, i + 1) within one chain."""
+        return np.flatnonzero(self.chain[:-1] == self.chain[1:])
+
+    def insert(self, after: np.ndarray, u: np.ndarray, v: np.ndarray, ok: np.ndarray) -> None:
+        at = after + 1
+        self.u = np.insert(self.u, at, u)
+        self.v = np.insert(self.v, at, v)
+        self.chain = np.insert(self.chain, at, self.chain[after])
+        self.ok = np.insert(self.ok, at, ok)
+
+
+def _grid_size(field: UlmetField, k: int) -> tuple[int, int]:
+    """Grid points along u and v so that one cell projects to about GRID_CELL_PX pixels."""
+    (u0, u1), (v0, v1) = field.surfaces.patches[k].domain
+    probe = 33
+    us, vs = np.linspace(u0, u1, probe), np.linspace(v0, v1, probe)
+    uu, vv = np.meshgrid(us, vs, indexing="ij")
+    px, depth = field.project(np.full(uu.size, k), uu.ravel(), vv.ravel())
+    px = px.reshape(probe, probe, 2)
+    front = (depth.reshape(probe, probe) > 0) | field.camera.orthographic
+    # Size the grid for what the image shows: probe points in front of the camera and near the image.
+    margin = 0.25 * max(field.camera.width, field.camera.height)
+    near = front & np.all((px >= -margin) & (px <= np.array([field.camera.width, field.camera.height]) + margin), axis=2)
+    px = np.where(near[..., None], px, np.nan)
+    with np.errstate(invalid="ignore"):
+        step_u = np.nanmax(np.linalg.norm(np.diff(px, axis=0), axis=2), initial=0.0)
+        step_v = np.nanmax(np.linalg.norm(np.diff(px, axis=1), axis=2), initial=0.0)
+    breaks_u, breaks_v = field.surfaces.patches[k].span_breaks()
+    n_u = int(np.clip(math.ceil((probe - 1) * step_u / GRID_CELL_PX), MIN_GRID, MAX_GRID))
+    n_v = int(np.clip(math.ceil((probe - 1) * step_v / GRID_CELL_PX), MIN_GRID, MAX_GRID))
+    # At least a few cells per knot span: f's pieces follow the surface's.
+    return max(n_u, 4 * (len(breaks_u) - 1)) + 1, max(n_v, 4 * (len(breaks_v) - 1)) + 1
+
+
+def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float]:
+    """contourpy's level sets f = c_j on patch k's grid, as chains, with each chain's tube index."""
+    (u0, u1), (v0, v1) = field.surfaces.patches[k].domain
+    n_u, n_v = _grid_size(field, k)
+    us, vs = np.linspace(u0, u1, n_u), np.linspace(v0, v1, n_v)
+    f = field.f_grid(k, us, vs)
+    generator = contourpy.contour_generator(vs, us, f, line_type="Separate", corner_mask=True)
+    lines_u, lines_v, chain_light = [], [], []
+    finite = f[np.isfinite(f)]
+    lo, hi = (finite.min(), finite.max()) if finite.size else (np.inf, -np.inf)
+    for j, level in enumerate(field.lights.c_k):
+        if not lo <= level <= hi:
+            continue
+        for line in generator.lines(float(level)):
+            if len(line) >= 2:
+                lines_v.append(line[:, 0])
+                lines_u.append(line[:, 1])
+                chain_light.append(j)
+    if not lines_u:
+        empty = np.zeros(0)
+        return _Chains(empty, empty, np.zeros(0, int), np.zeros(0, bool)), np.zeros(0, int), 0.0
+    lengths = [len(a) for a in lines_u]
+    chains = _Chains(np.concatenate(lines_u), np.concatenate(lines_v), np.repeat(np.arange(len(lengths)), lengths),
+                     np.ones(sum(lengths), dtype=bool))
+    cell = math.hypot((u1 - u0) / (n_u - 1), (v1 - v0) / (n_v - 1))
+    return chains, np.asarray(chain_light), cell
+
+
+def _cut_points(field: UlmetField, patch: np.ndarray, light: np.ndarray, ua, va, ub, vb, good_a: np.ndarray,
+                cell: float):
+    """Bisect segments whose ends differ in class (a good, b not, or the reverse) down to the boundary.
+
+    Returns the last point on the good side of each segment.
+    """
+    good_u = np.where(good_a, ua, ub)
+    good_v = np.where(good_a, va, vb)
+    bad_u = np.where(good_a, ub, ua)
+    bad_v = np.where(good_a, vb, va)
+    c = field.lights.c_k[light]
+    for _ in range(BISECTION_STEPS):
+        mu, mv, ok = field.polish(patch, 0.5 * (good_u + bad_u), 0.5 * (good_v + bad_v), c, np.full(len(patch), cell))
+        mid_good = ok & field.seen(patch, mu, mv, light)
+        good_u, good_v = np.where(mid_good, mu, good_u), np.where(mid_good, mv, good_v)
+        bad_u, bad_v = np.where(mid_good, bad_u, mu), np.where(mid_good, bad_v, mv)
+    return good_u, good_v
+
+
+def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
+    """(tube index, (n, 2) array of (u, v)) of every visible contour piece on patch k."""
+    chains, chain_light, cell = _patch_chains(field, k)
+    if len(chains.u) == 0:
+        return []
+    c_of = lambda rows: field.lights.c_k[chain_light[chains.chain[rows]]]  # noqa: E731
+    every = np.arange(len(chains.u))
+    pk = np.full(len(chains.u), k)
+    chains.u, chains.v, chains.ok = field.polish(pk, chains.u, chains.v, c_of(every), np.full(len(pk), cell))
+
+    # Subdivide until every segment is short and straight in the image.
+    px, depth = field.project(np.full(len(chains.u), k), chains.u, chains.v)
+    front = (depth > 0) | field.camera.orthographic
+    width, height = field.camera.width, field.camera.height
+    for _ in range(SUBDIVISION_ROUNDS):
+        seg = chains.segments()
+        # Only what can be seen needs refining: both ends polished and in front, the segment near the image.
+        lo = np.minimum(px[seg], px[seg + 1])
+        hi = np.maximum(px[seg], px[seg + 1])
+        near_image = ((hi[:, 0] >= -IMAGE_MARGIN_PX) & (lo[:, 0] <= width + IMAGE_MARGIN_PX)
+                      & (hi[:, 1] >= -IMAGE_MARGIN_PX) & (lo[:, 1] <= height + IMAGE_MARGIN_PX))
+        seg = seg[chains.ok[seg] & chains.ok[seg + 1] & front[seg] & front[seg + 1] & near_image]
+        if len(seg) == 0:
+            break
+        mid_u = 0.5 * (chains.u[seg] + chains.u[seg + 1])
+        mid_v = 0.5 * (chains.v[seg] + chains.v[seg + 1])
+        half = 0.5 * np.hypot(chains.u[seg + 1] - chains.u[seg], chains.v[seg + 1] - chains.v[seg])
+        mu, mv, mok = field.polish(np.full(len(seg), k), mid_u, mid_v, c_of(seg), np.maximum(half, 1e-3 * cell))
+        mpx, mdepth = field.project(np.full(len(seg), k), mu, mv)
+        chord_mid = 0.5 * (px[seg] + px[seg + 1])
+        length = np.linalg.norm(px[seg + 1] - px[seg], axis=1)
+        off = np.linalg.norm(mpx - chord_mid, axis=1)
+        split = ~((length <= MAX_SEGMENT_PX) & (off <= CHORD_TOLERANCE_PX)) | ~np.isfinite(length)
+        split &= half > 1e-9 * cell  # nothing left to split
+        if not split.any():
+            break
+        seg, mu, mv, mok, mpx, mdepth = seg[split], mu[split], mv[split], mok[split], mpx[split], mdepth[split]
+        chains.insert(seg, mu, mv, mok)
+        px = np.insert(px, seg + 1, mpx, axis=0)
+        front = np.insert(front, seg + 1, (mdepth > 0) | field.camera.orthographic)
+
+    light = chain_light[chains.chain]
+    good = chains.ok & field.seen(np.full(len(chains.u), k), chains.u, chains.v, light)
+
+    # Cut where the class changes, at the boundary found by bisection.
+    seg = chains.segments()
+    change = seg[good[seg] != good[seg + 1]]
+    cut_u, cut_v = _cut_points(field, np.full(len(change), k), light[change], chains.u[change], chains.v[change],
+                               chains.u[change + 1], chains.v[change + 1], good[change], cell)
+    # A good vertex followed by a bad one: append the cut after it; a bad one followed by a good one: before the good one.
+    u, v, chain, keep = chains.u, chains.v, chains.chain, good
+    ends_after = change[good[change]]
+    starts_before = change[~good[change]]
+    order = np.argsort(np.concatenate([ends_after, starts_before]), kind="stable")
+    where = np.concatenate([ends_after, starts_before])[order]
+    new_u = np.concatenate([cut_u[good[change]], cut_u[~good[change]]])[order]
+    new_v = np.concatenate([cut_v[good[change]], cut_v[~good[change]]])[order]
+    u = np.insert(u, where + 1, new_u)
+    v = np.insert(v, where + 1, new_v)
+    chain = np.insert(chain, where + 1, chain[where])
+    keep = np.insert(keep, where + 1, True)
+    # Runs of kept vertices within one chain become the pieces.
+    run_start = keep & np.concatenate([[True], ~keep[:-1] | (chain[1:] != chain[:-1])])
+    run_id = np.cumsum(run_start) - 1
+    pieces = []
+    kept = np.flatnonzero(keep)
+    if len(kept) == 0:
+        return []
+    bounds = np.flatnonzero(np.diff(run_id[kept])) + 1
+    for rows in np.split(kept, bounds):
+        if len(rows) >= 2:
+            pieces.append((int(chain_light[chain[rows[0]]]), np.column_stack([u[rows], v[rows]])))
+    return pieces
+
+
+def analytic_contours(field: UlmetField, progress=None) -> ContourLines:
+    """Every tube's visible reflection line as projected polylines (the contour theorem, section 4)."""
+    per_light: dict[int, list[Polyline]] = {j: [] for j in range(len(field.lights.c_k))}
+    for k in range(len(field.surfaces)):
+        for light, uv in patch_contours(field, k):
+            px, _ = field.project(np.full(len(uv), k), uv[:, 0], uv[:, 1])
+            per_light[light].append(Polyline(k, uv, px))
+        if progress:
+            progress(1)
+    lines = [ContourLine(j, float(field.lights.c_k[j]), per_light[j]) for j in range(len(field.lights.c_k))]
+    return ContourLines(field.camera.width, field.camera.height, lines)

@@ -1,0 +1,169 @@
+"""Ulmet's f and the analytic contours f = c_k against independent computations.
+
+f against the paper's special form (eq. 5–6, light plane z = z0, lines x = c) and
+against a brute-force ray/plane intersection; contour points against f itself, the
+camera's projection and, on the cylinder seen along a ruling-free direction, the
+closed form (every reflection line is a ruling u = const); the overlay's coverage
+against the box filter of a 1-pixel line.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from rtreflect.cli import cli
+from rtreflect.contours import MAX_SEGMENT_PX, ContourLine, ContourLines, Polyline, UlmetField, analytic_contours
+from rtreflect.lights import TubeLights
+from rtreflect.overlay import coverage
+from rtreflect.render import Renderer
+from rtreflect.scene import LightSpec, load_scene
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+I, J, K = np.eye(3)
+
+
+def unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def tubes(point, normal, direction, positions=(0.0,), length=np.inf) -> TubeLights:
+    return TubeLights.from_spec(LightSpec(np.asarray(point, float), unit(np.asarray(normal, float)),
+                                          unit(np.asarray(direction, float)), np.asarray(positions, float), 0.05, length))
+
+
+def test_f_is_the_papers_special_form():
+    """Paper eq. (5): for lights x = c in the plane z = z0, f = [(s × r)·j + z0 (s·i)] / (s·k)."""
+    rng = np.random.default_rng(1)
+    z0 = 3.0
+    r = rng.uniform(-1, 1, (500, 3)) * [2, 2, 0.5]
+    s = unit(rng.normal(size=(500, 3)) + [0, 0, 1.5])
+    s = s[s[:, 2] > 0.05]
+    r = r[: len(s)]
+    paper = (np.cross(s, r) @ J + z0 * (s @ I)) / (s @ K)
+    ours = tubes([0, 0, z0], K, J).ulmet_f(r, s)
+    np.testing.assert_allclose(ours, paper, rtol=1e-12, atol=1e-12)
+
+
+def test_f_is_where_the_reflected_ray_meets_the_light_plane():
+    """Brute force: solve R + t s = Q + α e + β c for (t, α, β); f = α where t > 0, NaN where t ≤ 0."""
+    rng = np.random.default_rng(2)
+    m = unit(np.array([0.3, -0.4, 1.0]))
+    c = unit(np.cross(m, [1.0, 0.2, 0.1]))
+    Q = np.array([0.4, -0.2, 2.5])
+    lights = tubes(Q, m, c)
+    R = rng.uniform(-1, 1, (300, 3))
+    s = unit(rng.normal(size=(300, 3)))
+    ours = lights.ulmet_f(R, s)
+    for row in range(len(R)):
+        t, alpha, _ = np.linalg.solve(np.column_stack([s[row], -lights.e, -c]), Q - R[row])
+        if t > 1e-9:
+            assert ours[row] == pytest.approx(alpha, rel=1e-9, abs=1e-9)
+        elif t < -1e-9:
+            assert np.isnan(ours[row])
+
+
+@pytest.fixture(scope="module")
+def hood():
+    renderer = Renderer(load_scene(SCENES / "hood.toml").with_image(320, 180, 1))
+    field = UlmetField.of(renderer)
+    return renderer, field, analytic_contours(field)
+
+
+def test_contour_points_lie_on_their_level_set_and_project_with_the_camera(hood):
+    renderer, field, contours = hood
+    assert len(contours.lines) == len(renderer.lights.c_k)
+    for line in contours.lines:
+        assert line.polylines, f"tube {line.light} has no visible reflection line on the hood"
+        for poly in line.polylines:
+            patch = np.full(len(poly.uv), poly.patch)
+            f = field.f(patch, poly.uv[:, 0], poly.uv[:, 1])
+            assert np.max(np.abs(f - line.position)) <= 1e-9
+            S = renderer.surfaces.evaluate(patch, poly.uv[:, 0], poly.uv[:, 1]).S
+            np.testing.assert_allclose(poly.px, renderer.camera.project(S), atol=1e-9)
+            steps = np.linalg.norm(np.diff(poly.px, axis=0), axis=1)
+            assert steps.max() <= MAX_SEGMENT_PX + 1e-9  # short enough to be straight at a pixel's scale
+
+
+def test_reflection_lines_on_a_cylinder_are_rulings():
+    """Closed form: seen orthographically along a direction ⊥ the axis (y), the normal and s depend on u only,
+    so each level set f = c_k is a ruling u = const spanning the whole v range."""
+    scene = load_scene(SCENES / "cylinder.toml").with_image(160, 90, 1)
+    eye = np.array([2.6, 0.0, 2.2])
+    scene = replace(scene, camera=replace(scene.camera, projection="orthographic", eye=eye,
+                                          look_at=np.array([0.45, 0.0, 0.45]), view_height=3.0))
+    field = UlmetField.of(Renderer(scene))
+    contours = analytic_contours(field)
+    (v0, v1) = scene.surfaces[0].domain[1]
+    count = 0
+    for line in contours.lines:
+        for poly in line.polylines:
+            count += 1
+            assert np.ptp(poly.uv[:, 0]) <= 1e-9
+            assert poly.uv[:, 1].min() == pytest.approx(v0) and poly.uv[:, 1].max() == pytest.approx(v1)
+    assert count >= 3
+
+
+def test_finite_tubes_clip_the_contours(hood):
+    renderer, _, full = hood
+    length = 0.8
+    lights = replace(renderer.lights, length=length)
+    field = UlmetField(renderer.surfaces, renderer.tessellation, renderer.accelerator, renderer.camera, lights)
+    clipped = analytic_contours(field)
+    for line in clipped.lines:
+        for poly in line.polylines:
+            patch = np.full(len(poly.uv), poly.patch)
+            R, _, _, s = field.geometry(patch, poly.uv[:, 0], poly.uv[:, 1])
+            t = ((lights.Q - R) @ lights.m) / (s @ lights.m)
+            tau = (R + t[:, None] * s - lights.Q) @ lights.c
+            assert np.max(np.abs(tau)) <= 0.5 * length + 1e-9
+            # The cut is found by bisection: the ends sit at the tube's ends, not a segment short of them.
+            assert np.max(np.abs(tau)) >= 0.5 * length - 1e-3
+    total = lambda c: sum(len(p.uv) for line in c.lines for p in line.polylines)  # noqa: E731
+    assert 0 < total(clipped) < total(full)
+
+
+def test_overlay_coverage_is_the_box_filter_of_a_one_pixel_line():
+    def one_segment(y: float) -> ContourLines:
+        px = np.array([[2.0, y], [18.0, y]])
+        return ContourLines(20, 20, [ContourLine(0, 0.0, [Polyline(0, np.zeros((2, 2)), px)])])
+
+    centred = coverage(one_segment(10.5), 20, 20)  # on pixel row 10's centre line: that row, fully
+    np.testing.assert_allclose(centred[10, 5:15], 1.0)
+    assert np.all(centred[[8, 9, 11, 12], 5:15] == 0.0)
+    between = coverage(one_segment(10.0), 20, 20)  # on the border of rows 9 and 10: half each
+    np.testing.assert_allclose(between[9, 5:15], 0.5)
+    np.testing.assert_allclose(between[10, 5:15], 0.5)
+    assert np.all(between[[8, 11], :] == 0.0)
+
+
+def test_render_overlay_writes_contours_json_and_draws_them(tmp_path):
+    scene = SCENES / "hood.toml"
+    options = ["--width", "160", "--height", "90", "--samples", "1"]
+    plain = CliRunner().invoke(cli, ["render", str(scene), "-o", str(tmp_path / "plain"), *options])
+    assert plain.exit_code == 0, plain.stderr
+    drawn = CliRunner().invoke(cli, ["render", str(scene), "-o", str(tmp_path / "overlay"), "--overlay", *options])
+    assert drawn.exit_code == 0, drawn.stderr
+    from rtreflect.imagefiles import read_image
+
+    a, _, _ = read_image(tmp_path / "plain" / "hood.png")
+    b, _, _ = read_image(tmp_path / "overlay" / "hood.png")
+    doc = json.loads((tmp_path / "overlay" / "hood.contours.json").read_text())
+    assert [line["light"] for line in doc["lines"]] == list(range(9))
+    assert doc["width"] == 160 and doc["height"] == 90
+    changed = np.argwhere(np.any(a != b, axis=2))
+    assert len(changed) > 0
+    # Every changed pixel lies within a pixel of some contour point.
+    points = np.concatenate([np.asarray(p["pixels"]) for line in doc["lines"] for p in line["polylines"]])
+    centres = changed[:, ::-1] + 0.5
+    gaps = np.min(np.linalg.norm(centres[:, None, :] - points[None, :, :], axis=2), axis=1)
+    assert gaps.max() <= 1.5
+    for line in doc["lines"]:
+        for poly in line["polylines"]:
+            assert len(poly["pixels"]) == len(poly["uv"]) >= 2
+    assert sorted(p.name for p in (tmp_path / "plain").iterdir()) == ["hood.exr", "hood.png"]
