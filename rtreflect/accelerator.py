@@ -30,6 +30,17 @@ class Accelerator:
         self._vertices = np.ascontiguousarray(tessellation.vertices, dtype=np.float32)
         self._faces = np.ascontiguousarray(tessellation.faces, dtype=np.int32)
         self._mesh = TriangleMesh(self.scene, self._vertices, self._faces)
+        self._chord_error = tessellation.chord_error
+        self._extent = tessellation.extent
+
+    def surface_origins(self, R: np.ndarray, n: np.ndarray, patch: np.ndarray) -> np.ndarray:
+        """Origins for rays leaving the surface at R on ``patch``'s side n (unit normal facing the ray's side).
+
+        Offset along n by more than the mesh's chord error (twice it, plus a relative 1e-6 for
+        float32), so the mesh standing in for the surface does not shadow the point it approximates.
+        """
+        eps = 2.0 * self._chord_error[patch] + 1e-6 * (self._extent + np.abs(R).max(axis=1))
+        return R + eps[:, None] * n
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> MeshHits:
         """Nearest triangle hit of each ray."""

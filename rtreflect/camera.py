@@ -49,6 +49,13 @@ class Camera:
         half_h = self.spec.view_height / 2 if self.orthographic else math.tan(math.radians(self.spec.fov) / 2)
         return half_h * aspect, half_h
 
+    def pixel_footprint(self, depth: np.ndarray) -> np.ndarray:
+        """Height in model units of one pixel at distance ``depth`` from the eye (perspective), constant if orthographic."""
+        half_h = self._half_extents()[1]
+        if self.orthographic:
+            return np.full_like(np.asarray(depth, dtype=np.float64), 2.0 * half_h / self.height)
+        return np.asarray(depth, dtype=np.float64) * 2.0 * half_h / self.height
+
     def rays(self, rows: np.ndarray, cols: np.ndarray, offsets: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Origins and unit directions (N, 3) for pixels (rows, cols) at sub-pixel offsets (dy, dx).
 

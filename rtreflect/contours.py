@@ -150,8 +150,8 @@ class UlmetField:
         hold_v = (v <= v0) | (v >= v1)
         hu = 1e-7 * (u1 - u0)
         hv = 1e-7 * (v1 - v0)
-        gaps = np.diff(np.unique(self.lights.c_k))
-        scale = float(gaps.min()) if len(gaps) else 1.0  # the tube spacing: f's natural unit
+        spacing = self.lights.spacing
+        scale = spacing if math.isfinite(spacing) else 1.0  # the tube spacing: f's natural unit
         scale = max(scale, 1e-9 * (self.tessellation.extent + float(np.abs(self.lights.c_k).max())))
         ok = np.zeros(len(u), dtype=bool)
         active = np.arange(len(u))
@@ -186,10 +186,11 @@ class UlmetField:
         depth = (R - self.camera.spec.eye) @ self.camera.basis[0]
         return self.camera.project(R), depth
 
-    def seen(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """True where S(u, v) on tube k's contour shows the tube: visible, unblocked, on the tube.
+    def seen(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """True where the contour point S(u, v) shows its tube: visible, unblocked, on the tube.
 
-        In front of the camera; no triangle between the point and the eye; no triangle on
+        In front of the camera (depth > 0 for either projection: orthographic rays start on
+        the eye plane too, DESIGN.md's camera contract); no triangle between the point and the eye; no triangle on
         the reflected ray before it reaches the light plane; for a finite tube, the ray meets
         the plane within the tube's length. Rays start off the surface along the normal
         turned towards the eye by more than the mesh's chord error, as the renderer's do.
@@ -198,18 +199,16 @@ class UlmetField:
         lights = self.lights
         w = self.camera.basis[0]
         depth = (R - self.camera.spec.eye) @ w
-        good = (depth > 0) | self.camera.orthographic
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = ((lights.Q - R) @ lights.m) / (s @ lights.m)
+        good = depth > 0
+        t = lights.plane_t(R, s)
         good &= t > 0
         tau = (R + np.where(np.isfinite(t), t, 0.0)[:, None] * s - lights.Q) @ lights.c
         if math.isfinite(lights.length):
             good &= np.abs(tau) <= 0.5 * lights.length
         n = np.where((np.einsum("ij,ij->i", n, a) < 0)[:, None], -n, n)
-        eps = (2.0 * self.tessellation.chord_error[patch] + 1e-6 * (self.tessellation.extent + np.abs(R).max(axis=1)))
-        origin = R + eps[:, None] * n
-        if self.camera.orthographic:
-            to_eye = np.full(len(R), np.inf)
+        origin = self.accelerator.surface_origins(R, n, patch)
+        if self.camera.orthographic:  # back along the view direction to the eye plane, where the ray started
+            to_eye = (origin - self.camera.spec.eye) @ w
         else:
             to_eye = np.linalg.norm(self.camera.spec.eye - origin, axis=1)
         idx = np.flatnonzero(good)
@@ -251,7 +250,7 @@ def _grid_size(field: UlmetField, k: int) -> tuple[int, int]:
     uu, vv = np.meshgrid(us, vs, indexing="ij")
     px, depth = field.project(np.full(uu.size, k), uu.ravel(), vv.ravel())
     px = px.reshape(probe, probe, 2)
-    front = (depth.reshape(probe, probe) > 0) | field.camera.orthographic
+    front = depth.reshape(probe, probe) > 0
     # Size the grid for what the image shows: probe points in front of the camera and near the image.
     margin = 0.25 * max(field.camera.width, field.camera.height)
     near = front & np.all((px >= -margin) & (px <= np.array([field.camera.width, field.camera.height]) + margin), axis=2)
@@ -307,7 +306,7 @@ def _cut_points(field: UlmetField, patch: np.ndarray, light: np.ndarray, ua, va,
     c = field.lights.c_k[light]
     for _ in range(BISECTION_STEPS):
         mu, mv, ok = field.polish(patch, 0.5 * (good_u + bad_u), 0.5 * (good_v + bad_v), c, np.full(len(patch), cell))
-        mid_good = ok & field.seen(patch, mu, mv, light)
+        mid_good = ok & field.seen(patch, mu, mv)
         good_u, good_v = np.where(mid_good, mu, good_u), np.where(mid_good, mv, good_v)
         bad_u, bad_v = np.where(mid_good, bad_u, mu), np.where(mid_good, bad_v, mv)
     return good_u, good_v
@@ -325,7 +324,7 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
 
     # Subdivide until every segment is short and straight in the image.
     px, depth = field.project(np.full(len(chains.u), k), chains.u, chains.v)
-    front = (depth > 0) | field.camera.orthographic
+    front = depth > 0
     width, height = field.camera.width, field.camera.height
     for _ in range(SUBDIVISION_ROUNDS):
         seg = chains.segments()
@@ -352,10 +351,10 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
         seg, mu, mv, mok, mpx, mdepth = seg[split], mu[split], mv[split], mok[split], mpx[split], mdepth[split]
         chains.insert(seg, mu, mv, mok)
         px = np.insert(px, seg + 1, mpx, axis=0)
-        front = np.insert(front, seg + 1, (mdepth > 0) | field.camera.orthographic)
+        front = np.insert(front, seg + 1, mdepth > 0)
 
     light = chain_light[chains.chain]
-    good = chains.ok & field.seen(np.full(len(chains.u), k), chains.u, chains.v, light)
+    good = chains.ok & field.seen(np.full(len(chains.u), k), chains.u, chains.v)
 
     # Cut where the class changes, at the boundary found by bisection.
     seg = chains.segments()

@@ -50,6 +50,17 @@ class TubeLights:
                    float(spec.radius), float(spec.length))
 
     @property
+    def spacing(self) -> float:
+        """Smallest distance between two distinct tube positions c_k: f's natural unit (inf for a single position)."""
+        gaps = np.diff(np.unique(self.c_k))
+        return float(gaps.min()) if len(gaps) else float("inf")
+
+    def plane_t(self, R: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Ray parameter where R + t s meets the light plane, t = m·(Q − R)/(m·s) (±inf or NaN where s ∥ plane)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return _dot(self.Q - R, self.m) / _dot(s, self.m)
+
+    @property
     def points(self) -> np.ndarray:
         """B_k = Q + c_k e: a point of each tube's axis, its centre for a finite tube."""
         return self.Q + self.c_k[:, None] * self.e
@@ -95,9 +106,8 @@ class TubeLights:
         t = m·(Q − R)/(m·s), f = e·(R + t s − Q); NaN where t ≤ 0 (the ray never reaches the plane).
         For m = k, c = j this is f = [(s × r)·j + z0 (s·i)] / (s·k).
         """
-        ms = _dot(s, self.m)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = _dot(self.Q - R, self.m) / ms
+        t = self.plane_t(R, s)
+        with np.errstate(invalid="ignore"):
             f = _dot(R + t[:, None] * s - self.Q, self.e)
         return np.where(t > 0, f, np.nan)
 

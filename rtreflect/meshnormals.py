@@ -21,9 +21,8 @@ from .tracing import Hits
 
 def vertex_normals(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
     """(V, 3) exact unit normals at the mesh vertices (each vertex belongs to one patch)."""
-    vertex_patch = np.empty(len(tessellation.vertices), dtype=np.int64)
-    vertex_patch[tessellation.faces] = tessellation.face_patch[:, None]
-    return surfaces.normals(vertex_patch, tessellation.vertex_uv[:, 0], tessellation.vertex_uv[:, 1])
+    return surfaces.normals(tessellation.vertex_patch.astype(np.int64), tessellation.vertex_uv[:, 0],
+                            tessellation.vertex_uv[:, 1])
 
 
 def trace_mesh(accelerator: Accelerator, tessellation: Tessellation, normals_at_vertices: np.ndarray,

@@ -112,12 +112,9 @@ class Renderer:
             candidate, t_tube = self.lights.candidates(hit_dist)
             cand = np.flatnonzero(candidate)
         if len(cand):
-            # Start the occlusion ray off the surface by more than the mesh's chord error, so the
-            # mesh standing in for the surface does not shadow the point it approximates.
-            eps = (2.0 * self.tessellation.chord_error[hits.patch[idx[cand]]]
-                   + 1e-6 * (self.tessellation.extent + np.abs(R[cand]).max(axis=1)))
+            start = self.accelerator.surface_origins(R[cand], n[cand], hits.patch[idx[cand]])
             with self.clock.stage("occlusion (Embree)"):
-                blocked = self.accelerator.occluded(R[cand] + eps[:, None] * n[cand], s[idx[cand]], t_tube[cand])
+                blocked = self.accelerator.occluded(start, s[idx[cand]], t_tube[cand])
             lit[idx[cand]] = ~blocked
         return shading
 
