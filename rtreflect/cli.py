@@ -82,6 +82,9 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
                       leave=False, disable=None, file=sys.stderr) as bar:
                 result = renderer.render(progress=bar.update, threads=threads)
             png_rgba, extra = overlay_outputs(renderer, result) if scene.render.overlay else (None, None)
+            if scene.render.overlay and not scene.output.png:
+                click.echo(f"{scene.output.name}: overlay not drawn ([output] png = false; the EXR never shows it), "
+                           f"contours in {scene.output.name}.contours.json")
             written = save_render(result, outdir, png_rgba, extra)
         except RtreflectError as exc:
             fail(str(exc))
@@ -180,29 +183,36 @@ def _fmt(value: float | None) -> str:
 @cli.command()
 @click.argument("scenes", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--json", "report_path", type=click.Path(path_type=Path), default=None,
-              help="Also write the report as JSON: scenes → NAME → max_px, p95_px, mean_px, points, misses, lines.")
+              help="Also write the report as JSON: scenes → NAME → max_px, p95_px, mean_px, points, misses, "
+                   "colour_mismatches, colour_checked, reasons, lines.")
 @click.option("--tolerance", type=click.FloatRange(0, min_open=True), default=DEFAULT_TOLERANCE_PX, show_default=True,
               help="Largest allowed deviation in pixels between traced and analytic line centres.")
 @click.option("--width", type=click.IntRange(1, MAX_SIDE), help="Image width in pixels (overrides [image] width).")
 @click.option("--height", type=click.IntRange(1, MAX_SIDE), help="Image height in pixels (overrides [image] height).")
+@click.option("--samples", type=click.IntRange(1, MAX_SAMPLES),
+              help="s: s×s samples per pixel of the checked colour image (overrides [image] samples).")
 @click.option("--normals", type=click.Choice(NORMALS_MODES), default=None,
               help="Validate the exact renderer or the analysis-mesh one (overrides [render] normals).")
 @click.option("--threads", type=click.IntRange(1, 64), default=None, help="Render threads (default: up to 2).")
-def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: float, width, height, normals,
+def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: float, width, height, samples, normals,
              threads) -> None:
     """Check each SCENE's render against the analytic reflection lines (Ulmet's theorem).
 
     The reflection line of tube k is the image of the level set f(u, v) = c_k. The
-    scene is rendered in memory (pixel-centre AOVs: anti-aliasing samples do not enter)
+    scene is rendered in memory (colour at its samples, AOVs from the pixel-centre rays)
     and each traced line's centre is found at sub-pixel precision where the f AOV
     crosses c_k between neighbouring pixel centres. It is compared with the analytic
     contour projected into the image: per light line and overall, the number of points,
     the mean, 95th percentile and maximum deviation in pixels, and misses (analytic
     points away from silhouettes and occlusion edges with no traced centre within
-    1.5 px, and traced centres with no analytic line nearby).
+    1.5 px, and traced centres with no analytic line nearby). The colour image is
+    checked too: a pixel whose every sample lies within a tube's radius (line.dist and
+    its gradient, eq. 4) with the reflected ray unblocked must be fully lit, one whose
+    every sample lies outside must show no line; "colour" counts the pixels that do not.
 
-    Exit status 0 when every scene's maximum deviation is within --tolerance and there
-    are no misses, 1 otherwise, 2 on bad input.
+    Exit status 0 when every scene's maximum deviation is within --tolerance, there are
+    no misses and no colour mismatches, and something was compared; 1 otherwise (the
+    reason is printed), 2 on bad input.
 
     \b
     Example:
@@ -210,7 +220,7 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
       rtreflect validate scenes/hood.toml --normals mesh
     """
     try:
-        loaded = [load_scene(path).with_image(width, height).with_render(normals=normals) for path in scenes]
+        loaded = [load_scene(path).with_image(width, height, samples).with_render(normals=normals) for path in scenes]
     except RtreflectError as exc:
         fail(str(exc))
     reports = []
@@ -224,13 +234,17 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
             fail(str(exc))
         reports.append(report)
         click.echo(f"{scene.output.name} ({scene.path}, {image.width}×{image.height}, {scene.render.normals} normals)")
-        click.echo(f"  {'light':>5} {'c_k':>9} {'points':>7} {'mean_px':>8} {'p95_px':>8} {'max_px':>8} {'misses':>6}")
+        click.echo(f"  {'light':>5} {'c_k':>9} {'points':>7} {'mean_px':>8} {'p95_px':>8} {'max_px':>8} {'misses':>6}"
+                   f" {'colour':>6}")
         for line in report.lines:
             click.echo(f"  {line.light:>5} {line.position:>9.4g} {line.points:>7} {_fmt(line.mean_px):>8} "
-                       f"{_fmt(line.p95_px):>8} {_fmt(line.max_px):>8} {line.misses:>6}")
+                       f"{_fmt(line.p95_px):>8} {_fmt(line.max_px):>8} {line.misses:>6} {line.colour_mismatches:>6}")
         click.echo(f"  {'all':>5} {'':>9} {report.points:>7} {_fmt(report.mean_px):>8} {_fmt(report.p95_px):>8} "
-                   f"{_fmt(report.max_px):>8} {report.misses:>6}  {'PASS' if report.passed else 'FAIL'}"
-                   f" (tolerance {tolerance:g} px)")
+                   f"{_fmt(report.max_px):>8} {report.misses:>6} {report.colour_mismatches:>6}  "
+                   f"{'PASS' if report.passed else 'FAIL'} (tolerance {tolerance:g} px; "
+                   f"{report.colour_checked} pixels' colour checked)")
+        for reason in report.reasons:
+            click.echo(f"  FAIL: {reason}")
     if report_path is not None:
         document = {"scenes": {}}
         for report in reports:

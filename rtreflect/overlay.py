@@ -97,10 +97,14 @@ def draw_overlay(rgba: np.ndarray, contours: ContourLines, color) -> np.ndarray:
     return out
 
 
-def overlay_outputs(renderer, result) -> tuple[np.ndarray, dict[str, str]]:
-    """For a finished render: the PNG's RGBA with the contours drawn over it, and `NAME.contours.json`'s text."""
+def overlay_outputs(renderer, result) -> tuple[np.ndarray | None, dict[str, str]]:
+    """For a finished render: the PNG's RGBA with the contours drawn over it, and `NAME.contours.json`'s text.
+
+    With ``[output] png = false`` nothing is drawn (the EXR never shows the overlay): the RGBA is None
+    and only the JSON is written.
+    """
     scene = result.scene
     contours = analytic_contours(UlmetField.of(renderer))
-    rgba = draw_overlay(result.film.pixels[..., :4], contours, scene.render.overlay_color)
+    rgba = draw_overlay(result.film.pixels[..., :4], contours, scene.render.overlay_color) if scene.output.png else None
     document = {"scene": str(scene.path), "normals": scene.render.normals, **contours.to_json()}
     return rgba, {f"{scene.output.name}.contours.json": json.dumps(document, separators=(",", ":")) + "\n"}

@@ -33,15 +33,15 @@ A scene passes when the maximum deviation is within the tolerance and there are 
 from __future__ import annotations
 
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from .contours import ContourLines, UlmetField, analytic_contours
-from .render import RAYS_PER_TILE, Renderer
+from .film import Film
+from .lights import reflect
+from .render import Renderer
 from .scene import Scene
 
 DEFAULT_TOLERANCE_PX = 0.5
@@ -58,11 +58,20 @@ MISS_RADIUS_PX = 1.5
 END_MARGIN_PX = 2.0
 #: Contour points are checked for misses only this many pixels from unusable pixels and the border.
 CLEAN_MARGIN_PX = 2
+#: A tube with this many analytic points in clean view (checked for misses) must have compared points.
+NOTHING_COMPARED_POINTS = 5
 
 
 @dataclass
 class PixelAOVs:
-    """Float64 pixel-centre AOVs of a whole image, (H, W) or (H, W, 3)."""
+    """Per-pixel values of a finished render, (H, W) or (H, W, 3), in float64.
+
+    From the film (`Renderer.render`): the AOVs of the pixel-centre ray (f, patch, P, N, Z,
+    line.id, line.dist) and A; ``s`` is recomputed from N and the camera's pixel-centre ray
+    (paper eq. 3); ``line_coverage`` is the fraction of samples showing a tube, read back from
+    RGB (see `line_coverage`); ``fallback`` marks hits off the surface (Newton failed, the
+    mesh hit kept: P ≠ S(u, v)).
+    """
 
     f: np.ndarray
     patch: np.ndarray
@@ -71,67 +80,74 @@ class PixelAOVs:
     s: np.ndarray
     Z: np.ndarray
     line_id: np.ndarray
+    line_dist: np.ndarray
     fallback: np.ndarray
+    coverage: np.ndarray  # A: fraction of samples that hit the surface
+    line_coverage: np.ndarray  # fraction of samples that see a tube (NaN where colours cannot tell)
 
 
-def pixel_aovs(renderer: Renderer, progress: Callable[[int], None] | None = None,
-               threads: int | None = None) -> PixelAOVs:
-    """The renderer's AOVs of every pixel centre, in float64 (the EXR stores float32), tile by tile."""
-    width, height = renderer.camera.width, renderer.camera.height
-    out = PixelAOVs(*(np.full((height, width), np.nan) for _ in range(2)), *(np.full((height, width, 3), np.nan)
-                                                                           for _ in range(3)),
-                    np.full((height, width), np.nan), np.full((height, width), -1.0),
-                    np.zeros((height, width), dtype=bool))
-    rows_per_tile = max(1, RAYS_PER_TILE // width)
-    tiles = [(r, min(r + rows_per_tile, height)) for r in range(0, height, rows_per_tile)]
+def line_coverage(rgba: np.ndarray, surface_color, line_color, background) -> np.ndarray:
+    """Fraction L of a pixel's samples that see a tube, from its linear RGBA (film.coverage_color inverted).
 
-    def work(tile: tuple[int, int]) -> int:
-        r0, r1 = tile
-        rows, cols = np.divmod(np.arange(r0 * width, r1 * width), width)
-        aovs = renderer.pixel_aovs(rows, cols)
-        shading = aovs["shading"]
-        shape = (r1 - r0, width)
-        out.f[r0:r1] = aovs["f"].reshape(shape)
-        out.patch[r0:r1] = aovs["patch"].reshape(shape)
-        out.P[r0:r1] = aovs["P"].reshape(*shape, 3)
-        out.N[r0:r1] = aovs["N"].reshape(*shape, 3)
-        out.s[r0:r1] = shading.s.reshape(*shape, 3)
-        out.Z[r0:r1] = aovs["Z"].reshape(shape)
-        out.line_id[r0:r1] = aovs["line.id"].reshape(shape)
-        out.fallback[r0:r1] = shading.hits.fallback.reshape(shape)
-        return (r1 - r0) * width
-
-    with ThreadPoolExecutor(max_workers=threads or min(2, os.cpu_count() or 1)) as pool:
-        for done in pool.map(work, tiles):
-            if progress:
-                progress(done)
-    return out
+    RGB = L·line_color + (A − L)·surface_color + (1 − A)·background, so
+    RGB − A·surface_color − (1 − A)·background = L·(line_color − surface_color): L by least
+    squares over the three channels. NaN when line and surface colours are equal.
+    """
+    line_color, surface_color, background = (np.asarray(c, dtype=np.float64) for c in
+                                             (line_color, surface_color, background))
+    contrast = line_color - surface_color
+    denom = float(contrast @ contrast)
+    if denom == 0.0:
+        return np.full(rgba.shape[:-1], np.nan)
+    A = rgba[..., 3:4].astype(np.float64)
+    rest = rgba[..., :3].astype(np.float64) - A * surface_color - (1.0 - A) * background
+    return (rest @ contrast) / denom
 
 
-def pixel_footprint(renderer: Renderer, Z: np.ndarray) -> np.ndarray:
-    """Size in model units of one pixel at ray distance Z."""
-    camera = renderer.camera
-    if camera.orthographic:
-        return np.full_like(Z, camera.spec.view_height / camera.height)
-    return Z * 2.0 * math.tan(math.radians(camera.spec.fov) / 2) / camera.height
+def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
+    """The film's pixel values as `PixelAOVs` (see there)."""
+    height, width = film.height, film.width
+    channel = lambda name: film.channel(name).astype(np.float64)  # noqa: E731
+    triple = lambda prefix: np.stack([channel(f"{prefix}.{c}") for c in "XYZ"], axis=-1)  # noqa: E731
+    P, N = triple("P"), triple("N")
+    N /= np.linalg.norm(N, axis=-1, keepdims=True)  # float32 storage: back to unit length
+    patch = channel("patch")
+    hit = np.flatnonzero(patch.ravel() >= 0)
+    rows, cols = np.divmod(hit, width)
+    _, directions = renderer.camera.rays(rows, cols)
+    s = np.full((height * width, 3), np.nan)
+    s[hit] = reflect(-directions, N.reshape(-1, 3)[hit])
+    fallback = np.zeros(height * width, dtype=bool)
+    if renderer.vertex_normals is None:  # exact mode; mesh mode never falls back (and is never on S)
+        u, v = channel("u").ravel()[hit], channel("v").ravel()[hit]
+        S = renderer.surfaces.evaluate(patch.ravel()[hit].astype(int), u, v).S
+        P_hit = P.reshape(-1, 3)[hit]
+        # float32 storage moves P and S(u, v) by ~1e-7 relative; a mesh hit is off by up to the chord error.
+        tolerance = 1e-5 * (renderer.tessellation.extent + np.abs(P_hit).max(axis=1))
+        fallback[hit] = ~(np.linalg.norm(S - P_hit, axis=1) <= tolerance)
+    render = renderer.scene.render
+    return PixelAOVs(
+        f=channel("f"), patch=patch, P=P, N=N, s=s.reshape(height, width, 3), Z=channel("Z"),
+        line_id=channel("line.id"), line_dist=channel("line.dist"), fallback=fallback.reshape(height, width),
+        coverage=channel("A"),
+        line_coverage=line_coverage(film.pixels[..., :4], render.surface_color, render.line_color, render.background),
+    )
 
 
 @dataclass
 class TracedCentres:
-    """Sub-pixel centres of the traced lines: image positions (n, 2) and tube index per centre."""
+    """Sub-pixel centres of the traced lines: image positions (n, 2), tube index, and the two pixels (flat indices)."""
 
     px: np.ndarray
     light: np.ndarray
+    pixel_a: np.ndarray
+    pixel_b: np.ndarray
+
+    def take(self, keep: np.ndarray) -> "TracedCentres":
+        return TracedCentres(self.px[keep], self.light[keep], self.pixel_a[keep], self.pixel_b[keep])
 
 
-def tube_gap(c_k: np.ndarray) -> float:
-    """Smallest distance between two tubes' positions c_k (inf for one tube)."""
-    gaps = np.diff(np.sort(c_k))
-    gaps = gaps[gaps > 0]
-    return float(gaps.min()) if len(gaps) else math.inf
-
-
-def _smooth_pairs(aovs: PixelAOVs, footprint: np.ndarray, axis: int,
+def _smooth_pairs(renderer: Renderer, aovs: PixelAOVs, axis: int,
                   gap: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
     """Flat indices (a, b) of neighbouring pixels along ``axis`` inside one smooth visible piece of a patch.
 
@@ -144,7 +160,7 @@ def _smooth_pairs(aovs: PixelAOVs, footprint: np.ndarray, axis: int,
     b = index[:, 1:] if axis == 1 else index[1:, :]
     a, b = a.ravel(), b.ravel()
     patch, f, fallback = aovs.patch.ravel(), aovs.f.ravel(), aovs.fallback.ravel()
-    P, fp = aovs.P.reshape(-1, 3), footprint.ravel()
+    P, fp = aovs.P.reshape(-1, 3), renderer.camera.pixel_footprint(aovs.Z).ravel()
     ok = (patch[a] >= 0) & (patch[a] == patch[b]) & ~fallback[a] & ~fallback[b]
     ok &= np.isfinite(f[a]) & np.isfinite(f[b])
     with np.errstate(invalid="ignore"):
@@ -156,13 +172,10 @@ def _smooth_pairs(aovs: PixelAOVs, footprint: np.ndarray, axis: int,
 def _unblocked(renderer: Renderer, aovs: PixelAOVs, pixels: np.ndarray) -> np.ndarray:
     """True where the pixel's reflected ray reaches the light plane without meeting the surface."""
     P, n, s = aovs.P.reshape(-1, 3)[pixels], aovs.N.reshape(-1, 3)[pixels], aovs.s.reshape(-1, 3)[pixels]
-    lights = renderer.lights
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((lights.Q - P) @ lights.m) / (s @ lights.m)
+    t = renderer.lights.plane_t(P, s)
     patch = aovs.patch.ravel()[pixels].astype(int)
-    tess = renderer.tessellation
-    eps = 2.0 * tess.chord_error[patch] + 1e-6 * (tess.extent + np.abs(P).max(axis=1))
-    return (t > 0) & ~renderer.accelerator.occluded(P + eps[:, None] * n, s, np.where(t > 0, t, 0.0))
+    start = renderer.accelerator.surface_origins(P, n, patch)
+    return (t > 0) & ~renderer.accelerator.occluded(start, s, np.where(t > 0, t, 0.0))
 
 
 def _crossing(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, smooth_next: np.ndarray,
@@ -202,16 +215,15 @@ def _crossing(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, smooth
 
 
 def traced_centres(renderer: Renderer, aovs: PixelAOVs) -> TracedCentres:
-    """Where f − c_k changes sign between neighbouring pixel centres, by linear interpolation (see module doc)."""
+    """Where f − c_k changes sign between neighbouring pixel centres, on the cubic through four pixels (module doc)."""
     height, width = aovs.f.shape
-    footprint = pixel_footprint(renderer, aovs.Z)
     c_k = renderer.lights.c_k
     order = np.argsort(c_k)
     c_sorted = c_k[order]
     f, line_id = aovs.f.ravel(), aovs.line_id.ravel()
-    pos, light = [], []
+    pos, light, first_pixel, second_pixel = [], [], [], []
     for axis in (1, 0):
-        a, b = _smooth_pairs(aovs, footprint, axis, tube_gap(c_k))
+        a, b = _smooth_pairs(renderer, aovs, axis, renderer.lights.spacing)
         smooth_next = np.zeros(f.size, dtype=bool)  # pair (p, p + step) is smooth, keyed by p
         smooth_next[a] = True
         lo_f, hi_f = np.fmin(f[a], f[b]), np.fmax(f[a], f[b])
@@ -228,27 +240,87 @@ def traced_centres(renderer: Renderer, aovs: PixelAOVs) -> TracedCentres:
         keep = (pos_a == c_k[k]) & (pos_b == c_k[k])
         a, b, k = a[keep], b[keep], k[keep]
         delta, resolved = _crossing(f, a, b, c_k[k], smooth_next, step=1 if axis == 1 else width)
-        a, k, delta = a[resolved], k[resolved], delta[resolved]
+        a, b, k, delta = a[resolved], b[resolved], k[resolved], delta[resolved]
         row, col = np.divmod(a, width)
         x = col + 0.5 + (delta if axis == 1 else 0.0)
         y = row + 0.5 + (delta if axis == 0 else 0.0)
         pos.append(np.column_stack([x, y]))
         light.append(k)
-    return TracedCentres(np.concatenate(pos), np.concatenate(light))
+        first_pixel.append(a)
+        second_pixel.append(b)
+    return TracedCentres(np.concatenate(pos), np.concatenate(light), np.concatenate(first_pixel),
+                         np.concatenate(second_pixel))
 
 
 def _filter_unblocked(renderer: Renderer, aovs: PixelAOVs, centres: TracedCentres) -> TracedCentres:
     """The centres whose two pixels see the tube: reflected rays unblocked (line.id already says it is ahead)."""
-    width = aovs.f.shape[1]
-    x, y = centres.px[:, 0], centres.px[:, 1]
-    # The two pixels of each pair: the centre lies between them, so floor/ceil of (pos − ½) give them.
-    ca, ra = np.floor(x - 0.5).astype(int), np.floor(y - 0.5).astype(int)
-    cb, rb = np.ceil(x - 0.5).astype(int), np.ceil(y - 0.5).astype(int)
-    pixels = np.unique(np.concatenate([ra * width + ca, rb * width + cb]))
+    pixels = np.unique(np.concatenate([centres.pixel_a, centres.pixel_b]))
     clear = np.zeros(aovs.f.size, dtype=bool)
     clear[pixels] = _unblocked(renderer, aovs, pixels)
-    keep = clear[ra * width + ca] & clear[rb * width + cb]
-    return TracedCentres(centres.px[keep], centres.light[keep])
+    return centres.take(clear[centres.pixel_a] & clear[centres.pixel_b])
+
+
+# -- the colour image -----------------------------------------------------------------------------
+
+
+def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) masks of the pixels whose colour was checked, and of those whose colour is wrong (module doc).
+
+    A pixel is checked where it and its four neighbours hit one smooth piece of one patch
+    (`_smooth_pairs`), all with the same nearest tube ahead (line.id), every sample hits
+    (A = 1), and the colours tell lines from surface. With d the pixel-centre line.dist and
+    g = |∇d| from one-sided differences to those neighbours (the larger per axis), d moves by at
+    most 0.71·g (= g·√2/2) to a sample inside the pixel, to first order. So: d + 0.71·g < r
+    (every sample within the tube's radius, paper eq. 4) with the reflected ray unblocked, for
+    the pixel and its neighbours, must be fully lit; d − 0.71·g > r, or no tube ahead, or
+    within the radius but blocked (pixel and neighbours), must show no line at all. Lit or not
+    is read from the colour (`line_coverage`), within half a sample.
+    """
+    height, width = aovs.f.shape
+    size = height * width
+    line_id, d = aovs.line_id.ravel(), aovs.line_dist.ravel()
+    checked = (aovs.patch.ravel() >= 0) & (aovs.coverage.ravel() >= 1.0 - 1e-6) & np.isfinite(aovs.line_coverage.ravel())
+    slope = np.zeros((2, size))
+    for i, axis in enumerate((1, 0)):
+        a, b = _smooth_pairs(renderer, aovs, axis)
+        same = line_id[a] == line_id[b]
+        a, b = a[same], b[same]
+        step = np.zeros(size)
+        with np.errstate(invalid="ignore"):
+            diff = np.abs(d[b] - d[a])
+        diff = np.where(np.isfinite(diff), diff, 0.0)  # no tube ahead on either side: d is NaN, no slope
+        np.maximum.at(step, a, diff)
+        np.maximum.at(step, b, diff)
+        slope[i] = step
+        has_next = np.zeros(size, dtype=bool)
+        has_prev = np.zeros(size, dtype=bool)
+        has_next[a] = True
+        has_prev[b] = True
+        checked &= has_next & has_prev
+    g = np.hypot(slope[0], slope[1])
+    radius = renderer.lights.radius
+    with np.errstate(invalid="ignore"):
+        inside = (line_id >= 0) & (d + 0.71 * g < radius)
+        outside = (line_id < 0) | (d - 0.71 * g > radius)
+    # Occlusion of the reflected ray towards the nearest tube ahead, for every pixel that has one.
+    ahead = np.flatnonzero(line_id >= 0)
+    blocked = np.zeros(size, dtype=bool)
+    if len(ahead):
+        P, n, s = aovs.P.reshape(-1, 3)[ahead], aovs.N.reshape(-1, 3)[ahead], aovs.s.reshape(-1, 3)[ahead]
+        t = renderer.lights.distances(P, s).t[np.arange(len(ahead)), line_id[ahead].astype(int)]
+        start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[ahead].astype(int))
+        blocked[ahead] = renderer.accelerator.occluded(start, s, t)
+    blocked_grid = blocked.reshape(height, width)
+    padded = np.pad(blocked_grid, 1, mode="edge")
+    uniform = ((padded[1:-1, :-2] == blocked_grid) & (padded[1:-1, 2:] == blocked_grid)
+               & (padded[:-2, 1:-1] == blocked_grid) & (padded[2:, 1:-1] == blocked_grid)).ravel()
+    lit_expected = checked & inside & uniform & ~blocked
+    dark_expected = checked & (outside | (inside & uniform & blocked))
+    samples = renderer.scene.image.samples
+    tolerance = 0.5 / samples**2
+    L = aovs.line_coverage.ravel()
+    wrong = (lit_expected & ~(np.abs(L - 1.0) <= tolerance)) | (dark_expected & ~(np.abs(L) <= tolerance))
+    return (lit_expected | dark_expected).reshape(height, width), wrong.reshape(height, width)
 
 
 # -- nearest distances ------------------------------------------------------------------------
@@ -345,14 +417,13 @@ def _checkable_points(contours: ContourLines, light: int, clean: np.ndarray) -> 
 def clean_pixels(renderer: Renderer, aovs: PixelAOVs) -> np.ndarray:
     """(H, W) True where every pixel within CLEAN_MARGIN_PX hits one smooth piece of one patch (see module doc)."""
     height, width = aovs.f.shape
-    footprint = pixel_footprint(renderer, aovs.Z)
     bad = ~(aovs.patch >= 0) | aovs.fallback
     flat_bad = bad.ravel().copy()
     for axis in (1, 0):
         index = np.arange(height * width).reshape(height, width)
         a = (index[:, :-1] if axis == 1 else index[:-1, :]).ravel()
         b = (index[:, 1:] if axis == 1 else index[1:, :]).ravel()
-        good_a, good_b = _smooth_pairs(aovs, footprint, axis, tube_gap(renderer.lights.c_k))
+        good_a, good_b = _smooth_pairs(renderer, aovs, axis, renderer.lights.spacing)
         smooth = np.zeros(height * width, dtype=bool)
         smooth[good_a] = True  # pair (a, a + step) is smooth, keyed by a
         edge = ~smooth[a]
@@ -380,6 +451,7 @@ class LineReport:
     p95_px: float | None
     mean_px: float | None
     misses: int
+    colour_mismatches: int
 
     def to_json(self) -> dict:
         return dict(vars(self))
@@ -393,6 +465,8 @@ def _stats(dev: np.ndarray) -> tuple[float | None, float | None, float | None]:
 
 @dataclass
 class SceneReport:
+    """One scene's result. Overall figures count each tube position once (tubes sharing one draw one line)."""
+
     name: str
     path: str
     width: int
@@ -400,7 +474,11 @@ class SceneReport:
     normals: str
     tolerance: float
     lines: list[LineReport]
-    deviations: np.ndarray = field(repr=False)  # every compared point's deviation, px
+    deviations: np.ndarray = field(repr=False)  # every compared point's deviation (one tube per position), px
+    colour_mismatches: int = 0  # pixels whose colour disagrees with line.dist (all tubes, and no tube ahead)
+    colour_checked: int = 0  # pixels whose colour was checked
+    reasons: list[str] = field(default_factory=list)  # why the scene fails besides deviations, misses and colours
+    counted: list[bool] | None = field(default=None, repr=False)  # per line: first tube at its position
     contours: ContourLines | None = field(default=None, repr=False)
     centres: TracedCentres | None = field(default=None, repr=False)
 
@@ -410,7 +488,8 @@ class SceneReport:
 
     @property
     def misses(self) -> int:
-        return sum(line.misses for line in self.lines)
+        counted = self.counted or [True] * len(self.lines)
+        return sum(line.misses for line, first in zip(self.lines, counted) if first)
 
     @property
     def max_px(self) -> float | None:
@@ -426,18 +505,24 @@ class SceneReport:
 
     @property
     def passed(self) -> bool:
-        return self.misses == 0 and (self.max_px is None or self.max_px <= self.tolerance)
+        return (self.misses == 0 and self.colour_mismatches == 0 and not self.reasons
+                and (self.max_px is None or self.max_px <= self.tolerance))
 
     def to_json(self) -> dict:
         return {"max_px": self.max_px, "p95_px": self.p95_px, "mean_px": self.mean_px, "points": self.points,
-                "misses": self.misses, "lines": [line.to_json() for line in self.lines]}
+                "misses": self.misses, "colour_mismatches": self.colour_mismatches,
+                "colour_checked": self.colour_checked, "reasons": list(self.reasons),
+                "lines": [line.to_json() for line in self.lines]}
 
 
 def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, tolerance: float) -> SceneReport:
-    """Deviation of traced centres from the analytic contours, and misses both ways, per light line."""
+    """Deviation of traced centres from the analytic contours, misses both ways and colour mismatches, per line."""
     centres = _filter_unblocked(renderer, aovs, traced_centres(renderer, aovs))
     clean = clean_pixels(renderer, aovs)
-    reports, all_dev = [], []
+    checked, wrong = colour_mismatches(renderer, aovs)
+    wrong_light = aovs.line_id[wrong].astype(int)
+    c_k = renderer.lights.c_k
+    reports, all_dev, counted, reasons = [], [], [], []
     for line in contours.lines:
         k = line.light
         segs = _segments(contours, k)
@@ -457,18 +542,31 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
         check = _checkable_points(contours, k, clean)
         gap, _ = nearest_segment(check, pts, pts, MISS_RADIUS_PX)
         misses = int(np.count_nonzero(~np.isfinite(gap))) + int(np.count_nonzero(unmatched))
-        reports.append(LineReport(k, line.position, int(len(dev)), *_stats(dev), misses))
-        all_dev.append(dev)
+        reports.append(LineReport(light=k, position=line.position, points=int(len(dev)), max_px=_stats(dev)[0],
+                                  p95_px=_stats(dev)[1], mean_px=_stats(dev)[2], misses=misses,
+                                  colour_mismatches=int(np.count_nonzero(wrong_light == k))))
+        # Tubes sharing a position have the same traced centres: count them once overall.
+        first = int(np.flatnonzero(c_k == c_k[k])[0]) == k
+        counted.append(first)
+        if first:
+            all_dev.append(dev)
+            if len(dev) == 0 and len(check) >= NOTHING_COMPARED_POINTS:
+                reasons.append(f"light {k}: {len(check)} analytic points in clean view but no traced centre compared")
+    deviations = np.concatenate(all_dev) if all_dev else np.zeros(0)
+    if len(deviations) == 0:
+        reasons.insert(0, "no traced line centre was compared (no tube reflected where the camera sees the surface)")
     camera = renderer.camera
     scene = renderer.scene
     return SceneReport(scene.output.name, str(scene.path), camera.width, camera.height, scene.render.normals,
-                       tolerance, reports, np.concatenate(all_dev) if all_dev else np.zeros(0), contours, centres)
+                       tolerance, reports, deviations, colour_mismatches=int(np.count_nonzero(wrong)),
+                       colour_checked=int(np.count_nonzero(checked)), reasons=reasons, counted=counted,
+                       contours=contours, centres=centres)
 
 
 def validate_scene(scene: Scene, tolerance: float = DEFAULT_TOLERANCE_PX, progress: Callable[[int], None] | None = None,
                    threads: int | None = None, renderer: Renderer | None = None) -> SceneReport:
-    """Render the scene's pixel-centre AOVs in memory and compare them with the analytic contours."""
+    """Render the scene (colour at its samples, pixel-centre AOVs) in memory and check it against the analytic contours."""
     renderer = renderer or Renderer(scene)
-    aovs = pixel_aovs(renderer, progress, threads)
+    film = renderer.render(progress, threads).film
     contours = analytic_contours(UlmetField.of(renderer))
-    return compare(renderer, aovs, contours, tolerance)
+    return compare(renderer, film_aovs(renderer, film), contours, tolerance)

@@ -5,6 +5,9 @@
 - on the hood with tessellation 4 exact mode still validates while mesh normals are at least
   5× worse;
 - a deliberately wrong renderer (normals turned by half a degree) fails: the check can fail;
+- the colour image is checked: lines drawn 30% of a spacing off (the f AOV untouched) fail;
+- missing traced lines fail (misses), and so does a scene where nothing could be compared;
+- tubes sharing a position count once overall;
 - the command line: table, `--json` keys, exit statuses.
 """
 
@@ -35,6 +38,14 @@ def test_shipped_scene_validates(path: Path):
     assert report.misses == 0
     assert report.max_px <= 0.5
     assert report.p95_px <= 0.1
+    assert report.colour_checked >= 1000 and report.colour_mismatches == 0
+    assert report.passed and not report.reasons
+
+
+def test_colour_check_holds_with_supersampling():
+    """s = 2: the colour comes from 4 samples per pixel, the AOVs from a separate pixel-centre ray."""
+    report = validate_scene(load_scene(SCENES / "teapot.toml").with_image(WIDTH, HEIGHT, 2))
+    assert report.colour_checked >= 500 and report.colour_mismatches == 0
     assert report.passed
 
 
@@ -48,7 +59,7 @@ def test_orthographic_camera_tilted_light_plane_and_short_tubes_validate():
                                    length=3.0))
     report = validate_scene(scene)
     assert report.points >= 100
-    assert report.passed and report.p95_px <= 0.1
+    assert report.passed and report.p95_px <= 0.1 and report.colour_checked >= 1000
 
 
 def hood_with_tessellation(normals: str, tessellation: int = 4):
@@ -115,9 +126,12 @@ def test_validate_command_reports_and_passes(tmp_path):
     doc = json.loads(target.read_text())
     assert set(doc) == {"scenes"} and set(doc["scenes"]) == {"hood", "cylinder"}
     for name, scene in doc["scenes"].items():
-        assert set(scene) == {"max_px", "p95_px", "mean_px", "points", "misses", "lines"}
+        assert set(scene) == {"max_px", "p95_px", "mean_px", "points", "misses", "colour_mismatches",
+                              "colour_checked", "reasons", "lines"}
         assert len(scene["lines"]) == len(load_scene(SCENES / f"{name}.toml").lights.positions)
         assert scene["points"] == sum(line["points"] for line in scene["lines"])
+        assert scene["colour_mismatches"] == 0 and scene["colour_checked"] > 0 and scene["reasons"] == []
+        assert all(line["colour_mismatches"] == 0 for line in scene["lines"])
     assert [p.name for p in target.parent.iterdir()] == ["validate.json"]  # no temporary left behind
 
 
@@ -145,3 +159,75 @@ def test_nearest_segment_is_the_point_to_segment_distance():
     np.testing.assert_allclose(dist[within], best[within], atol=5e-3)
     assert np.all(np.isinf(dist[best > 5.0 + 5e-3]))
     np.testing.assert_allclose(brute[np.flatnonzero(within), seg[within]], best[within], atol=5e-3)
+
+
+@pytest.fixture
+def shifted_lines(monkeypatch):
+    """The reviewer's repro: the colour ('lit', eq. 4) uses tubes shifted by 30% of the spacing, AOVs untouched."""
+    original = Renderer.shade
+
+    def shade(self, origins, directions):
+        shading = original(self, origins, directions)
+        lights = replace(self.lights, c_k=self.lights.c_k + 0.3 * self.lights.spacing)
+        idx = np.flatnonzero(shading.hits.hit)
+        shading.lit[:] = False
+        if len(idx):
+            shading.lit[idx] = lights.candidates(lights.distances(shading.hits.P[idx], shading.s[idx]))[0]
+        return shading
+
+    monkeypatch.setattr(Renderer, "shade", shade)
+
+
+def test_lines_drawn_in_the_wrong_place_fail_validation(shifted_lines, tmp_path):
+    result = CliRunner().invoke(cli, ["validate", str(SCENES / "hood.toml"), "--width", str(WIDTH), "--height",
+                                      str(HEIGHT), "--samples", "2", "--json", str(tmp_path / "report.json")])
+    assert result.exit_code == 1, result.output
+    report = json.loads((tmp_path / "report.json").read_text())["scenes"]["hood"]
+    # The f AOV still agrees with the analytic lines: only the colour check sees the error.
+    assert report["max_px"] <= 0.5 and report["misses"] == 0
+    assert report["colour_mismatches"] >= 100
+    assert sum(line["colour_mismatches"] > 0 for line in report["lines"]) >= 5
+    assert "FAIL" in result.output
+
+
+@pytest.fixture
+def lost_line(monkeypatch):
+    """A renderer whose line.id never names tube 4: that tube's traced centres vanish."""
+    original = Renderer.aovs
+
+    def aovs(self, shading):
+        out = original(self, shading)
+        out["line.id"] = np.where(out["line.id"] == 4, -1.0, out["line.id"])
+        return out
+
+    monkeypatch.setattr(Renderer, "aovs", aovs)
+
+
+def test_missing_traced_lines_fail_validation(lost_line):
+    report = validate_scene(load_scene(SCENES / "hood.toml").with_image(WIDTH, HEIGHT, 1))
+    assert report.lines[4].points == 0 and report.lines[4].misses >= 20
+    assert all(line.misses == 0 for line in report.lines if line.light != 4)
+    assert not report.passed and any(reason.startswith("light 4:") for reason in report.reasons)
+
+
+def test_nothing_compared_fails(tmp_path):
+    """Surface behind the camera, or the light plane below the surface: 0 points is a failure, not a pass."""
+    hood = (SCENES / "hood.toml").read_text()
+    behind = tmp_path / "behind.toml"
+    behind.write_text(hood.replace("look_at = [0.0, 0.0, 0.0]", "look_at = [0.0, -6.4, 4.8]"))
+    below = tmp_path / "below.toml"
+    below.write_text(hood.replace("point = [0.0, 0.0, 3.0]", "point = [0.0, 0.0, -3.0]"))
+    for scene in (behind, below):
+        result = CliRunner().invoke(cli, ["validate", str(scene), "--width", "160", "--height", "90",
+                                          "--samples", "1"])
+        assert result.exit_code == 1, result.output
+        assert "FAIL: no traced line centre was compared" in result.output
+
+
+def test_tubes_sharing_a_position_count_once():
+    scene = load_scene(SCENES / "hood.toml").with_image(WIDTH, HEIGHT, 1)
+    twice = validate_scene(replace(scene, lights=replace(scene.lights, positions=np.array([0.5, -0.5, 0.5]))))
+    once = validate_scene(replace(scene, lights=replace(scene.lights, positions=np.array([0.5, -0.5]))))
+    assert once.points >= 100 and once.passed and twice.passed
+    assert twice.lines[0].points == twice.lines[2].points == once.lines[0].points
+    assert (twice.points, twice.misses, twice.max_px) == (once.points, once.misses, once.max_px)
