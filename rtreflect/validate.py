@@ -1,20 +1,21 @@
-"""Validation: traced reflection lines against the analytic contours f = c_k (paper section 4).
+"""Validation: the render against the analytic contours f = c_k (paper section 4).
 
-The render's `f` AOV (from the ray through each pixel centre) and the analytic level
-sets must agree: the traced line of tube k is centred where f = c_k.
+The scene is rendered as `rtreflect render` would (`Renderer.render`: colour at the
+scene's samples, AOVs from the pixel-centre rays) and checked two ways.
 
-**Traced centres.** Between two neighbouring pixel centres (horizontal or vertical)
-where f − c_k changes sign, the centre is placed on the cubic through f at the four
-pixel centres around the crossing (linear interpolation would err by up to
-|f''|/(8|f'|) px where lines bend tightly). A pair counts only when it lies inside one
-smooth, visible piece of surface where the pixels resolve the lines, and tube k is
-really seen there: the pair and the pairs before and after it hit the same patch with
-converged exact hits (no Newton fallback) and finite f, neighbouring hit points are no
-farther apart than `JUMP_FOOTPRINTS` pixel footprints (so no silhouette or occlusion
-edge lies between them), f changes by less than 1/`MIN_LINE_GAP_PX` of the tube spacing
-per pixel (lines at least that many pixels apart), both pixels have ``line.id == k``
-(tube k, or one at the same position, is the nearest tube ahead, within its length) and
-neither pixel's reflected ray is blocked before the light plane.
+**Traced centres.** The render's `f` AOV and the analytic level sets must agree: the
+traced line of tube k is centred where f = c_k. Between two neighbouring pixel centres
+(horizontal or vertical) where f − c_k changes sign, the centre is placed on the cubic
+through f at the four pixel centres around the crossing (linear interpolation would err
+by up to |f''|/(8|f'|) px where lines bend tightly). A pair counts only when it lies
+inside one smooth, visible piece of surface where the pixels resolve the lines, and tube
+k is really seen there: the pair and the pairs before and after it hit the same patch
+with exact hits (P = S(u, v): no Newton fallback) and finite f, neighbouring hit points
+are no farther apart than `JUMP_FOOTPRINTS` pixel footprints (so no silhouette or
+occlusion edge lies between them), f changes by less than 1/`MIN_LINE_GAP_PX` of the tube
+spacing per pixel (lines at least that many pixels apart), both pixels have
+``line.id == k`` (tube k, or one at the same position, is the nearest tube ahead, within
+its length) and neither pixel's reflected ray is blocked before the light plane.
 
 **Deviation.** Each traced centre's distance in pixels to the nearest segment of tube
 k's projected analytic polylines. A centre whose nearest contour point is the open end
@@ -27,7 +28,15 @@ boundaries and the image border (the pixel is `CLEAN_MARGIN_PX` from any such pi
 the point is `END_MARGIN_PX` along the contour from a polyline end); plus traced centres
 with no analytic contour of their tube within `SEARCH_RADIUS_PX`.
 
-A scene passes when the maximum deviation is within the tolerance and there are no misses.
+**Colour.** The lines that are drawn (the `lit` flags of eq. 4 with occlusion, blended
+into RGB) are checked against the pixel-centre `line.dist` d and its gradient: a pixel
+all of whose samples lie within the radius of an unblocked tube must be fully lit, one
+all of whose samples lie outside must show no line (`colour_mismatches`).
+
+A scene passes when the maximum deviation is within the tolerance, there are no misses
+and no colour mismatches, and something was compared: at least one traced centre, and
+every tube with `NOTHING_COMPARED_POINTS` analytic points in clean view has some.
+Overall figures count each tube position once (tubes sharing a position draw one line).
 """
 
 from __future__ import annotations

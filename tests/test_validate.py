@@ -24,7 +24,8 @@ from click.testing import CliRunner
 from rtreflect.cli import cli
 from rtreflect.render import Renderer
 from rtreflect.scene import load_scene
-from rtreflect.validate import nearest_segment, validate_scene
+from rtreflect.validate import (TracedCentres, _filter_unblocked, film_aovs, line_coverage, nearest_segment,
+                                traced_centres, validate_scene)
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 SCENE_FILES = sorted(SCENES.glob("*.toml"))
@@ -231,3 +232,28 @@ def test_tubes_sharing_a_position_count_once():
     assert once.points >= 100 and once.passed and twice.passed
     assert twice.lines[0].points == twice.lines[2].points == once.lines[0].points
     assert (twice.points, twice.misses, twice.max_px) == (once.points, once.misses, once.max_px)
+
+
+def test_both_pixels_of_a_centre_are_occlusion_checked_even_on_a_pixel_centre():
+    """A centre exactly on pixel a's centre (δ = 0) still needs pixel b's reflected ray to reach the light plane."""
+    renderer = Renderer(load_scene(SCENES / "hood.toml").with_image(160, 90, 1))
+    aovs = film_aovs(renderer, renderer.render().film)
+    centres = _filter_unblocked(renderer, aovs, traced_centres(renderer, aovs))
+    a, b = centres.pixel_a[:1], centres.pixel_b[:1]
+    row, col = np.divmod(a, 160)
+    on_a = TracedCentres(np.column_stack([col + 0.5, row + 0.5]), centres.light[:1], a, b)
+    assert len(_filter_unblocked(renderer, aovs, on_a).px) == 1
+    aovs.s.reshape(-1, 3)[b] = -renderer.lights.m  # pixel b's reflected ray now turns away from the light plane
+    assert len(_filter_unblocked(renderer, aovs, on_a).px) == 0
+
+
+def test_line_coverage_inverts_the_films_colour_blend():
+    from rtreflect.film import coverage_color
+
+    rng = np.random.default_rng(5)
+    hit = rng.random((200, 9)) < 0.8
+    lit = rng.random((200, 9)) < 0.4
+    surface, line, background = [0.18, 0.18, 0.2], [1.0, 0.9, 0.3], [0.05, 0.0, 0.1]
+    rgba = coverage_color(hit, lit, surface, line, background)
+    np.testing.assert_allclose(line_coverage(rgba, surface, line, background), (hit & lit).sum(axis=1) / 9, atol=1e-12)
+    assert np.all(np.isnan(line_coverage(rgba, surface, surface, background)))
