@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from rtreflect.camera import Camera
 from rtreflect.cli import cli
 from rtreflect.contours import MAX_SEGMENT_PX, ContourLine, ContourLines, Polyline, UlmetField, analytic_contours
 from rtreflect.lights import TubeLights
@@ -207,3 +208,25 @@ def test_overlay_without_png_says_so_and_writes_the_contours(tmp_path):
     assert result.exit_code == 0, result.stderr
     assert "overlay not drawn" in result.output and "png = false" in result.output
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["hood.contours.json", "hood.exr"]
+
+
+def test_tube_spacing_and_light_plane_parameter():
+    assert tubes([0, 0, 2], K, J, positions=(0.5, -0.5, 0.5, 1.25)).spacing == pytest.approx(0.75)
+    assert tubes([0, 0, 2], K, J, positions=(0.3, 0.3)).spacing == np.inf  # one position: no spacing
+    lights = tubes([0.2, -0.1, 2.0], [0.2, 0.1, 1.0], np.cross([0.2, 0.1, 1.0], I))
+    rng = np.random.default_rng(4)
+    R, s = rng.uniform(-1, 1, (50, 3)), unit(rng.normal(size=(50, 3)))
+    t = lights.plane_t(R, s)
+    np.testing.assert_allclose((R + t[:, None] * s - lights.Q) @ lights.m, 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_pixel_footprint_is_one_pixel_in_the_image(projection):
+    scene = load_scene(SCENES / "hood.toml").with_image(160, 90, 1)
+    camera = Camera(replace(scene.camera, projection=projection, view_height=2.6), 160, 90)
+    w, _, q = camera.basis
+    for depth in (1.5, 4.0):
+        centre = camera.spec.eye + depth * w
+        step = camera.pixel_footprint(np.array([depth]))[0]
+        a, b = camera.project(np.array([centre, centre + step * q]))
+        assert np.linalg.norm(b - a) == pytest.approx(1.0, rel=1e-12)

@@ -5,7 +5,8 @@
 - on the hood with tessellation 4 exact mode still validates while mesh normals are at least
   5× worse;
 - a deliberately wrong renderer (normals turned by half a degree) fails: the check can fail;
-- the colour image is checked: lines drawn 30% of a spacing off (the f AOV untouched) fail;
+- the colour image is checked: lines drawn 30% of a spacing off (the f AOV untouched) fail, and so
+  do tubes seen through the surface (no occlusion test);
 - missing traced lines fail (misses), and so does a scene where nothing could be compared;
 - tubes sharing a position count once overall;
 - the command line: table, `--json` keys, exit statuses.
@@ -189,6 +190,27 @@ def test_lines_drawn_in_the_wrong_place_fail_validation(shifted_lines, tmp_path)
     assert report["colour_mismatches"] >= 100
     assert sum(line["colour_mismatches"] > 0 for line in report["lines"]) >= 5
     assert "FAIL" in result.output
+
+
+@pytest.fixture
+def no_occlusion(monkeypatch):
+    """A renderer that forgets the occlusion test: tubes shine through the teapot's own body."""
+    original = Renderer.shade
+
+    def shade(self, origins, directions):
+        shading = original(self, origins, directions)
+        idx = np.flatnonzero(shading.hits.hit)
+        if len(idx):
+            shading.lit[idx] = self.lights.candidates(self.lights.distances(shading.hits.P[idx], shading.s[idx]))[0]
+        return shading
+
+    monkeypatch.setattr(Renderer, "shade", shade)
+
+
+def test_lines_seen_through_the_surface_fail_validation(no_occlusion):
+    report = validate_scene(load_scene(SCENES / "teapot.toml").with_image(WIDTH, HEIGHT, 1))
+    assert report.max_px <= 0.5 and report.misses == 0  # the centres are filtered for occlusion on their own
+    assert report.colour_mismatches > 0 and not report.passed
 
 
 @pytest.fixture
