@@ -13,9 +13,9 @@ from tqdm import tqdm
 
 from . import __version__
 from .errors import RtreflectError
-from .imagefiles import save_render
-from .render import Renderer
 from .scene import MAX_SAMPLES, MAX_SIDE, load_scene
+from .streaming import render_to_files
+from .tiling import parse_size
 
 EXIT_BAD_INPUT = 2
 
@@ -23,6 +23,16 @@ EXIT_BAD_INPUT = 2
 def fail(message: str) -> "NoReturn":  # noqa: F821
     click.echo(f"rtreflect: error: {message}", err=True)
     sys.exit(EXIT_BAD_INPUT)
+
+
+def memory_option(text: str | None) -> int | None:
+    """--max-memory SIZE in bytes (None: the default budget); a malformed size exits 2."""
+    if text is None:
+        return None
+    try:
+        return parse_size(text)
+    except ValueError as exc:
+        fail(f"--max-memory: {exc}")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -46,7 +56,10 @@ def cli() -> None:
 @click.option("--samples", type=click.IntRange(1, MAX_SAMPLES),
               help="s: s×s stratified samples per pixel for anti-aliasing (overrides [image] samples).")
 @click.option("--threads", type=click.IntRange(1, 64), default=None, help="Render threads (default: up to 2).")
-def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads) -> None:
+@click.option("--max-memory", "max_memory", metavar="SIZE", default=None,
+              help="Working memory for tiles in flight, e.g. 512M or 2G (default: a quarter of RAM). "
+                   "Images are rendered and written in tiles, so any size fits.")
+def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory) -> None:
     """Render the reflection lines of each SCENE file to OUTPUT/NAME.exr and .png.
 
     The EXR holds linear RGBA plus per-pixel AOVs from the pixel-centre ray
@@ -58,6 +71,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
       rtreflect render scenes/hood.toml -o out/
       rtreflect render scenes/*.toml -o out/ --width 480 --height 270 --samples 2
     """
+    budget = memory_option(max_memory)
     try:
         loaded = [load_scene(path).with_image(width, height, samples) for path in scenes]
     except RtreflectError as exc:
@@ -65,14 +79,12 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     for scene in loaded:
         image = scene.image
         try:
-            renderer = Renderer(scene)
             with tqdm(total=image.width * image.height, unit="px", unit_scale=True, desc=scene.output.name,
                       leave=False, disable=None, file=sys.stderr) as bar:
-                result = renderer.render(progress=bar.update, threads=threads)
-            written = save_render(result, outdir)
+                done = render_to_files(scene, outdir, threads=threads, max_memory=budget, progress=bar.update)
         except RtreflectError as exc:
             fail(str(exc))
-        st = result.stats
+        st, written = done.stats, done.files
         click.echo(
             f"{scene.output.name}: {image.width}×{image.height}, {image.samples**2} samples/px, "
             f"{st.seconds:.2f} s, {st.mrays_per_second:.2f} Mrays/s, {st.fallbacks} Newton fallbacks"
