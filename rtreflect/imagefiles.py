@@ -191,7 +191,15 @@ class ImageWriter:
     def abandon(self) -> None:
         """Close the files without checks (their temporaries are about to be removed)."""
         outputs, self._outputs = self._outputs, []
-        for out, _, _ in outputs:
+        next_row = (self.next_pixel - len(self._partial)) // self.width  # the first row not yet written
+        for out, _, is_exr in outputs:
+            if not is_exr:
+                # libpng prints "No IDATs written into file" when closing a PNG before zlib emitted any data;
+                # filling the rest with zeros keeps a discarded file quiet (deflate on zeros is fast).
+                chunk = max(1, (16 << 20) // (4 * self.width))
+                for row in range(next_row, self.height, chunk):
+                    rows = min(chunk, self.height - row)
+                    out.write_scanlines(row, row + rows, 0, np.zeros((rows, self.width, 4), dtype=np.uint8))
             out.close()
 
     def close(self) -> None:

@@ -23,7 +23,7 @@ from .camera import Camera, rays_per_pixel, sample_offsets
 from .clock import StageClock
 from .film import CHANNELS, Film, aov_planes, coverage_color
 from .lights import TubeDistances, TubeLights, reflect
-from .scene import Scene
+from .scene import ImageSpec, Scene
 from .surfaces import SurfaceSet
 from .tessellation import tessellate
 from .tracing import Hits, trace
@@ -80,6 +80,13 @@ class RenderResult:
     scene: Scene
     film: Film
     stats: RenderStats
+
+
+def pixel_spans(image: ImageSpec, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
+    """The image cut into row-major pixel spans [start, stop) of at most ``rays_per_tile`` rays (at least one pixel)."""
+    per_tile = max(1, rays_per_tile // rays_per_pixel(image.samples))
+    total = image.width * image.height
+    return [(p, min(p + per_tile, total)) for p in range(0, total, per_tile)]
 
 
 class Renderer:
@@ -180,11 +187,7 @@ class Renderer:
         return tile.pixels[:, :4], tile.pixels[:, 4:], tile.rays, tile.fallbacks
 
     def spans(self, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
-        """The image cut into pixel spans [start, stop) of at most ``rays_per_tile`` rays (at least one pixel)."""
-        width, height = self.scene.image.width, self.scene.image.height
-        per_tile = max(1, rays_per_tile // self.rays_per_pixel())
-        total = width * height
-        return [(p, min(p + per_tile, total)) for p in range(0, total, per_tile)]
+        return pixel_spans(self.scene.image, rays_per_tile)
 
     def tiles(self) -> list[tuple[int, int]]:
         """Whole-row tiles of about `RAYS_PER_TILE` rays, as (row0, row1)."""
