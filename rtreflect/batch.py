@@ -261,11 +261,11 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
             if broken:  # a broken pool fails all its futures at once
                 for future in cf.wait(running)[0]:
                     settle(running.pop(future), future)
-        except KeyboardInterrupt:
+        except BaseException:  # Ctrl-C (or a failing callback): stop the workers, their temporaries removed
             _terminate(pool)
-            raise
-        finally:
             pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown(wait=True)
     _drain(progress_queue, on_progress)
 
 

@@ -203,20 +203,24 @@ class Renderer:
         is bounded by the tile size, not the image size. ``stats`` (if given) counts rays
         and fallbacks as tiles are yielded.
         """
-        threads = threads or min(2, os.cpu_count() or 1)
-        spans = iter(self.spans(rays_per_tile))
+        for tile in self._tiles_in_order(threads or min(2, os.cpu_count() or 1), self.spans(rays_per_tile)):
+            if stats is not None:
+                stats.rays += tile.rays
+                stats.fallbacks += tile.fallbacks
+            yield tile
+
+    def _tiles_in_order(self, threads: int, spans: list[tuple[int, int]]) -> Iterator[Tile]:
+        if threads == 1:  # one tile at a time, in this thread (batch workers)
+            yield from (self.render_span(*span) for span in spans)
+            return
+        todo = iter(spans)
         with ThreadPoolExecutor(max_workers=threads) as pool:
-            pending: deque[Future[Tile]] = deque()
+            pending: deque[Future[Tile]] = deque(pool.submit(self.render_span, *span)
+                                                 for span in itertools.islice(todo, threads))
             try:
-                for span in itertools.islice(spans, threads):
-                    pending.append(pool.submit(self.render_span, *span))
                 while pending:
                     tile = pending.popleft().result()
-                    for span in itertools.islice(spans, 1):
-                        pending.append(pool.submit(self.render_span, *span))
-                    if stats is not None:
-                        stats.rays += tile.rays
-                        stats.fallbacks += tile.fallbacks
+                    pending.extend(pool.submit(self.render_span, *span) for span in itertools.islice(todo, 1))
                     yield tile
             finally:  # the consumer stopped early (error, Ctrl-C): do not render the rest
                 for future in pending:
