@@ -31,6 +31,7 @@ from . import __version__
 from .errors import RtreflectError
 from .imagefiles import INPUTS_HASH_ATTRIBUTE, VERSION_ATTRIBUTE, atomic_path, output_paths, read_provenance
 from .scene import Scene, load_scene
+from .tiling import default_max_memory
 
 RENDERED, SKIPPED, FAILED, INTERRUPTED = "rendered", "skipped", "failed", "interrupted"
 
@@ -217,7 +218,7 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
         for job in jobs:
             on_done(render_job(job.scene, outdir, None, max_memory, progress=on_progress))
         return
-    per_worker = max_memory // workers if max_memory else None
+    per_worker = (max_memory or default_max_memory()) // workers
     # Spawned, not forked: workers start clean (no inherited threads or Embree state) and behave alike on all systems.
     context = multiprocessing.get_context("spawn")
     progress_queue = context.Queue()

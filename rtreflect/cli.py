@@ -192,7 +192,8 @@ def _print_scene(report) -> None:
     elif report.status == "skipped":
         line = f"{name}: up to date, skipped"
     else:
-        line = f"{name}: rendered in {report.seconds:.2f} s ({report.tiles} tiles) → {', '.join(report.outputs)}"
+        tiles = f"{report.tiles} tile{'' if report.tiles == 1 else 's'}"
+        line = f"{name}: rendered in {report.seconds:.2f} s ({tiles}) → {', '.join(report.outputs)}"
     tqdm.write(line, file=sys.stdout)
 
 

@@ -82,6 +82,14 @@ def render_tile(scene: Scene, key: str, start: int, stop: int, client_version: s
     return tile.pixels, tile.rays, tile.fallbacks
 
 
+def _task_error(future) -> BaseException:
+    """Why a tile task did not finish: its exception, or the cancellation (worker or scheduler lost)."""
+    try:
+        return future.exception() or RuntimeError(f"task {future.status}")
+    except Exception as exc:  # a cancelled future raises instead of returning its exception
+        return exc
+
+
 @dataclass
 class _SceneRun:
     """The client's state of one scene: spans to submit, the open writer, tiles waiting for their turn."""
@@ -146,7 +154,7 @@ class _ClusterBatch:
                     run.waiting[index] = (pixels, rays)
                     self._write_ready(run)
                 elif run in self.active:
-                    self._fail(run, future.exception())
+                    self._fail(run, _task_error(future))
                 del future  # release the result on the cluster
                 self._fill(tasks)
         except BaseException:

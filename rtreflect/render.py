@@ -1,9 +1,12 @@
 """The reflection-line integrator: scene → film, tile by tile (DESIGN.md, "The pipeline").
 
-Per tile of pixel rows: camera rays for the s×s samples → exact hits → reflected
-directions → light tubes and the occlusion test → coverage colour; plus the
-pixel-centre rays → AOVs. Tiles are independent, so two threads (Embree and most
-numpy kernels release the GIL) render them side by side, deterministically.
+Per tile (a span of pixels in row-major order): camera rays for the s×s samples →
+exact hits → reflected directions → light tubes and the occlusion test → coverage
+colour; plus the pixel-centre rays → AOVs. Tiles are independent, so two threads
+(Embree and most numpy kernels release the GIL) render them side by side,
+deterministically, and a pixel's value does not depend on the tile it falls in.
+`Renderer.stream` hands tiles over in image order (to `streaming`, which writes them
+to files as they come); `Renderer.render` collects them in an in-memory `Film`.
 """
 
 from __future__ import annotations
@@ -188,12 +191,6 @@ class Renderer:
 
     def spans(self, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
         return pixel_spans(self.scene.image, rays_per_tile)
-
-    def tiles(self) -> list[tuple[int, int]]:
-        """Whole-row tiles of about `RAYS_PER_TILE` rays, as (row0, row1)."""
-        width, height = self.scene.image.width, self.scene.image.height
-        rows_per_tile = max(1, RAYS_PER_TILE // (width * self.rays_per_pixel()))
-        return [(r, min(r + rows_per_tile, height)) for r in range(0, height, rows_per_tile)]
 
     def stream(self, threads: int | None = None, rays_per_tile: int = RAYS_PER_TILE,
                stats: RenderStats | None = None) -> Iterator[Tile]:
