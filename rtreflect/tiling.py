@@ -24,6 +24,10 @@ DEFAULT_FRACTION = 0.25
 #: Fallback when the physical memory cannot be read.
 FALLBACK_BYTES = 2 << 30
 
+#: Full-width float32 scanlines the EXR writer keeps: measured ~8 zip chunks of 16 rows (compressed in
+#: parallel), independent of the image height (67 MB for 7680 px wide rows of 17 channels).
+WRITER_ROWS = 128
+
 _UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
 
@@ -71,8 +75,8 @@ def rays_per_tile(scene: Scene, max_memory: int, tiles_in_flight: int) -> int:
     per_pixel = rays_per_pixel(scene.image.samples)
     per_ray = bytes_per_ray(scene)
     pixel_bytes = len(CHANNELS) * 4
-    # The writer holds a partial row, and encodes whole rows of the tile it is given.
-    rows = 2 * scene.image.width * pixel_bytes
+    # The writer holds a partial row; OpenImageIO's EXR writer holds scanline buffers (`WRITER_ROWS`).
+    rows = (2 + WRITER_ROWS) * scene.image.width * pixel_bytes
     usable = (max_memory - rows) // max(1, tiles_in_flight)
     rays = usable // (per_ray + pixel_bytes // per_pixel + 1)
     if rays < per_pixel:
