@@ -184,6 +184,12 @@ def _on_sigterm(signum, frame) -> None:
 def _worker_init(progress_queue) -> None:
     global _progress_queue
     _progress_queue = progress_queue
+    # One core per worker: without this each worker's OpenImageIO/OpenEXR pool would compress
+    # on every core too, and the -j workers would crowd each other.
+    import OpenImageIO as oiio
+
+    oiio.attribute("threads", 1)
+    oiio.attribute("exr_threads", 1)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     signal.signal(signal.SIGTERM, _on_sigterm)
 
@@ -201,6 +207,9 @@ def _worker_render(scene: Scene, outdir: Path, max_memory: int | None) -> SceneR
 
 # -- the local runner --------------------------------------------------------------------
 def default_jobs() -> int:
+    """The cores this process may run on (its CPU affinity where the system tells it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0)) or 1
     return os.cpu_count() or 1
 
 

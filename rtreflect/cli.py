@@ -160,13 +160,11 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
     where = scheduler or f"local, -j {jobs or batching.default_jobs()}"
     try:
         with bar:
-            if not todo:
-                pass
-            elif scheduler:
+            if scheduler and todo:
                 from .cluster import run_on_cluster
 
                 run_on_cluster(scheduler, todo, outdir, max_memory=budget, on_progress=bar.update, on_done=on_done)
-            else:
+            elif todo:
                 batching.run_local(todo, outdir, workers=jobs or batching.default_jobs(), max_memory=budget,
                                    on_progress=bar.update, on_done=on_done)
     except KeyboardInterrupt:
