@@ -225,6 +225,24 @@ def test_interrupted_batch_leaves_only_complete_files_and_resumes(tmp_path):
     assert report["counts"]["rendered"] == 4 - len(finished)
 
 
+@pytest.mark.parametrize("where", ["local", "cluster"])
+def test_render_error_is_isolated(where, tmp_path, request):
+    """A scene that fails while rendering (here: its 10,000 tubes at 16×16 samples do not fit the memory budget)."""
+    heavy = small_scene("hood", tmp_path / "heavy.toml", samples=16)
+    text, n = re.subn(r"(?m)^positions = .*$", "spacing = 0.001\ncount = 10000", heavy.read_text())
+    assert n == 1
+    heavy.write_text(text)
+    small_scene("hood", tmp_path / "light.toml")
+    options = ["--scheduler", request.getfixturevalue("cluster")] if where == "cluster" else ["-j", "2"]
+    code, output, report = run_batch(tmp_path, "-o", tmp_path / "out", "--max-memory", "40M",
+                                     "--json", tmp_path / "r.json", *options)
+    assert code == 1, output
+    scenes = by_name(report)
+    assert scenes["light"]["status"] == "rendered"
+    assert scenes["heavy"]["status"] == "failed" and "heavy.toml: image: needs about" in scenes["heavy"]["error"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["light.exr", "light.png"]
+
+
 # -- batch on a Dask cluster -------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def cluster():
