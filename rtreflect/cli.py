@@ -142,6 +142,9 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         todo, reports = batching.plan(loaded, outdir, force)
     except RtreflectError as exc:
         fail(str(exc))
+    except KeyboardInterrupt:
+        click.echo("rtreflect: interrupted before rendering; nothing written", err=True)
+        sys.exit(EXIT_INTERRUPTED)
     for report in reports:
         _print_scene(report)
     order = {str(job.path): i for i, job in enumerate(loaded)}
