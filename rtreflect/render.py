@@ -1,28 +1,33 @@
 """The reflection-line integrator: scene → film, tile by tile (DESIGN.md, "The pipeline").
 
-Per tile of pixel rows: camera rays for the s×s samples → exact hits → reflected
-directions → light tubes and the occlusion test → coverage colour; plus the
-pixel-centre rays → AOVs. Tiles are independent, so two threads (Embree and most
-numpy kernels release the GIL) render them side by side, deterministically.
+Per tile (a span of pixels in row-major order): camera rays for the s×s samples →
+exact hits → reflected directions → light tubes and the occlusion test → coverage
+colour; plus the pixel-centre rays → AOVs. Tiles are independent, so two threads
+(Embree and most numpy kernels release the GIL) render them side by side,
+deterministically, and a pixel's value does not depend on the tile it falls in.
+`Renderer.stream` hands tiles over in image order (to `streaming`, which writes them
+to files as they come); `Renderer.render` collects them in an in-memory `Film`.
 """
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
 from .accelerator import Accelerator
-from .camera import Camera, sample_offsets
+from .camera import Camera, rays_per_pixel, sample_offsets
 from .clock import StageClock
-from .film import Film, aov_planes, coverage_color
+from .film import CHANNELS, Film, aov_planes, coverage_color
 from .lights import TubeLights, reflect
 from .meshnormals import trace_mesh, vertex_normals
-from .scene import Scene
+from .scene import ImageSpec, Scene
 from .surfaces import SurfaceSet
 from .tessellation import tessellate
 from .tracing import Hits, trace
@@ -65,10 +70,28 @@ class RenderStats:
 
 
 @dataclass
+class Tile:
+    """Rendered pixels [start, stop) of the image in row-major order: (stop − start, 17) float32 in `CHANNELS` order."""
+
+    start: int
+    stop: int
+    pixels: np.ndarray
+    rays: int
+    fallbacks: int
+
+
+@dataclass
 class RenderResult:
     scene: Scene
     film: Film
     stats: RenderStats
+
+
+def pixel_spans(image: ImageSpec, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
+    """The image cut into row-major pixel spans [start, stop) of at most ``rays_per_tile`` rays (at least one pixel)."""
+    per_tile = max(1, rays_per_tile // rays_per_pixel(image.samples))
+    total = image.width * image.height
+    return [(p, min(p + per_tile, total)) for p in range(0, total, per_tile)]
 
 
 class Renderer:
@@ -136,10 +159,17 @@ class Renderer:
                 "shading": shading}
 
     # -- tiles ---------------------------------------------------------------------------
-    def render_rows(self, row0: int, row1: int) -> tuple[np.ndarray, np.ndarray, int, int]:
-        """RGBA (P, 4) and AOVs (P, 13) of pixel rows [row0, row1), with ray and fallback counts."""
+    def rays_per_pixel(self) -> int:
+        return rays_per_pixel(self.scene.image.samples)
+
+    def render_span(self, start: int, stop: int) -> Tile:
+        """Pixels [start, stop) in row-major order (a tile may begin or end mid-row) as one `Tile`.
+
+        Every pixel's value depends only on its own rays, so any cut of the image into
+        spans gives the same bytes.
+        """
         width, s = self.scene.image.width, self.scene.image.samples
-        rows, cols = np.divmod(np.arange(row0 * width, row1 * width), width)
+        rows, cols = np.divmod(np.arange(start, stop), width)
         offsets = sample_offsets(s)
         ns = len(offsets)
         with self.clock.stage("camera rays"):
@@ -149,39 +179,74 @@ class Renderer:
                               self.scene.render.surface_color, self.scene.render.line_color, self.scene.render.background)
         fallbacks = int(shading.hits.fallback.sum())
         rays = len(origins)
+        del origins, directions
         if s % 2 == 1:  # the middle sample of an odd s×s grid is the pixel-centre ray
             aovs = self.aovs(shading.take(np.arange(len(rows)) * ns + ns // 2))
         else:
+            del shading  # free the samples' shading before tracing the centre rays
             aovs = self.pixel_aovs(rows, cols)
             rays += len(rows)
-        return rgba, aov_planes(aovs), rays, fallbacks
+        pixels = np.empty((len(rows), len(CHANNELS)), dtype=np.float32)
+        pixels[:, :4] = rgba
+        pixels[:, 4:] = aov_planes(aovs)
+        return Tile(start, stop, pixels, rays, fallbacks)
 
-    def tiles(self) -> list[tuple[int, int]]:
-        width, height, s = self.scene.image.width, self.scene.image.height, self.scene.image.samples
-        rows_per_tile = max(1, RAYS_PER_TILE // (width * (s * s + 1)))
-        return [(r, min(r + rows_per_tile, height)) for r in range(0, height, rows_per_tile)]
+    def render_rows(self, row0: int, row1: int) -> tuple[np.ndarray, np.ndarray, int, int]:
+        """RGBA (P, 4) and AOVs (P, 13) of pixel rows [row0, row1), with ray and fallback counts."""
+        width = self.scene.image.width
+        tile = self.render_span(row0 * width, row1 * width)
+        return tile.pixels[:, :4], tile.pixels[:, 4:], tile.rays, tile.fallbacks
 
-    def render(self, progress: Callable[[int], None] | None = None, threads: int | None = None) -> RenderResult:
-        """Render the whole image; ``progress(pixels)`` is called as tiles finish."""
+    def spans(self, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
+        return pixel_spans(self.scene.image, rays_per_tile)
+
+    def stream(self, threads: int | None = None, rays_per_tile: int = RAYS_PER_TILE,
+               stats: RenderStats | None = None) -> Iterator[Tile]:
+        """Tiles in image order, rendered ``threads`` at a time.
+
+        At most ``threads`` tiles are in flight plus one waiting to be taken, so memory
+        is bounded by the tile size, not the image size. ``stats`` (if given) counts rays
+        and fallbacks as tiles are yielded.
+        """
+        for tile in self._tiles_in_order(threads or min(2, os.cpu_count() or 1), self.spans(rays_per_tile)):
+            if stats is not None:
+                stats.rays += tile.rays
+                stats.fallbacks += tile.fallbacks
+            yield tile
+
+    def _tiles_in_order(self, threads: int, spans: list[tuple[int, int]]) -> Iterator[Tile]:
+        if threads == 1:  # one tile at a time, in this thread (batch workers)
+            yield from (self.render_span(*span) for span in spans)
+            return
+        todo = iter(spans)
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            pending: deque[Future[Tile]] = deque(pool.submit(self.render_span, *span)
+                                                 for span in itertools.islice(todo, threads))
+            try:
+                while pending:
+                    tile = pending.popleft().result()
+                    pending.extend(pool.submit(self.render_span, *span) for span in itertools.islice(todo, 1))
+                    yield tile
+            finally:  # the consumer stopped early (error, Ctrl-C): do not render the rest
+                for future in pending:
+                    future.cancel()
+
+    def new_stats(self) -> RenderStats:
+        image = self.scene.image
+        self.clock = StageClock()
+        return RenderStats(image.width, image.height, image.samples)
+
+    def render(self, progress: Callable[[int], None] | None = None, threads: int | None = None,
+               rays_per_tile: int = RAYS_PER_TILE) -> RenderResult:
+        """Render the whole image into an in-memory `Film`; ``progress(pixels)`` is called as tiles finish."""
         start = time.perf_counter()
         image = self.scene.image
         film = Film(image.width, image.height)
-        stats = RenderStats(image.width, image.height, image.samples)
-        threads = threads or min(2, os.cpu_count() or 1)
-        self.clock = StageClock()
-
-        def work(tile: tuple[int, int]) -> tuple[int, int]:
-            rgba, aovs, rays, fallbacks = self.render_rows(*tile)
-            film.put(tile[0], tile[1], rgba, aovs)  # tiles own disjoint rows: no lock needed
-            return rays, fallbacks
-
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            tiles = self.tiles()
-            for tile, (rays, fallbacks) in zip(tiles, pool.map(work, tiles)):
-                stats.rays += rays
-                stats.fallbacks += fallbacks
-                if progress:
-                    progress((tile[1] - tile[0]) * image.width)
+        stats = self.new_stats()
+        for tile in self.stream(threads, rays_per_tile, stats):
+            film.put_span(tile.start, tile.stop, tile.pixels)
+            if progress:
+                progress(tile.stop - tile.start)
         stats.seconds = time.perf_counter() - start
         stats.stages = dict(self.clock.seconds)
         return RenderResult(self.scene, film, stats)
