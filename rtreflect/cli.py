@@ -12,8 +12,9 @@ import click
 from tqdm import tqdm
 
 from . import __version__
-from .errors import RtreflectError
-from .imagefiles import save_render
+from .errors import RtreflectError, one_line
+from .imagefiles import prepare_output_folder, save_render
+from .interrupts import Interrupted, signals_as_exceptions
 from .render import Renderer
 from .scene import MAX_SAMPLES, MAX_SIDE, load_scene
 
@@ -21,7 +22,7 @@ EXIT_BAD_INPUT = 2
 
 
 def fail(message: str) -> "NoReturn":  # noqa: F821
-    click.echo(f"rtreflect: error: {message}", err=True)
+    click.echo(f"rtreflect: error: {one_line(message)}", err=True)
     sys.exit(EXIT_BAD_INPUT)
 
 
@@ -60,6 +61,8 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     """
     try:
         loaded = [load_scene(path).with_image(width, height, samples) for path in scenes]
+        check_distinct_outputs(loaded)
+        prepare_output_folder(outdir)
     except RtreflectError as exc:
         fail(str(exc))
     for scene in loaded:
@@ -75,10 +78,26 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
         st = result.stats
         click.echo(
             f"{scene.output.name}: {image.width}×{image.height}, {image.samples**2} samples/px, "
-            f"{st.seconds:.2f} s, {st.mrays_per_second:.2f} Mrays/s, {st.fallbacks} Newton fallbacks"
+            f"{st.seconds:.2f} s, {st.mrays_per_second:.2f} Mrays/s, "
+            f"{st.fallbacks} Newton fallbacks in {st.fallback_pixels} pixels"
             f" → {', '.join(str(p) for p in written)}"
         )
 
 
+def check_distinct_outputs(scenes) -> None:
+    """Two scenes of one run writing the same NAME would silently overwrite each other's images."""
+    first: dict[str, Path] = {}
+    for scene in scenes:
+        earlier = first.setdefault(scene.output.name, scene.path)
+        if earlier != scene.path:
+            raise RtreflectError(f"{scene.path}: output.name: {scene.output.name!r} is also the output name of {earlier}")
+
+
 def main() -> None:
-    cli(prog_name="rtreflect")
+    # Ctrl-C, kill and a closed terminal unwind the stack (temporary files removed) and exit 128 + signal.
+    with signals_as_exceptions():
+        try:
+            cli(prog_name="rtreflect")
+        except Interrupted as exc:
+            click.echo(f"rtreflect: interrupted by {exc}: unfinished output removed, finished files kept", err=True)
+            sys.exit(exc.exit_status)

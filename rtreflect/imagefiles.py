@@ -98,6 +98,20 @@ def write_png(path: Path, rgba: np.ndarray, final: Path | None = None) -> None:
     _write(path, spec, encode_srgb(rgba), final)
 
 
+def prepare_output_folder(outdir: Path) -> None:
+    """Create ``outdir`` if missing and prove a file can be made in it: a bad folder fails before the render, not after."""
+    outdir = Path(outdir)
+    if outdir.exists() and not outdir.is_dir():
+        raise RtreflectError(f"{outdir}: -o/--output: is a file, not a folder")
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".rtreflect-probe.", dir=outdir)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise RtreflectError(f"{outdir}: -o/--output: output folder is not writable ({exc.strerror or exc})") from None
+
+
 def save_render(result: "RenderResult", outdir: Path) -> list[Path]:
     """The render's EXR and/or PNG in ``outdir`` as its `[output]` table says; all files appear together or none."""
     from . import __version__
@@ -111,6 +125,7 @@ def save_render(result: "RenderResult", outdir: Path) -> list[Path]:
         targets.append(outdir / f"{scene.output.name}.png")
     attributes = {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
                   VERSION_ATTRIBUTE: __version__}
+    target = outdir
     try:
         outdir.mkdir(parents=True, exist_ok=True)
         with contextlib.ExitStack() as stack:
@@ -121,7 +136,8 @@ def save_render(result: "RenderResult", outdir: Path) -> list[Path]:
                 else:
                     write_png(tmp, result.film.pixels[..., :4], final=target)
     except OSError as exc:
-        raise RtreflectError(f"{exc.filename or outdir}: cannot write output ({exc.strerror or exc})") from None
+        # Name the file the user asked for, not the temporary one the OS error may carry.
+        raise RtreflectError(f"{target}: cannot write output ({exc.strerror or exc})") from None
     return targets
 
 

@@ -28,6 +28,9 @@ from .tracing import Hits, trace
 
 #: Rays per tile: bounds memory (a few hundred bytes a ray) while keeping numpy's per-call overhead small.
 RAYS_PER_TILE = 1 << 16
+#: Tubes up to which a tile has RAYS_PER_TILE rays; beyond, the per-ray tube tables (about 80 bytes
+#: per ray and tube) grow with the tube count, so tiles shrink in proportion.
+TUBES_PER_FULL_TILE = 16
 
 
 @dataclass
@@ -54,6 +57,7 @@ class RenderStats:
     samples: int
     rays: int = 0
     fallbacks: int = 0  # samples whose Newton refinement failed (mesh hit kept)
+    fallback_pixels: int = 0  # pixels with at least one such sample
     seconds: float = 0.0
     stages: dict[str, float] = field(default_factory=dict)
 
@@ -128,8 +132,8 @@ class Renderer:
                 "shading": shading}
 
     # -- tiles ---------------------------------------------------------------------------
-    def render_rows(self, row0: int, row1: int) -> tuple[np.ndarray, np.ndarray, int, int]:
-        """RGBA (P, 4) and AOVs (P, 13) of pixel rows [row0, row1), with ray and fallback counts."""
+    def render_rows(self, row0: int, row1: int) -> tuple[np.ndarray, np.ndarray, int, int, int]:
+        """RGBA (P, 4) and AOVs (P, 13) of pixel rows [row0, row1), with ray, fallback-sample and fallback-pixel counts."""
         width, s = self.scene.image.width, self.scene.image.samples
         rows, cols = np.divmod(np.arange(row0 * width, row1 * width), width)
         offsets = sample_offsets(s)
@@ -140,17 +144,19 @@ class Renderer:
         rgba = coverage_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
                               self.scene.render.surface_color, self.scene.render.line_color, self.scene.render.background)
         fallbacks = int(shading.hits.fallback.sum())
+        fallback_pixels = int(shading.hits.fallback.reshape(-1, ns).any(axis=1).sum())
         rays = len(origins)
         if s % 2 == 1:  # the middle sample of an odd s×s grid is the pixel-centre ray
             aovs = self.aovs(shading.take(np.arange(len(rows)) * ns + ns // 2))
         else:
             aovs = self.pixel_aovs(rows, cols)
             rays += len(rows)
-        return rgba, aov_planes(aovs), rays, fallbacks
+        return rgba, aov_planes(aovs), rays, fallbacks, fallback_pixels
 
     def tiles(self) -> list[tuple[int, int]]:
         width, height, s = self.scene.image.width, self.scene.image.height, self.scene.image.samples
-        rows_per_tile = max(1, RAYS_PER_TILE // (width * (s * s + 1)))
+        rays = RAYS_PER_TILE * TUBES_PER_FULL_TILE // max(TUBES_PER_FULL_TILE, len(self.lights.c_k))
+        rows_per_tile = max(1, rays // (width * (s * s + 1)))
         return [(r, min(r + rows_per_tile, height)) for r in range(0, height, rows_per_tile)]
 
     def render(self, progress: Callable[[int], None] | None = None, threads: int | None = None) -> RenderResult:
@@ -162,18 +168,24 @@ class Renderer:
         threads = threads or min(2, os.cpu_count() or 1)
         self.clock = StageClock()
 
-        def work(tile: tuple[int, int]) -> tuple[int, int]:
-            rgba, aovs, rays, fallbacks = self.render_rows(*tile)
+        def work(tile: tuple[int, int]) -> tuple[int, int, int]:
+            rgba, aovs, rays, fallbacks, fallback_pixels = self.render_rows(*tile)
             film.put(tile[0], tile[1], rgba, aovs)  # tiles own disjoint rows: no lock needed
-            return rays, fallbacks
+            return rays, fallbacks, fallback_pixels
 
         with ThreadPoolExecutor(max_workers=threads) as pool:
             tiles = self.tiles()
-            for tile, (rays, fallbacks) in zip(tiles, pool.map(work, tiles)):
-                stats.rays += rays
-                stats.fallbacks += fallbacks
-                if progress:
-                    progress((tile[1] - tile[0]) * image.width)
+            try:
+                for tile, (rays, fallbacks, fallback_pixels) in zip(tiles, pool.map(work, tiles)):
+                    stats.rays += rays
+                    stats.fallbacks += fallbacks
+                    stats.fallback_pixels += fallback_pixels
+                    if progress:
+                        progress((tile[1] - tile[0]) * image.width)
+            except BaseException:
+                # Interrupted or failed: drop the queued tiles, or leaving the pool would wait for all of them.
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
         stats.seconds = time.perf_counter() - start
         stats.stages = dict(self.clock.seconds)
         return RenderResult(self.scene, film, stats)

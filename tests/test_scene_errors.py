@@ -190,7 +190,7 @@ ragged_net = control_net()[:3] + [control_net()[3][:3]]
 
 CASES = [
     # TOML itself and the shape of the document
-    Case("toml syntax error", put("camera.fov", Raw("40 40")), "TOML syntax error"),
+    Case("toml syntax error", put("camera.fov", Raw("40 40")), "line 12, column 10: TOML syntax error"),
     Case("table is a number", put("camera", 3), "camera"),
     Case("lights as array of tables", put("lights", [valid_scene()["lights"]]), "lights"),
     Case("surface as single table", put("surface", valid_scene()["surface"][0]), "surface"),
