@@ -19,6 +19,8 @@ from .render import Renderer
 from .scene import MAX_SAMPLES, MAX_SIDE, load_scene
 
 EXIT_BAD_INPUT = 2
+#: Raised by click (8.2+) for a group called without a command; older click prints the help itself.
+NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
 
 
 def fail(message: str) -> "NoReturn":  # noqa: F821
@@ -97,7 +99,21 @@ def main() -> None:
     # Ctrl-C, kill and a closed terminal unwind the stack (temporary files removed) and exit 128 + signal.
     with signals_as_exceptions():
         try:
-            cli(prog_name="rtreflect")
+            # Not standalone: click would print a usage block over several lines for a bad option.
+            status = cli.main(prog_name="rtreflect", standalone_mode=False)
         except Interrupted as exc:
             click.echo(f"rtreflect: interrupted by {exc}: unfinished output removed, finished files kept", err=True)
             sys.exit(exc.exit_status)
+        except NO_ARGS_IS_HELP as exc:  # `rtreflect` alone: the help is the answer
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.UsageError as exc:
+            command = exc.ctx.command_path if exc.ctx else "rtreflect"
+            fail(f"{command}: {exc.format_message()} (see '{command} --help')")
+        except click.ClickException as exc:
+            click.echo(f"rtreflect: error: {one_line(exc.format_message())}", err=True)
+            sys.exit(exc.exit_code)
+        except click.Abort:  # end of input at a prompt, or Ctrl-C where SIGINT could not be caught
+            click.echo("rtreflect: aborted", err=True)
+            sys.exit(128 + 2)
+    sys.exit(status if isinstance(status, int) else 0)

@@ -75,9 +75,12 @@ def nurbs(draw) -> dict:
     points = [[[size * (-1 + 2 * i / (nu - 1) + jitter[3 * (i * nv + j)]),
                 size * (-1 + 2 * j / (nv - 1) + jitter[3 * (i * nv + j) + 1]),
                 size * jitter[3 * (i * nv + j) + 2]] for j in range(nv)] for i in range(nu)]
+    if draw(one_in(4)):  # a pole: the first row collapsed to a point, as at the teapot's lid (S_u × S_v = 0 there)
+        points[0] = [list(points[0][0]) for _ in range(nv)]
     surface = {"degree": [p, q], "knots_u": knots(p, nu), "knots_v": knots(q, nv), "points": points}
     if draw(st.booleans()):
-        surface["weights"] = [[draw(st.floats(0.2, 3.0)) for _ in range(nv)] for _ in range(nu)]
+        spread = draw(st.sampled_from([3.0, 1e3, 1e6]))
+        surface["weights"] = [[draw(st.floats(1 / spread, spread)) for _ in range(nv)] for _ in range(nu)]
     if draw(st.booleans()):
         surface["name"] = draw(NAMES)
     return surface
@@ -102,7 +105,7 @@ def bezier_file(draw) -> str:
 def scene_documents(draw) -> tuple[dict, str | None]:
     """A valid scene (and its .bpt file, if it uses one)."""
     eye_dir = unit(np.array(draw(vec3)) + np.array([0.0, -0.01, 1e-3]))
-    eye = (eye_dir * draw(st.floats(2.0, 8.0))).tolist()
+    eye = (eye_dir * draw(st.floats(0.1, 8.0))).tolist()  # from inside the net's hull to far away
     camera = {"eye": eye, "look_at": draw(st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3))}
     if draw(st.booleans()):
         camera["projection"] = draw(st.sampled_from(["perspective", "orthographic"]))

@@ -482,3 +482,26 @@ def test_valid_base_scene_renders(geometry: str | None, tmp_path: Path) -> None:
     done = run_rtreflect(scene_path, outdir)
     assert done.returncode == 0, done.stderr
     assert sorted(p.name for p in files_under(outdir)) == ["base.exr", "base.png"]
+
+
+#: Bad command lines: the console script's own path (click's usage errors) also answers in one line.
+BAD_COMMAND_LINES = [
+    (["render", "{scene}", "--width", "0"], "--width"),
+    (["render", "{scene}", "--samples", "many"], "--samples"),
+    (["render"], "SCENES"),
+    (["rendr", "{scene}"], "rendr"),
+    (["render", "{scene}", "--colour", "red"], "--colour"),
+]
+
+
+@pytest.mark.parametrize("args, named", BAD_COMMAND_LINES, ids=[" ".join(a) for a, _ in BAD_COMMAND_LINES])
+def test_bad_command_line_is_rejected_in_one_line(args: list[str], named: str, tmp_path: Path) -> None:
+    scene_path = write_scene(tmp_path, Case("valid", lambda scene: None, ""))
+    done = subprocess.run([str(RTREFLECT), *(a.format(scene=scene_path) for a in args), "-o", str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == EXIT_BAD_INPUT, done.stderr
+    assert "Traceback" not in done.stderr
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rtreflect: error: "), done.stderr
+    assert named in lines[0] and "--help" in lines[0], lines[0]
+    assert files_under(tmp_path / "out") == []
