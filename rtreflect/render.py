@@ -20,7 +20,7 @@ from .accelerator import Accelerator
 from .camera import Camera, sample_offsets
 from .clock import StageClock
 from .film import Film, aov_planes, coverage_color
-from .lights import TubeDistances, TubeLights, reflect
+from .lights import TubeLights, reflect
 from .scene import Scene
 from .surfaces import SurfaceSet
 from .tessellation import tessellate
@@ -28,26 +28,28 @@ from .tracing import Hits, trace
 
 #: Rays per tile: bounds memory (a few hundred bytes a ray) while keeping numpy's per-call overhead small.
 RAYS_PER_TILE = 1 << 16
-#: Tubes up to which a tile has RAYS_PER_TILE rays; beyond, the per-ray tube tables (about 80 bytes
-#: per ray and tube) grow with the tube count, so tiles shrink in proportion.
-TUBES_PER_FULL_TILE = 16
+#: Point × tube pairs per chunk of the skew-line distances (eq. 4): about 80 MB of temporaries.
+TUBE_ENTRIES_PER_CHUNK = 1 << 20
 
 
 @dataclass
 class Shading:
-    """Everything known about a batch of rays after shading: hits, s, tube distances, lit flags."""
+    """Everything known about a batch of rays after shading: hits, s, nearest tube ahead, lit flags."""
 
     hits: Hits
     origins: np.ndarray
     directions: np.ndarray
     s: np.ndarray  # reflected directions (NaN where no hit)
-    distances: TubeDistances  # (N, K); d = inf and ahead = False where no hit
+    # The nearest tube ahead and its distance d (−1 and NaN where none is, or no hit). Kept instead of
+    # the (N, tubes) tables of eq. (4), so memory does not grow with the number of tubes.
+    line_id: np.ndarray
+    line_dist: np.ndarray
     lit: np.ndarray
 
     def take(self, rows: np.ndarray) -> "Shading":
         pick = lambda obj: type(obj)(**{k: getattr(obj, k)[rows] for k in obj.__dataclass_fields__})  # noqa: E731
-        return Shading(pick(self.hits), self.origins[rows], self.directions[rows], self.s[rows], pick(self.distances),
-                       self.lit[rows])
+        return Shading(pick(self.hits), self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
+                       self.line_dist[rows], self.lit[rows])
 
 
 @dataclass
@@ -92,19 +94,23 @@ class Renderer:
         n_rays, n_tubes = len(origins), len(self.lights.c_k)
         s = np.full_like(directions, np.nan)
         lit = np.zeros(n_rays, dtype=bool)
-        dist = TubeDistances(np.full((n_rays, n_tubes), np.inf), np.full((n_rays, n_tubes), np.nan),
-                             np.zeros((n_rays, n_tubes), dtype=bool))
+        line_id, line_dist = np.full(n_rays, -1), np.full(n_rays, np.nan)
         idx = np.flatnonzero(hits.hit)
-        shading = Shading(hits, origins, directions, s, dist, lit)
+        shading = Shading(hits, origins, directions, s, line_id, line_dist, lit)
         if len(idx) == 0:
             return shading
         R, n = hits.P[idx], hits.N[idx]
         with self.clock.stage("tubes (eq. 3, 4)"):
             # a, the unit vector towards the eye, is the reversed ray direction for either camera.
             s[idx] = reflect(-directions[idx], n)
-            hit_dist = self.lights.distances(R, s[idx])
-            dist.d[idx], dist.t[idx], dist.ahead[idx] = hit_dist.d, hit_dist.t, hit_dist.ahead
-            candidate, t_tube = self.lights.candidates(hit_dist)
+            candidate, t_tube = np.zeros(len(idx), dtype=bool), np.full(len(idx), np.inf)
+            # Chunks of points, so eq. (4)'s temporaries (about ten (points, tubes) arrays) stay bounded.
+            step = max(1, TUBE_ENTRIES_PER_CHUNK // max(1, n_tubes))
+            for lo in range(0, len(idx), step):
+                part, rows = slice(lo, lo + step), idx[lo:lo + step]
+                hit_dist = self.lights.distances(R[part], s[rows])
+                line_id[rows], line_dist[rows] = self.lights.nearest(hit_dist)
+                candidate[part], t_tube[part] = self.lights.candidates(hit_dist)
             cand = np.flatnonzero(candidate)
         if len(cand):
             # Start the occlusion ray off the surface by more than the mesh's chord error, so the
@@ -126,9 +132,8 @@ class Renderer:
             f = np.full(len(hits.hit), np.nan)
             idx = np.flatnonzero(hits.hit)
             f[idx] = self.lights.ulmet_f(hits.P[idx], shading.s[idx])
-            line_id, line_dist = self.lights.nearest(shading.distances)
         return {"P": hits.P, "N": hits.N, "u": hits.u, "v": hits.v, "patch": hits.patch.astype(np.float64),
-                "Z": hits.t, "f": f, "line.id": line_id.astype(np.float64), "line.dist": line_dist,
+                "Z": hits.t, "f": f, "line.id": shading.line_id.astype(np.float64), "line.dist": shading.line_dist,
                 "shading": shading}
 
     # -- tiles ---------------------------------------------------------------------------
@@ -155,8 +160,7 @@ class Renderer:
 
     def tiles(self) -> list[tuple[int, int]]:
         width, height, s = self.scene.image.width, self.scene.image.height, self.scene.image.samples
-        rays = RAYS_PER_TILE * TUBES_PER_FULL_TILE // max(TUBES_PER_FULL_TILE, len(self.lights.c_k))
-        rows_per_tile = max(1, rays // (width * (s * s + 1)))
+        rows_per_tile = max(1, RAYS_PER_TILE // (width * (s * s + 1)))
         return [(r, min(r + rows_per_tile, height)) for r in range(0, height, rows_per_tile)]
 
     def render(self, progress: Callable[[int], None] | None = None, threads: int | None = None) -> RenderResult:

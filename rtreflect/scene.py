@@ -29,8 +29,8 @@ MAX_SIDE = 16384
 MAX_PIXELS = 1 << 27
 #: Why the two limits above exist, for the messages that enforce them.
 FILM_LIMIT_REASON = "the film keeps 17 float32 channels per pixel, about 9 GB at 8192×16384"
-#: Most light tubes: every ray is tested against every tube, and beyond this the per-ray tube
-#: tables of a tile outgrow memory long before anyone could tell the stripes apart.
+#: Most light tubes: every sample is tested against every tube, so more only slows the render;
+#: no image shows this many stripes apart.
 MAX_TUBES = 10000
 #: Most mesh vertices over all patches (tessellation × knot spans, squared): about 1.5 GB of mesh,
 #: (u, v) table and Embree copy. Newton refines hits onto the surface, so a finer mesh buys nothing.

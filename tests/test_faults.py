@@ -390,3 +390,36 @@ def test_silhouette_fallbacks_are_reported_and_head_on_has_none(tmp_path: Path) 
         assert result.exit_code == 0, result.stderr
         counts[name] = int(SUMMARY.search(result.stdout)[2])
     assert counts["edge-on"] > 0 and counts["head-on"] == 0, counts
+
+
+# --- Many tubes: memory must not grow with rays × tubes ----------------------------------------
+
+
+def shading_peak_bytes(tmp_path: Path, tubes: int) -> int:
+    """Peak memory numpy allocates while shading 4000 pixel-centre rays under ``tubes`` tubes."""
+    import tracemalloc
+
+    from rtreflect.render import Renderer
+    from rtreflect.scene import load_scene
+
+    scene = copy.deepcopy(valid_scene())
+    scene["lights"]["positions"] = [-1.5 + 3.0 * k / tubes for k in range(tubes)]
+    scene["camera"]["fov"] = 15.0  # the bump fills the view
+    renderer = Renderer(load_scene(write_scene(tmp_path, scene, name=f"tubes{tubes}.toml")).with_image(80, 50, 1))
+    rows, cols = np.divmod(np.arange(80 * 50), 80)
+    origins, directions = renderer.camera.rays(rows, cols)
+    tracemalloc.start()
+    try:
+        shading = renderer.shade(origins, directions)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert shading.hits.hit.sum() > 1000  # most rays reach the surface and are tested against every tube
+    return peak
+
+
+def test_tube_memory_is_bounded_however_many_tubes(tmp_path: Path) -> None:
+    """Eq. (4) for every ray and tube is worked in chunks and only the nearest tube is kept: ten times the
+    tubes must not cost ten times the memory (whole (rays, tubes) tables would: 4000 × 2000 × 8 bytes each)."""
+    few, many = shading_peak_bytes(tmp_path, 200), shading_peak_bytes(tmp_path, 2000)
+    assert many < 2 * few, (few, many)
