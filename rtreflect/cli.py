@@ -13,7 +13,7 @@ from tqdm import tqdm
 
 from . import __version__
 from .errors import RtreflectError, one_line
-from .imagefiles import prepare_output_folder, save_render
+from .imagefiles import output_paths, prepare_output_folder, save_render
 from .interrupts import Interrupted, signals_as_exceptions
 from .render import Renderer
 from .scene import MAX_SAMPLES, MAX_SIDE, load_scene
@@ -64,7 +64,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     try:
         loaded = [load_scene(path).with_image(width, height, samples) for path in scenes]
         check_distinct_outputs(loaded)
-        prepare_output_folder(outdir)
+        prepare_output_folder(outdir, [path for scene in loaded for path in output_paths(scene, outdir)])
     except RtreflectError as exc:
         fail(str(exc))
     for scene in loaded:

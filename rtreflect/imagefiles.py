@@ -98,11 +98,23 @@ def write_png(path: Path, rgba: np.ndarray, final: Path | None = None) -> None:
     _write(path, spec, encode_srgb(rgba), final)
 
 
-def prepare_output_folder(outdir: Path) -> None:
-    """Create ``outdir`` if missing and prove a file can be made in it: a bad folder fails before the render, not after."""
+def output_paths(scene, outdir: Path) -> list[Path]:
+    """The files a render of ``scene`` writes into ``outdir``, as its `[output]` table says."""
+    return [Path(outdir) / f"{scene.output.name}{suffix}"
+            for suffix, wanted in ((".exr", scene.output.exr), (".png", scene.output.png)) if wanted]
+
+
+def prepare_output_folder(outdir: Path, targets: list[Path] = ()) -> None:
+    """Create ``outdir`` if missing and prove a file can be made in it: a bad folder fails before the render, not after.
+
+    A folder standing where one of ``targets`` goes would stop its rename after the other files were replaced.
+    """
     outdir = Path(outdir)
     if outdir.exists() and not outdir.is_dir():
         raise RtreflectError(f"{outdir}: -o/--output: is a file, not a folder")
+    for target in targets:
+        if target.is_dir():
+            raise RtreflectError(f"{target}: cannot write output (a folder has that name)")
     try:
         outdir.mkdir(parents=True, exist_ok=True)
         fd, probe = tempfile.mkstemp(prefix=".rtreflect-probe.", dir=outdir)
@@ -118,16 +130,12 @@ def save_render(result: "RenderResult", outdir: Path) -> list[Path]:
 
     scene = result.scene
     outdir = Path(outdir)
-    targets = []
-    if scene.output.exr:
-        targets.append(outdir / f"{scene.output.name}.exr")
-    if scene.output.png:
-        targets.append(outdir / f"{scene.output.name}.png")
+    targets = output_paths(scene, outdir)
     attributes = {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
                   VERSION_ATTRIBUTE: __version__}
     target = outdir
     try:
-        outdir.mkdir(parents=True, exist_ok=True)
+        prepare_output_folder(outdir, targets)
         with contextlib.ExitStack() as stack:
             for target in targets:
                 tmp = stack.enter_context(atomic_path(target))
@@ -136,8 +144,9 @@ def save_render(result: "RenderResult", outdir: Path) -> list[Path]:
                 else:
                     write_png(tmp, result.film.pixels[..., :4], final=target)
     except OSError as exc:
-        # Name the file the user asked for, not the temporary one the OS error may carry.
-        raise RtreflectError(f"{target}: cannot write output ({exc.strerror or exc})") from None
+        # Name the file the user asked for, not the temporary one the OS error may carry
+        # (a failed rename carries the final name as filename2).
+        raise RtreflectError(f"{exc.filename2 or target}: cannot write output ({exc.strerror or exc})") from None
     return targets
 
 

@@ -179,11 +179,24 @@ def test_os_error_on_rename_keeps_previous_images(previous_output, monkeypatch: 
     scene_path, outdir, before = previous_output
 
     def no_space(src, dst):
-        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), src)
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(src), None, str(dst))
 
     monkeypatch.setattr(imagefiles.os, "replace", no_space)
-    assert_one_line_error(render_in_process(scene_path, outdir, "--width", "40"), "No space left on device")
+    line = assert_one_line_error(render_in_process(scene_path, outdir, "--width", "40"), "No space left on device")
+    assert re.search(rf"{re.escape(str(outdir))}/base\.(exr|png): cannot write output", line), line  # not the temporary
     assert snapshot(outdir) == before
+
+
+def test_folder_in_place_of_an_output_is_found_before_rendering(previous_output, monkeypatch) -> None:
+    """Otherwise the PNG would be replaced and then the EXR's rename fail: a mismatched pair."""
+    scene_path, outdir, before = previous_output
+    (outdir / "base.exr").unlink()
+    (outdir / "base.exr").mkdir()
+    rendered = []
+    monkeypatch.setattr("rtreflect.cli.Renderer", lambda scene: rendered.append(scene))
+    assert_one_line_error(render_in_process(scene_path, outdir), f"{outdir / 'base.exr'}: cannot write output")
+    assert rendered == []
+    assert (outdir / "base.png").read_bytes() == before["base.png"]
 
 
 @pytest.mark.parametrize("stop", [KeyboardInterrupt, lambda: Interrupted(signal.SIGTERM)], ids=["Ctrl-C", "SIGTERM"])
