@@ -36,10 +36,22 @@ class SceneError(RtreflectError):
         super().__init__(one_line(f"{where}: {message}"))
 
 
+#: Largest scene or geometry text read: about two million control points of .bpt text, whose parse
+#: already takes a gigabyte. The cap also stops /dev/zero or an endless pipe from filling memory.
+MAX_TEXT_BYTES = 64 << 20
+
+
 def read_text(path: Path, what: str) -> str:
-    """A UTF-8 text file's contents; a missing, unreadable or binary file is a `SceneError` naming it."""
+    """A UTF-8 text file's contents; a missing, unreadable, binary or huge file is a `SceneError` naming it.
+
+    Pipes work (a scene from a script through ``<(...)``): the file is read, not measured first.
+    """
     try:
-        return Path(path).read_bytes().decode("utf-8-sig")  # a byte-order mark (Windows editors) is not content
+        with open(path, "rb") as stream:
+            data = stream.read(MAX_TEXT_BYTES + 1)
+        if len(data) > MAX_TEXT_BYTES:
+            raise SceneError(path, "", f"{what} is larger than {MAX_TEXT_BYTES >> 20} MB; no scene or geometry file is")
+        return data.decode("utf-8-sig")  # a byte-order mark (Windows editors) is not content
     except FileNotFoundError:
         raise SceneError(path, "", f"{what} not found") from None
     except OSError as exc:

@@ -446,17 +446,32 @@ def _hash_files(paths: list[Path]) -> tuple[str, str]:
     return digests[0], combined
 
 
+def _long_number_position(text: str) -> str:
+    """``line L, column C`` of the first run of thousands of digits in ``text``, or "" if there is none."""
+    found = re.search(r"[0-9_]{4000,}", text)
+    if not found:
+        return ""
+    line_start = text.rfind("\n", 0, found.start()) + 1
+    return f"line {text.count(chr(10), 0, found.start()) + 1}, column {found.start() - line_start + 1}"
+
+
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file; raises `SceneError` naming the file and field."""
     path = Path(path)
+    text = read_text(path, "scene file")
     try:
-        doc = tomllib.loads(read_text(path, "scene file"))
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         # tomllib puts the position at the end ("... (at line 3, column 7)"); lead with it instead.
         where = re.fullmatch(r"(.*) \((at line \d+, column \d+|at end of document)\)", str(exc), re.S)
         if where:
             raise SceneError(path, where[2].removeprefix("at "), f"TOML syntax error: {where[1]}") from None
         raise SceneError(path, "", f"TOML syntax error: {exc}") from None
+    except RecursionError:  # tomllib reads nested arrays and inline tables recursively
+        raise SceneError(path, "", "TOML syntax error: arrays or inline tables nested too deeply to read") from None
+    except ValueError as exc:
+        # int() refuses more than 4300 digits (Python's guard against slow conversions); tomllib passes that on.
+        raise SceneError(path, _long_number_position(text), "TOML syntax error: a number with more than 4300 digits") from None
 
     root = _Table(path, "", doc)
     image = _parse_image(_Table(path, "image", root.raw("image", {})))

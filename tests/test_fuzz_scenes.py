@@ -199,11 +199,17 @@ def mangle(draw, scene: dict) -> dict:
 
 
 def corrupt_text(draw, text: str) -> str:
-    """Insert, delete or replace a few characters: syntax errors, or changed numbers and names."""
+    """Insert, delete or cut characters: syntax errors, changed numbers and names, or, where a value
+    begins, brackets nested past the parser's recursion limit and integers past Python's 4300 digits."""
+    value_starts = [i + 3 for i in range(len(text) - 2) if text[i:i + 3] == " = "]
+    if value_starts and draw(one_in(3)):
+        position = draw(st.sampled_from(value_starts))
+        return text[:position] + draw(st.sampled_from(["[" * 1500, "{a = " * 1500, "9" * 4400])) + text[position:]
     position = draw(st.integers(0, len(text)))
     edit = draw(st.sampled_from(["insert", "delete", "truncate"]))
     if edit == "insert":
-        return text[:position] + draw(st.sampled_from(["[", "]", "=", '"', "\n", "x", ",", "{", "#", "\0", "é"])) + text[position:]
+        inserted = draw(st.sampled_from(["[", "]", "=", '"', "\n", "x", ",", "{", "#", "\0", "é"]))
+        return text[:position] + inserted + text[position:]
     if edit == "delete":
         return text[:position] + text[position + draw(st.integers(1, 5)):]
     return text[:position]
@@ -216,7 +222,7 @@ def scene_files(draw) -> tuple[str, str | bytes | None]:
     for _ in range(draw(st.integers(0, 5).map(lambda k: (k + 1) // 2 % 3))):  # 0, 1, 1, 2, 2, 0 edits
         scene = draw(mangle(scene))
     text = toml_document(scene)
-    if draw(one_in(10)):
+    if draw(one_in(4)):
         text = corrupt_text(draw, text)
     if geometry is not None and draw(one_in(4)):
         geometry = corrupt_text(draw, geometry)
