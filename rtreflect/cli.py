@@ -1,6 +1,7 @@
 """Command line: `rtreflect render SCENE... -o DIR` (DESIGN.md, "Command line").
 
-Exit status: 0 success, 1 a check failed, 2 bad input (one line naming file and field).
+Exit status: 0 success, 1 a check failed, 2 bad input (one line naming file and field),
+128 + signal number when stopped by SIGINT, SIGTERM or SIGHUP (one line; unfinished files removed).
 """
 
 from __future__ import annotations
