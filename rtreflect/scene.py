@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 import re
 import tomllib
 from dataclasses import dataclass, field, replace
@@ -441,7 +442,10 @@ def _check_mesh_size(path: Path, surfaces: list[NurbsSurface], per_span: int) ->
 
 
 def _hash_files(paths: list[Path]) -> tuple[str, str]:
-    digests = [hashlib.sha256(p.read_bytes()).hexdigest() for p in paths]
+    try:
+        digests = [hashlib.sha256(p.read_bytes()).hexdigest() for p in paths]
+    except OSError as exc:  # read a moment ago: moved or removed since
+        raise SceneError(exc.filename or paths[0], "", f"cannot read it again to hash it ({exc.strerror or exc})") from None
     combined = hashlib.sha256("\n".join(digests).encode()).hexdigest()
     return digests[0], combined
 
@@ -491,7 +495,10 @@ def load_scene(path: str | Path) -> Scene:
             given = t.string("file")
             if not given.strip() or "\0" in given:
                 raise t.error("file", f"must name a geometry file (.bpt), got {quote(given)}")
-            file = (path.parent / given).resolve()
+            try:
+                file = (path.parent / given).resolve()
+            except (OSError, RuntimeError):  # a symlink loop (RuntimeError before Python 3.13): reading will say so
+                file = Path(os.path.abspath(path.parent / given))
             name = t.string("name", "")
             t.finish()
             try:

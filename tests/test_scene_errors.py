@@ -511,3 +511,19 @@ def test_bad_command_line_is_rejected_in_one_line(args: list[str], named: str, t
     assert len(lines) == 1 and lines[0].startswith("rtreflect: error: "), done.stderr
     assert named in lines[0] and "--help" in lines[0], lines[0]
     assert files_under(tmp_path / "out") == []
+
+
+def test_geometry_symlink_loop_is_rejected_in_one_line(tmp_path: Path) -> None:
+    """Path.resolve raises RuntimeError on a loop (Python < 3.13): it must still be a one-line error."""
+    (tmp_path / "a.bpt").symlink_to("b.bpt")
+    (tmp_path / "b.bpt").symlink_to("a.bpt")
+    case = Case("symlink loop", put(S, {"file": "a.bpt"}), "cannot read geometry file", blamed_file="a.bpt")
+    scene_path = write_scene(tmp_path, case)
+    outdir = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["render", str(scene_path), "-o", str(outdir), *RENDER_OPTIONS])
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    assert result.exit_code == EXIT_BAD_INPUT
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and f"{tmp_path / 'a.bpt'}: cannot read geometry file" in lines[0], result.stderr
+    assert f"{scene_path}: surface[0].file" in lines[0]
+    assert files_under(outdir) == []
