@@ -28,10 +28,10 @@ from rtreflect.cli import cli
 from rtreflect.imagefiles import read_image
 from test_scene_errors import toml_document
 
-#: Examples per run: about 25 s on the 2-core CI machine. Derandomized and without a database, so
+#: Examples per run: about 20 s on the 2-core CI machine. Derandomized and without a database, so
 #: every run tries the same documents and a failure reproduces. RTREFLECT_FUZZ_EXAMPLES and
 #: RTREFLECT_FUZZ_RANDOM=1 widen the search by hand (more examples, fresh ones each run).
-EXAMPLES = int(os.environ.get("RTREFLECT_FUZZ_EXAMPLES", 1200))
+EXAMPLES = int(os.environ.get("RTREFLECT_FUZZ_EXAMPLES", 1500))
 DERANDOMIZE = os.environ.get("RTREFLECT_FUZZ_RANDOM") != "1"
 IMAGE_OPTIONS = ["--width", "20", "--height", "12", "--samples", "1"]
 #: Channels that hold a number wherever the pixel-centre ray hits (DESIGN.md "EXR channels").
