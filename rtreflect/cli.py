@@ -1,6 +1,7 @@
 """Command line: `rtreflect render SCENE... -o DIR` (DESIGN.md, "Command line").
 
-Exit status: 0 success, 1 a check failed, 2 bad input (one line naming file and field).
+Exit status: 0 success, 1 a check failed, 2 bad input (one line naming file and field),
+128 + signal number when stopped by SIGINT, SIGTERM or SIGHUP (one line; unfinished files removed).
 """
 
 from __future__ import annotations
@@ -14,8 +15,9 @@ import click
 from tqdm import tqdm
 
 from . import __version__
-from .errors import RtreflectError
-from .imagefiles import atomic_path
+from .errors import RtreflectError, one_line
+from .imagefiles import atomic_path, output_paths, prepare_output_folder
+from .interrupts import Interrupted, signals_as_exceptions
 from .scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, load_scene
 from .streaming import render_to_files
 from .tiling import parse_size
@@ -23,10 +25,12 @@ from .validate import DEFAULT_TOLERANCE_PX, validate_scene
 
 EXIT_BAD_INPUT = 2
 EXIT_CHECK_FAILED = 1
+#: Raised by click (8.2+) for a group called without a command; older click prints the help itself.
+NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
 
 
 def fail(message: str) -> "NoReturn":  # noqa: F821
-    click.echo(f"rtreflect: error: {message}", err=True)
+    click.echo(f"rtreflect: error: {one_line(message)}", err=True)
     sys.exit(EXIT_BAD_INPUT)
 
 
@@ -88,6 +92,8 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     budget = memory_option(max_memory)
     try:
         loaded = [load_scene(path).with_image(width, height, samples).with_render(overlay, normals) for path in scenes]
+        check_distinct_outputs(loaded)
+        prepare_output_folder(outdir, [path for scene in loaded for path in output_paths(scene, outdir)])
     except RtreflectError as exc:
         fail(str(exc))
     for scene in loaded:
@@ -101,7 +107,8 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
         st, written = done.stats, done.files
         click.echo(
             f"{scene.output.name}: {image.width}×{image.height}, {image.samples**2} samples/px, "
-            f"{st.seconds:.2f} s, {st.mrays_per_second:.2f} Mrays/s, {st.fallbacks} Newton fallbacks"
+            f"{st.seconds:.2f} s, {st.mrays_per_second:.2f} Mrays/s, "
+            f"{st.fallbacks} Newton fallbacks in {st.fallback_pixels} pixels"
             f" → {', '.join(str(p) for p in written)}"
         )
 
@@ -385,5 +392,34 @@ def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False
     return tally["failed"]
 
 
+def check_distinct_outputs(scenes) -> None:
+    """Two scenes of one run writing the same NAME would silently overwrite each other's images."""
+    first: dict[str, Path] = {}
+    for scene in scenes:
+        earlier = first.setdefault(scene.output.name, scene.path)
+        if earlier != scene.path:
+            raise RtreflectError(f"{scene.path}: output.name: {scene.output.name!r} is also the output name of {earlier}")
+
+
 def main() -> None:
-    cli(prog_name="rtreflect")
+    # Ctrl-C, kill and a closed terminal unwind the stack (temporary files removed) and exit 128 + signal.
+    with signals_as_exceptions():
+        try:
+            # Not standalone: click would print a usage block over several lines for a bad option.
+            status = cli.main(prog_name="rtreflect", standalone_mode=False)
+        except Interrupted as exc:
+            click.echo(f"rtreflect: interrupted by {exc}: unfinished output removed, finished files kept", err=True)
+            sys.exit(exc.exit_status)
+        except NO_ARGS_IS_HELP as exc:  # `rtreflect` alone: the help is the answer
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.UsageError as exc:
+            command = exc.ctx.command_path if exc.ctx else "rtreflect"
+            fail(f"{command}: {exc.format_message()} (see '{command} --help')")
+        except click.ClickException as exc:
+            click.echo(f"rtreflect: error: {one_line(exc.format_message())}", err=True)
+            sys.exit(exc.exit_code)
+        except click.Abort:  # end of input at a prompt, or Ctrl-C where SIGINT could not be caught
+            click.echo("rtreflect: aborted", err=True)
+            sys.exit(128 + 2)
+    sys.exit(status if isinstance(status, int) else 0)

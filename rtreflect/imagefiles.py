@@ -123,6 +123,26 @@ def output_paths(scene: "Scene", outdir: Path) -> list[Path]:
     return targets
 
 
+def prepare_output_folder(outdir: Path, targets: list[Path] = ()) -> None:
+    """Create ``outdir`` if missing and prove a file can be made in it: a bad folder fails before the render, not after.
+
+    A folder standing where one of ``targets`` goes would stop its rename after the other files were replaced.
+    """
+    outdir = Path(outdir)
+    if outdir.exists() and not outdir.is_dir():
+        raise RtreflectError(f"{outdir}: -o/--output: is a file, not a folder")
+    for target in targets:
+        if target.is_dir():
+            raise RtreflectError(f"{target}: cannot write output (a folder has that name)")
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".rtreflect-probe.", dir=outdir)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise RtreflectError(f"{outdir}: -o/--output: output folder is not writable ({exc.strerror or exc})") from None
+
+
 def provenance_attributes(scene: "Scene") -> dict[str, str]:
     """What each output records of its origin: the scene file's hash, all inputs' hash, the rtreflect version."""
     from . import __version__
@@ -235,12 +255,16 @@ def open_outputs(scene: "Scene", outdir: Path, png_filter: PngFilter | None = No
     """
     outdir = Path(outdir)
     targets = output_paths(scene, outdir)
+    prepare_output_folder(outdir, targets + [outdir / name for name in extra_files or {}])
+    target = outdir
     try:
-        outdir.mkdir(parents=True, exist_ok=True)
         with contextlib.ExitStack() as stack:
             for name, text in (extra_files or {}).items():
-                stack.enter_context(atomic_path(outdir / name)).write_text(text, encoding="utf-8")
-            paths = [(stack.enter_context(atomic_path(target)), target) for target in targets]
+                target = outdir / name
+                stack.enter_context(atomic_path(target)).write_text(text, encoding="utf-8")
+            paths = []
+            for target in targets:
+                paths.append((stack.enter_context(atomic_path(target)), target))
             writer = ImageWriter(scene, paths, png_filter)
             try:
                 yield writer
@@ -249,7 +273,9 @@ def open_outputs(scene: "Scene", outdir: Path, png_filter: PngFilter | None = No
                 raise
             writer.close()
     except OSError as exc:
-        raise RtreflectError(f"{exc.filename or outdir}: cannot write output ({exc.strerror or exc})") from None
+        # Name the file the user asked for, not the temporary one the OS error may carry
+        # (a failed rename carries the final name as filename2).
+        raise RtreflectError(f"{exc.filename2 or target}: cannot write output ({exc.strerror or exc})") from None
 
 
 def save_render(result: "RenderResult", outdir: Path, png_filter: PngFilter | None = None,

@@ -34,6 +34,8 @@ from .tracing import Hits, trace
 
 #: Rays per tile: bounds memory (a few hundred bytes a ray) while keeping numpy's per-call overhead small.
 RAYS_PER_TILE = 1 << 16
+#: Point × tube pairs per chunk of the skew-line distances (eq. 4): about 80 MB of temporaries.
+TUBE_ENTRIES_PER_CHUNK = 1 << 20
 
 
 @dataclass
@@ -44,8 +46,10 @@ class Shading:
     origins: np.ndarray
     directions: np.ndarray
     s: np.ndarray  # reflected directions (NaN where no hit)
-    line_id: np.ndarray  # nearest tube ahead, −1 where none (or no hit)
-    line_dist: np.ndarray  # its skew-line distance d, NaN where none
+    # The nearest tube ahead and its distance d (−1 and NaN where none is, or no hit). Kept instead of
+    # the (N, tubes) tables of eq. (4), so memory does not grow with the number of tubes.
+    line_id: np.ndarray
+    line_dist: np.ndarray
     lit: np.ndarray
 
     def take(self, rows: np.ndarray) -> "Shading":
@@ -61,6 +65,7 @@ class RenderStats:
     samples: int
     rays: int = 0
     fallbacks: int = 0  # samples whose Newton refinement failed (mesh hit kept)
+    fallback_pixels: int = 0  # pixels with at least one such sample
     seconds: float = 0.0
     stages: dict[str, float] = field(default_factory=dict)
 
@@ -78,6 +83,7 @@ class Tile:
     pixels: np.ndarray
     rays: int
     fallbacks: int
+    fallback_pixels: int
 
 
 @dataclass
@@ -117,11 +123,10 @@ class Renderer:
     def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
         """Exact hits, reflected directions s, tube distances and 'lit' flags (a tube within its radius, unoccluded)."""
         hits = self.trace(origins, directions)
-        n_rays = len(origins)
+        n_rays, n_tubes = len(origins), len(self.lights.c_k)
         s = np.full_like(directions, np.nan)
         lit = np.zeros(n_rays, dtype=bool)
-        line_id = np.full(n_rays, -1)
-        line_dist = np.full(n_rays, np.nan)
+        line_id, line_dist = np.full(n_rays, -1), np.full(n_rays, np.nan)
         idx = np.flatnonzero(hits.hit)
         shading = Shading(hits, origins, directions, s, line_id, line_dist, lit)
         if len(idx) == 0:
@@ -130,9 +135,14 @@ class Renderer:
         with self.clock.stage("tubes (eq. 3, 4)"):
             # a, the unit vector towards the eye, is the reversed ray direction for either camera.
             s[idx] = reflect(-directions[idx], n)
-            hit_dist = self.lights.distances(R, s[idx])
-            line_id[idx], line_dist[idx] = self.lights.nearest(hit_dist)
-            candidate, t_tube = self.lights.candidates(hit_dist)
+            candidate, t_tube = np.zeros(len(idx), dtype=bool), np.full(len(idx), np.inf)
+            # Chunks of points, so eq. (4)'s temporaries (about ten (points, tubes) arrays) stay bounded.
+            step = max(1, TUBE_ENTRIES_PER_CHUNK // max(1, n_tubes))
+            for lo in range(0, len(idx), step):
+                part, rows = slice(lo, lo + step), idx[lo:lo + step]
+                hit_dist = self.lights.distances(R[part], s[rows])
+                line_id[rows], line_dist[rows] = self.lights.nearest(hit_dist)
+                candidate[part], t_tube[part] = self.lights.candidates(hit_dist)
             cand = np.flatnonzero(candidate)
         if len(cand):
             # Start the occlusion ray off the surface by more than the mesh's chord error, so the
@@ -178,6 +188,7 @@ class Renderer:
         rgba = coverage_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
                               self.scene.render.surface_color, self.scene.render.line_color, self.scene.render.background)
         fallbacks = int(shading.hits.fallback.sum())
+        fallback_pixels = int(shading.hits.fallback.reshape(-1, ns).any(axis=1).sum())
         rays = len(origins)
         del origins, directions
         if s % 2 == 1:  # the middle sample of an odd s×s grid is the pixel-centre ray
@@ -189,13 +200,7 @@ class Renderer:
         pixels = np.empty((len(rows), len(CHANNELS)), dtype=np.float32)
         pixels[:, :4] = rgba
         pixels[:, 4:] = aov_planes(aovs)
-        return Tile(start, stop, pixels, rays, fallbacks)
-
-    def render_rows(self, row0: int, row1: int) -> tuple[np.ndarray, np.ndarray, int, int]:
-        """RGBA (P, 4) and AOVs (P, 13) of pixel rows [row0, row1), with ray and fallback counts."""
-        width = self.scene.image.width
-        tile = self.render_span(row0 * width, row1 * width)
-        return tile.pixels[:, :4], tile.pixels[:, 4:], tile.rays, tile.fallbacks
+        return Tile(start, stop, pixels, rays, fallbacks, fallback_pixels)
 
     def spans(self, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
         return pixel_spans(self.scene.image, rays_per_tile)
@@ -212,6 +217,7 @@ class Renderer:
             if stats is not None:
                 stats.rays += tile.rays
                 stats.fallbacks += tile.fallbacks
+                stats.fallback_pixels += tile.fallback_pixels
             yield tile
 
     def _tiles_in_order(self, threads: int, spans: list[tuple[int, int]]) -> Iterator[Tile]:
