@@ -114,10 +114,6 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
 
 
 # -- rtreflect diff (issue 4): logic in rtreflect/diff.py ---------------------------------------
-EXIT_MISMATCH = 1
-fail_with = fail  # `diff` has a --fail option, which shadows the helper's name inside it
-
-
 def _channel_list(ctx, param, value: str | None) -> tuple[str, ...] | None:
     if value is None:
         return None
@@ -130,7 +126,7 @@ def _channel_list(ctx, param, value: str | None) -> tuple[str, ...] | None:
 @cli.command()
 @click.argument("a", type=click.Path(path_type=Path))
 @click.argument("b", type=click.Path(path_type=Path))
-@click.option("--fail", type=click.FloatRange(min=0), default=None, metavar="T",
+@click.option("--fail", "fail_threshold", type=click.FloatRange(min=0), default=None, metavar="T",
               help="A pixel fails when any compared channel differs by more than T "
                    "[default: 1e-6 for float images (EXR), one code value (1/255) for 8-bit images (PNG)].")
 @click.option("--failrelative", type=click.FloatRange(0, 2, max_open=True), default=0.0, metavar="R",
@@ -154,7 +150,7 @@ def _channel_list(ctx, param, value: str | None) -> tuple[str, ...] | None:
                    "(just above the threshold) to yellow (the largest error).")
 @click.option("--json", "json_path", type=click.Path(path_type=Path), metavar="REPORT",
               help="Also write the report as JSON to REPORT.")
-def diff(a: Path, b: Path, fail, failrelative, failpercent, hardfail, warn, warnrelative, warnpercent, channels,
+def diff(a: Path, b: Path, fail_threshold, failrelative, failpercent, hardfail, warn, warnrelative, warnpercent, channels,
          diff_png, json_path) -> None:
     """Compare images A and B (EXR or PNG) for CI, with OpenImageIO's compare.
 
@@ -176,18 +172,15 @@ def diff(a: Path, b: Path, fail, failrelative, failpercent, hardfail, warn, warn
     """
     from .diff import Tolerance, compare_images
 
-    tolerance = Tolerance(fail=fail, failrelative=failrelative, failpercent=failpercent, hardfail=hardfail, warn=warn,
+    tolerance = Tolerance(fail=fail_threshold, failrelative=failrelative, failpercent=failpercent, hardfail=hardfail, warn=warn,
                           warnrelative=warnrelative, warnpercent=warnpercent)
     try:
         report = compare_images(a, b, channels, tolerance)
-        if diff_png:
-            report.write_diff_image(diff_png)
-        if json_path:
-            report.write_json(json_path)
+        report.write_files(diff_png, json_path)
     except RtreflectError as exc:
-        fail_with(str(exc))
+        fail(str(exc))
     click.echo("\n".join(report.summary()))
-    sys.exit(0 if report.passed else EXIT_MISMATCH)
+    sys.exit(0 if report.passed else EXIT_CHECK_FAILED)
 
 
 # -- rtreflect validate ------------------------------------------------------------------------
