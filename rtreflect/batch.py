@@ -30,6 +30,7 @@ from typing import Callable
 from . import __version__
 from .errors import RtreflectError
 from .imagefiles import INPUTS_HASH_ATTRIBUTE, VERSION_ATTRIBUTE, atomic_path, output_paths, read_provenance
+from .overlay import contours_file_name
 from .scene import Scene, load_scene
 from .tiling import default_max_memory
 
@@ -118,7 +119,7 @@ def up_to_date(scene: Scene, outdir: Path) -> bool:
         header = read_provenance(path)
         if header.get(INPUTS_HASH_ATTRIBUTE) != scene.inputs_sha256 or header.get(VERSION_ATTRIBUTE) != __version__:
             return False
-    return True
+    return not scene.render.overlay or (Path(outdir) / contours_file_name(scene)).is_file()
 
 
 def plan(jobs: list[Job], outdir: Path, force: bool = False) -> tuple[list[Job], list[SceneReport]]:

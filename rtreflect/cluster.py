@@ -30,6 +30,7 @@ from .errors import RtreflectError
 from .imagefiles import ImageWriter, open_outputs, output_paths
 from .render import Renderer, pixel_spans
 from .scene import Scene
+from .streaming import overlay_for
 from .tiling import default_max_memory, rays_per_tile
 
 #: Seconds to wait for the scheduler before giving up.
@@ -105,6 +106,7 @@ class _SceneRun:
     futures: set = field(default_factory=set)
     started: float = 0.0
     rays: int = 0
+    extra_files: dict[str, str] | None = None  # the contours JSON of an overlay
 
 
 def run_on_cluster(address: str, jobs: list[Job], outdir: Path, *, max_memory: int | None,
@@ -185,7 +187,8 @@ class _ClusterBatch:
             try:
                 run.spans = pixel_spans(job.scene.image, rays_per_tile(job.scene, self.max_memory, 1))
                 run.outputs = contextlib.ExitStack()
-                run.writer = run.outputs.enter_context(open_outputs(job.scene, self.outdir))
+                png_filter, run.extra_files = overlay_for(job.scene)  # drawn by the client, as locally
+                run.writer = run.outputs.enter_context(open_outputs(job.scene, self.outdir, png_filter, run.extra_files))
             except RtreflectError as exc:
                 self._report_failure(run, exc)
                 continue
@@ -209,7 +212,8 @@ class _ClusterBatch:
                 scene = run.job.scene
                 self.on_done(SceneReport(str(run.job.path), scene.output.name, RENDERED,
                                          seconds=time.perf_counter() - run.started,
-                                         outputs=[str(p) for p in output_paths(scene, self.outdir)],
+                                         outputs=[str(p) for p in output_paths(scene, self.outdir)]
+                                                 + [str(self.outdir / n) for n in run.extra_files or {}],
                                          pixels=scene.image.width * scene.image.height, rays=run.rays,
                                          tiles=len(run.spans)))
         except RtreflectError as exc:

@@ -103,6 +103,11 @@ def draw_overlay(rgba: np.ndarray, contours: ContourLines, color) -> np.ndarray:
     return blend(rgba, coverage(contours, width, height), color)
 
 
+def contours_file_name(scene) -> str:
+    """``NAME.contours.json``: where a render with the overlay keeps its contours, beside the images."""
+    return f"{scene.output.name}.contours.json"
+
+
 def overlay_outputs(renderer) -> tuple[Callable[[int, np.ndarray], np.ndarray], dict[str, str]]:
     """For a scene about to render: the PNG filter that draws its contours, and `NAME.contours.json`'s text.
 
@@ -118,4 +123,4 @@ def overlay_outputs(renderer) -> tuple[Callable[[int, np.ndarray], np.ndarray], 
         return blend(rgba_rows, alpha[row0:row0 + len(rgba_rows)], color)
 
     document = {"scene": str(scene.path), "normals": scene.render.normals, **contours.to_json()}
-    return draw, {f"{scene.output.name}.contours.json": json.dumps(document, separators=(",", ":")) + "\n"}
+    return draw, {contours_file_name(scene): json.dumps(document, separators=(",", ":")) + "\n"}

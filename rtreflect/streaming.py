@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from .imagefiles import open_outputs, output_paths
+from .imagefiles import PngFilter, open_outputs, output_paths
 from .overlay import overlay_outputs
 from .render import Renderer, RenderStats
 from .scene import Scene
@@ -40,7 +40,7 @@ def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, m
     threads = threads or min(2, os.cpu_count() or 1)
     tile_rays = rays_per_tile(scene, max_memory or default_max_memory(), threads)
     renderer = Renderer(scene)
-    png_filter, extra_files = overlay_outputs(renderer) if scene.render.overlay else (None, None)
+    png_filter, extra_files = overlay_for(scene, renderer)
     start = time.perf_counter()
     stats = renderer.new_stats()
     tiles = 0
@@ -52,5 +52,11 @@ def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, m
                 progress(tile.stop - tile.start)
     stats.seconds = time.perf_counter() - start
     stats.stages = dict(renderer.clock.seconds)
-    files = output_paths(scene, outdir) + [Path(outdir) / name for name in extra_files or {}]
-    return SceneOutput(files, stats, tiles)
+    return SceneOutput(output_paths(scene, outdir) + [Path(outdir) / name for name in extra_files or {}], stats, tiles)
+
+
+def overlay_for(scene: Scene, renderer: Renderer | None = None) -> tuple[PngFilter | None, dict[str, str] | None]:
+    """The PNG filter and extra files (contours JSON) of a scene with `[render] overlay`; (None, None) without."""
+    if not scene.render.overlay:
+        return None, None
+    return overlay_outputs(renderer or Renderer(scene))

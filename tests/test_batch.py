@@ -271,6 +271,25 @@ def test_tiled_cluster_render_equals_untiled_local_render(cluster, tmp_path):
     assert folder_bytes(tmp_path / "out") == expected
 
 
+def test_overlay_through_the_cluster_equals_a_local_render(cluster, tmp_path):
+    """The client draws the analytic contours over the PNG and writes NAME.contours.json, as `render` does."""
+    scene_path = small_scene("g1_join", tmp_path / "scenes" / "g.toml")
+    scene_path.write_text(scene_path.read_text().replace("[render]\n", "[render]\noverlay = true\n", 1))
+    local = subprocess.run([str(RTREFLECT), "render", str(scene_path), "-o", str(tmp_path / "local")],
+                           capture_output=True, text=True)
+    assert local.returncode == 0, local.stderr
+    code, output, _ = run_batch(scene_path, "-o", tmp_path / "out", "--scheduler", cluster)
+    assert code == 0, output
+    names = ["g.contours.json", "g.exr", "g.png"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == names
+    assert all((tmp_path / "out" / n).read_bytes() == (tmp_path / "local" / n).read_bytes() for n in names)
+    code, output, report = run_batch(scene_path, "-o", tmp_path / "out", "--json", tmp_path / "r.json")
+    assert report["counts"]["skipped"] == 1  # up to date: images and contours all there
+    (tmp_path / "out" / "g.contours.json").unlink()
+    code, output, report = run_batch(scene_path, "-o", tmp_path / "out", "--json", tmp_path / "r.json")
+    assert report["counts"]["rendered"] == 1  # a missing contours file is not up to date
+
+
 def test_unreachable_scheduler_is_bad_input(tmp_path, monkeypatch):
     pytest.importorskip("distributed")
     from rtreflect import cluster as clustering
