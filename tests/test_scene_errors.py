@@ -535,3 +535,34 @@ def test_geometry_symlink_loop_is_rejected_in_one_line(tmp_path: Path) -> None:
     assert len(lines) == 1 and f"{tmp_path / 'a.bpt'}: cannot read geometry file" in lines[0], result.stderr
     assert f"{scene_path}: surface[0].file" in lines[0]
     assert files_under(outdir) == []
+
+
+#: Every command that reads scenes applies the same checks: a sample of the table through `validate`
+#: (exit 2, one line) and `batch` (the scene fails with that one-line reason, the others go on: exit 1).
+OTHER_COMMAND_CASES = CASES[::8]
+
+
+@pytest.mark.parametrize("case", OTHER_COMMAND_CASES, ids=[case.id for case in OTHER_COMMAND_CASES])
+def test_bad_scene_is_rejected_by_validate(case: Case, tmp_path: Path) -> None:
+    scene_path = write_scene(tmp_path, case)
+    result = CliRunner().invoke(cli, ["validate", str(scene_path), "--json", str(tmp_path / "out" / "r.json"),
+                                      "--width", "32", "--height", "18"])
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    check_rejection(case, scene_path, tmp_path / "out", result.exit_code, result.stderr)
+
+
+@pytest.mark.parametrize("case", OTHER_COMMAND_CASES, ids=[case.id for case in OTHER_COMMAND_CASES])
+def test_bad_scene_fails_alone_in_a_batch(case: Case, tmp_path: Path) -> None:
+    scene_path = write_scene(tmp_path, case)
+    good = tmp_path / "good" / "good.toml"
+    good.parent.mkdir()
+    good.write_text(toml_document(valid_scene()))
+    report_path = tmp_path / "report.json"
+    result = CliRunner().invoke(cli, ["batch", str(scene_path), str(good), "-o", str(tmp_path / "out"), "-j", "1",
+                                      "--json", str(report_path)])
+    assert result.exit_code == 1, result.output
+    scenes = {Path(s["scene"]).name: s for s in json.loads(report_path.read_text())["scenes"]}
+    assert scenes["good.toml"]["status"] == "rendered"
+    bad = scenes["scene.toml"]
+    assert bad["status"] == "failed" and "\n" not in bad["error"]
+    assert f"{case.expected_file(scene_path)}: {case.field}" in bad["error"], bad["error"]
