@@ -19,6 +19,11 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
+def rays_per_pixel(samples: int) -> int:
+    """Rays traced per pixel: s² samples, plus the pixel-centre ray for the AOVs when s is even (no sample is central)."""
+    return samples * samples + (1 if samples % 2 == 0 else 0)
+
+
 def sample_offsets(samples: int) -> np.ndarray:
     """(s², 2) offsets (dy, dx) in [0, 1): centres of an s×s grid, row-major. Fixed, so renders are deterministic."""
     centres = (np.arange(samples) + 0.5) / samples

@@ -1,32 +1,47 @@
 """Command line: `rtreflect render SCENE... -o DIR` (DESIGN.md, "Command line").
 
-Exit status: 0 success, 1 a check failed, 2 bad input (one line naming file and field).
+Exit status: 0 success, 1 a check failed, 2 bad input (one line naming file and field),
+128 + signal number when stopped by SIGINT, SIGTERM or SIGHUP (one line; unfinished files removed).
 """
 
 from __future__ import annotations
 
 import json
 import sys
+import time
 from pathlib import Path
 
 import click
 from tqdm import tqdm
 
 from . import __version__
-from .errors import RtreflectError
-from .imagefiles import atomic_path, save_render
-from .render import Renderer
-from .overlay import overlay_outputs
+from .errors import RtreflectError, one_line
+from .imagefiles import atomic_path, output_paths, prepare_output_folder
+from .interrupts import Interrupted, signals_as_exceptions
 from .scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, load_scene
+from .streaming import render_to_files
+from .tiling import parse_size
 from .validate import DEFAULT_TOLERANCE_PX, validate_scene
 
 EXIT_BAD_INPUT = 2
 EXIT_CHECK_FAILED = 1
+#: Raised by click (8.2+) for a group called without a command; older click prints the help itself.
+NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
 
 
 def fail(message: str) -> "NoReturn":  # noqa: F821
-    click.echo(f"rtreflect: error: {message}", err=True)
+    click.echo(f"rtreflect: error: {one_line(message)}", err=True)
     sys.exit(EXIT_BAD_INPUT)
+
+
+def memory_option(text: str | None) -> int | None:
+    """--max-memory SIZE in bytes (None: the default budget); a malformed size exits 2."""
+    if text is None:
+        return None
+    try:
+        return parse_size(text)
+    except ValueError as exc:
+        fail(f"--max-memory: {exc}")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -50,13 +65,17 @@ def cli() -> None:
 @click.option("--samples", type=click.IntRange(1, MAX_SAMPLES),
               help="s: s×s stratified samples per pixel for anti-aliasing (overrides [image] samples).")
 @click.option("--threads", type=click.IntRange(1, 64), default=None, help="Render threads (default: up to 2).")
+@click.option("--max-memory", "max_memory", metavar="SIZE", default=None,
+              help="Working memory for tiles in flight, e.g. 512M or 2G (default: a quarter of RAM). "
+                   "Images are rendered and written in tiles, so any size fits.")
 @click.option("--overlay/--no-overlay", default=None,
               help="Draw the analytic reflection lines (f = c_k) over the PNG and write NAME.contours.json "
                    "(overrides [render] overlay).")
 @click.option("--normals", type=click.Choice(NORMALS_MODES), default=None,
               help="exact: the NURBS normal at the exact hit; mesh: the CAD analysis-mesh normal, for comparison "
                    "(overrides [render] normals).")
-def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, overlay, normals) -> None:
+def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory, overlay,
+           normals) -> None:
     """Render the reflection lines of each SCENE file to OUTPUT/NAME.exr and .png.
 
     The EXR holds linear RGBA plus per-pixel AOVs from the pixel-centre ray
@@ -70,37 +89,34 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
       rtreflect render scenes/hood.toml -o out/
       rtreflect render scenes/*.toml -o out/ --width 480 --height 270 --samples 2
     """
+    budget = memory_option(max_memory)
     try:
         loaded = [load_scene(path).with_image(width, height, samples).with_render(overlay, normals) for path in scenes]
+        check_distinct_outputs(loaded)
+        prepare_output_folder(outdir, [path for scene in loaded for path in output_paths(scene, outdir)])
     except RtreflectError as exc:
         fail(str(exc))
     for scene in loaded:
         image = scene.image
         try:
-            renderer = Renderer(scene)
             with tqdm(total=image.width * image.height, unit="px", unit_scale=True, desc=scene.output.name,
                       leave=False, disable=None, file=sys.stderr) as bar:
-                result = renderer.render(progress=bar.update, threads=threads)
-            png_rgba, extra = overlay_outputs(renderer, result) if scene.render.overlay else (None, None)
+                done = render_to_files(scene, outdir, threads=threads, max_memory=budget, progress=bar.update)
             if scene.render.overlay and not scene.output.png:
                 click.echo(f"{scene.output.name}: overlay not drawn ([output] png = false; the EXR never shows it), "
                            f"contours in {scene.output.name}.contours.json")
-            written = save_render(result, outdir, png_rgba, extra)
         except RtreflectError as exc:
             fail(str(exc))
-        st = result.stats
+        st, written = done.stats, done.files
         click.echo(
             f"{scene.output.name}: {image.width}×{image.height}, {image.samples**2} samples/px, "
-            f"{st.seconds:.2f} s, {st.mrays_per_second:.2f} Mrays/s, {st.fallbacks} Newton fallbacks"
+            f"{st.seconds:.2f} s, {st.mrays_per_second:.2f} Mrays/s, "
+            f"{st.fallbacks} Newton fallbacks in {st.fallback_pixels} pixels"
             f" → {', '.join(str(p) for p in written)}"
         )
 
 
 # -- rtreflect diff (issue 4): logic in rtreflect/diff.py ---------------------------------------
-EXIT_MISMATCH = 1
-fail_with = fail  # `diff` has a --fail option, which shadows the helper's name inside it
-
-
 def _channel_list(ctx, param, value: str | None) -> tuple[str, ...] | None:
     if value is None:
         return None
@@ -113,7 +129,7 @@ def _channel_list(ctx, param, value: str | None) -> tuple[str, ...] | None:
 @cli.command()
 @click.argument("a", type=click.Path(path_type=Path))
 @click.argument("b", type=click.Path(path_type=Path))
-@click.option("--fail", type=click.FloatRange(min=0), default=None, metavar="T",
+@click.option("--fail", "fail_threshold", type=click.FloatRange(min=0), default=None, metavar="T",
               help="A pixel fails when any compared channel differs by more than T "
                    "[default: 1e-6 for float images (EXR), one code value (1/255) for 8-bit images (PNG)].")
 @click.option("--failrelative", type=click.FloatRange(0, 2, max_open=True), default=0.0, metavar="R",
@@ -137,7 +153,7 @@ def _channel_list(ctx, param, value: str | None) -> tuple[str, ...] | None:
                    "(just above the threshold) to yellow (the largest error).")
 @click.option("--json", "json_path", type=click.Path(path_type=Path), metavar="REPORT",
               help="Also write the report as JSON to REPORT.")
-def diff(a: Path, b: Path, fail, failrelative, failpercent, hardfail, warn, warnrelative, warnpercent, channels,
+def diff(a: Path, b: Path, fail_threshold, failrelative, failpercent, hardfail, warn, warnrelative, warnpercent, channels,
          diff_png, json_path) -> None:
     """Compare images A and B (EXR or PNG) for CI, with OpenImageIO's compare.
 
@@ -159,18 +175,15 @@ def diff(a: Path, b: Path, fail, failrelative, failpercent, hardfail, warn, warn
     """
     from .diff import Tolerance, compare_images
 
-    tolerance = Tolerance(fail=fail, failrelative=failrelative, failpercent=failpercent, hardfail=hardfail, warn=warn,
+    tolerance = Tolerance(fail=fail_threshold, failrelative=failrelative, failpercent=failpercent, hardfail=hardfail, warn=warn,
                           warnrelative=warnrelative, warnpercent=warnpercent)
     try:
         report = compare_images(a, b, channels, tolerance)
-        if diff_png:
-            report.write_diff_image(diff_png)
-        if json_path:
-            report.write_json(json_path)
+        report.write_files(diff_png, json_path)
     except RtreflectError as exc:
-        fail_with(str(exc))
+        fail(str(exc))
     click.echo("\n".join(report.summary()))
-    sys.exit(0 if report.passed else EXIT_MISMATCH)
+    sys.exit(0 if report.passed else EXIT_CHECK_FAILED)
 
 
 # -- rtreflect validate ------------------------------------------------------------------------
@@ -260,5 +273,160 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
     sys.exit(0 if all(report.passed for report in reports) else EXIT_CHECK_FAILED)
 
 
+# -- rtreflect batch ----------------------------------------------------------------------
+EXIT_FAILED = 1
+EXIT_INTERRUPTED = 130
+
+
+@cli.command()
+@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("-o", "--output", "outdir", type=click.Path(path_type=Path), required=True,
+              help="Folder for every scene's NAME.exr and NAME.png (created if missing).")
+@click.option("-r", "--recursive", is_flag=True, help="Search folders' sub-folders for *.toml too.")
+@click.option("-j", "--jobs", type=click.IntRange(1, 1024), default=None,
+              help="Scenes rendered at once on this machine (default: the number of cores).")
+@click.option("--force", is_flag=True, help="Render every scene, even those whose outputs are up to date.")
+@click.option("--json", "report_path", type=click.Path(path_type=Path), metavar="REPORT",
+              help="Also write the summary as JSON to REPORT.")
+@click.option("--max-memory", "max_memory", metavar="SIZE", default=None,
+              help="Working memory for tiles, e.g. 512M or 2G (default: a quarter of RAM), shared by the -j "
+                   "workers; with --scheduler, per tile task.")
+@click.option("--scheduler", metavar="tcp://HOST:PORT", default=None,
+              help="Render on this dask.distributed cluster instead of locally (needs rtreflect[dask]).")
+def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, scheduler) -> None:
+    """Render folders of scenes: every *.toml in each PATH (or PATH itself) to OUTPUT/NAME.exr and .png.
+
+    Scenes render in parallel; one that fails is reported and the others go on.
+    A scene whose outputs exist and were rendered from the same scene and
+    geometry files by the same rtreflect version is skipped (--force renders it
+    again), so an interrupted batch resumes where it stopped. Ctrl-C leaves only
+    complete files. At the end a table lists scene, status, seconds and files.
+
+    \b
+    Exit status: 0 all scenes rendered or up to date, 1 some scene failed,
+    2 bad input (no scenes, two scenes writing the same NAME, ...), 130 interrupted.
+
+    \b
+    Examples:
+      rtreflect batch scenes/ -o out/
+      rtreflect batch parts/ variants/door.toml -o out/ --recursive -j 4 --json out/report.json
+      rtreflect batch scenes/ -o out/ --scheduler tcp://10.0.0.5:8786
+    """
+    from . import batch as batching
+
+    start = time.perf_counter()
+    budget = memory_option(max_memory)
+    try:
+        loaded = batching.load_jobs(batching.discover(list(paths), recursive))
+        batching.check_collisions(loaded, outdir)
+        todo, reports = batching.plan(loaded, outdir, force)
+    except RtreflectError as exc:
+        fail(str(exc))
+    except KeyboardInterrupt:
+        click.echo("rtreflect: interrupted before rendering; nothing written", err=True)
+        sys.exit(EXIT_INTERRUPTED)
+    for report in reports:
+        _print_scene(report)
+    order = {str(job.path): i for i, job in enumerate(loaded)}
+    total_pixels = sum(job.scene.image.width * job.scene.image.height for job in todo)
+    bar = tqdm(total=total_pixels, unit="px", unit_scale=True, disable=None, file=sys.stderr, dynamic_ncols=True,
+               desc=f"0/{len(todo)} scenes")
+
+    finished = [0]
+
+    def on_done(report) -> None:
+        reports.append(report)
+        finished[0] += 1
+        bar.set_description(f"{finished[0]}/{len(todo)} scenes")
+        _print_scene(report)
+
+    where = scheduler or f"local, -j {jobs or batching.default_jobs()}"
+    try:
+        with bar:
+            if scheduler and todo:
+                from .cluster import run_on_cluster
+
+                run_on_cluster(scheduler, todo, outdir, max_memory=budget, on_progress=bar.update, on_done=on_done)
+            elif todo:
+                batching.run_local(todo, outdir, workers=jobs or batching.default_jobs(), max_memory=budget,
+                                   on_progress=bar.update, on_done=on_done)
+    except KeyboardInterrupt:
+        done = {r.scene for r in reports}
+        reports.extend(batching.SceneReport(str(job.path), job.scene.output.name, batching.INTERRUPTED)
+                       for job in todo if str(job.path) not in done)
+        _finish_batch(reports, order, outdir, report_path, start, where, quiet=True)
+        tally = batching.counts(reports)
+        click.echo(f"rtreflect: interrupted: {tally['rendered']} rendered, {tally['interrupted']} not finished; "
+                   "no partial files left, run again to resume", err=True)
+        sys.exit(EXIT_INTERRUPTED)
+    except RtreflectError as exc:
+        fail(str(exc))
+    failed = _finish_batch(reports, order, outdir, report_path, start, where)
+    sys.exit(EXIT_FAILED if failed else 0)
+
+
+def _print_scene(report) -> None:
+    """The line printed as a scene finishes (written above the progress bar)."""
+    name = report.name or Path(report.scene).stem
+    if report.status == "failed":
+        line = f"{name}: FAILED: {report.error}"
+    elif report.status == "skipped":
+        line = f"{name}: up to date, skipped"
+    else:
+        tiles = f"{report.tiles} tile{'' if report.tiles == 1 else 's'}"
+        line = f"{name}: rendered in {report.seconds:.2f} s ({tiles}) → {', '.join(report.outputs)}"
+    tqdm.write(line, file=sys.stdout)
+
+
+def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False) -> int:
+    """Print the summary table, write the JSON report; the number of failed scenes."""
+    from . import batch as batching
+
+    reports.sort(key=lambda r: order.get(r.scene, len(order)))
+    tally = batching.counts(reports)
+    seconds = time.perf_counter() - start
+    if not quiet:
+        click.echo("")
+        click.echo(batching.summary_table(reports))
+        click.echo(f"{tally['rendered']} rendered, {tally['skipped']} up to date, {tally['failed']} failed "
+                   f"in {seconds:.1f} s ({where})")
+    if report_path:
+        try:
+            batching.write_report(report_path, reports, outdir, seconds, where)
+        except RtreflectError as exc:
+            click.echo(f"rtreflect: error: {exc}", err=True)
+            return max(1, tally["failed"])
+    return tally["failed"]
+
+
+def check_distinct_outputs(scenes) -> None:
+    """Two scenes of one run writing the same NAME would silently overwrite each other's images."""
+    first: dict[str, Path] = {}
+    for scene in scenes:
+        earlier = first.setdefault(scene.output.name, scene.path)
+        if earlier != scene.path:
+            raise RtreflectError(f"{scene.path}: output.name: {scene.output.name!r} is also the output name of {earlier}")
+
+
 def main() -> None:
-    cli(prog_name="rtreflect")
+    # Ctrl-C, kill and a closed terminal unwind the stack (temporary files removed) and exit 128 + signal.
+    with signals_as_exceptions():
+        try:
+            # Not standalone: click would print a usage block over several lines for a bad option.
+            status = cli.main(prog_name="rtreflect", standalone_mode=False)
+        except Interrupted as exc:
+            click.echo(f"rtreflect: interrupted by {exc}: unfinished output removed, finished files kept", err=True)
+            sys.exit(exc.exit_status)
+        except NO_ARGS_IS_HELP as exc:  # `rtreflect` alone: the help is the answer
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.UsageError as exc:
+            command = exc.ctx.command_path if exc.ctx else "rtreflect"
+            fail(f"{command}: {exc.format_message()} (see '{command} --help')")
+        except click.ClickException as exc:
+            click.echo(f"rtreflect: error: {one_line(exc.format_message())}", err=True)
+            sys.exit(exc.exit_code)
+        except click.Abort:  # end of input at a prompt, or Ctrl-C where SIGINT could not be caught
+            click.echo("rtreflect: aborted", err=True)
+            sys.exit(128 + 2)
+    sys.exit(status if isinstance(status, int) else 0)

@@ -22,6 +22,7 @@ over the finite pairs only (the non-finite pair contributes 0).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import warnings
@@ -36,10 +37,10 @@ with warnings.catch_warnings():
     import colour
 
 from .errors import RtreflectError
+from .film import COLOR_CHANNELS
 from .imagefiles import atomic_path, read_image, write_png
 
 #: Channels compared when none are named: the colour channels, if the images have any.
-COLOR_CHANNELS = ("R", "G", "B", "A")
 #: Default ``fail`` for float images: float32 noise passes, any real change fails.
 FLOAT_FAIL = 1e-6
 #: Slack on one integer code value: OpenImageIO reads code k of 8 bits as float32(k/255),
@@ -161,20 +162,29 @@ class DiffReport:
 
     def write_json(self, path: Path) -> None:
         """The report as JSON, written atomically (its folder is created if missing)."""
-        _write(Path(path), lambda tmp: tmp.write_text(json.dumps(self.to_json(), indent=2) + "\n"))
+        self.write_files(json_path=path)
 
     def write_diff_image(self, path: Path) -> None:
         """A PNG showing where A and B differ (see `diff_image`), written atomically (folder created)."""
-        _write(Path(path), lambda tmp: write_png(tmp, diff_image(self.background, self.excess), final=Path(path)))
+        self.write_files(diff_png=path)
 
-
-def _write(path: Path, writer) -> None:
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp:
-            writer(tmp)
-    except OSError as exc:
-        raise RtreflectError(f"{path}: cannot write ({exc.strerror or exc})") from None
+    def write_files(self, diff_png: Path | None = None, json_path: Path | None = None) -> None:
+        """The diff image and/or the JSON report: both appear together, or neither (atomic renames)."""
+        writers = []
+        if diff_png is not None:
+            final = Path(diff_png)
+            writers.append((final, lambda tmp, final=final: write_png(tmp, diff_image(self.background, self.excess),
+                                                                      final=final)))
+        if json_path is not None:
+            writers.append((Path(json_path), lambda tmp: tmp.write_text(json.dumps(self.to_json(), indent=2) + "\n")))
+        target = None
+        try:
+            with contextlib.ExitStack() as stack:
+                for target, write in writers:
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    write(stack.enter_context(atomic_path(target)))
+        except OSError as exc:
+            raise RtreflectError(f"{exc.filename2 or target}: cannot write ({exc.strerror or exc})") from None
 
 
 def _threshold(absolute: float, relative: float) -> str:

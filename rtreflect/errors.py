@@ -2,6 +2,24 @@
 
 from pathlib import Path
 
+#: Longest quoted value (a token, a name) shown in a message: enough to recognise it, short enough to read.
+QUOTE_LIMIT = 60
+
+
+def one_line(text: str) -> str:
+    """``text`` with line breaks and other control characters escaped, so a message stays one line.
+
+    Paths, names and parser or OS messages can carry newlines; a CI log or a script
+    reading the first line of stderr would then see half a message.
+    """
+    return "".join(ch if ch.isprintable() or ch == " " else ascii(ch)[1:-1] for ch in str(text))
+
+
+def quote(value: object) -> str:
+    """A value for a message: repr, shortened to `QUOTE_LIMIT` characters."""
+    text = repr(value)
+    return text if len(text) <= QUOTE_LIMIT else text[:QUOTE_LIMIT - 5] + "…" + text[-4:]
+
 
 class RtreflectError(Exception):
     """Bad input or an environment problem the user can fix; the command line exits 2."""
@@ -15,16 +33,30 @@ class SceneError(RtreflectError):
         self.field = field
         self.reason = message
         where = f"{self.file}: {field}" if field else self.file
-        super().__init__(f"{where}: {message}")
+        super().__init__(one_line(f"{where}: {message}"))
+
+
+#: Largest scene or geometry text read: about two million control points of .bpt text, whose parse
+#: already takes a gigabyte. The cap also stops /dev/zero or an endless pipe from filling memory.
+MAX_TEXT_BYTES = 64 << 20
 
 
 def read_text(path: Path, what: str) -> str:
-    """A UTF-8 text file's contents; a missing, unreadable or binary file is a `SceneError` naming it."""
+    """A UTF-8 text file's contents; a missing, unreadable, binary or huge file is a `SceneError` naming it.
+
+    Pipes work (a scene from a script through ``<(...)``): the file is read, not measured first.
+    """
     try:
-        return Path(path).read_bytes().decode("utf-8")
+        with open(path, "rb") as stream:
+            data = stream.read(MAX_TEXT_BYTES + 1)
+        if len(data) > MAX_TEXT_BYTES:
+            raise SceneError(path, "", f"{what} is larger than {MAX_TEXT_BYTES >> 20} MB; no scene or geometry file is")
+        return data.decode("utf-8-sig")  # a byte-order mark (Windows editors) is not content
     except FileNotFoundError:
         raise SceneError(path, "", f"{what} not found") from None
     except OSError as exc:
         raise SceneError(path, "", f"cannot read {what} ({exc.strerror or exc})") from None
     except UnicodeDecodeError as exc:
         raise SceneError(path, "", f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except ValueError as exc:  # e.g. a NUL character in the path, which no file system accepts
+        raise SceneError(path, "", f"cannot read {what} ({exc})") from None

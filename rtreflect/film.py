@@ -43,5 +43,9 @@ class Film:
         block[:, :4] = rgba
         block[:, 4:] = aovs
 
+    def put_span(self, start: int, stop: int, pixels: np.ndarray) -> None:
+        """Store pixels [start, stop) in row-major order: (stop − start, 17) values in `CHANNELS` order."""
+        self.pixels.reshape(-1, len(CHANNELS))[start:stop] = pixels
+
     def channel(self, name: str) -> np.ndarray:
         return self.pixels[..., CHANNELS.index(name)]

@@ -11,7 +11,7 @@ import os
 import tempfile
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
 import numpy as np
 import OpenImageIO as oiio
@@ -26,6 +26,7 @@ from .film import CHANNELS, Film
 
 if TYPE_CHECKING:
     from .render import RenderResult
+    from .scene import Scene
 
 #: EXR header attributes that record where an image came from.
 SCENE_HASH_ATTRIBUTE = "rtreflect:scene_sha256"
@@ -67,16 +68,34 @@ def _write(path: Path, spec: oiio.ImageSpec, pixels: np.ndarray, final: Path | N
         raise RtreflectError(f"{shown}: cannot write image ({out.geterror() or 'disk full?'})")
 
 
-def write_exr(path: Path, film: Film, attributes: dict[str, str], final: Path | None = None) -> None:
-    """All channels of the film as float32, with the given header attributes (not atomic: see `save_render`)."""
-    spec = oiio.ImageSpec(film.width, film.height, len(CHANNELS), oiio.FLOAT)
+def _exr_spec(width: int, height: int, attributes: dict[str, str]) -> oiio.ImageSpec:
+    spec = oiio.ImageSpec(width, height, len(CHANNELS), oiio.FLOAT)
     spec.channelnames = CHANNELS
     spec.alpha_channel = CHANNELS.index("A")
     spec.z_channel = CHANNELS.index("Z")
     spec.attribute("compression", "zip")
+    # OpenImageIO stamps the wall-clock time unless told otherwise (an empty value writes none):
+    # without it the same scene gives the same bytes on every run and every cluster worker.
+    spec.attribute("DateTime", "")
     for key, value in attributes.items():
         spec.attribute(key, value)
-    _write(path, spec, np.ascontiguousarray(film.pixels), final)
+    return spec
+
+
+def _png_spec(width: int, height: int, attributes: dict[str, str]) -> oiio.ImageSpec:
+    spec = oiio.ImageSpec(width, height, 4, oiio.UINT8)
+    spec.channelnames = ("R", "G", "B", "A")
+    spec.alpha_channel = 3
+    # Store the encoded colour verbatim: without this OpenImageIO would un-premultiply it by alpha.
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    for key, value in attributes.items():  # PNG text chunks
+        spec.attribute(key, value)
+    return spec
+
+
+def write_exr(path: Path, film: Film, attributes: dict[str, str], final: Path | None = None) -> None:
+    """All channels of the film as float32, with the given header attributes (not atomic: see `save_render`)."""
+    _write(path, _exr_spec(film.width, film.height, attributes), np.ascontiguousarray(film.pixels), final)
 
 
 def encode_srgb(rgba: np.ndarray) -> np.ndarray:
@@ -90,50 +109,181 @@ def encode_srgb(rgba: np.ndarray) -> np.ndarray:
 def write_png(path: Path, rgba: np.ndarray, final: Path | None = None) -> None:
     """An 8-bit sRGB PNG of a linear (H, W, 4) RGBA image (not atomic: see `save_render`)."""
     height, width = rgba.shape[:2]
-    spec = oiio.ImageSpec(width, height, 4, oiio.UINT8)
-    spec.channelnames = ("R", "G", "B", "A")
-    spec.alpha_channel = 3
-    # Store the encoded colour verbatim: without this OpenImageIO would un-premultiply it by alpha.
-    spec.attribute("oiio:UnassociatedAlpha", 1)
-    _write(path, spec, encode_srgb(rgba), final)
+    _write(path, _png_spec(width, height, {}), encode_srgb(rgba), final)
 
 
-def save_render(result: "RenderResult", outdir: Path, png_rgba: np.ndarray | None = None,
-                extra_files: dict[str, str] | None = None, extra_attributes: dict[str, str] | None = None) -> list[Path]:
-    """The render's EXR and/or PNG in ``outdir`` as its `[output]` table says; all files appear together or none.
-
-    ``png_rgba``: linear RGBA for the PNG instead of the film's (the overlay); ``extra_files``:
-    text files to write beside them, by file name (the contours JSON); ``extra_attributes`` go
-    into the EXR header too (golden images fix ``DateTime`` with them).
-    """
-    from . import __version__
-
-    scene = result.scene
+def output_paths(scene: "Scene", outdir: Path) -> list[Path]:
+    """``outdir/NAME.exr`` and/or ``outdir/NAME.png``, as the scene's `[output]` table asks."""
     outdir = Path(outdir)
     targets = []
     if scene.output.exr:
         targets.append(outdir / f"{scene.output.name}.exr")
     if scene.output.png:
         targets.append(outdir / f"{scene.output.name}.png")
-    attributes = {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
-                  VERSION_ATTRIBUTE: __version__, **(extra_attributes or {})}
+    return targets
+
+
+def prepare_output_folder(outdir: Path, targets: list[Path] = ()) -> None:
+    """Create ``outdir`` if missing and prove a file can be made in it: a bad folder fails before the render, not after.
+
+    A folder standing where one of ``targets`` goes would stop its rename after the other files were replaced.
+    """
+    outdir = Path(outdir)
+    if outdir.exists() and not outdir.is_dir():
+        raise RtreflectError(f"{outdir}: -o/--output: is a file, not a folder")
+    for target in targets:
+        if target.is_dir():
+            raise RtreflectError(f"{target}: cannot write output (a folder has that name)")
     try:
         outdir.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".rtreflect-probe.", dir=outdir)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise RtreflectError(f"{outdir}: -o/--output: output folder is not writable ({exc.strerror or exc})") from None
+
+
+def provenance_attributes(scene: "Scene") -> dict[str, str]:
+    """What each output records of its origin: the scene file's hash, all inputs' hash, the rtreflect version."""
+    from . import __version__
+
+    return {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
+            VERSION_ATTRIBUTE: __version__}
+
+
+def read_provenance(path: Path) -> dict[str, str]:
+    """The ``rtreflect:*`` header attributes of an image file (EXR header or PNG text chunks); {} if unreadable."""
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        oiio.geterror()  # clear the message: an unreadable file is simply not up to date
+        return {}
+    try:
+        return {a.name: str(a.value) for a in inp.spec().extra_attribs if a.name.startswith("rtreflect:")}
+    finally:
+        inp.close()
+
+
+#: ``png_filter(row0, rgba_rows) -> rgba_rows``: linear RGBA of image rows [row0, row0 + len) before sRGB encoding.
+PngFilter = Callable[[int, np.ndarray], np.ndarray]
+
+
+class ImageWriter:
+    """A render's EXR and PNG written scanline by scanline as pixels arrive in image order.
+
+    Pixels come as row-major spans (a span may start or end mid-row); complete rows
+    are encoded and handed to OpenImageIO at once, so memory holds one span plus at
+    most one partial row, whatever the image size. The bytes equal those of writing
+    the whole image in one call.
+    """
+
+    def __init__(self, scene: "Scene", paths: list[tuple[Path, Path]], png_filter: PngFilter | None = None):
+        self.width, self.height = scene.image.width, scene.image.height
+        self.png_filter = png_filter
+        self.next_pixel = 0
+        self._partial = np.empty((0, len(CHANNELS)), dtype=np.float32)
+        self._outputs: list[tuple[oiio.ImageOutput, Path, bool]] = []
+        attributes = provenance_attributes(scene)
+        for tmp, final in paths:
+            is_exr = final.suffix == ".exr"
+            spec = (_exr_spec if is_exr else _png_spec)(self.width, self.height, attributes)
+            out = oiio.ImageOutput.create(str(tmp))
+            if out is None or not out.open(str(tmp), spec):
+                self.abandon()
+                raise RtreflectError(f"{final}: cannot write image ({oiio.geterror() or 'unknown OpenImageIO error'})")
+            self._outputs.append((out, final, is_exr))
+
+    def write(self, start: int, pixels: np.ndarray) -> None:
+        """Pixels [start, start + len(pixels)) as (P, 17) float32 in `CHANNELS` order; spans must come in order."""
+        if start != self.next_pixel:
+            raise ValueError(f"pixels must arrive in order: expected pixel {self.next_pixel}, got {start}")
+        self.next_pixel += len(pixels)
+        if len(self._partial):
+            pixels = np.concatenate([self._partial, pixels])
+        first_row = (start - len(self._partial)) // self.width
+        complete = len(pixels) // self.width * self.width
+        self._partial = pixels[complete:].copy()
+        if complete:
+            self._write_rows(first_row, pixels[:complete].reshape(-1, self.width, len(CHANNELS)))
+
+    def _write_rows(self, row0: int, rows: np.ndarray) -> None:
+        rows = np.ascontiguousarray(rows, dtype=np.float32)
+        row1 = row0 + len(rows)
+        for out, final, is_exr in self._outputs:
+            if is_exr:
+                data = rows
+            else:
+                rgba = rows[..., :4] if self.png_filter is None else self.png_filter(row0, rows[..., :4])
+                data = encode_srgb(rgba)
+            if not out.write_scanlines(row0, row1, 0, data):
+                raise RtreflectError(f"{final}: cannot write image ({out.geterror() or 'disk full?'})")
+
+    def abandon(self) -> None:
+        """Close the files without checks (their temporaries are about to be removed)."""
+        outputs, self._outputs = self._outputs, []
+        next_row = (self.next_pixel - len(self._partial)) // self.width  # the first row not yet written
+        for out, _, is_exr in outputs:
+            if not is_exr:
+                # libpng prints "No IDATs written into file" when closing a PNG before zlib emitted any data;
+                # filling the rest with zeros keeps a discarded file quiet (deflate on zeros is fast).
+                chunk = max(1, (16 << 20) // (4 * self.width))
+                for row in range(next_row, self.height, chunk):
+                    rows = min(chunk, self.height - row)
+                    out.write_scanlines(row, row + rows, 0, np.zeros((rows, self.width, 4), dtype=np.uint8))
+            out.close()
+
+    def close(self) -> None:
+        """Finish the files; an image with pixels missing is an error (it must not be renamed into place)."""
+        outputs, self._outputs = self._outputs, []
+        ok = [out.close() for out, _, _ in outputs]
+        if self.next_pixel != self.width * self.height:
+            raise RtreflectError(f"{outputs[0][1] if outputs else 'image'}: render stopped at pixel {self.next_pixel} "
+                                 f"of {self.width * self.height}")
+        for (out, final, _), closed in zip(outputs, ok):
+            if not closed:
+                raise RtreflectError(f"{final}: cannot write image ({out.geterror() or 'disk full?'})")
+
+
+@contextlib.contextmanager
+def open_outputs(scene: "Scene", outdir: Path, png_filter: PngFilter | None = None,
+                 extra_files: dict[str, str] | None = None) -> Iterator[ImageWriter]:
+    """An `ImageWriter` for the scene's outputs in ``outdir``: all files appear together when the block ends, or none.
+
+    Files are written under temporary names beside their final ones and renamed into
+    place only if the block completes, so an error or Ctrl-C leaves the old files or none.
+    ``png_filter(row0, rgba_rows)`` changes the linear RGBA before the PNG encodes it (the
+    overlay); ``extra_files`` are text files written beside the images, by file name.
+    """
+    outdir = Path(outdir)
+    targets = output_paths(scene, outdir)
+    prepare_output_folder(outdir, targets + [outdir / name for name in extra_files or {}])
+    target = outdir
+    try:
         with contextlib.ExitStack() as stack:
-            for target in targets:
-                tmp = stack.enter_context(atomic_path(target))
-                if target.suffix == ".exr":
-                    write_exr(tmp, result.film, attributes, final=target)
-                else:
-                    write_png(tmp, result.film.pixels[..., :4] if png_rgba is None else png_rgba, final=target)
             for name, text in (extra_files or {}).items():
                 target = outdir / name
-                tmp = stack.enter_context(atomic_path(target))
-                tmp.write_text(text, encoding="utf-8")
-                targets.append(target)
+                stack.enter_context(atomic_path(target)).write_text(text, encoding="utf-8")
+            paths = []
+            for target in targets:
+                paths.append((stack.enter_context(atomic_path(target)), target))
+            writer = ImageWriter(scene, paths, png_filter)
+            try:
+                yield writer
+            except BaseException:
+                writer.abandon()  # release the file handles; the temporaries are then removed
+                raise
+            writer.close()
     except OSError as exc:
-        raise RtreflectError(f"{exc.filename or outdir}: cannot write output ({exc.strerror or exc})") from None
-    return targets
+        # Name the file the user asked for, not the temporary one the OS error may carry
+        # (a failed rename carries the final name as filename2).
+        raise RtreflectError(f"{exc.filename2 or target}: cannot write output ({exc.strerror or exc})") from None
+
+
+def save_render(result: "RenderResult", outdir: Path, png_filter: PngFilter | None = None,
+                extra_files: dict[str, str] | None = None) -> list[Path]:
+    """The render's EXR and/or PNG in ``outdir`` as its `[output]` table says; all files appear together or none."""
+    with open_outputs(result.scene, outdir, png_filter, extra_files) as writer:
+        writer.write(0, result.film.pixels.reshape(-1, len(CHANNELS)))
+    return output_paths(result.scene, outdir) + [Path(outdir) / name for name in extra_files or {}]
 
 
 def read_image(path: Path) -> tuple[np.ndarray, tuple[str, ...], dict[str, object]]:

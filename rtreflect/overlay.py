@@ -10,6 +10,7 @@ overlay runs down the middle of every traced line.
 from __future__ import annotations
 
 import json
+from typing import Callable
 
 import numpy as np
 
@@ -87,24 +88,44 @@ def coverage(contours: ContourLines, width: int, height: int, line_width: float 
     return cover.reshape(height, width)
 
 
-def draw_overlay(rgba: np.ndarray, contours: ContourLines, color) -> np.ndarray:
-    """A copy of the linear (H, W, 4) RGBA image with the contours blended over it in ``color``."""
-    height, width = rgba.shape[:2]
-    alpha = coverage(contours, width, height)[..., None]
+def blend(rgba: np.ndarray, alpha: np.ndarray, color) -> np.ndarray:
+    """A copy of linear RGBA pixels (..., 4) with ``color`` blended over them at coverage ``alpha`` (...)."""
+    alpha = alpha[..., None]
     out = np.array(rgba, dtype=np.float32, copy=True)
     out[..., :3] = (1.0 - alpha) * out[..., :3] + alpha * np.asarray(color, dtype=np.float32)
     out[..., 3:4] = np.maximum(out[..., 3:4], alpha)
     return out
 
 
-def overlay_outputs(renderer, result) -> tuple[np.ndarray | None, dict[str, str]]:
-    """For a finished render: the PNG's RGBA with the contours drawn over it, and `NAME.contours.json`'s text.
+def draw_overlay(rgba: np.ndarray, contours: ContourLines, color) -> np.ndarray:
+    """A copy of the linear (H, W, 4) RGBA image with the contours blended over it in ``color``."""
+    height, width = rgba.shape[:2]
+    return blend(rgba, coverage(contours, width, height), color)
 
-    With ``[output] png = false`` nothing is drawn (the EXR never shows the overlay): the RGBA is None
-    and only the JSON is written.
+
+def contours_file_name(scene) -> str:
+    """``NAME.contours.json``: where a render with the overlay keeps its contours, beside the images."""
+    return f"{scene.output.name}.contours.json"
+
+
+def overlay_outputs(renderer) -> tuple[Callable[[int, np.ndarray], np.ndarray] | None, dict[str, str]]:
+    """For a scene about to render: the PNG filter that draws its contours, and `NAME.contours.json`'s text.
+
+    The contours depend on the scene alone, so they are found before rendering and the
+    PNG's rows are blended as they stream out (see `rtreflect.imagefiles.open_outputs`).
+    With ``[output] png = false`` nothing is drawn (the EXR never shows the overlay): the
+    filter is None and only the JSON is written.
     """
-    scene = result.scene
+    scene = renderer.scene
     contours = analytic_contours(UlmetField.of(renderer))
-    rgba = draw_overlay(result.film.pixels[..., :4], contours, scene.render.overlay_color) if scene.output.png else None
     document = {"scene": str(scene.path), "normals": scene.render.normals, **contours.to_json()}
-    return rgba, {f"{scene.output.name}.contours.json": json.dumps(document, separators=(",", ":")) + "\n"}
+    files = {contours_file_name(scene): json.dumps(document, separators=(",", ":")) + "\n"}
+    if not scene.output.png:
+        return None, files
+    alpha = coverage(contours, scene.image.width, scene.image.height).astype(np.float32)
+    color = scene.render.overlay_color
+
+    def draw(row0: int, rgba_rows: np.ndarray) -> np.ndarray:
+        return blend(rgba_rows, alpha[row0:row0 + len(rgba_rows)], color)
+
+    return draw, files

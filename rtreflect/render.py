@@ -1,34 +1,41 @@
 """The reflection-line integrator: scene → film, tile by tile (DESIGN.md, "The pipeline").
 
-Per tile of pixel rows: camera rays for the s×s samples → exact hits → reflected
-directions → light tubes and the occlusion test → coverage colour; plus the
-pixel-centre rays → AOVs. Tiles are independent, so two threads (Embree and most
-numpy kernels release the GIL) render them side by side, deterministically.
+Per tile (a span of pixels in row-major order): camera rays for the s×s samples →
+exact hits → reflected directions → light tubes and the occlusion test → coverage
+colour; plus the pixel-centre rays → AOVs. Tiles are independent, so two threads
+(Embree and most numpy kernels release the GIL) render them side by side,
+deterministically, and a pixel's value does not depend on the tile it falls in.
+`Renderer.stream` hands tiles over in image order (to `streaming`, which writes them
+to files as they come); `Renderer.render` collects them in an in-memory `Film`.
 """
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
 from .accelerator import Accelerator
-from .camera import Camera, sample_offsets
+from .camera import Camera, rays_per_pixel, sample_offsets
 from .clock import StageClock
-from .film import Film, aov_planes, coverage_color
+from .film import CHANNELS, Film, aov_planes, coverage_color
 from .lights import TubeLights, reflect
 from .meshnormals import trace_mesh, vertex_normals
-from .scene import Scene
+from .scene import ImageSpec, Scene
 from .surfaces import SurfaceSet
 from .tessellation import tessellate
 from .tracing import Hits, trace
 
 #: Rays per tile: bounds memory (a few hundred bytes a ray) while keeping numpy's per-call overhead small.
 RAYS_PER_TILE = 1 << 16
+#: Point × tube pairs per chunk of the skew-line distances (eq. 4): about 80 MB of temporaries.
+TUBE_ENTRIES_PER_CHUNK = 1 << 20
 
 
 @dataclass
@@ -39,8 +46,10 @@ class Shading:
     origins: np.ndarray
     directions: np.ndarray
     s: np.ndarray  # reflected directions (NaN where no hit)
-    line_id: np.ndarray  # nearest tube ahead, −1 where none (or no hit)
-    line_dist: np.ndarray  # its skew-line distance d, NaN where none
+    # The nearest tube ahead and its distance d (−1 and NaN where none is, or no hit). Kept instead of
+    # the (N, tubes) tables of eq. (4), so memory does not grow with the number of tubes.
+    line_id: np.ndarray
+    line_dist: np.ndarray
     lit: np.ndarray
 
     def take(self, rows: np.ndarray) -> "Shading":
@@ -56,6 +65,7 @@ class RenderStats:
     samples: int
     rays: int = 0
     fallbacks: int = 0  # samples whose Newton refinement failed (mesh hit kept)
+    fallback_pixels: int = 0  # pixels with at least one such sample
     seconds: float = 0.0
     stages: dict[str, float] = field(default_factory=dict)
 
@@ -65,10 +75,29 @@ class RenderStats:
 
 
 @dataclass
+class Tile:
+    """Rendered pixels [start, stop) of the image in row-major order: (stop − start, 17) float32 in `CHANNELS` order."""
+
+    start: int
+    stop: int
+    pixels: np.ndarray
+    rays: int
+    fallbacks: int
+    fallback_pixels: int
+
+
+@dataclass
 class RenderResult:
     scene: Scene
     film: Film
     stats: RenderStats
+
+
+def pixel_spans(image: ImageSpec, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
+    """The image cut into row-major pixel spans [start, stop) of at most ``rays_per_tile`` rays (at least one pixel)."""
+    per_tile = max(1, rays_per_tile // rays_per_pixel(image.samples))
+    total = image.width * image.height
+    return [(p, min(p + per_tile, total)) for p in range(0, total, per_tile)]
 
 
 class Renderer:
@@ -94,11 +123,10 @@ class Renderer:
     def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
         """Exact hits, reflected directions s, tube distances and 'lit' flags (a tube within its radius, unoccluded)."""
         hits = self.trace(origins, directions)
-        n_rays = len(origins)
+        n_rays, n_tubes = len(origins), len(self.lights.c_k)
         s = np.full_like(directions, np.nan)
         lit = np.zeros(n_rays, dtype=bool)
-        line_id = np.full(n_rays, -1)
-        line_dist = np.full(n_rays, np.nan)
+        line_id, line_dist = np.full(n_rays, -1), np.full(n_rays, np.nan)
         idx = np.flatnonzero(hits.hit)
         shading = Shading(hits, origins, directions, s, line_id, line_dist, lit)
         if len(idx) == 0:
@@ -107,9 +135,14 @@ class Renderer:
         with self.clock.stage("tubes (eq. 3, 4)"):
             # a, the unit vector towards the eye, is the reversed ray direction for either camera.
             s[idx] = reflect(-directions[idx], n)
-            hit_dist = self.lights.distances(R, s[idx])
-            line_id[idx], line_dist[idx] = self.lights.nearest(hit_dist)
-            candidate, t_tube = self.lights.candidates(hit_dist)
+            candidate, t_tube = np.zeros(len(idx), dtype=bool), np.full(len(idx), np.inf)
+            # Chunks of points, so eq. (4)'s temporaries (about ten (points, tubes) arrays) stay bounded.
+            step = max(1, TUBE_ENTRIES_PER_CHUNK // max(1, n_tubes))
+            for lo in range(0, len(idx), step):
+                part, rows = slice(lo, lo + step), idx[lo:lo + step]
+                hit_dist = self.lights.distances(R[part], s[rows])
+                line_id[rows], line_dist[rows] = self.lights.nearest(hit_dist)
+                candidate[part], t_tube[part] = self.lights.candidates(hit_dist)
             cand = np.flatnonzero(candidate)
         if len(cand):
             start = self.accelerator.surface_origins(R[cand], n[cand], hits.patch[idx[cand]])
@@ -133,10 +166,17 @@ class Renderer:
                 "shading": shading}
 
     # -- tiles ---------------------------------------------------------------------------
-    def render_rows(self, row0: int, row1: int) -> tuple[np.ndarray, np.ndarray, int, int]:
-        """RGBA (P, 4) and AOVs (P, 13) of pixel rows [row0, row1), with ray and fallback counts."""
+    def rays_per_pixel(self) -> int:
+        return rays_per_pixel(self.scene.image.samples)
+
+    def render_span(self, start: int, stop: int) -> Tile:
+        """Pixels [start, stop) in row-major order (a tile may begin or end mid-row) as one `Tile`.
+
+        Every pixel's value depends only on its own rays, so any cut of the image into
+        spans gives the same bytes.
+        """
         width, s = self.scene.image.width, self.scene.image.samples
-        rows, cols = np.divmod(np.arange(row0 * width, row1 * width), width)
+        rows, cols = np.divmod(np.arange(start, stop), width)
         offsets = sample_offsets(s)
         ns = len(offsets)
         with self.clock.stage("camera rays"):
@@ -145,40 +185,71 @@ class Renderer:
         rgba = coverage_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
                               self.scene.render.surface_color, self.scene.render.line_color, self.scene.render.background)
         fallbacks = int(shading.hits.fallback.sum())
+        fallback_pixels = int(shading.hits.fallback.reshape(-1, ns).any(axis=1).sum())
         rays = len(origins)
+        del origins, directions
         if s % 2 == 1:  # the middle sample of an odd s×s grid is the pixel-centre ray
             aovs = self.aovs(shading.take(np.arange(len(rows)) * ns + ns // 2))
         else:
+            del shading  # free the samples' shading before tracing the centre rays
             aovs = self.pixel_aovs(rows, cols)
             rays += len(rows)
-        return rgba, aov_planes(aovs), rays, fallbacks
+        pixels = np.empty((len(rows), len(CHANNELS)), dtype=np.float32)
+        pixels[:, :4] = rgba
+        pixels[:, 4:] = aov_planes(aovs)
+        return Tile(start, stop, pixels, rays, fallbacks, fallback_pixels)
 
-    def tiles(self) -> list[tuple[int, int]]:
-        width, height, s = self.scene.image.width, self.scene.image.height, self.scene.image.samples
-        rows_per_tile = max(1, RAYS_PER_TILE // (width * (s * s + 1)))
-        return [(r, min(r + rows_per_tile, height)) for r in range(0, height, rows_per_tile)]
+    def spans(self, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
+        return pixel_spans(self.scene.image, rays_per_tile)
 
-    def render(self, progress: Callable[[int], None] | None = None, threads: int | None = None) -> RenderResult:
-        """Render the whole image; ``progress(pixels)`` is called as tiles finish."""
+    def stream(self, threads: int | None = None, rays_per_tile: int = RAYS_PER_TILE,
+               stats: RenderStats | None = None) -> Iterator[Tile]:
+        """Tiles in image order, rendered ``threads`` at a time.
+
+        At most ``threads`` tiles are in flight plus one waiting to be taken, so memory
+        is bounded by the tile size, not the image size. ``stats`` (if given) counts rays
+        and fallbacks as tiles are yielded.
+        """
+        for tile in self._tiles_in_order(threads or min(2, os.cpu_count() or 1), self.spans(rays_per_tile)):
+            if stats is not None:
+                stats.rays += tile.rays
+                stats.fallbacks += tile.fallbacks
+                stats.fallback_pixels += tile.fallback_pixels
+            yield tile
+
+    def _tiles_in_order(self, threads: int, spans: list[tuple[int, int]]) -> Iterator[Tile]:
+        if threads == 1:  # one tile at a time, in this thread (batch workers)
+            yield from (self.render_span(*span) for span in spans)
+            return
+        todo = iter(spans)
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            pending: deque[Future[Tile]] = deque(pool.submit(self.render_span, *span)
+                                                 for span in itertools.islice(todo, threads))
+            try:
+                while pending:
+                    tile = pending.popleft().result()
+                    pending.extend(pool.submit(self.render_span, *span) for span in itertools.islice(todo, 1))
+                    yield tile
+            finally:  # the consumer stopped early (error, Ctrl-C): do not render the rest
+                for future in pending:
+                    future.cancel()
+
+    def new_stats(self) -> RenderStats:
+        image = self.scene.image
+        self.clock = StageClock()
+        return RenderStats(image.width, image.height, image.samples)
+
+    def render(self, progress: Callable[[int], None] | None = None, threads: int | None = None,
+               rays_per_tile: int = RAYS_PER_TILE) -> RenderResult:
+        """Render the whole image into an in-memory `Film`; ``progress(pixels)`` is called as tiles finish."""
         start = time.perf_counter()
         image = self.scene.image
         film = Film(image.width, image.height)
-        stats = RenderStats(image.width, image.height, image.samples)
-        threads = threads or min(2, os.cpu_count() or 1)
-        self.clock = StageClock()
-
-        def work(tile: tuple[int, int]) -> tuple[int, int]:
-            rgba, aovs, rays, fallbacks = self.render_rows(*tile)
-            film.put(tile[0], tile[1], rgba, aovs)  # tiles own disjoint rows: no lock needed
-            return rays, fallbacks
-
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            tiles = self.tiles()
-            for tile, (rays, fallbacks) in zip(tiles, pool.map(work, tiles)):
-                stats.rays += rays
-                stats.fallbacks += fallbacks
-                if progress:
-                    progress((tile[1] - tile[0]) * image.width)
+        stats = self.new_stats()
+        for tile in self.stream(threads, rays_per_tile, stats):
+            film.put_span(tile.start, tile.stop, tile.pixels)
+            if progress:
+                progress(tile.stop - tile.start)
         stats.seconds = time.perf_counter() - start
         stats.stages = dict(self.clock.seconds)
         return RenderResult(self.scene, film, stats)

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
+import re
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -18,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from .bpt import read_bpt
-from .errors import SceneError, read_text
+from .errors import SceneError, quote, read_text
 from .surfaces import NurbsSurface
 
 #: Largest image side. The film keeps 17 float32 planes per pixel, and beyond this
@@ -26,6 +28,20 @@ from .surfaces import NurbsSurface
 MAX_SIDE = 16384
 #: Largest pixel count (8192 × 16384): 17 planes × 4 bytes × 2^27 ≈ 9 GB of film.
 MAX_PIXELS = 1 << 27
+#: Why the two limits above exist, for the messages that enforce them.
+FILM_LIMIT_REASON = "the film keeps 17 float32 channels per pixel, about 9 GB at 8192×16384"
+#: Most light tubes: every sample is tested against every tube, so more only slows the render;
+#: no image shows this many stripes apart.
+MAX_TUBES = 10000
+#: Most mesh vertices over all patches (tessellation × knot spans, squared): about 1.5 GB of mesh,
+#: (u, v) table and Embree copy. Newton refines hits onto the surface, so a finer mesh buys nothing.
+MAX_MESH_VERTICES = 1 << 23
+#: Narrowest non-empty knot span, relative to the largest knot magnitude (at least 1): below it the
+#: basis functions keep fewer than 4 of float64's 16 digits, and their derivatives overflow.
+MIN_KNOT_SPAN = 1e-12
+#: Longest output name in UTF-8 bytes: file names stop at 255 bytes, and the temporary name
+#: written first adds a dot, a random part and the extension.
+MAX_NAME_BYTES = 200
 #: Largest s (s×s samples per pixel); 256 samples per pixel is far past visible gains.
 MAX_SAMPLES = 16
 #: Largest tessellation per knot span; hits are refined by Newton, so more buys nothing.
@@ -261,12 +277,16 @@ def _array(table: _Table, key: str, value: Any, shape: tuple[int | None, ...]) -
 
 
 def _parse_image(t: _Table) -> ImageSpec:
-    width = t.number("width", ImageSpec.width, low=1, high=MAX_SIDE, integer=True)
-    height = t.number("height", ImageSpec.height, low=1, high=MAX_SIDE, integer=True)
+    sides = {}
+    for key, default in (("width", ImageSpec.width), ("height", ImageSpec.height)):
+        sides[key] = t.number(key, default, low=1, integer=True)
+        if sides[key] > MAX_SIDE:
+            raise t.error(key, f"must be at most {MAX_SIDE} pixels ({FILM_LIMIT_REASON}), got {sides[key]}")
+    width, height = sides["width"], sides["height"]
     samples = t.number("samples", ImageSpec.samples, low=1, high=MAX_SAMPLES, integer=True)
     t.finish()
     if width * height > MAX_PIXELS:
-        raise t.error("width", f"{width}×{height} pixels is more than the {MAX_PIXELS} the film can hold in memory")
+        raise t.error("width", f"{width}×{height} pixels is more than the maximum {MAX_PIXELS} ({FILM_LIMIT_REASON})")
     return ImageSpec(width, height, samples)
 
 
@@ -299,9 +319,11 @@ def _parse_lights(t: _Table) -> LightSpec:
             if t.has(key):
                 raise t.error(key, "give either lights.positions or lights.spacing with lights.count, not both")
         positions = t.array("positions", (None,))
+        if len(positions) > MAX_TUBES:
+            raise t.error("positions", f"at most {MAX_TUBES} tubes (every ray is tested against every tube), got {len(positions)}")
     elif t.has("spacing") or t.has("count"):
         spacing = t.number("spacing", required_default(), low=0, open_low=True)
-        count = t.number("count", required_default(), low=1, high=10000, integer=True)
+        count = t.number("count", required_default(), low=1, high=MAX_TUBES, integer=True)
         positions = (np.arange(count) - 0.5 * (count - 1)) * spacing
     else:
         raise t.error("positions", "required field is missing (or give lights.spacing and lights.count)")
@@ -335,8 +357,11 @@ def _parse_render(t: _Table) -> RenderSettings:
 
 def _parse_output(t: _Table, path: Path) -> OutputSpec:
     name = t.string("name", path.stem)
-    if not name or name in (".", "..") or "/" in name or "\\" in name or "\0" in name:
-        raise t.error("name", f"must be a plain file stem without path separators, got {name!r}")
+    if not name or name in (".", "..") or "/" in name or "\\" in name or not name.isprintable():
+        raise t.error("name", f"must be a plain file stem without path separators or control characters, got {quote(name)}")
+    if len(name.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
+        raise t.error("name", f"must be at most {MAX_NAME_BYTES} bytes long (file names stop at 255 bytes), "
+                              f"got {len(name.encode('utf-8', 'surrogatepass'))}")
     exr = t.boolean("exr", True)
     png = t.boolean("png", True)
     t.finish()
@@ -351,11 +376,21 @@ def _check_knots(t: _Table, key: str, knots: np.ndarray, degree: int, n_ctrl: in
     if np.any(np.diff(knots) < 0):
         i = int(np.flatnonzero(np.diff(knots) < 0)[0])
         raise t.error(key, f"knots must not decrease (knot {i + 1} = {knots[i + 1]:g} < knot {i} = {knots[i]:g})")
-    _, counts = np.unique(knots, return_counts=True)
+    values, counts = np.unique(knots, return_counts=True)
     if counts.max() > degree + 1:
-        raise t.error(key, f"a knot is repeated {counts.max()} times; at most degree + 1 = {degree + 1} allowed")
+        k = int(np.argmax(counts))
+        where = "an end knot" if k in (0, len(values) - 1) else "an inner knot"
+        raise t.error(key, f"{where} ({values[k]:g}) is repeated {counts[k]} times; at most degree + 1 = {degree + 1} allowed")
     if not knots[n_ctrl] > knots[degree]:
         raise t.error(key, "the parameter domain is empty (knot[degree] == knot[count])")
+    inside = knots[degree:n_ctrl + 1]
+    spans = np.diff(inside)
+    narrowest = MIN_KNOT_SPAN * max(1.0, float(np.max(np.abs(knots))))
+    thin = np.flatnonzero((spans > 0) & (spans < narrowest))
+    if len(thin):
+        i = degree + int(thin[0])
+        raise t.error(key, f"knots {i} and {i + 1} differ by only {spans[thin[0]]:.3g}, too little for float64 "
+                           f"(at least {narrowest:.3g}): merge them or rescale the knot vector")
 
 
 ZERO_AREA = "the control points lie on a point or a line: the patch has zero area"
@@ -411,19 +446,53 @@ def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
     return surface
 
 
+def _check_mesh_size(path: Path, surfaces: list[NurbsSurface], per_span: int) -> None:
+    """Refuse, before any allocation, a tessellation that cannot fit (tessellation.py: per_span segments a span)."""
+    vertices = 0
+    for surface in surfaces:
+        breaks_u, breaks_v = surface.span_breaks()
+        vertices += ((len(breaks_u) - 1) * per_span + 1) * ((len(breaks_v) - 1) * per_span + 1)
+    if vertices > MAX_MESH_VERTICES:
+        raise SceneError(path, "render.tessellation",
+                         f"{per_span} segments per knot span make {vertices} mesh vertices over {len(surfaces)} patches, "
+                         f"more than the {MAX_MESH_VERTICES} that fit in memory: lower render.tessellation")
+
+
 def _hash_files(paths: list[Path]) -> tuple[str, str]:
-    digests = [hashlib.sha256(p.read_bytes()).hexdigest() for p in paths]
+    try:
+        digests = [hashlib.sha256(p.read_bytes()).hexdigest() for p in paths]
+    except OSError as exc:  # read a moment ago: moved or removed since
+        raise SceneError(exc.filename or paths[0], "", f"cannot read it again to hash it ({exc.strerror or exc})") from None
     combined = hashlib.sha256("\n".join(digests).encode()).hexdigest()
     return digests[0], combined
+
+
+def _long_number_position(text: str) -> str:
+    """``line L, column C`` of the first run of thousands of digits in ``text``, or "" if there is none."""
+    found = re.search(r"[0-9_]{4000,}", text)
+    if not found:
+        return ""
+    line_start = text.rfind("\n", 0, found.start()) + 1
+    return f"line {text.count(chr(10), 0, found.start()) + 1}, column {found.start() - line_start + 1}"
 
 
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene file; raises `SceneError` naming the file and field."""
     path = Path(path)
+    text = read_text(path, "scene file")
     try:
-        doc = tomllib.loads(read_text(path, "scene file"))
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
+        # tomllib puts the position at the end ("... (at line 3, column 7)"); lead with it instead.
+        where = re.fullmatch(r"(.*) \((at line \d+, column \d+|at end of document)\)", str(exc), re.S)
+        if where:
+            raise SceneError(path, where[2].removeprefix("at "), f"TOML syntax error: {where[1]}") from None
         raise SceneError(path, "", f"TOML syntax error: {exc}") from None
+    except RecursionError:  # tomllib reads nested arrays and inline tables recursively
+        raise SceneError(path, "", "TOML syntax error: arrays or inline tables nested too deeply to read") from None
+    except ValueError as exc:
+        # int() refuses more than 4300 digits (Python's guard against slow conversions); tomllib passes that on.
+        raise SceneError(path, _long_number_position(text), "TOML syntax error: a number with more than 4300 digits") from None
 
     root = _Table(path, "", doc)
     image = _parse_image(_Table(path, "image", root.raw("image", {})))
@@ -440,7 +509,13 @@ def load_scene(path: str | Path) -> Scene:
     for i, entry in enumerate(entries):
         t = _Table(path, f"surface[{i}]", entry)
         if t.has("file"):
-            file = (path.parent / t.string("file")).resolve()
+            given = t.string("file")
+            if not given.strip() or "\0" in given:
+                raise t.error("file", f"must name a geometry file (.bpt), got {quote(given)}")
+            try:
+                file = (path.parent / given).resolve()
+            except (OSError, RuntimeError):  # a symlink loop (RuntimeError before Python 3.13): reading will say so
+                file = Path(os.path.abspath(path.parent / given))
             name = t.string("name", "")
             t.finish()
             try:
@@ -454,5 +529,6 @@ def load_scene(path: str | Path) -> Scene:
         else:
             surfaces.append(_parse_inline_surface(t, i))
     root.finish()
+    _check_mesh_size(path, surfaces, render.tessellation)
     sha, inputs = _hash_files([path, *geometry_files])
     return Scene(path, image, camera, lights, tuple(surfaces), render, output, sha, inputs)

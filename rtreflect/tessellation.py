@@ -57,6 +57,7 @@ class Tessellation:
     chord_error: np.ndarray  # per patch: largest mesh-to-surface distance found at edge midpoints
     meshes: tuple[trimesh.Trimesh, ...]
     boundary: np.ndarray  # indices of the vertices on a patch's domain boundary (where a neighbour may join)
+    edge_length: np.ndarray  # per patch: its longest mesh edge
 
     @property
     def extent(self) -> float:
@@ -84,10 +85,12 @@ class Tessellation:
         if len(candidates) == 0:
             return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
         cand_xyz, cand_patch = self.vertices[candidates], self.vertex_patch[candidates]
-        rows = max(1, (1 << 22) // len(candidates))
+        cand_sq = np.einsum("ij,ij->i", cand_xyz, cand_xyz)
+        rows = max(1, (1 << 20) // len(candidates))  # bounds the (rows, candidates) distance table
         for lo in range(0, len(points), rows):
             hi = min(lo + rows, len(points))
-            d2 = ((points[lo:hi, None, :] - cand_xyz[None]) ** 2).sum(axis=2)
+            pts = points[lo:hi]
+            d2 = np.maximum(np.einsum("ij,ij->i", pts, pts)[:, None] - 2.0 * pts @ cand_xyz.T + cand_sq, 0.0)
             d2[cand_patch[None, :] == patch[lo:hi, None]] = np.inf
             best = np.argmin(d2, axis=1)
             dist_out[lo:hi] = np.sqrt(d2[np.arange(hi - lo), best])
@@ -121,6 +124,7 @@ def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span
         chord_error=np.array([_chord_error(s, m) for s, m in zip(surfaces, meshes)]),
         meshes=meshes,
         boundary=np.concatenate([_boundary_vertices(m) + off for m, off in zip(meshes, offsets)]),
+        edge_length=np.array([float(m.edges_unique_length.max()) for m in meshes]),
     )
 
 

@@ -137,8 +137,10 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             ok &= _near_mesh_hit(derivs, O, D, tm, tessellation.chord_error[pk] + 1e-6 * tessellation.extent)
             seam = np.flatnonzero(~ok & _on_domain_edge(surfaces, pk, ur, vr))
             if len(seam):
-                pn, un, vn, _ = tessellation.across_seam(derivs.S[seam], pk[seam])
-                seam, pn, un, vn = (x[pn >= 0] for x in (seam, pn, un, vn))
+                pn, un, vn, gap = tessellation.across_seam(derivs.S[seam], pk[seam])
+                # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
+                near = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[pk[seam]])
+                seam, pn, un, vn = (x[near] for x in (seam, pn, un, vn))
                 u2, v2, d2, ok2 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
                 ok2 &= _near_mesh_hit(d2, O[seam], D[seam], tm[seam],
                                       tessellation.chord_error[pn] + 1e-6 * tessellation.extent)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -307,7 +308,7 @@ def test_channels_as_comma_string(tmp_path, pair):
 
 def test_console_script_exit_codes(pair, tmp_path):
     """The installed command, not just the click group: stdout report, stderr error line, exit codes."""
-    command = [shutil.which("rtreflect") or "rtreflect"]
+    command = [str(Path(sys.executable).parent / "rtreflect")]  # this venv's, whatever PATH says
     same = subprocess.run(command + ["diff", str(pair[0]), str(pair[0])], capture_output=True, text=True)
     differ = subprocess.run(command + ["diff", *map(str, pair)], capture_output=True, text=True)
     missing = subprocess.run(command + ["diff", str(pair[0]), str(tmp_path / "x.exr")], capture_output=True, text=True)

@@ -52,7 +52,9 @@ def toml_value(value: Any) -> str:
             return "inf" if value > 0 else "-inf"
         return repr(value)
     if isinstance(value, str):
-        return json.dumps(value)  # JSON string escapes are valid TOML basic-string escapes
+        # JSON string escapes are valid TOML basic-string escapes; astral characters stay literal (JSON would
+        # write surrogate pairs, which TOML refuses), and DEL, which JSON leaves raw, is escaped as TOML wants.
+        return json.dumps(value, ensure_ascii=False).replace("\x7f", "\\u007f")
     if isinstance(value, list):
         return "[" + ", ".join(toml_value(item) for item in value) + "]"
     if isinstance(value, dict):
@@ -188,9 +190,32 @@ collapsed_to_point = [[[0.5, 0.5, 0.5]] * 4 for _ in range(4)]
 collapsed_to_line = [[[t, 2 * t, 3 * t] for t in (i + 0.25 * j for j in range(4))] for i in range(4)]
 ragged_net = control_net()[:3] + [control_net()[3][:3]]
 
+
+def wider_v(nv: int, knots_v: list[float]) -> Defect:
+    """The surface with nv control points in v (and matching weights) and the given v knots."""
+    return together(put(f"{S}.points", control_net(4, nv)), put(f"{S}.weights", [[1.0] * nv for _ in range(4)]),
+                    put(f"{S}.knots_v", knots_v))
+
+
+def fine_grid(n: int) -> Defect:
+    """A bilinear surface of n×n control points: n − 1 knot spans each way."""
+    knots = [0.0] + [i / (n - 1) for i in range(n)] + [1.0]
+    return together(put(f"{S}.degree", [1, 1]), put(f"{S}.points", control_net(n, n)),
+                    put(f"{S}.weights", [[1.0] * n for _ in range(n)]), put(f"{S}.knots_u", knots),
+                    put(f"{S}.knots_v", knots))
+
 CASES = [
     # TOML itself and the shape of the document
-    Case("toml syntax error", put("camera.fov", Raw("40 40")), "TOML syntax error"),
+    Case("toml syntax error", put("camera.fov", Raw("40 40")), "line 12, column 10: TOML syntax error"),
+    Case("toml unterminated string", put("output.name", Raw('"base')), "line 38, column 13: TOML syntax error"),
+    Case("toml duplicate key", put("camera.fov", Raw("40.0\nfov = 30.0")), "line 13, column 11: TOML syntax error"),
+    Case("toml unclosed array", put("camera.eye", Raw("[0.0, -3.2, 2.4")), "line 10, column 1: TOML syntax error"),
+    Case("toml duplicate table", put("render.tessellation", Raw("8\n[render]")), "line 33, column 8: TOML syntax error"),
+    Case("image as array of tables", put("image", [{"width": 64}]), "image"),
+    Case("toml nested too deeply", put("camera.eye", Raw("[" * 2000 + "]" * 2000)),
+         "TOML syntax error: arrays or inline tables nested too deeply"),
+    Case("toml integer of 5000 digits", put("image.width", Raw("9" * 5000)),
+         "line 3, column 9: TOML syntax error: a number with more than 4300 digits"),
     Case("table is a number", put("camera", 3), "camera"),
     Case("lights as array of tables", put("lights", [valid_scene()["lights"]]), "lights"),
     Case("surface as single table", put("surface", valid_scene()["surface"][0]), "surface"),
@@ -242,6 +267,12 @@ CASES = [
     Case("too few knots", put(f"{S}.knots_v", [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]), f"{S}.knots_v"),
     Case("too many knots", put(f"{S}.knots_u", [0.0] * 4 + [0.5] + [1.0] * 4), f"{S}.knots_u"),
     Case("knot multiplicity above degree+1", put(f"{S}.knots_v", [0.0] * 4 + [1.0] * 3), f"{S}.knots_v"),
+    Case("inner knot multiplicity above degree+1", wider_v(7, [0.0] * 3 + [0.5] * 4 + [1.0] * 3),
+         f"{S}.knots_v: an inner knot (0.5) is repeated 4 times"),
+    Case("knot span too narrow for float64", put(f"{S}.knots_v", [0.0, 0.0, 0.0, 1e-300, 1.0, 1.0, 1.0]),
+         f"{S}.knots_v: knots 2 and 3 differ by only 1e-300"),
+    Case("parameter domain too narrow", put(f"{S}.knots_u", [0.0] * 4 + [1e-200] * 4), f"{S}.knots_u"),
+    Case("near-duplicate inner knots", wider_v(5, [0.0] * 3 + [0.5, 0.5 + 1e-15] + [1.0] * 3), f"{S}.knots_v"),
     Case("empty parameter domain", put(f"{S}.knots_v", [0.0] * 3 + [0.0] + [0.0] * 3), f"{S}.knots_v"),
     Case("nan knot", put(f"{S}.knots_u[4]", NAN), f"{S}.knots_u"),
     Case("degree zero", put(f"{S}.degree", [0, 2]), f"{S}.degree"),
@@ -273,6 +304,9 @@ CASES = [
     Case("fov 180", put("camera.fov", 180.0), "camera.fov"),
     Case("fov negative", put("camera.fov", -30.0), "camera.fov"),
     Case("fov nan", put("camera.fov", NAN), "camera.fov"),
+    Case("fov 200", put("camera.fov", 200.0), "camera.fov"),
+    Case("view_height nan", put("camera.view_height", NAN), "camera.view_height"),
+    Case("up reversed view direction", put("camera.up", [0.0, -3.2, 2.4]), "camera.up"),
     Case("view_height zero", put("camera.view_height", 0.0), "camera.view_height"),
     Case("view_height negative", together(put("camera.projection", "orthographic"), put("camera.view_height", -2.0)),
          "camera.view_height"),
@@ -281,10 +315,14 @@ CASES = [
     # image
     Case("width zero", put("image.width", 0), "image.width"),
     Case("height negative", put("image.height", -18), "image.height"),
-    Case("width absurd", put("image.width", 1_000_000), "image.width"),
+    Case("width absurd", put("image.width", 1_000_000),
+         "image.width: must be at most 16384 pixels (the film keeps 17 float32 channels per pixel"),
+    Case("height beyond 64 bits", put("image.height", 10**30), "image.height: must be at most 16384 pixels"),
     Case("height absurd float", put("image.height", 1e6), "image.height"),
     Case("too many pixels", together(put("image.width", 16384), put("image.height", 16384)), "image.width"),
     Case("samples zero", put("image.samples", 0), "image.samples"),
+    Case("samples negative", put("image.samples", -2), "image.samples"),
+    Case("samples absurd", put("image.samples", 1000), "image.samples"),
     # lights
     Case("normal zero", put("lights.normal", [0.0, 0.0, 0.0]), "lights.normal"),
     Case("direction zero", put("lights.direction", [0.0, 0.0, 0.0]), "lights.direction"),
@@ -302,6 +340,15 @@ CASES = [
     Case("spacing zero", together(drop("lights.positions"), put("lights.spacing", 0.0), put("lights.count", 5)),
          "lights.spacing"),
     Case("radius inf", put("lights.radius", INF), "lights.radius"),
+    Case("radius -inf", put("lights.radius", -INF), "lights.radius"),
+    Case("direction along normal", put("lights.direction", [0.0, 0.0, 2.0]), "lights.direction"),
+    Case("count a float", together(drop("lights.positions"), put("lights.spacing", 0.5), put("lights.count", 5.5)),
+         "lights.count"),
+    Case("count absurd", together(drop("lights.positions"), put("lights.spacing", 0.5), put("lights.count", 10**7)),
+         "lights.count"),
+    Case("too many positions", put("lights.positions", [0.001 * k for k in range(10001)]),
+         "lights.positions: at most 10000 tubes"),
+    Case("positions are strings", put("lights.positions", ["left", "right"]), "lights.positions[0]"),
     Case("radius nan", put("lights.radius", NAN), "lights.radius"),
     Case("radius negative", put("lights.radius", -0.05), "lights.radius"),
     Case("radius zero", put("lights.radius", 0.0), "lights.radius"),
@@ -309,6 +356,8 @@ CASES = [
     # render and output
     Case("negative colour", put("render.line_color", [1.0, -0.5, 1.0]), "render.line_color"),
     Case("tessellation zero", put("render.tessellation", 0), "render.tessellation"),
+    Case("tessellation beyond memory", together(fine_grid(13), put("render.tessellation", 256)),
+         "render.tessellation: 256 segments per knot span make"),
     Case("colour beyond float32 range", put("render.background", [1e308, 0.0, 0.0]), "render.background"),
     Case("overlay not a boolean", put("render.overlay", "yes"), "render.overlay"),
     Case("overlay colour too short", put("render.overlay_color", [1.0, 0.2]), "render.overlay_color"),
@@ -321,9 +370,16 @@ CASES = [
     Case("output name with slash", put("output.name", "sub/base"), "output.name"),
     Case("output name with backslash", put("output.name", "sub\\base"), "output.name"),
     Case("output name empty", put("output.name", ""), "output.name"),
+    Case("output name with newline", put("output.name", "base\nother"), "output.name"),
+    Case("output name with NUL", put("output.name", "base\0"), "output.name"),
+    Case("output name too long", put("output.name", "b" * 201), "output.name: must be at most 200 bytes"),
+    Case("surface file empty", put(S, {"file": ""}), f"{S}.file"),
+    Case("surface file with NUL", put(S, {"file": "patch\0.bpt"}), f"{S}.file"),
     # .bpt geometry files: the message names the resolved .bpt path, where in it, and the scene field
     Case("bpt file missing", put(S, {"file": "missing.bpt"}), "geometry file not found", blamed_file="missing.bpt"),
     Case("bpt is a folder", put(S, {"file": "."}), "cannot read geometry file", blamed_file="."),
+    Case("bpt is an endless device", put(S, {"file": "/dev/zero"}), "geometry file is larger than 64 MB",
+         blamed_file="/dev/zero"),
     bpt_case("bpt one point too many", bpt_text(extra="0.0 0.0 0.0\n"), "line 19"),
     bpt_case("bpt one point too few", bpt_text(points=bpt_text().splitlines()[2:-1]), "end of file"),
     bpt_case("bpt truncated mid-point", VALID_BPT[:-12], "end of file"),
@@ -338,6 +394,13 @@ CASES = [
     bpt_case("bpt patch collapsed to a line", bpt_text(points=[f"{t} {t} 0.0" for t in range(16)]), "patch 0"),
     bpt_case("bpt coordinate beyond float32 range", VALID_BPT.replace("-1.0", "-1e300", 1), "patch 0"),
     bpt_case("bpt not UTF-8", b"1\n3 3\n\xff\n", "not UTF-8"),
+    bpt_case("bpt patch count a float", bpt_text(count="1.0"), "line 1: expected the patch count"),
+    bpt_case("bpt patch count absurd", bpt_text(count="1" + "0" * 5000), "line 1: the patch count is too large"),
+    bpt_case("bpt number with underscore", VALID_BPT.replace("-1.0", "-1_0", 1), "line 3"),
+    bpt_case("bpt hexadecimal count", bpt_text(count="0x1"), "line 1"),
+    bpt_case("bpt Arabic-Indic digit", bpt_text(count="\u0661"), "line 1"),
+    bpt_case("bpt negative degree", bpt_text(degrees="-3 3"), "patch 0"),
+    bpt_case("bpt binary garbage", bytes(range(256)) * 4, "not UTF-8"),
 ]
 
 
@@ -433,3 +496,73 @@ def test_valid_base_scene_renders(geometry: str | None, tmp_path: Path) -> None:
     done = run_rtreflect(scene_path, outdir)
     assert done.returncode == 0, done.stderr
     assert sorted(p.name for p in files_under(outdir)) == ["base.exr", "base.png"]
+
+
+#: Bad command lines: the console script's own path (click's usage errors) also answers in one line.
+BAD_COMMAND_LINES = [
+    (["render", "{scene}", "--width", "0"], "--width"),
+    (["render", "{scene}", "--samples", "many"], "--samples"),
+    (["render"], "SCENES"),
+    (["rendr", "{scene}"], "rendr"),
+    (["render", "{scene}", "--colour", "red"], "--colour"),
+]
+
+
+@pytest.mark.parametrize("args, named", BAD_COMMAND_LINES, ids=[" ".join(a) for a, _ in BAD_COMMAND_LINES])
+def test_bad_command_line_is_rejected_in_one_line(args: list[str], named: str, tmp_path: Path) -> None:
+    scene_path = write_scene(tmp_path, Case("valid", lambda scene: None, ""))
+    done = subprocess.run([str(RTREFLECT), *(a.format(scene=scene_path) for a in args), "-o", str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == EXIT_BAD_INPUT, done.stderr
+    assert "Traceback" not in done.stderr
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rtreflect: error: "), done.stderr
+    assert named in lines[0] and "--help" in lines[0], lines[0]
+    assert files_under(tmp_path / "out") == []
+
+
+def test_geometry_symlink_loop_is_rejected_in_one_line(tmp_path: Path) -> None:
+    """Path.resolve raises RuntimeError on a loop (Python < 3.13): it must still be a one-line error."""
+    (tmp_path / "a.bpt").symlink_to("b.bpt")
+    (tmp_path / "b.bpt").symlink_to("a.bpt")
+    case = Case("symlink loop", put(S, {"file": "a.bpt"}), "cannot read geometry file", blamed_file="a.bpt")
+    scene_path = write_scene(tmp_path, case)
+    outdir = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["render", str(scene_path), "-o", str(outdir), *RENDER_OPTIONS])
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    assert result.exit_code == EXIT_BAD_INPUT
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and f"{tmp_path / 'a.bpt'}: cannot read geometry file" in lines[0], result.stderr
+    assert f"{scene_path}: surface[0].file" in lines[0]
+    assert files_under(outdir) == []
+
+
+#: Every command that reads scenes applies the same checks: a sample of the table through `validate`
+#: (exit 2, one line) and `batch` (the scene fails with that one-line reason, the others go on: exit 1).
+OTHER_COMMAND_CASES = CASES[::8]
+
+
+@pytest.mark.parametrize("case", OTHER_COMMAND_CASES, ids=[case.id for case in OTHER_COMMAND_CASES])
+def test_bad_scene_is_rejected_by_validate(case: Case, tmp_path: Path) -> None:
+    scene_path = write_scene(tmp_path, case)
+    result = CliRunner().invoke(cli, ["validate", str(scene_path), "--json", str(tmp_path / "out" / "r.json"),
+                                      "--width", "32", "--height", "18"])
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    check_rejection(case, scene_path, tmp_path / "out", result.exit_code, result.stderr)
+
+
+@pytest.mark.parametrize("case", OTHER_COMMAND_CASES, ids=[case.id for case in OTHER_COMMAND_CASES])
+def test_bad_scene_fails_alone_in_a_batch(case: Case, tmp_path: Path) -> None:
+    scene_path = write_scene(tmp_path, case)
+    good = tmp_path / "good" / "good.toml"
+    good.parent.mkdir()
+    good.write_text(toml_document(valid_scene()))
+    report_path = tmp_path / "report.json"
+    result = CliRunner().invoke(cli, ["batch", str(scene_path), str(good), "-o", str(tmp_path / "out"), "-j", "1",
+                                      "--json", str(report_path)])
+    assert result.exit_code == 1, result.output
+    scenes = {Path(s["scene"]).name: s for s in json.loads(report_path.read_text())["scenes"]}
+    assert scenes["good.toml"]["status"] == "rendered"
+    bad = scenes["scene.toml"]
+    assert bad["status"] == "failed" and "\n" not in bad["error"]
+    assert f"{case.expected_file(scene_path)}: {case.field}" in bad["error"], bad["error"]

@@ -1,0 +1,329 @@
+"""Batch rendering: folders of scenes, each to ``OUTDIR/NAME.exr|.png``, in parallel, resumable.
+
+The flow is one way: `discover` scene files → `load_jobs` (a scene that cannot be read
+becomes a failed job, not an abort) → `check_collisions` (two scenes writing the same
+NAME stop the batch before anything renders) → `plan` (skip scenes whose outputs are up
+to date) → a runner: `run_local` (a process pool on this machine) or
+`rtreflect.cluster.run_on_cluster` (a Dask cluster). Runners report each scene as it
+finishes through callbacks; `summary_table` and `write_report` turn the reports into
+the closing table and the ``--json`` file.
+
+Up to date means: every output the scene asks for exists and records, in its header
+(EXR attribute or PNG text chunk), the same `rtreflect:inputs_sha256` (scene file plus
+geometry files) and `rtreflect:version` as this run would write.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import json
+import multiprocessing
+import os
+import queue
+import signal
+import time
+import traceback
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from . import __version__
+from .errors import RtreflectError
+from .imagefiles import INPUTS_HASH_ATTRIBUTE, VERSION_ATTRIBUTE, atomic_path, output_paths, read_provenance
+from .overlay import contours_file_name
+from .scene import Scene, load_scene
+from .tiling import default_max_memory
+
+RENDERED, SKIPPED, FAILED, INTERRUPTED = "rendered", "skipped", "failed", "interrupted"
+
+
+@dataclass
+class Job:
+    """One scene file of the batch: its parsed scene, or the one-line reason it could not be read."""
+
+    path: Path
+    scene: Scene | None = None
+    error: str | None = None
+
+
+@dataclass
+class SceneReport:
+    """One row of the summary (and of the ``--json`` report)."""
+
+    scene: str  # the scene file
+    name: str | None  # [output] name (None if the file could not be read)
+    status: str  # rendered | skipped | failed | interrupted
+    seconds: float = 0.0
+    outputs: list[str] = field(default_factory=list)
+    error: str | None = None
+    pixels: int = 0
+    rays: int = 0
+    tiles: int = 0
+
+
+# -- discovery and planning -------------------------------------------------------------
+def discover(paths: list[Path], recursive: bool = False) -> list[Path]:
+    """Scene files named by ``paths``: files as given, folders searched for ``*.toml`` (sub-folders with ``recursive``).
+
+    Each file appears once, in the order given (folders sorted); a path that does not
+    exist, or no scene file at all, is an `RtreflectError`.
+    """
+    found: list[Path] = []
+    seen: set[Path] = set()
+    for path in paths:
+        path = Path(path)
+        if path.is_dir():
+            pattern = "**/*.toml" if recursive else "*.toml"
+            files = sorted(p for p in path.glob(pattern) if p.is_file())
+        elif path.exists():
+            files = [path]
+        else:
+            raise RtreflectError(f"{path}: no such file or folder")
+        for file in files:
+            if file.resolve() not in seen:
+                seen.add(file.resolve())
+                found.append(file)
+    if not found:
+        where = ", ".join(str(p) for p in paths)
+        raise RtreflectError(f"{where}: no scene files (*.toml) found" + ("" if recursive else "; use --recursive for sub-folders"))
+    return found
+
+
+def load_jobs(files: list[Path]) -> list[Job]:
+    jobs = []
+    for file in files:
+        try:
+            jobs.append(Job(file, scene=load_scene(file)))
+        except RtreflectError as exc:
+            jobs.append(Job(file, error=str(exc)))
+    return jobs
+
+
+def check_collisions(jobs: list[Job], outdir: Path) -> None:
+    """Two scenes with one `[output] name` would overwrite each other's files: an `RtreflectError` naming them all."""
+    by_name: dict[str, list[Path]] = {}
+    for job in jobs:
+        if job.scene is not None:
+            by_name.setdefault(job.scene.output.name, []).append(job.path)
+    clashes = [(name, files) for name, files in by_name.items() if len(files) > 1]
+    if clashes:
+        text = "; ".join(f"{Path(outdir) / name}.* from {' and '.join(str(f) for f in files)}" for name, files in clashes)
+        raise RtreflectError(f"output names collide: {text} (give each scene its own [output] name)")
+
+
+def up_to_date(scene: Scene, outdir: Path) -> bool:
+    """Every output exists and was rendered from the same inputs (scene and geometry files) by this version."""
+    for path in output_paths(scene, outdir):
+        if not path.is_file():
+            return False
+        header = read_provenance(path)
+        if header.get(INPUTS_HASH_ATTRIBUTE) != scene.inputs_sha256 or header.get(VERSION_ATTRIBUTE) != __version__:
+            return False
+    return not scene.render.overlay or (Path(outdir) / contours_file_name(scene)).is_file()
+
+
+def plan(jobs: list[Job], outdir: Path, force: bool = False) -> tuple[list[Job], list[SceneReport]]:
+    """Jobs to render, and reports for the rest: unreadable scenes (failed) and up-to-date ones (skipped)."""
+    todo, settled = [], []
+    for job in jobs:
+        if job.scene is None:
+            settled.append(SceneReport(str(job.path), None, FAILED, error=job.error))
+        elif not force and up_to_date(job.scene, outdir):
+            settled.append(SceneReport(str(job.path), job.scene.output.name, SKIPPED,
+                                       outputs=[str(p) for p in output_paths(job.scene, outdir)]))
+        else:
+            todo.append(job)
+    return todo, settled
+
+
+def failure_reason(exc: BaseException) -> str:
+    """One line for the summary: the user's error as is, anything else as an internal error with its type."""
+    if isinstance(exc, RtreflectError):
+        return str(exc)
+    text = " ".join(str(exc).split()) or "no message"
+    return f"internal error: {type(exc).__name__}: {text}"
+
+
+# -- one scene (this process or a pool worker) -------------------------------------------
+def render_job(scene: Scene, outdir: Path, threads: int | None, max_memory: int | None,
+               progress: Callable[[int], None] | None = None) -> SceneReport:
+    """Render one scene to its files (`streaming.render_to_files`); failures become a failed report, not an exception."""
+    from .streaming import render_to_files
+
+    start = time.perf_counter()
+    report = SceneReport(str(scene.path), scene.output.name, RENDERED)
+    try:
+        done = render_to_files(scene, outdir, threads=threads, max_memory=max_memory, progress=progress)
+    except Exception as exc:  # failure isolation: one scene's error must not stop the batch
+        report.status, report.error = FAILED, failure_reason(exc)
+        if not isinstance(exc, RtreflectError) and os.environ.get("RTREFLECT_DEBUG"):
+            traceback.print_exc()
+    else:
+        report.outputs = [str(p) for p in done.files]
+        report.pixels = scene.image.width * scene.image.height
+        report.rays, report.tiles = done.stats.rays, done.tiles
+    report.seconds = time.perf_counter() - start
+    return report
+
+
+# Pool workers: progress goes back through a queue; SIGTERM (sent by the parent on Ctrl-C)
+# unwinds the render so its temporary files are removed, then ends the process.
+_progress_queue = None
+_busy = False
+
+
+class _Terminated(BaseException):
+    """Raised in a worker by SIGTERM while it renders (BaseException: no `except Exception` swallows it)."""
+
+
+def _on_sigterm(signum, frame) -> None:
+    if _busy:
+        raise _Terminated
+    os._exit(128 + signum)
+
+
+def _worker_init(progress_queue) -> None:
+    global _progress_queue
+    _progress_queue = progress_queue
+    # One core per worker: without this each worker's OpenImageIO/OpenEXR pool would compress
+    # on every core too, and the -j workers would crowd each other.
+    import OpenImageIO as oiio
+
+    oiio.attribute("threads", 1)
+    oiio.attribute("exr_threads", 1)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    signal.signal(signal.SIGTERM, _on_sigterm)
+
+
+def _worker_render(scene: Scene, outdir: Path, max_memory: int | None) -> SceneReport:
+    global _busy
+    _busy = True
+    try:
+        return render_job(scene, outdir, 1, max_memory, progress=_progress_queue.put)
+    except _Terminated:
+        os._exit(128 + signal.SIGTERM)  # the temporaries were removed while unwinding
+    finally:
+        _busy = False
+
+
+# -- the local runner --------------------------------------------------------------------
+def default_jobs() -> int:
+    """The cores this process may run on (its CPU affinity where the system tells it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0)) or 1
+    return os.cpu_count() or 1
+
+
+def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | None,
+              on_progress: Callable[[int], None], on_done: Callable[[SceneReport], None]) -> None:
+    """Render ``jobs`` on this machine, ``workers`` scenes at a time, calling ``on_done`` as each finishes.
+
+    One worker (or one scene): rendered here, with the usual render threads. More:
+    a pool of spawned processes, each rendering one scene at a time with one thread and
+    ``max_memory / workers`` of working memory. On Ctrl-C the workers are terminated
+    (their temporary files removed) and KeyboardInterrupt propagates.
+    """
+    workers = max(1, min(workers, len(jobs)))
+    if workers == 1:
+        for job in jobs:
+            on_done(render_job(job.scene, outdir, None, max_memory, progress=on_progress))
+        return
+    per_worker = (max_memory or default_max_memory()) // workers
+    # Spawned, not forked: workers start clean (no inherited threads or Embree state) and behave alike on all systems.
+    context = multiprocessing.get_context("spawn")
+    progress_queue = context.Queue()
+    waiting = list(reversed(jobs))  # popped from the end: scenes start in the given order
+    attempts: dict[int, int] = {}
+
+    def settle(job: Job, future: cf.Future) -> bool:
+        """Report a finished scene; True when its worker died (the pool is then broken)."""
+        try:
+            on_done(future.result())
+            return False
+        except cf.process.BrokenProcessPool:
+            # A worker died (killed, out of memory, crashed) and took every scene in flight with it.
+            # Each is tried again once in a fresh pool; a scene in flight at two deaths is reported failed.
+            attempts[id(job)] = attempts.get(id(job), 0) + 1
+            if attempts[id(job)] >= 2:
+                on_done(SceneReport(str(job.path), job.scene.output.name, FAILED,
+                                    error=f"{job.path}: the worker process rendering it died "
+                                          "(out of memory? see --max-memory)"))
+            else:
+                waiting.append(job)
+            return True
+
+    while waiting:
+        pool = cf.ProcessPoolExecutor(workers, mp_context=context, initializer=_worker_init, initargs=(progress_queue,))
+        running: dict[cf.Future, Job] = {}
+        broken = False
+        try:
+            while (waiting or running) and not broken:
+                while waiting and len(running) < workers and not broken:
+                    job = waiting.pop()
+                    try:
+                        running[pool.submit(_worker_render, job.scene, outdir, per_worker)] = job
+                    except cf.process.BrokenProcessPool:
+                        waiting.append(job)
+                        broken = True
+                finished, _ = cf.wait(running, timeout=0.2, return_when=cf.FIRST_COMPLETED)
+                _drain(progress_queue, on_progress)
+                for future in finished:
+                    broken |= settle(running.pop(future), future)
+            if broken:  # a broken pool fails all its futures at once
+                for future in cf.wait(running)[0]:
+                    settle(running.pop(future), future)
+        except BaseException:  # Ctrl-C (or a failing callback): stop the workers, their temporaries removed
+            _terminate(pool)
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown(wait=True)
+    _drain(progress_queue, on_progress)
+
+
+def _drain(progress_queue, on_progress: Callable[[int], None]) -> None:
+    while True:
+        try:
+            on_progress(progress_queue.get_nowait())
+        except queue.Empty:
+            return
+
+
+def _terminate(pool: cf.ProcessPoolExecutor) -> None:
+    """SIGTERM every worker and wait for it: each removes its temporary files and exits."""
+    processes = list(getattr(pool, "_processes", {}).values())  # no public API before Python 3.14
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(timeout=10)
+        if process.is_alive():
+            process.kill()
+
+
+# -- summary -----------------------------------------------------------------------------
+def summary_table(reports: list[SceneReport]) -> str:
+    """A plain-text table: scene, status, seconds, output files (or the failure reason)."""
+    rows = [("scene", "status", "seconds", "outputs")]
+    for r in reports:
+        detail = r.error if r.status == FAILED else ", ".join(r.outputs)
+        seconds = f"{r.seconds:.2f}" if r.status in (RENDERED, FAILED) and r.seconds else "-"
+        rows.append((r.scene, r.status, seconds, detail or "-"))
+    widths = [max(len(row[i]) for row in rows) for i in range(3)]
+    return "\n".join(f"{a:<{widths[0]}}  {b:<{widths[1]}}  {c:>{widths[2]}}  {d}".rstrip() for a, b, c, d in rows)
+
+
+def counts(reports: list[SceneReport]) -> dict[str, int]:
+    return {status: sum(r.status == status for r in reports) for status in (RENDERED, SKIPPED, FAILED, INTERRUPTED)}
+
+
+def write_report(path: Path, reports: list[SceneReport], outdir: Path, seconds: float, where: str) -> None:
+    """The summary as JSON (written atomically): totals and one record per scene."""
+    document = {"rtreflect_version": __version__, "outdir": str(outdir), "where": where,
+                "seconds": round(seconds, 3), "counts": counts(reports), "scenes": [asdict(r) for r in reports]}
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise RtreflectError(f"{path}: cannot write report ({exc.strerror or exc})") from None

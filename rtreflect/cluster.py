@@ -1,0 +1,247 @@
+"""Batch rendering on a dask.distributed cluster: ``rtreflect batch ... --scheduler tcp://HOST:PORT``.
+
+Every scene is cut into pixel spans (`render.pixel_spans`, sized by `tiling.rays_per_tile`
+for one tile per task); each span is a Dask task (`render_tile`) that a worker renders
+with the same `Renderer.render_span` as a local render. Results come back to this
+client, which writes them in image order with the same `ImageWriter` as `rtreflect
+render`, so the files are byte-identical to a local run. A window of about two tasks
+per worker thread is in flight at once: the cluster stays busy, and the client holds
+at most that many tiles. Dask is imported only here, only when ``--scheduler`` is given.
+
+Workers need rtreflect (the same version: a task refuses to run otherwise) but not
+the scene files: the parsed scene, geometry included, is sent to the cluster.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from . import __version__
+from .batch import FAILED, RENDERED, Job, SceneReport, failure_reason
+from .errors import RtreflectError
+from .imagefiles import ImageWriter, open_outputs, output_paths
+from .render import Renderer, pixel_spans
+from .scene import Scene
+from .streaming import overlay_for
+from .tiling import default_max_memory, rays_per_tile
+
+#: Seconds to wait for the scheduler before giving up.
+CONNECT_TIMEOUT = 20
+#: Renderers a worker keeps built (tessellation + BVH), most recently used first.
+CACHED_RENDERERS = 4
+#: Tile tasks in flight per worker thread.
+TASKS_PER_THREAD = 2
+
+_cache_lock = threading.Lock()
+_build_locks: dict[str, threading.Lock] = {}
+_renderers: OrderedDict[str, Renderer] = OrderedDict()
+
+
+def scene_key(scene: Scene) -> str:
+    """What a render depends on: the inputs' hash and the image size and samples."""
+    image = scene.image
+    return f"{scene.inputs_sha256}-{image.width}x{image.height}x{image.samples}"
+
+
+def _renderer(scene: Scene, key: str) -> Renderer:
+    """This worker's `Renderer` for the scene, built by the first of its tasks and shared by the others."""
+    with _cache_lock:
+        if key in _renderers:
+            _renderers.move_to_end(key)
+            return _renderers[key]
+        build_lock = _build_locks.setdefault(key, threading.Lock())
+    with build_lock:  # concurrent tiles of one scene wait for one build; other scenes build in parallel
+        with _cache_lock:
+            if key in _renderers:
+                return _renderers[key]
+        renderer = Renderer(scene)
+        with _cache_lock:
+            _renderers[key] = renderer
+            _build_locks.pop(key, None)
+            while len(_renderers) > CACHED_RENDERERS:
+                _renderers.popitem(last=False)
+        return renderer
+
+
+def render_tile(scene: Scene, key: str, start: int, stop: int, client_version: str) -> tuple[np.ndarray, int, int]:
+    """A Dask task: pixels [start, stop) of the scene as (P, 17) float32, with ray and Newton-fallback counts."""
+    if client_version != __version__:
+        raise RtreflectError(f"worker runs rtreflect {__version__} but the client {client_version}: "
+                             "install the same version everywhere (outputs would differ)")
+    try:
+        tile = _renderer(scene, key).render_span(start, stop)
+    except RtreflectError as exc:
+        raise RtreflectError(str(exc)) from None  # a plain one-argument error travels back intact
+    return tile.pixels, tile.rays, tile.fallbacks
+
+
+def _task_error(future) -> BaseException:
+    """Why a tile task did not finish: its exception, or the cancellation (worker or scheduler lost)."""
+    try:
+        return future.exception() or RuntimeError(f"task {future.status}")
+    except Exception as exc:  # a cancelled future raises instead of returning its exception
+        return exc
+
+
+@dataclass
+class _SceneRun:
+    """The client's state of one scene: spans to submit, the open writer, tiles waiting for their turn."""
+
+    job: Job
+    spans: list[tuple[int, int]]
+    submitted: int = 0
+    written: int = 0
+    waiting: dict[int, tuple[np.ndarray, int]] = field(default_factory=dict)  # span index → (pixels, rays)
+    outputs: contextlib.ExitStack | None = None
+    writer: ImageWriter | None = None
+    scattered: Any = None
+    futures: set = field(default_factory=set)
+    started: float = 0.0
+    rays: int = 0
+    extra_files: dict[str, str] | None = None  # the contours JSON of an overlay
+
+
+def run_on_cluster(address: str, jobs: list[Job], outdir: Path, *, max_memory: int | None,
+                   on_progress: Callable[[int], None], on_done: Callable[[SceneReport], None]) -> None:
+    """Render ``jobs`` on the Dask cluster at ``address``; ``on_done`` as each scene's files are in place.
+
+    Raises `RtreflectError` when dask.distributed is missing or the scheduler cannot
+    be reached; on Ctrl-C cancels the tasks, removes the files being written and
+    re-raises KeyboardInterrupt.
+    """
+    try:
+        import distributed
+    except ImportError:
+        raise RtreflectError("--scheduler needs dask.distributed: pip install 'rtreflect[dask]'") from None
+    try:
+        client = distributed.Client(address, timeout=CONNECT_TIMEOUT, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise RtreflectError(f"--scheduler {address}: cannot connect ({' '.join(str(exc).split()) or type(exc).__name__})") from None
+    with client:
+        _ClusterBatch(client, distributed, jobs, Path(outdir), max_memory or default_max_memory(),
+                      on_progress, on_done).run()
+
+
+class _ClusterBatch:
+    def __init__(self, client, distributed, jobs, outdir, max_memory, on_progress, on_done):
+        self.client, self.distributed = client, distributed
+        self.outdir, self.max_memory = outdir, max_memory
+        self.on_progress, self.on_done = on_progress, on_done
+        self.queue = list(jobs)
+        self.active: list[_SceneRun] = []
+        self.owner: dict[Any, tuple[_SceneRun, int]] = {}
+        threads = sum(client.nthreads().values()) or 1
+        self.window = max(2, TASKS_PER_THREAD * threads)
+
+    def run(self) -> None:
+        tasks = self.distributed.as_completed(loop=self.client.loop)
+        try:
+            self._fill(tasks)
+            for future in tasks:
+                owner = self.owner.pop(future, None)
+                if owner is None:  # a tile of a scene that already failed
+                    continue
+                run, index = owner
+                run.futures.discard(future)
+                if future.status == "finished":
+                    pixels, rays, _ = future.result()
+                    run.waiting[index] = (pixels, rays)
+                    self._write_ready(run)
+                elif run in self.active:
+                    self._fail(run, _task_error(future))
+                del future  # release the result on the cluster
+                self._fill(tasks)
+        except BaseException:
+            self.client.cancel(list(self.owner))
+            for run in self.active:
+                self._close(run, failed=True)
+            raise
+
+    def _fill(self, tasks) -> None:
+        """Submit tiles, scene after scene, until the window is full."""
+        while len(self.owner) < self.window:
+            run = next((r for r in self.active if r.submitted < len(r.spans)), None) or self._start_next()
+            if run is None:
+                return
+            start, stop = run.spans[run.submitted]
+            future = self.client.submit(render_tile, run.scattered, scene_key(run.job.scene), start, stop,
+                                        __version__, pure=False)
+            self.owner[future] = (run, run.submitted)
+            run.futures.add(future)
+            run.submitted += 1
+            tasks.add(future)
+
+    def _start_next(self) -> _SceneRun | None:
+        """The next scene whose tiles can be submitted: tiles planned, outputs opened, scene sent to the cluster."""
+        while self.queue:
+            job = self.queue.pop(0)
+            run = _SceneRun(job, [], started=time.perf_counter())
+            try:
+                run.spans = pixel_spans(job.scene.image, rays_per_tile(job.scene, self.max_memory, 1))
+                run.outputs = contextlib.ExitStack()
+                png_filter, run.extra_files = overlay_for(job.scene)  # drawn by the client, as locally
+                run.writer = run.outputs.enter_context(open_outputs(job.scene, self.outdir, png_filter, run.extra_files))
+            except RtreflectError as exc:
+                self._report_failure(run, exc)
+                continue
+            run.scattered = self.client.scatter(job.scene, hash=False)
+            self.active.append(run)
+            return run
+        return None
+
+    def _write_ready(self, run: _SceneRun) -> None:
+        """Write the tiles that are next in image order; finish the scene after its last."""
+        try:
+            while run.written in run.waiting:
+                pixels, rays = run.waiting.pop(run.written)
+                start = run.spans[run.written][0]
+                run.writer.write(start, pixels)
+                run.rays += rays
+                run.written += 1
+                self.on_progress(len(pixels))
+            if run.written == len(run.spans):
+                self._close(run, failed=False)
+                scene = run.job.scene
+                self.on_done(SceneReport(str(run.job.path), scene.output.name, RENDERED,
+                                         seconds=time.perf_counter() - run.started,
+                                         outputs=[str(p) for p in output_paths(scene, self.outdir)]
+                                                 + [str(self.outdir / n) for n in run.extra_files or {}],
+                                         pixels=scene.image.width * scene.image.height, rays=run.rays,
+                                         tiles=len(run.spans)))
+        except RtreflectError as exc:
+            self._fail(run, exc)
+
+    def _fail(self, run: _SceneRun, exc: BaseException) -> None:
+        """One scene failed: cancel its other tiles, remove its partial files, report; the batch goes on."""
+        pending = [f for f in run.futures if f in self.owner]
+        for future in pending:
+            self.owner.pop(future, None)
+        if pending:
+            self.client.cancel(pending)
+        self._close(run, failed=True)
+        self._report_failure(run, exc)
+
+    def _report_failure(self, run: _SceneRun, exc: BaseException) -> None:
+        self.on_done(SceneReport(str(run.job.path), run.job.scene.output.name, FAILED,
+                                 seconds=time.perf_counter() - run.started, error=failure_reason(exc)))
+
+    def _close(self, run: _SceneRun, failed: bool) -> None:
+        """Rename the finished files into place, or (failed) remove the temporaries."""
+        if run in self.active:
+            self.active.remove(run)
+        outputs, run.outputs, run.scattered, run.waiting = run.outputs, None, None, {}
+        if outputs is None:
+            return
+        if failed:
+            with contextlib.suppress(BaseException):
+                outputs.__exit__(RtreflectError, RtreflectError("scene failed"), None)
+        else:
+            outputs.close()

@@ -1,0 +1,62 @@
+"""One scene straight to its image files, tile by tile: the path shared by `rtreflect render` and `batch`.
+
+Tiles of pixels are rendered (`Renderer.stream`) and handed in image order to the
+`ImageWriter`, which writes finished scanlines to the EXR and PNG under temporary
+names; the files are renamed into place only when the last tile is written. Peak
+memory is set by the tile size (`tiling.rays_per_tile`), not by the image size, and
+the bytes equal those of an in-memory render saved with `save_render`.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from .imagefiles import PngFilter, open_outputs, output_paths
+from .overlay import overlay_outputs
+from .render import Renderer, RenderStats
+from .scene import Scene
+from .tiling import default_max_memory, rays_per_tile
+
+
+@dataclass
+class SceneOutput:
+    files: list[Path]
+    stats: RenderStats
+    tiles: int
+
+
+def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, max_memory: int | None = None,
+                    progress: Callable[[int], None] | None = None) -> SceneOutput:
+    """Render ``scene`` into ``outdir/NAME.exr|.png`` within ``max_memory`` bytes of working memory.
+
+    ``progress(pixels)`` is called as tiles are written. Raises `RtreflectError` (before
+    building anything) when even one-pixel tiles would not fit the budget, and on
+    write errors; on any error or interrupt no output file is left half-written.
+    """
+    threads = threads or min(2, os.cpu_count() or 1)
+    tile_rays = rays_per_tile(scene, max_memory or default_max_memory(), threads)
+    renderer = Renderer(scene)
+    png_filter, extra_files = overlay_for(scene, renderer)
+    start = time.perf_counter()
+    stats = renderer.new_stats()
+    tiles = 0
+    with open_outputs(scene, outdir, png_filter, extra_files) as writer:
+        for tile in renderer.stream(threads, tile_rays, stats):
+            writer.write(tile.start, tile.pixels)
+            tiles += 1
+            if progress:
+                progress(tile.stop - tile.start)
+    stats.seconds = time.perf_counter() - start
+    stats.stages = dict(renderer.clock.seconds)
+    return SceneOutput(output_paths(scene, outdir) + [Path(outdir) / name for name in extra_files or {}], stats, tiles)
+
+
+def overlay_for(scene: Scene, renderer: Renderer | None = None) -> tuple[PngFilter | None, dict[str, str] | None]:
+    """The PNG filter and extra files (contours JSON) of a scene with `[render] overlay`; (None, None) without."""
+    if not scene.render.overlay:
+        return None, None
+    return overlay_outputs(renderer or Renderer(scene))

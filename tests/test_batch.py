@@ -1,0 +1,300 @@
+"""Batch rendering and streamed (tiled) output.
+
+The references are independent of the code under test: outputs are compared byte for
+byte with an in-memory render (`Renderer.render` → one `Film` → `save_render`), which
+shares no tiling, scheduling or streaming with `batch`, the process pool or the Dask
+path. Resumability is judged by file modification times and the JSON report; an
+interrupt by what is left in the output folder.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from rtreflect import batch as batching
+from rtreflect.cli import cli
+from rtreflect.film import CHANNELS
+from rtreflect.imagefiles import ImageWriter, open_outputs, read_image, read_provenance, save_render
+from rtreflect.render import Renderer
+from rtreflect.scene import load_scene
+from rtreflect.streaming import render_to_files
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+RTREFLECT = Path(sys.executable).parent / "rtreflect"
+
+
+def small_scene(source: str, dest: Path, width: int = 160, height: int = 90, samples: int = 1, **output) -> Path:
+    """A copy of a shipped scene with its [image] table set (and [output] values appended)."""
+    text = (SCENES / f"{source}.toml").read_text()
+    for key, value in (("width", width), ("height", height), ("samples", samples)):
+        text, n = re.subn(rf"(?m)^{key} = .*$", f"{key} = {value}", text, count=1)
+        assert n == 1, f"{source}.toml has no [image] {key}"
+    if output:
+        assert "[output]" not in text
+        text += "\n[output]\n" + "".join(f"{k} = {json.dumps(v)}\n" for k, v in output.items())
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    dest.write_text(text)
+    if "teapot.bpt" in text:
+        shutil.copy(SCENES / "teapot.bpt", dest.parent / "teapot.bpt")
+    return dest
+
+
+def reference_files(scene_path: Path, outdir: Path) -> dict[str, bytes]:
+    """The scene rendered in memory, untiled (one tile), and saved: the bytes every other path must reproduce."""
+    scene = load_scene(scene_path)
+    result = Renderer(scene).render(rays_per_tile=1 << 40)
+    return {p.name: p.read_bytes() for p in save_render(result, outdir)}
+
+
+def folder_bytes(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir()) if p.suffix in (".exr", ".png")}
+
+
+@pytest.fixture(scope="module")
+def scene_folder(tmp_path_factory) -> Path:
+    """Three small scenes and a broken one."""
+    folder = tmp_path_factory.mktemp("scenes")
+    small_scene("hood", folder / "hood.toml")
+    small_scene("cylinder", folder / "cylinder.toml", samples=2)
+    small_scene("teapot", folder / "teapot.toml")
+    (folder / "broken.toml").write_text((SCENES / "hood.toml").read_text().replace("radius", "radios", 1))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def references(scene_folder, tmp_path_factory) -> dict[str, bytes]:
+    outdir = tmp_path_factory.mktemp("reference")
+    files = {}
+    for name in ("hood", "cylinder", "teapot"):
+        files.update(reference_files(scene_folder / f"{name}.toml", outdir))
+    return files
+
+
+def run_batch(*args) -> tuple[int, str, dict | None]:
+    report = None
+    result = CliRunner().invoke(cli, ["batch", *map(str, args)])
+    if "--json" in args:
+        path = Path(args[list(args).index("--json") + 1])
+        report = json.loads(path.read_text()) if path.exists() else None
+    return result.exit_code, result.output, report
+
+
+def by_name(report: dict) -> dict[str, dict]:
+    return {Path(s["scene"]).stem: s for s in report["scenes"]}
+
+
+# -- streaming ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("samples", [1, 2])
+def test_streamed_render_equals_in_memory_render(tmp_path, samples):
+    """Tiles of a few dozen pixels (starting and ending mid-row) written as they finish give the same bytes."""
+    scene_path = small_scene("g1_join", tmp_path / "g1.toml", width=97, height=31, samples=samples)
+    expected = reference_files(scene_path, tmp_path / "memory")
+    done = render_to_files(load_scene(scene_path), tmp_path / "streamed", threads=2, max_memory=1_000_000)
+    assert done.tiles > 10  # the budget really cut the image into many spans
+    assert folder_bytes(tmp_path / "streamed") == expected
+    pixels, channels, attrs = read_image(tmp_path / "streamed" / "g1.exr")
+    assert sorted(channels) == sorted(CHANNELS) and attrs["rtreflect:inputs_sha256"] == load_scene(scene_path).inputs_sha256
+
+
+def test_writer_refuses_incomplete_image_and_leaves_nothing(tmp_path):
+    scene = load_scene(small_scene("hood", tmp_path / "hood.toml", width=20, height=10))
+    with pytest.raises(Exception, match="stopped at pixel 150 of 200"):
+        with open_outputs(scene, tmp_path / "out") as writer:
+            writer.write(0, np.zeros((150, len(CHANNELS)), dtype=np.float32))
+    with pytest.raises(ValueError, match="in order"):
+        with open_outputs(scene, tmp_path / "out") as writer:
+            assert isinstance(writer, ImageWriter)
+            writer.write(10, np.zeros((5, len(CHANNELS)), dtype=np.float32))
+    assert list((tmp_path / "out").iterdir()) == []
+
+
+def test_memory_budget_too_small_is_bad_input(tmp_path):
+    scene_path = small_scene("hood", tmp_path / "hood.toml")
+    result = CliRunner().invoke(cli, ["render", str(scene_path), "-o", str(tmp_path / "out"), "--max-memory", "4K"])
+    assert result.exit_code == 2
+    assert result.output.count("\n") == 1 and "hood.toml: image:" in result.output and "--max-memory" in result.output
+    assert not (tmp_path / "out").exists() or list((tmp_path / "out").iterdir()) == []
+    assert CliRunner().invoke(cli, ["render", str(scene_path), "--max-memory", "lots"]).exit_code == 2
+
+
+# -- batch on this machine ---------------------------------------------------------------------
+def test_batch_isolates_failures_skips_up_to_date_and_rerenders_changes(scene_folder, references, tmp_path):
+    folder = tmp_path / "scenes"
+    shutil.copytree(scene_folder, folder)
+    out, report_path = tmp_path / "out", tmp_path / "report.json"
+
+    code, output, report = run_batch(folder, "-o", out, "-j", "2", "--json", report_path)
+    assert code == 1, output
+    assert report["counts"] == {"rendered": 3, "skipped": 0, "failed": 1, "interrupted": 0}
+    broken = by_name(report)["broken"]
+    assert broken["status"] == "failed" and "broken.toml: lights.radios: unknown key" in broken["error"]
+    assert folder_bytes(out) == references  # the pool's outputs are the in-memory renders, byte for byte
+    assert re.search(r"broken.toml +failed", output) and "3 rendered, 0 up to date, 1 failed" in output
+
+    stamps = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
+    code, output, report = run_batch(folder, "-o", out, "--json", report_path)
+    assert code == 1
+    assert report["counts"]["skipped"] == 3 and report["counts"]["rendered"] == 0
+    assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == stamps  # nothing rewritten
+
+    # A changed scene file and a changed geometry file each make their scene render again.
+    hood = folder / "hood.toml"
+    hood.write_text(hood.read_text() + "\n# edited\n")
+    with (folder / "teapot.bpt").open("a") as bpt:
+        bpt.write("\n")
+    (folder / "broken.toml").unlink()
+    code, output, report = run_batch(folder, "-o", out, "--json", report_path)
+    assert code == 0, output
+    status = {name: s["status"] for name, s in by_name(report).items()}
+    assert status == {"hood": "rendered", "teapot": "rendered", "cylinder": "skipped"}
+    assert read_provenance(out / "hood.png")["rtreflect:inputs_sha256"] == load_scene(hood).inputs_sha256
+
+    code, _, report = run_batch(folder, "-o", out, "--json", report_path, "--force")
+    assert code == 0 and report["counts"]["rendered"] == 3
+
+
+def test_up_to_date_needs_every_output_and_the_same_version(tmp_path, monkeypatch):
+    scene_path = small_scene("hood", tmp_path / "pngonly.toml", width=32, height=18, exr=False)
+    scene = load_scene(scene_path)
+    out = tmp_path / "out"
+    assert not batching.up_to_date(scene, out)
+    render_to_files(scene, out)
+    assert [p.name for p in out.iterdir()] == ["pngonly.png"]
+    assert batching.up_to_date(scene, out)  # the hash travels in the PNG's text chunks
+    monkeypatch.setattr(batching, "__version__", "999.0")
+    assert not batching.up_to_date(scene, out)
+    monkeypatch.undo()
+    (out / "pngonly.png").write_bytes(b"not a png")
+    assert not batching.up_to_date(scene, out)
+
+
+def test_colliding_names_stop_the_batch_before_rendering(tmp_path):
+    small_scene("hood", tmp_path / "a" / "part.toml")
+    small_scene("cylinder", tmp_path / "b" / "other.toml", name="part")
+    small_scene("g1_join", tmp_path / "c.toml")
+    code, output, _ = run_batch(tmp_path, "-o", tmp_path / "out", "--recursive")
+    assert code == 2 and output.count("\n") == 1
+    assert "part.toml" in output and "other.toml" in output and "collide" in output
+    assert not (tmp_path / "out").exists()
+    # Without --recursive only c.toml is found: no collision.
+    code, output, _ = run_batch(tmp_path, "-o", tmp_path / "out")
+    assert code == 0 and sorted(p.name for p in (tmp_path / "out").iterdir()) == ["c.exr", "c.png"]
+    code, output, _ = run_batch(tmp_path / "missing", "-o", tmp_path / "out")
+    assert code == 2 and "missing: no such file or folder" in output
+
+
+def test_interrupted_batch_leaves_only_complete_files_and_resumes(tmp_path):
+    """SIGINT mid-render (as Ctrl-C): exit 130, no temporary or partial file; a rerun renders only what is missing."""
+    folder = tmp_path / "scenes"
+    for name in ("a", "b", "c", "d"):
+        small_scene("hood", folder / f"{name}.toml", width=480, height=270, samples=3)
+    out, report_path = tmp_path / "out", tmp_path / "report.json"
+    batch = subprocess.Popen([str(RTREFLECT), "batch", str(folder), "-o", str(out), "-j", "2"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    # Interrupt once the workers are writing (their temporary files exist).
+    while not (out.is_dir() and any(p.name.startswith(".") for p in out.iterdir())):
+        assert batch.poll() is None and time.monotonic() < deadline, batch.communicate()
+        time.sleep(0.02)
+    batch.send_signal(signal.SIGINT)
+    stdout, stderr = batch.communicate(timeout=60)
+    assert batch.returncode == 130, stderr
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    left = sorted(p.name for p in out.iterdir())
+    assert not [name for name in left if name.startswith(".")], left
+    for name in left:  # whatever is there is complete: it reads back whole
+        read_image(out / name)
+    finished = {Path(name).stem for name in left}
+    assert all(f"{stem}.exr" in left and f"{stem}.png" in left for stem in finished)
+
+    code, _, report = run_batch(folder, "-o", out, "--json", report_path)
+    assert code == 0
+    assert {Path(s["scene"]).stem for s in report["scenes"] if s["status"] == "skipped"} == finished
+    assert report["counts"]["rendered"] == 4 - len(finished)
+
+
+@pytest.mark.parametrize("where", ["local", "cluster"])
+def test_render_error_is_isolated(where, tmp_path, request):
+    """A scene that fails while rendering (here: its 10,000 tubes at 16×16 samples do not fit the memory budget)."""
+    heavy = small_scene("hood", tmp_path / "heavy.toml", samples=16)
+    text, n = re.subn(r"(?m)^positions = .*$", "spacing = 0.001\ncount = 10000", heavy.read_text())
+    assert n == 1
+    heavy.write_text(text)
+    small_scene("hood", tmp_path / "light.toml")
+    options = ["--scheduler", request.getfixturevalue("cluster")] if where == "cluster" else ["-j", "2"]
+    code, output, report = run_batch(tmp_path, "-o", tmp_path / "out", "--max-memory", "40M",
+                                     "--json", tmp_path / "r.json", *options)
+    assert code == 1, output
+    scenes = by_name(report)
+    assert scenes["light"]["status"] == "rendered"
+    assert scenes["heavy"]["status"] == "failed" and "heavy.toml: image: needs about" in scenes["heavy"]["error"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["light.exr", "light.png"]
+
+
+# -- batch on a Dask cluster -------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=":0") as local:
+        yield local.scheduler_address
+
+
+def test_cluster_batch_equals_local_batch(cluster, scene_folder, references, tmp_path):
+    code, output, report = run_batch(scene_folder, "-o", tmp_path / "out", "--scheduler", cluster,
+                                     "--json", tmp_path / "r.json")
+    assert code == 1, output
+    assert report["where"] == cluster and report["counts"]["rendered"] == 3
+    assert "broken.toml: lights.radios: unknown key" in by_name(report)["broken"]["error"]
+    assert folder_bytes(tmp_path / "out") == references
+
+
+def test_tiled_cluster_render_equals_untiled_local_render(cluster, tmp_path):
+    scene_path = small_scene("teapot", tmp_path / "scenes" / "tea.toml", width=320, height=180, samples=2)
+    expected = reference_files(scene_path, tmp_path / "local")
+    code, output, report = run_batch(scene_path, "-o", tmp_path / "out", "--scheduler", cluster,
+                                     "--max-memory", "12M", "--json", tmp_path / "r.json")
+    assert code == 0, output
+    assert by_name(report)["tea"]["tiles"] >= 8  # the image went to the cluster as many tile tasks
+    assert folder_bytes(tmp_path / "out") == expected
+
+
+def test_overlay_through_the_cluster_equals_a_local_render(cluster, tmp_path):
+    """The client draws the analytic contours over the PNG and writes NAME.contours.json, as `render` does."""
+    scene_path = small_scene("g1_join", tmp_path / "scenes" / "g.toml")
+    scene_path.write_text(scene_path.read_text().replace("[render]\n", "[render]\noverlay = true\n", 1))
+    local = subprocess.run([str(RTREFLECT), "render", str(scene_path), "-o", str(tmp_path / "local")],
+                           capture_output=True, text=True)
+    assert local.returncode == 0, local.stderr
+    code, output, _ = run_batch(scene_path, "-o", tmp_path / "out", "--scheduler", cluster)
+    assert code == 0, output
+    names = ["g.contours.json", "g.exr", "g.png"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == names
+    assert all((tmp_path / "out" / n).read_bytes() == (tmp_path / "local" / n).read_bytes() for n in names)
+    code, output, report = run_batch(scene_path, "-o", tmp_path / "out", "--json", tmp_path / "r.json")
+    assert report["counts"]["skipped"] == 1  # up to date: images and contours all there
+    (tmp_path / "out" / "g.contours.json").unlink()
+    code, output, report = run_batch(scene_path, "-o", tmp_path / "out", "--json", tmp_path / "r.json")
+    assert report["counts"]["rendered"] == 1  # a missing contours file is not up to date
+
+
+def test_unreachable_scheduler_is_bad_input(tmp_path, monkeypatch):
+    pytest.importorskip("distributed")
+    from rtreflect import cluster as clustering
+
+    monkeypatch.setattr(clustering, "CONNECT_TIMEOUT", 2)
+    scene_path = small_scene("hood", tmp_path / "hood.toml")
+    code, output, _ = run_batch(scene_path, "-o", tmp_path / "out", "--scheduler", "tcp://127.0.0.1:9")
+    assert code == 2 and "--scheduler tcp://127.0.0.1:9: cannot connect" in output
