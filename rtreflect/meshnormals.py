@@ -16,7 +16,7 @@ from .accelerator import Accelerator
 from .clock import NULL_CLOCK, StageClock
 from .surfaces import SurfaceSet
 from .tessellation import Tessellation
-from .tracing import Hits
+from .tracing import Hits, facing
 
 
 def vertex_normals(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
@@ -31,25 +31,15 @@ def trace_mesh(accelerator: Accelerator, tessellation: Tessellation, normals_at_
     n = len(origins)
     with clock.stage("intersect (Embree)"):
         mesh = accelerator.intersect(origins, directions)
-    hit = mesh.prim >= 0
-    idx = np.flatnonzero(hit)
-    patch = np.full(n, -1)
-    u = np.full(n, np.nan)
-    v = np.full(n, np.nan)
-    t = np.full(n, np.nan)
-    P = np.full((n, 3), np.nan)
-    normal = np.full((n, 3), np.nan)
+    hits = Hits.blank(n, mesh.prim >= 0)
+    idx = np.flatnonzero(hits.hit)
     if len(idx):
         prim, b1, b2 = mesh.prim[idx], mesh.b1[idx], mesh.b2[idx]
-        patch[idx], u[idx], v[idx] = tessellation.start_parameters(prim, b1, b2)
-        t[idx] = mesh.t[idx]
-        P[idx] = origins[idx] + mesh.t[idx, None] * directions[idx]
+        hits.patch[idx], hits.u[idx], hits.v[idx] = tessellation.start_parameters(prim, b1, b2)
+        hits.t[idx] = mesh.t[idx]
+        hits.P[idx] = origins[idx] + mesh.t[idx, None] * directions[idx]
         with clock.stage("mesh normals"):
             corners = normals_at_vertices[tessellation.faces[prim]]  # (N, 3, 3)
             nrm = (1.0 - b1 - b2)[:, None] * corners[:, 0] + b1[:, None] * corners[:, 1] + b2[:, None] * corners[:, 2]
-            nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-            # Two-sided mirror: the normal faces the incoming ray.
-            flip = np.einsum("ij,ij->i", nrm, directions[idx]) > 0
-            nrm[flip] *= -1.0
-        normal[idx] = nrm
-    return Hits(hit, patch, u, v, t, P, normal, np.zeros(n, dtype=bool))
+            hits.N[idx] = facing(nrm / np.linalg.norm(nrm, axis=1, keepdims=True), directions[idx])
+    return hits

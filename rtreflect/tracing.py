@@ -44,6 +44,18 @@ class Hits:
     N: np.ndarray  # (N, 3) exact unit normal, turned to face the incoming ray
     fallback: np.ndarray  # bool: Newton failed, mesh hit kept
 
+    @classmethod
+    def blank(cls, n: int, hit: np.ndarray) -> "Hits":
+        """Rows for n rays flagged ``hit``, every value still that of a miss: to be filled in where hit."""
+        return cls(hit, np.full(n, -1), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan),
+                   np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool))
+
+
+def facing(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """The normals turned to face the incoming rays, in place: the surface is a two-sided mirror."""
+    normals[np.einsum("ij,ij->i", normals, directions) > 0] *= -1.0
+    return normals
+
 
 def _across(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors e1, e2 spanning the plane normal to each direction."""
@@ -120,15 +132,9 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     n = len(origins)
     with clock.stage("intersect (Embree)"):
         mesh = accelerator.intersect(origins, directions)
-    hit = mesh.prim >= 0
-    idx = np.flatnonzero(hit)
-    patch = np.full(n, -1)
-    u = np.full(n, np.nan)
-    v = np.full(n, np.nan)
-    t = np.full(n, np.nan)
-    P = np.full((n, 3), np.nan)
-    normal = np.full((n, 3), np.nan)
-    fallback = np.zeros(n, dtype=bool)
+    hits = Hits.blank(n, mesh.prim >= 0)
+    patch, u, v, t, P, normal, fallback = hits.patch, hits.u, hits.v, hits.t, hits.P, hits.N, hits.fallback
+    idx = np.flatnonzero(hits.hit)
     if len(idx):
         O, D, tm = origins[idx], directions[idx], mesh.t[idx]
         pk, us, vs = tessellation.start_parameters(mesh.prim[idx], mesh.b1[idx], mesh.b2[idx])
@@ -162,10 +168,6 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 again = surfaces.evaluate(pk[lost], us[lost], vs[lost])
                 for have, new in zip(derivs[:3], again):
                     have[lost] = new
-            nrm = surfaces.normals(pk, u[idx], v[idx], derivs)
-        # Two-sided mirror: the normal faces the incoming ray.
-        flip = np.einsum("ij,ij->i", nrm, D) > 0
-        nrm[flip] *= -1.0
-        normal[idx] = nrm
+            normal[idx] = facing(surfaces.normals(pk, u[idx], v[idx], derivs), D)
         fallback[idx] = ~ok
-    return Hits(hit, patch, u, v, t, P, normal, fallback)
+    return hits
