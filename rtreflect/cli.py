@@ -7,6 +7,7 @@ Exit status: 0 success, 1 a check failed, 2 bad input (one line naming file and 
 from __future__ import annotations
 
 import json
+import signal
 import sys
 import time
 from pathlib import Path
@@ -274,8 +275,17 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
 
 
 # -- rtreflect batch ----------------------------------------------------------------------
-EXIT_FAILED = 1
-EXIT_INTERRUPTED = 130
+#: Stops a batch reports before exiting: Ctrl-C (KeyboardInterrupt where `main`'s handlers are not installed,
+#: e.g. click's test runner) and the stop signals `main` turns into `Interrupted`.
+STOPS = (KeyboardInterrupt, Interrupted)
+
+
+def stop_name(exc: BaseException) -> str:
+    return str(exc) if isinstance(exc, Interrupted) else "SIGINT"
+
+
+def stop_status(exc: BaseException) -> int:
+    return exc.exit_status if isinstance(exc, Interrupted) else Interrupted(signal.SIGINT).exit_status
 
 
 @cli.command()
@@ -322,9 +332,9 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         todo, reports = batching.plan(loaded, outdir, force)
     except RtreflectError as exc:
         fail(str(exc))
-    except KeyboardInterrupt:
-        click.echo("rtreflect: interrupted before rendering; nothing written", err=True)
-        sys.exit(EXIT_INTERRUPTED)
+    except STOPS as exc:
+        click.echo(f"rtreflect: interrupted by {stop_name(exc)} before rendering; nothing written", err=True)
+        sys.exit(stop_status(exc))
     for report in reports:
         _print_scene(report)
     order = {str(job.path): i for i, job in enumerate(loaded)}
@@ -350,19 +360,19 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
             elif todo:
                 batching.run_local(todo, outdir, workers=jobs or batching.default_jobs(), max_memory=budget,
                                    on_progress=bar.update, on_done=on_done)
-    except KeyboardInterrupt:
+    except STOPS as exc:
         done = {r.scene for r in reports}
         reports.extend(batching.SceneReport(str(job.path), job.scene.output.name, batching.INTERRUPTED)
                        for job in todo if str(job.path) not in done)
         _finish_batch(reports, order, outdir, report_path, start, where, quiet=True)
         tally = batching.counts(reports)
-        click.echo(f"rtreflect: interrupted: {tally['rendered']} rendered, {tally['interrupted']} not finished; "
-                   "no partial files left, run again to resume", err=True)
-        sys.exit(EXIT_INTERRUPTED)
+        click.echo(f"rtreflect: interrupted by {stop_name(exc)}: {tally['rendered']} rendered, "
+                   f"{tally['interrupted']} not finished; no partial files left, run again to resume", err=True)
+        sys.exit(stop_status(exc))
     except RtreflectError as exc:
         fail(str(exc))
     failed = _finish_batch(reports, order, outdir, report_path, start, where)
-    sys.exit(EXIT_FAILED if failed else 0)
+    sys.exit(EXIT_CHECK_FAILED if failed else 0)
 
 
 def _print_scene(report) -> None:
@@ -394,7 +404,7 @@ def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False
         try:
             batching.write_report(report_path, reports, outdir, seconds, where)
         except RtreflectError as exc:
-            click.echo(f"rtreflect: error: {exc}", err=True)
+            click.echo(f"rtreflect: error: {one_line(str(exc))}", err=True)
             return max(1, tally["failed"])
     return tally["failed"]
 
@@ -428,5 +438,5 @@ def main() -> None:
             sys.exit(exc.exit_code)
         except click.Abort:  # end of input at a prompt, or Ctrl-C where SIGINT could not be caught
             click.echo("rtreflect: aborted", err=True)
-            sys.exit(128 + 2)
+            sys.exit(stop_status(KeyboardInterrupt()))
     sys.exit(status if isinstance(status, int) else 0)

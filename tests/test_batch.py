@@ -201,7 +201,8 @@ def test_interrupted_batch_leaves_only_complete_files_and_resumes(tmp_path):
     for name in ("a", "b", "c", "d"):
         small_scene("hood", folder / f"{name}.toml", width=480, height=270, samples=3)
     out, report_path = tmp_path / "out", tmp_path / "report.json"
-    batch = subprocess.Popen([str(RTREFLECT), "batch", str(folder), "-o", str(out), "-j", "2"],
+    batch = subprocess.Popen([str(RTREFLECT), "batch", str(folder), "-o", str(out), "-j", "2",
+                              "--json", str(report_path)],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     # Interrupt once the workers are writing (their temporary files exist).
@@ -211,7 +212,9 @@ def test_interrupted_batch_leaves_only_complete_files_and_resumes(tmp_path):
     batch.send_signal(signal.SIGINT)
     stdout, stderr = batch.communicate(timeout=60)
     assert batch.returncode == 130, stderr
-    assert "interrupted" in stderr and "Traceback" not in stderr
+    assert "interrupted by SIGINT" in stderr and "run again to resume" in stderr and "Traceback" not in stderr
+    interrupted = json.loads(report_path.read_text())  # the batch's own report, written on the way out
+    assert interrupted["counts"]["interrupted"] >= 1
     left = sorted(p.name for p in out.iterdir())
     assert not [name for name in left if name.startswith(".")], left
     for name in left:  # whatever is there is complete: it reads back whole
