@@ -29,7 +29,7 @@ from typing import Callable
 
 from . import __version__
 from .errors import RtreflectError
-from .imagefiles import INPUTS_HASH_ATTRIBUTE, VERSION_ATTRIBUTE, atomic_path, output_paths, read_provenance
+from .imagefiles import OUTPUT_KEY_ATTRIBUTE, VERSION_ATTRIBUTE, atomic_path, output_paths, read_provenance
 from .overlay import contours_file_name
 from .scene import Scene, load_scene
 from .tiling import default_max_memory
@@ -112,12 +112,13 @@ def check_collisions(jobs: list[Job], outdir: Path) -> None:
 
 
 def up_to_date(scene: Scene, outdir: Path) -> bool:
-    """Every output exists and was rendered from the same inputs (scene and geometry files) by this version."""
+    """Every output exists and was rendered from the same inputs (scene and geometry files) with the same size,
+    samples, normals and overlay, by this version."""
     for path in output_paths(scene, outdir):
         if not path.is_file():
             return False
         header = read_provenance(path)
-        if header.get(INPUTS_HASH_ATTRIBUTE) != scene.inputs_sha256 or header.get(VERSION_ATTRIBUTE) != __version__:
+        if header.get(OUTPUT_KEY_ATTRIBUTE) != scene.output_key or header.get(VERSION_ATTRIBUTE) != __version__:
             return False
     return not scene.render.overlay or (Path(outdir) / contours_file_name(scene)).is_file()
 

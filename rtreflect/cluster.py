@@ -45,10 +45,6 @@ _build_locks: dict[str, threading.Lock] = {}
 _renderers: OrderedDict[str, Renderer] = OrderedDict()
 
 
-def scene_key(scene: Scene) -> str:
-    """What a render depends on: the inputs' hash and the image size and samples."""
-    image = scene.image
-    return f"{scene.inputs_sha256}-{image.width}x{image.height}x{image.samples}"
 
 
 def _renderer(scene: Scene, key: str) -> Renderer:
@@ -172,7 +168,7 @@ class _ClusterBatch:
             if run is None:
                 return
             start, stop = run.spans[run.submitted]
-            future = self.client.submit(render_tile, run.scattered, scene_key(run.job.scene), start, stop,
+            future = self.client.submit(render_tile, run.scattered, run.job.scene.output_key, start, stop,
                                         __version__, pure=False)
             self.owner[future] = (run, run.submitted)
             run.futures.add(future)

@@ -32,6 +32,8 @@ if TYPE_CHECKING:
 SCENE_HASH_ATTRIBUTE = "rtreflect:scene_sha256"
 INPUTS_HASH_ATTRIBUTE = "rtreflect:inputs_sha256"
 VERSION_ATTRIBUTE = "rtreflect:version"
+#: `Scene.output_key`: the inputs' hash plus size, samples, normals and overlay (which the command line may override).
+OUTPUT_KEY_ATTRIBUTE = "rtreflect:output_key"
 
 
 def _umask() -> int:
@@ -148,7 +150,7 @@ def provenance_attributes(scene: "Scene") -> dict[str, str]:
     from . import __version__
 
     return {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
-            VERSION_ATTRIBUTE: __version__}
+            OUTPUT_KEY_ATTRIBUTE: scene.output_key, VERSION_ATTRIBUTE: __version__}
 
 
 def read_provenance(path: Path) -> dict[str, str]:

@@ -115,6 +115,13 @@ class Scene:
     sha256: str  # of the scene file's bytes
     inputs_sha256: str  # of the scene file and every geometry file it reads
 
+    @property
+    def output_key(self) -> str:
+        """What the rendered files depend on: every input file, and the settings the command line can override."""
+        image, render = self.image, self.render
+        return (f"{self.inputs_sha256}-{image.width}x{image.height}x{image.samples}-{render.normals}"
+                f"{'-overlay' if render.overlay else ''}")
+
     def with_image(self, width: int | None = None, height: int | None = None, samples: int | None = None) -> "Scene":
         """The same scene with some `[image]` values overridden (command-line options), validated alike."""
         values = {"width": width, "height": height, "samples": samples}

@@ -301,3 +301,17 @@ def test_unreachable_scheduler_is_bad_input(tmp_path, monkeypatch):
     scene_path = small_scene("hood", tmp_path / "hood.toml")
     code, output, _ = run_batch(scene_path, "-o", tmp_path / "out", "--scheduler", "tcp://127.0.0.1:9")
     assert code == 2 and "--scheduler tcp://127.0.0.1:9: cannot connect" in output
+
+
+def test_outputs_rendered_with_other_settings_are_not_up_to_date(tmp_path):
+    """`render --width/--samples/--normals` writes the same scene's files with other settings: batch renders again."""
+    scene_path = small_scene("hood", tmp_path / "scenes" / "hood.toml")
+    out = tmp_path / "out"
+    run = subprocess.run([str(RTREFLECT), "render", str(scene_path), "-o", str(out), "--width", "80", "--height",
+                          "45", "--normals", "mesh"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    code, output, report = run_batch(scene_path, "-o", out, "--json", tmp_path / "r.json")
+    assert code == 0 and report["counts"]["rendered"] == 1, output
+    assert read_image(out / "hood.exr")[0].shape[:2] == (90, 160)  # the scene's own size now
+    code, output, report = run_batch(scene_path, "-o", out, "--json", tmp_path / "r.json")
+    assert report["counts"]["skipped"] == 1
