@@ -40,7 +40,6 @@ from .errors import RtreflectError
 from .film import COLOR_CHANNELS
 from .imagefiles import atomic_path, read_image, write_png
 
-#: Channels compared when none are named: the colour channels, if the images have any.
 #: Default ``fail`` for float images: float32 noise passes, any real change fails.
 FLOAT_FAIL = 1e-6
 #: Slack on one integer code value: OpenImageIO reads code k of 8 bits as float32(k/255),
@@ -159,10 +158,6 @@ class DiffReport:
             "first_nonfinite_mismatch": where(self.first_nonfinite_mismatch),
             "status": self.status,
         }
-
-    def write_json(self, path: Path) -> None:
-        """The report as JSON, written atomically (its folder is created if missing)."""
-        self.write_files(json_path=path)
 
     def write_diff_image(self, path: Path) -> None:
         """A PNG showing where A and B differ (see `diff_image`), written atomically (folder created)."""

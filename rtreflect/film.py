@@ -37,12 +37,6 @@ class Film:
         self.height = height
         self.pixels = np.empty((height, width, len(CHANNELS)), dtype=np.float32)
 
-    def put(self, row0: int, row1: int, rgba: np.ndarray, aovs: np.ndarray) -> None:
-        """Store rows [row0, row1): rgba (P, 4) and aovs (P, 13), P = (row1 − row0)·width pixels."""
-        block = self.pixels[row0:row1].reshape(-1, len(CHANNELS))
-        block[:, :4] = rgba
-        block[:, 4:] = aovs
-
     def put_span(self, start: int, stop: int, pixels: np.ndarray) -> None:
         """Store pixels [start, stop) in row-major order: (stop − start, 17) values in `CHANNELS` order."""
         self.pixels.reshape(-1, len(CHANNELS))[start:stop] = pixels

@@ -95,11 +95,6 @@ def _png_spec(width: int, height: int, attributes: dict[str, str]) -> oiio.Image
     return spec
 
 
-def write_exr(path: Path, film: Film, attributes: dict[str, str], final: Path | None = None) -> None:
-    """All channels of the film as float32, with the given header attributes (not atomic: see `save_render`)."""
-    _write(path, _exr_spec(film.width, film.height, attributes), np.ascontiguousarray(film.pixels), final)
-
-
 def encode_srgb(rgba: np.ndarray) -> np.ndarray:
     """Linear RGBA → 8-bit sRGB RGBA (colour-science's sRGB transfer function; alpha stays linear)."""
     rgb = np.clip(np.nan_to_num(rgba[..., :3], nan=0.0), 0.0, 1.0)
@@ -109,7 +104,7 @@ def encode_srgb(rgba: np.ndarray) -> np.ndarray:
 
 
 def write_png(path: Path, rgba: np.ndarray, final: Path | None = None) -> None:
-    """An 8-bit sRGB PNG of a linear (H, W, 4) RGBA image (not atomic: see `save_render`)."""
+    """An 8-bit sRGB PNG of a linear (H, W, 4) RGBA image (not atomic: wrap it in `atomic_path`)."""
     height, width = rgba.shape[:2]
     _write(path, _png_spec(width, height, {}), encode_srgb(rgba), final)
 

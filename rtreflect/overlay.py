@@ -97,12 +97,6 @@ def blend(rgba: np.ndarray, alpha: np.ndarray, color) -> np.ndarray:
     return out
 
 
-def draw_overlay(rgba: np.ndarray, contours: ContourLines, color) -> np.ndarray:
-    """A copy of the linear (H, W, 4) RGBA image with the contours blended over it in ``color``."""
-    height, width = rgba.shape[:2]
-    return blend(rgba, coverage(contours, width, height), color)
-
-
 def contours_file_name(scene) -> str:
     """``NAME.contours.json``: where a render with the overlay keeps its contours, beside the images."""
     return f"{scene.output.name}.contours.json"

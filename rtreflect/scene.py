@@ -29,7 +29,7 @@ MAX_SIDE = 16384
 #: Largest pixel count (8192 × 16384): 17 planes × 4 bytes × 2^27 ≈ 9 GB of film.
 MAX_PIXELS = 1 << 27
 #: Why the two limits above exist, for the messages that enforce them.
-FILM_LIMIT_REASON = "the film keeps 17 float32 channels per pixel, about 9 GB at 8192×16384"
+FILM_LIMIT_REASON = "17 float32 channels per pixel: about 9 GB of EXR at 8192×16384, and validate keeps it in memory"
 #: Most light tubes: every sample is tested against every tube, so more only slows the render;
 #: no image shows this many stripes apart.
 MAX_TUBES = 10000
