@@ -16,7 +16,6 @@ geometry files) and `rtreflect:version` as this run would write.
 from __future__ import annotations
 
 import concurrent.futures as cf
-import json
 import multiprocessing
 import os
 import queue
@@ -29,7 +28,8 @@ from typing import Callable
 
 from . import __version__
 from .errors import RtreflectError
-from .imagefiles import OUTPUT_KEY_ATTRIBUTE, VERSION_ATTRIBUTE, atomic_path, output_paths, read_provenance
+from .imagefiles import (OUTPUT_KEY_ATTRIBUTE, VERSION_ATTRIBUTE, check_distinct_outputs, output_paths, read_provenance,
+                         write_json)
 from .overlay import contours_file_name
 from .scene import Scene, load_scene
 from .tiling import default_max_memory
@@ -100,15 +100,8 @@ def load_jobs(files: list[Path]) -> list[Job]:
 
 
 def check_collisions(jobs: list[Job], outdir: Path) -> None:
-    """Two scenes with one `[output] name` would overwrite each other's files: an `RtreflectError` naming them all."""
-    by_name: dict[str, list[Path]] = {}
-    for job in jobs:
-        if job.scene is not None:
-            by_name.setdefault(job.scene.output.name, []).append(job.path)
-    clashes = [(name, files) for name, files in by_name.items() if len(files) > 1]
-    if clashes:
-        text = "; ".join(f"{Path(outdir) / name}.* from {' and '.join(str(f) for f in files)}" for name, files in clashes)
-        raise RtreflectError(f"output names collide: {text} (give each scene its own [output] name)")
+    """Scenes that load and share an `[output] name`: an `RtreflectError` naming them (`check_distinct_outputs`)."""
+    check_distinct_outputs([job.scene for job in jobs if job.scene is not None], outdir)
 
 
 def up_to_date(scene: Scene, outdir: Path) -> bool:
@@ -321,10 +314,4 @@ def write_report(path: Path, reports: list[SceneReport], outdir: Path, seconds: 
     """The summary as JSON (written atomically): totals and one record per scene."""
     document = {"rtreflect_version": __version__, "outdir": str(outdir), "where": where,
                 "seconds": round(seconds, 3), "counts": counts(reports), "scenes": [asdict(r) for r in reports]}
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp:
-            tmp.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    except OSError as exc:
-        raise RtreflectError(f"{path}: cannot write report ({exc.strerror or exc})") from None
+    write_json(path, document)

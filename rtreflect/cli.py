@@ -6,7 +6,6 @@ Exit status: 0 success, 1 a check failed, 2 bad input (one line naming file and 
 
 from __future__ import annotations
 
-import json
 import signal
 import sys
 import time
@@ -17,8 +16,9 @@ from tqdm import tqdm
 
 from . import __version__
 from .errors import RtreflectError, one_line
-from .imagefiles import atomic_path, output_paths, prepare_output_folder
+from .imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, write_json
 from .interrupts import Interrupted, signals_as_exceptions
+from .overlay import contours_file_name
 from .scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, load_scene
 from .streaming import render_to_files
 from .tiling import parse_size
@@ -93,7 +93,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     budget = memory_option(max_memory)
     try:
         loaded = [load_scene(path).with_image(width, height, samples).with_render(overlay, normals) for path in scenes]
-        check_distinct_outputs(loaded)
+        check_distinct_outputs(loaded, outdir)
         prepare_output_folder(outdir, [path for scene in loaded for path in output_paths(scene, outdir)])
     except RtreflectError as exc:
         fail(str(exc))
@@ -105,7 +105,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
                 done = render_to_files(scene, outdir, threads=threads, max_memory=budget, progress=bar.update)
             if scene.render.overlay and not scene.output.png:
                 click.echo(f"{scene.output.name}: overlay not drawn ([output] png = false; the EXR never shows it), "
-                           f"contours in {scene.output.name}.contours.json")
+                           f"contours in {contours_file_name(scene)}")
         except RtreflectError as exc:
             fail(str(exc))
         st, written = done.stats, done.files
@@ -266,11 +266,9 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
             key = report.name if report.name not in document["scenes"] else report.path
             document["scenes"][key] = report.to_json()
         try:
-            report_path.parent.mkdir(parents=True, exist_ok=True)
-            with atomic_path(report_path) as tmp:
-                tmp.write_text(json.dumps(document, indent=1) + "\n", encoding="utf-8")
-        except OSError as exc:
-            fail(f"{exc.filename or report_path}: cannot write report ({exc.strerror or exc})")
+            write_json(report_path, document)
+        except RtreflectError as exc:
+            fail(str(exc))
     sys.exit(0 if all(report.passed for report in reports) else EXIT_CHECK_FAILED)
 
 
@@ -407,15 +405,6 @@ def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False
             click.echo(f"rtreflect: error: {one_line(str(exc))}", err=True)
             return max(1, tally["failed"])
     return tally["failed"]
-
-
-def check_distinct_outputs(scenes) -> None:
-    """Two scenes of one run writing the same NAME would silently overwrite each other's images."""
-    first: dict[str, Path] = {}
-    for scene in scenes:
-        earlier = first.setdefault(scene.output.name, scene.path)
-        if earlier != scene.path:
-            raise RtreflectError(f"{scene.path}: output.name: {scene.output.name!r} is also the output name of {earlier}")
 
 
 def main() -> None:

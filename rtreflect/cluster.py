@@ -208,8 +208,7 @@ class _ClusterBatch:
                 scene = run.job.scene
                 self.on_done(SceneReport(str(run.job.path), scene.output.name, RENDERED,
                                          seconds=time.perf_counter() - run.started,
-                                         outputs=[str(p) for p in output_paths(scene, self.outdir)]
-                                                 + [str(self.outdir / n) for n in run.extra_files or {}],
+                                         outputs=[str(p) for p in output_paths(scene, self.outdir, run.extra_files)],
                                          pixels=scene.image.width * scene.image.height, rays=run.rays,
                                          tiles=len(run.spans)))
         except RtreflectError as exc:

@@ -7,6 +7,7 @@ place, so a failed or interrupted render leaves the old file or none, never half
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import tempfile
 import warnings
@@ -103,21 +104,45 @@ def encode_srgb(rgba: np.ndarray) -> np.ndarray:
     return np.round(np.concatenate([encoded, alpha], axis=-1) * 255.0).astype(np.uint8)
 
 
+def write_json(path: Path, document: object, what: str = "report") -> None:
+    """``document`` as indented JSON at ``path``, written atomically (folder created); errors name the file."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            tmp.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise RtreflectError(f"{path}: cannot write {what} ({exc.strerror or exc})") from None
+
+
 def write_png(path: Path, rgba: np.ndarray, final: Path | None = None) -> None:
     """An 8-bit sRGB PNG of a linear (H, W, 4) RGBA image (not atomic: wrap it in `atomic_path`)."""
     height, width = rgba.shape[:2]
     _write(path, _png_spec(width, height, {}), encode_srgb(rgba), final)
 
 
-def output_paths(scene: "Scene", outdir: Path) -> list[Path]:
-    """``outdir/NAME.exr`` and/or ``outdir/NAME.png``, as the scene's `[output]` table asks."""
+def output_paths(scene: "Scene", outdir: Path, extra_files: dict[str, str] | None = None) -> list[Path]:
+    """``outdir/NAME.exr`` and/or ``outdir/NAME.png``, as the scene's `[output]` table asks, then ``extra_files``'."""
     outdir = Path(outdir)
     targets = []
     if scene.output.exr:
         targets.append(outdir / f"{scene.output.name}.exr")
     if scene.output.png:
         targets.append(outdir / f"{scene.output.name}.png")
-    return targets
+    return targets + [outdir / name for name in extra_files or {}]
+
+
+def check_distinct_outputs(scenes: list["Scene"], outdir: Path) -> None:
+    """Two scenes of one run with one `[output] name` would overwrite each other's files: an error naming both."""
+    by_name: dict[str, list[Path]] = {}
+    for scene in scenes:
+        by_name.setdefault(scene.output.name, []).append(scene.path)
+    clashes = [(name, files) for name, files in by_name.items() if len(files) > 1]
+    if clashes:
+        name, files = clashes[0]
+        more = f"; {len(clashes) - 1} more names collide" if len(clashes) > 1 else ""
+        raise RtreflectError(f"{files[-1]}: output.name: outputs collide: {Path(outdir) / name}.* is also written from "
+                             f"{' and '.join(map(str, files[:-1]))}{more} (give each scene its own [output] name)")
 
 
 def prepare_output_folder(outdir: Path, targets: list[Path] = ()) -> None:
@@ -252,7 +277,7 @@ def open_outputs(scene: "Scene", outdir: Path, png_filter: PngFilter | None = No
     """
     outdir = Path(outdir)
     targets = output_paths(scene, outdir)
-    prepare_output_folder(outdir, targets + [outdir / name for name in extra_files or {}])
+    prepare_output_folder(outdir, output_paths(scene, outdir, extra_files))
     target = outdir
     try:
         with contextlib.ExitStack() as stack:
@@ -280,7 +305,7 @@ def save_render(result: "RenderResult", outdir: Path, png_filter: PngFilter | No
     """The render's EXR and/or PNG in ``outdir`` as its `[output]` table says; all files appear together or none."""
     with open_outputs(result.scene, outdir, png_filter, extra_files) as writer:
         writer.write(0, result.film.pixels.reshape(-1, len(CHANNELS)))
-    return output_paths(result.scene, outdir) + [Path(outdir) / name for name in extra_files or {}]
+    return output_paths(result.scene, outdir, extra_files)
 
 
 def read_image(path: Path) -> tuple[np.ndarray, tuple[str, ...], dict[str, object]]:

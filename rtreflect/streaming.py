@@ -52,7 +52,7 @@ def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, m
                 progress(tile.stop - tile.start)
     stats.seconds = time.perf_counter() - start
     stats.stages = dict(renderer.clock.seconds)
-    return SceneOutput(output_paths(scene, outdir) + [Path(outdir) / name for name in extra_files or {}], stats, tiles)
+    return SceneOutput(output_paths(scene, outdir, extra_files), stats, tiles)
 
 
 def overlay_for(scene: Scene, renderer: Renderer | None = None) -> tuple[PngFilter | None, dict[str, str] | None]:
