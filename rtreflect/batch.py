@@ -155,7 +155,7 @@ def render_job(scene: Scene, outdir: Path, threads: int | None, max_memory: int 
     else:
         report.outputs = [str(p) for p in done.files]
         report.pixels = scene.image.width * scene.image.height
-        report.rays, report.tiles = done.stats.rays, done.tiles
+        report.rays, report.tiles = done.stats.rays, done.stats.tiles
     report.seconds = time.perf_counter() - start
     return report
 

@@ -66,6 +66,7 @@ class RenderStats:
     rays: int = 0
     fallbacks: int = 0  # samples whose Newton refinement failed (mesh hit kept)
     fallback_pixels: int = 0  # pixels with at least one such sample
+    tiles: int = 0
     seconds: float = 0.0
     stages: dict[str, float] = field(default_factory=dict)
 
@@ -91,6 +92,11 @@ class RenderResult:
     scene: Scene
     film: Film
     stats: RenderStats
+
+
+def default_threads() -> int:
+    """Render threads when none are asked for: two (embreex and numpy release the GIL), or one on one core."""
+    return min(2, os.cpu_count() or 1)
 
 
 def pixel_spans(image: ImageSpec, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
@@ -207,7 +213,7 @@ class Renderer:
         is bounded by the tile size, not the image size. ``stats`` (if given) counts rays
         and fallbacks as tiles are yielded.
         """
-        for tile in self._tiles_in_order(threads or min(2, os.cpu_count() or 1), self.spans(rays_per_tile)):
+        for tile in self._tiles_in_order(threads or default_threads(), self.spans(rays_per_tile)):
             if stats is not None:
                 stats.rays += tile.rays
                 stats.fallbacks += tile.fallbacks
@@ -236,17 +242,24 @@ class Renderer:
         self.clock = StageClock()
         return RenderStats(image.width, image.height, image.samples)
 
-    def render(self, progress: Callable[[int], None] | None = None, threads: int | None = None,
-               rays_per_tile: int = RAYS_PER_TILE) -> RenderResult:
-        """Render the whole image into an in-memory `Film`; ``progress(pixels)`` is called as tiles finish."""
+    def run(self, sink: Callable[[Tile], None], threads: int | None = None, rays_per_tile: int = RAYS_PER_TILE,
+            progress: Callable[[int], None] | None = None) -> RenderStats:
+        """Render the whole image, handing each tile to ``sink`` in image order; ``progress(pixels)`` after each."""
         start = time.perf_counter()
-        image = self.scene.image
-        film = Film(image.width, image.height)
         stats = self.new_stats()
         for tile in self.stream(threads, rays_per_tile, stats):
-            film.put_span(tile.start, tile.stop, tile.pixels)
+            sink(tile)
+            stats.tiles += 1
             if progress:
                 progress(tile.stop - tile.start)
         stats.seconds = time.perf_counter() - start
         stats.stages = dict(self.clock.seconds)
+        return stats
+
+    def render(self, progress: Callable[[int], None] | None = None, threads: int | None = None,
+               rays_per_tile: int = RAYS_PER_TILE) -> RenderResult:
+        """Render the whole image into an in-memory `Film`; ``progress(pixels)`` is called as tiles finish."""
+        film = Film(self.scene.image.width, self.scene.image.height)
+        stats = self.run(lambda tile: film.put_span(tile.start, tile.stop, tile.pixels), threads, rays_per_tile,
+                         progress)
         return RenderResult(self.scene, film, stats)

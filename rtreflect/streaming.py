@@ -9,15 +9,13 @@ the bytes equal those of an in-memory render saved with `save_render`.
 
 from __future__ import annotations
 
-import os
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 from .imagefiles import PngFilter, open_outputs, output_paths
 from .overlay import overlay_outputs
-from .render import Renderer, RenderStats
+from .render import Renderer, RenderStats, default_threads
 from .scene import Scene
 from .tiling import default_max_memory, rays_per_tile
 
@@ -26,7 +24,6 @@ from .tiling import default_max_memory, rays_per_tile
 class SceneOutput:
     files: list[Path]
     stats: RenderStats
-    tiles: int
 
 
 def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, max_memory: int | None = None,
@@ -37,22 +34,13 @@ def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, m
     building anything) when even one-pixel tiles would not fit the budget, and on
     write errors; on any error or interrupt no output file is left half-written.
     """
-    threads = threads or min(2, os.cpu_count() or 1)
+    threads = threads or default_threads()
     tile_rays = rays_per_tile(scene, max_memory or default_max_memory(), threads)
     renderer = Renderer(scene)
     png_filter, extra_files = overlay_for(scene, renderer)
-    start = time.perf_counter()
-    stats = renderer.new_stats()
-    tiles = 0
     with open_outputs(scene, outdir, png_filter, extra_files) as writer:
-        for tile in renderer.stream(threads, tile_rays, stats):
-            writer.write(tile.start, tile.pixels)
-            tiles += 1
-            if progress:
-                progress(tile.stop - tile.start)
-    stats.seconds = time.perf_counter() - start
-    stats.stages = dict(renderer.clock.seconds)
-    return SceneOutput(output_paths(scene, outdir, extra_files), stats, tiles)
+        stats = renderer.run(lambda tile: writer.write(tile.start, tile.pixels), threads, tile_rays, progress)
+    return SceneOutput(output_paths(scene, outdir, extra_files), stats)
 
 
 def overlay_for(scene: Scene, renderer: Renderer | None = None) -> tuple[PngFilter | None, dict[str, str] | None]:

@@ -102,7 +102,7 @@ def test_streamed_render_equals_in_memory_render(tmp_path, samples):
     scene_path = small_scene("g1_join", tmp_path / "g1.toml", width=97, height=31, samples=samples)
     expected = reference_files(scene_path, tmp_path / "memory")
     done = render_to_files(load_scene(scene_path), tmp_path / "streamed", threads=2, max_memory=1_000_000)
-    assert done.tiles > 10  # the budget really cut the image into many spans
+    assert done.stats.tiles > 10  # the budget really cut the image into many spans
     assert folder_bytes(tmp_path / "streamed") == expected
     pixels, channels, attrs = read_image(tmp_path / "streamed" / "g1.exr")
     assert sorted(channels) == sorted(CHANNELS) and attrs["rtreflect:inputs_sha256"] == load_scene(scene_path).inputs_sha256
