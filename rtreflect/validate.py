@@ -312,18 +312,14 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
         inside = (line_id >= 0) & (d + 0.71 * g < radius)
         outside = (line_id < 0) | (d - 0.71 * g > radius)
     # Occlusion of the reflected ray, for every pixel with a tube ahead: up to the nearest tube within the
-    # radius along the ray (as the renderer does), else up to the nearest tube ahead. In chunks: (pixels × tubes).
+    # radius along the ray (as the renderer does), else up to the nearest tube ahead.
     ahead = np.flatnonzero(line_id >= 0)
     blocked = np.zeros(size, dtype=bool)
-    chunk = max(1, (1 << 22) // max(1, len(renderer.lights.c_k)))
-    for lo in range(0, len(ahead), chunk):
-        rows = ahead[lo:lo + chunk]
-        P, n, s = aovs.P.reshape(-1, 3)[rows], aovs.N.reshape(-1, 3)[rows], aovs.s.reshape(-1, 3)[rows]
-        dist = renderer.lights.distances(P, s)
-        within, t_within = renderer.lights.candidates(dist)
-        t = np.where(within, t_within, dist.t[np.arange(len(rows)), line_id[rows].astype(int)])
-        start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[rows].astype(int))
-        blocked[rows] = renderer.accelerator.occluded(start, s, t)
+    P, n, s = aovs.P.reshape(-1, 3)[ahead], aovs.N.reshape(-1, 3)[ahead], aovs.s.reshape(-1, 3)[ahead]
+    tubes = renderer.lights.reach(P, s, tube=line_id[ahead].astype(int))
+    t = np.where(tubes.candidate, tubes.t_candidate, tubes.t_of)
+    start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[ahead].astype(int))
+    blocked[ahead] = renderer.accelerator.occluded(start, s, t)
     blocked_grid = blocked.reshape(height, width)
     padded = np.pad(blocked_grid, 1, mode="edge")
     uniform = ((padded[1:-1, :-2] == blocked_grid) & (padded[1:-1, 2:] == blocked_grid)
