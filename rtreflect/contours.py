@@ -33,6 +33,7 @@ from .camera import Camera
 from .lights import TubeLights, reflect
 from .surfaces import SurfaceSet
 from .tessellation import Tessellation
+from .tracing import facing
 
 #: Target size in pixels of one cell of the (u, v) grid that contourpy sees.
 GRID_CELL_PX = 2.0
@@ -205,7 +206,7 @@ class UlmetField:
         tau = (R + np.where(np.isfinite(t), t, 0.0)[:, None] * s - lights.Q) @ lights.c
         if math.isfinite(lights.length):
             good &= np.abs(tau) <= 0.5 * lights.length
-        n = np.where((np.einsum("ij,ij->i", n, a) < 0)[:, None], -n, n)
+        n = facing(n, -a)  # a points to the eye: the incoming ray runs along −a
         origin = self.accelerator.surface_origins(R, n, patch)
         if self.camera.orthographic:  # back along the view direction to the eye plane, where the ray started
             to_eye = (origin - self.camera.spec.eye) @ w
@@ -214,8 +215,24 @@ class UlmetField:
         idx = np.flatnonzero(good)
         good[idx] &= ~self.accelerator.occluded(origin[idx], a[idx], to_eye[idx])
         idx = np.flatnonzero(good)
-        good[idx] &= ~self.accelerator.occluded(origin[idx], s[idx], t[idx])
+        good[idx] &= reaches_light_plane(self.accelerator, lights, R[idx], n[idx], patch[idx], s[idx])
         return good
+
+
+def reaches_light_plane(accelerator: Accelerator, lights: TubeLights, R: np.ndarray, n: np.ndarray,
+                        patch: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """True where the reflected ray R + t s meets the light plane ahead (t > 0) with no triangle on the way.
+
+    n is the unit normal at R turned to the side the ray leaves from; the ray starts there,
+    off the surface by more than the mesh's chord error (`Accelerator.surface_origins`), as the
+    renderer's do.
+    """
+    t = lights.plane_t(R, s)
+    clear = t > 0
+    idx = np.flatnonzero(clear)
+    origin = accelerator.surface_origins(R[idx], n[idx], patch[idx])
+    clear[idx] = ~accelerator.occluded(origin, s[idx], t[idx])
+    return clear
 
 
 # -- polylines as flat arrays -------------------------------------------------------------------

@@ -47,7 +47,7 @@ from typing import Callable
 
 import numpy as np
 
-from .contours import ContourLines, UlmetField, analytic_contours
+from .contours import ContourLines, UlmetField, analytic_contours, reaches_light_plane
 from .film import Film
 from .lights import reflect
 from .render import Renderer
@@ -181,10 +181,8 @@ def _smooth_pairs(renderer: Renderer, aovs: PixelAOVs, axis: int,
 def _unblocked(renderer: Renderer, aovs: PixelAOVs, pixels: np.ndarray) -> np.ndarray:
     """True where the pixel's reflected ray reaches the light plane without meeting the surface."""
     P, n, s = aovs.P.reshape(-1, 3)[pixels], aovs.N.reshape(-1, 3)[pixels], aovs.s.reshape(-1, 3)[pixels]
-    t = renderer.lights.plane_t(P, s)
     patch = aovs.patch.ravel()[pixels].astype(int)
-    start = renderer.accelerator.surface_origins(P, n, patch)
-    return (t > 0) & ~renderer.accelerator.occluded(start, s, np.where(t > 0, t, 0.0))
+    return reaches_light_plane(renderer.accelerator, renderer.lights, P, n, patch, s)
 
 
 def _crossing(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, smooth_next: np.ndarray,
