@@ -329,8 +329,8 @@ def _cut_points(field: UlmetField, patch: np.ndarray, light: np.ndarray, ua, va,
     return good_u, good_v
 
 
-def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
-    """(tube index, (n, 2) array of (u, v)) of every visible contour piece on patch k."""
+def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """(tube index, (n, 2) array of (u, v), (n, 2) image positions) of every visible contour piece on patch k."""
     chains, chain_light, cell = _patch_chains(field, k)
     if len(chains.u) == 0:
         return []
@@ -386,8 +386,10 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
     where = np.concatenate([ends_after, starts_before])[order]
     new_u = np.concatenate([cut_u[good[change]], cut_u[~good[change]]])[order]
     new_v = np.concatenate([cut_v[good[change]], cut_v[~good[change]]])[order]
+    new_px, _ = field.project(np.full(len(new_u), k), new_u, new_v)
     u = np.insert(u, where + 1, new_u)
     v = np.insert(v, where + 1, new_v)
+    px = np.insert(px, where + 1, new_px, axis=0)
     chain = np.insert(chain, where + 1, chain[where])
     keep = np.insert(keep, where + 1, True)
     # Runs of kept vertices within one chain become the pieces.
@@ -400,7 +402,7 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
     bounds = np.flatnonzero(np.diff(run_id[kept])) + 1
     for rows in np.split(kept, bounds):
         if len(rows) >= 2:
-            pieces.append((int(chain_light[chain[rows[0]]]), np.column_stack([u[rows], v[rows]])))
+            pieces.append((int(chain_light[chain[rows[0]]]), np.column_stack([u[rows], v[rows]]), px[rows]))
     return pieces
 
 
@@ -408,8 +410,7 @@ def analytic_contours(field: UlmetField, progress=None) -> ContourLines:
     """Every tube's visible reflection line as projected polylines (the contour theorem, section 4)."""
     per_light: dict[int, list[Polyline]] = {j: [] for j in range(len(field.lights.c_k))}
     for k in range(len(field.surfaces)):
-        for light, uv in patch_contours(field, k):
-            px, _ = field.project(np.full(len(uv), k), uv[:, 0], uv[:, 1])
+        for light, uv, px in patch_contours(field, k):
             per_light[light].append(Polyline(k, uv, px))
         if progress:
             progress(1)
