@@ -178,6 +178,11 @@ def _smooth_pairs(renderer: Renderer, aovs: PixelAOVs, axis: int,
     return a[ok], b[ok]
 
 
+def _resolved_pairs(renderer: Renderer, aovs: PixelAOVs) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """`_smooth_pairs` per axis (1: along rows, 0: down columns) where neighbouring lines are resolved (tube spacing)."""
+    return {axis: _smooth_pairs(renderer, aovs, axis, renderer.lights.spacing) for axis in (1, 0)}
+
+
 def _unblocked(renderer: Renderer, aovs: PixelAOVs, pixels: np.ndarray) -> np.ndarray:
     """True where the pixel's reflected ray reaches the light plane without meeting the surface."""
     P, n, s = aovs.P.reshape(-1, 3)[pixels], aovs.N.reshape(-1, 3)[pixels], aovs.s.reshape(-1, 3)[pixels]
@@ -221,8 +226,13 @@ def _crossing(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, smooth
     return delta, ok
 
 
-def traced_centres(renderer: Renderer, aovs: PixelAOVs) -> TracedCentres:
-    """Where f − c_k changes sign between neighbouring pixel centres, on the cubic through four pixels (module doc)."""
+def traced_centres(renderer: Renderer, aovs: PixelAOVs,
+                   pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> TracedCentres:
+    """Where f − c_k changes sign between neighbouring pixel centres, on the cubic through four pixels (module doc).
+
+    ``pairs``: `_resolved_pairs` of these AOVs, when the caller has them already.
+    """
+    pairs = pairs if pairs is not None else _resolved_pairs(renderer, aovs)
     height, width = aovs.f.shape
     c_k = renderer.lights.c_k
     order = np.argsort(c_k)
@@ -230,7 +240,7 @@ def traced_centres(renderer: Renderer, aovs: PixelAOVs) -> TracedCentres:
     f, line_id = aovs.f.ravel(), aovs.line_id.ravel()
     pos, light, first_pixel, second_pixel = [], [], [], []
     for axis in (1, 0):
-        a, b = _smooth_pairs(renderer, aovs, axis, renderer.lights.spacing)
+        a, b = pairs[axis]
         smooth_next = np.zeros(f.size, dtype=bool)  # pair (p, p + step) is smooth, keyed by p
         smooth_next[a] = True
         lo_f, hi_f = np.fmin(f[a], f[b]), np.fmax(f[a], f[b])
@@ -422,8 +432,13 @@ def _checkable_points(contours: ContourLines, light: int, clean: np.ndarray) -> 
     return np.concatenate(out) if out else np.zeros((0, 2))
 
 
-def clean_pixels(renderer: Renderer, aovs: PixelAOVs) -> np.ndarray:
-    """(H, W) True where every pixel within CLEAN_MARGIN_PX hits one smooth piece of one patch (see module doc)."""
+def clean_pixels(renderer: Renderer, aovs: PixelAOVs,
+                 pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> np.ndarray:
+    """(H, W) True where every pixel within CLEAN_MARGIN_PX hits one smooth piece of one patch (see module doc).
+
+    ``pairs``: `_resolved_pairs` of these AOVs, when the caller has them already.
+    """
+    pairs = pairs if pairs is not None else _resolved_pairs(renderer, aovs)
     height, width = aovs.f.shape
     bad = ~(aovs.patch >= 0) | aovs.fallback
     flat_bad = bad.ravel().copy()
@@ -431,7 +446,7 @@ def clean_pixels(renderer: Renderer, aovs: PixelAOVs) -> np.ndarray:
         index = np.arange(height * width).reshape(height, width)
         a = (index[:, :-1] if axis == 1 else index[:-1, :]).ravel()
         b = (index[:, 1:] if axis == 1 else index[1:, :]).ravel()
-        good_a, good_b = _smooth_pairs(renderer, aovs, axis, renderer.lights.spacing)
+        good_a, _ = pairs[axis]
         smooth = np.zeros(height * width, dtype=bool)
         smooth[good_a] = True  # pair (a, a + step) is smooth, keyed by a
         edge = ~smooth[a]
@@ -525,8 +540,9 @@ class SceneReport:
 
 def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, tolerance: float) -> SceneReport:
     """Deviation of traced centres from the analytic contours, misses both ways and colour mismatches, per line."""
-    centres = _filter_unblocked(renderer, aovs, traced_centres(renderer, aovs))
-    clean = clean_pixels(renderer, aovs)
+    pairs = _resolved_pairs(renderer, aovs)
+    centres = _filter_unblocked(renderer, aovs, traced_centres(renderer, aovs, pairs))
+    clean = clean_pixels(renderer, aovs, pairs)
     checked, wrong = colour_mismatches(renderer, aovs)
     wrong_light = aovs.line_id[wrong].astype(int)
     c_k = renderer.lights.c_k
