@@ -33,6 +33,7 @@ from .camera import Camera
 from .lights import TubeLights, reflect
 from .surfaces import SurfaceSet
 from .tessellation import Tessellation
+from .tracing import facing
 
 #: Target size in pixels of one cell of the (u, v) grid that contourpy sees.
 GRID_CELL_PX = 2.0
@@ -205,7 +206,7 @@ class UlmetField:
         tau = (R + np.where(np.isfinite(t), t, 0.0)[:, None] * s - lights.Q) @ lights.c
         if math.isfinite(lights.length):
             good &= np.abs(tau) <= 0.5 * lights.length
-        n = np.where((np.einsum("ij,ij->i", n, a) < 0)[:, None], -n, n)
+        n = facing(n, -a)  # a points to the eye: the incoming ray runs along −a
         origin = self.accelerator.surface_origins(R, n, patch)
         if self.camera.orthographic:  # back along the view direction to the eye plane, where the ray started
             to_eye = (origin - self.camera.spec.eye) @ w
@@ -214,8 +215,24 @@ class UlmetField:
         idx = np.flatnonzero(good)
         good[idx] &= ~self.accelerator.occluded(origin[idx], a[idx], to_eye[idx])
         idx = np.flatnonzero(good)
-        good[idx] &= ~self.accelerator.occluded(origin[idx], s[idx], t[idx])
+        good[idx] &= reaches_light_plane(self.accelerator, lights, R[idx], n[idx], patch[idx], s[idx])
         return good
+
+
+def reaches_light_plane(accelerator: Accelerator, lights: TubeLights, R: np.ndarray, n: np.ndarray,
+                        patch: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """True where the reflected ray R + t s meets the light plane ahead (t > 0) with no triangle on the way.
+
+    n is the unit normal at R turned to the side the ray leaves from; the ray starts there,
+    off the surface by more than the mesh's chord error (`Accelerator.surface_origins`), as the
+    renderer's do.
+    """
+    t = lights.plane_t(R, s)
+    clear = t > 0
+    idx = np.flatnonzero(clear)
+    origin = accelerator.surface_origins(R[idx], n[idx], patch[idx])
+    clear[idx] = ~accelerator.occluded(origin, s[idx], t[idx])
+    return clear
 
 
 # -- polylines as flat arrays -------------------------------------------------------------------
@@ -312,8 +329,8 @@ def _cut_points(field: UlmetField, patch: np.ndarray, light: np.ndarray, ua, va,
     return good_u, good_v
 
 
-def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
-    """(tube index, (n, 2) array of (u, v)) of every visible contour piece on patch k."""
+def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """(tube index, (n, 2) array of (u, v), (n, 2) image positions) of every visible contour piece on patch k."""
     chains, chain_light, cell = _patch_chains(field, k)
     if len(chains.u) == 0:
         return []
@@ -369,8 +386,10 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
     where = np.concatenate([ends_after, starts_before])[order]
     new_u = np.concatenate([cut_u[good[change]], cut_u[~good[change]]])[order]
     new_v = np.concatenate([cut_v[good[change]], cut_v[~good[change]]])[order]
+    new_px, _ = field.project(np.full(len(new_u), k), new_u, new_v)
     u = np.insert(u, where + 1, new_u)
     v = np.insert(v, where + 1, new_v)
+    px = np.insert(px, where + 1, new_px, axis=0)
     chain = np.insert(chain, where + 1, chain[where])
     keep = np.insert(keep, where + 1, True)
     # Runs of kept vertices within one chain become the pieces.
@@ -383,7 +402,7 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray]]:
     bounds = np.flatnonzero(np.diff(run_id[kept])) + 1
     for rows in np.split(kept, bounds):
         if len(rows) >= 2:
-            pieces.append((int(chain_light[chain[rows[0]]]), np.column_stack([u[rows], v[rows]])))
+            pieces.append((int(chain_light[chain[rows[0]]]), np.column_stack([u[rows], v[rows]]), px[rows]))
     return pieces
 
 
@@ -391,8 +410,7 @@ def analytic_contours(field: UlmetField, progress=None) -> ContourLines:
     """Every tube's visible reflection line as projected polylines (the contour theorem, section 4)."""
     per_light: dict[int, list[Polyline]] = {j: [] for j in range(len(field.lights.c_k))}
     for k in range(len(field.surfaces)):
-        for light, uv in patch_contours(field, k):
-            px, _ = field.project(np.full(len(uv), k), uv[:, 0], uv[:, 1])
+        for light, uv, px in patch_contours(field, k):
             per_light[light].append(Polyline(k, uv, px))
         if progress:
             progress(1)

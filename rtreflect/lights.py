@@ -14,6 +14,9 @@ import numpy as np
 
 from .scene import LightSpec
 
+#: Point × tube pairs per chunk of the skew-line distances (eq. 4): about 80 MB of temporaries.
+TUBE_ENTRIES_PER_CHUNK = 1 << 20
+
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("...j,...j->...", a, b)
@@ -31,6 +34,17 @@ class TubeDistances:
     d: np.ndarray
     t: np.ndarray
     ahead: np.ndarray  # t > 0 and within the tube's length
+
+
+@dataclass(frozen=True)
+class TubeReach:
+    """Per point, what eq. (4) tells about the tubes ahead of its reflected ray (see `TubeLights.reach`)."""
+
+    line_id: np.ndarray  # nearest tube ahead, −1 where none is
+    line_dist: np.ndarray  # its distance d, NaN where none is
+    candidate: np.ndarray  # some tube ahead lies within the radius
+    t_candidate: np.ndarray  # ray parameter t of the nearest such (inf where none)
+    t_of: np.ndarray | None  # t of the tube asked for per point (`reach`'s ``tube``), else None
 
 
 @dataclass(frozen=True)
@@ -124,3 +138,24 @@ class TubeLights:
         within = dist.ahead & (dist.d <= self.radius)
         t_hit = np.where(within, dist.t, np.inf).min(axis=1)
         return within.any(axis=1), t_hit
+
+    def reach(self, R: np.ndarray, s: np.ndarray, tube: np.ndarray | None = None) -> TubeReach:
+        """`nearest` and `candidates` of eq. (4)'s distances, in chunks of TUBE_ENTRIES_PER_CHUNK point × tube pairs.
+
+        The (points, tubes) temporaries of `distances` stay bounded; each point's values depend on
+        its own row only, so the chunking does not change them. With ``tube`` (one tube index per
+        point), also the ray parameter t of closest approach to that tube.
+        """
+        n = len(R)
+        line_id, line_dist = np.full(n, -1), np.full(n, np.nan)
+        candidate, t_candidate = np.zeros(n, dtype=bool), np.full(n, np.inf)
+        t_of = None if tube is None else np.full(n, np.nan)
+        step = max(1, TUBE_ENTRIES_PER_CHUNK // max(1, len(self.c_k)))
+        for lo in range(0, n, step):
+            part = slice(lo, lo + step)
+            dist = self.distances(R[part], s[part])
+            line_id[part], line_dist[part] = self.nearest(dist)
+            candidate[part], t_candidate[part] = self.candidates(dist)
+            if tube is not None:
+                t_of[part] = dist.t[np.arange(len(dist.t)), tube[part]]
+        return TubeReach(line_id, line_dist, candidate, t_candidate, t_of)

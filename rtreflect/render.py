@@ -34,8 +34,6 @@ from .tracing import Hits, trace
 
 #: Most rays per tile (about 1.3 kB each in flight, see `tiling`): larger tiles buy no speed over numpy's per-call overhead.
 RAYS_PER_TILE = 1 << 16
-#: Point × tube pairs per chunk of the skew-line distances (eq. 4): about 80 MB of temporaries.
-TUBE_ENTRIES_PER_CHUNK = 1 << 20
 
 
 @dataclass
@@ -129,7 +127,7 @@ class Renderer:
     def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
         """Exact hits, reflected directions s, tube distances and 'lit' flags (a tube within its radius, unoccluded)."""
         hits = self.trace(origins, directions)
-        n_rays, n_tubes = len(origins), len(self.lights.c_k)
+        n_rays = len(origins)
         s = np.full_like(directions, np.nan)
         lit = np.zeros(n_rays, dtype=bool)
         line_id, line_dist = np.full(n_rays, -1), np.full(n_rays, np.nan)
@@ -141,15 +139,10 @@ class Renderer:
         with self.clock.stage("tubes (eq. 3, 4)"):
             # a, the unit vector towards the eye, is the reversed ray direction for either camera.
             s[idx] = reflect(-directions[idx], n)
-            candidate, t_tube = np.zeros(len(idx), dtype=bool), np.full(len(idx), np.inf)
-            # Chunks of points, so eq. (4)'s temporaries (about ten (points, tubes) arrays) stay bounded.
-            step = max(1, TUBE_ENTRIES_PER_CHUNK // max(1, n_tubes))
-            for lo in range(0, len(idx), step):
-                part, rows = slice(lo, lo + step), idx[lo:lo + step]
-                hit_dist = self.lights.distances(R[part], s[rows])
-                line_id[rows], line_dist[rows] = self.lights.nearest(hit_dist)
-                candidate[part], t_tube[part] = self.lights.candidates(hit_dist)
-            cand = np.flatnonzero(candidate)
+            tubes = self.lights.reach(R, s[idx])
+            line_id[idx], line_dist[idx] = tubes.line_id, tubes.line_dist
+            t_tube = tubes.t_candidate
+            cand = np.flatnonzero(tubes.candidate)
         if len(cand):
             start = self.accelerator.surface_origins(R[cand], n[cand], hits.patch[idx[cand]])
             with self.clock.stage("occlusion (Embree)"):

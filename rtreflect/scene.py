@@ -130,11 +130,12 @@ class Scene:
         return replace(self, image=_parse_image(_Table(self.path, "image", table)))
 
     def with_render(self, overlay: bool | None = None, normals: str | None = None) -> "Scene":
-        """The same scene with `[render] overlay` and/or `normals` overridden (command-line options)."""
-        if normals is not None and normals not in NORMALS_MODES:
-            raise SceneError(self.path, "render.normals", f"must be one of {', '.join(map(repr, NORMALS_MODES))}, got {normals!r}")
-        values = {k: v for k, v in {"overlay": overlay, "normals": normals}.items() if v is not None}
-        return replace(self, render=replace(self.render, **values))
+        """The same scene with `[render] overlay` and/or `normals` overridden (command-line options), validated alike."""
+        values = {"overlay": overlay, "normals": normals}
+        # Back to TOML's own types (colours as lists) so the table reads as the scene file's did.
+        table = {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in vars(self.render).items()}
+        table.update({k: v for k, v in values.items() if v is not None})
+        return replace(self, render=_parse_render(_Table(self.path, "render", table)))
 
 
 class _Table:
@@ -349,14 +350,11 @@ def _parse_render(t: _Table) -> RenderSettings:
     defaults = RenderSettings()
     tess = t.number("tessellation", defaults.tessellation, low=1, high=MAX_TESSELLATION, integer=True)
     colors = {}
-    for key in ("surface_color", "line_color", "background"):
+    for key in ("surface_color", "line_color", "background", "overlay_color"):
         colors[key] = t.array(key, (3,), getattr(defaults, key))
         if np.any(colors[key] < 0):
             raise t.error(key, f"colour components must be >= 0, got {colors[key].tolist()}")
     overlay = t.boolean("overlay", defaults.overlay)
-    colors["overlay_color"] = t.array("overlay_color", (3,), defaults.overlay_color)
-    if np.any(colors["overlay_color"] < 0):
-        raise t.error("overlay_color", f"colour components must be >= 0, got {colors['overlay_color'].tolist()}")
     normals = t.string("normals", defaults.normals, NORMALS_MODES)
     t.finish()
     return RenderSettings(tess, **colors, overlay=overlay, normals=normals)

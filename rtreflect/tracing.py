@@ -109,16 +109,16 @@ def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, toler
     return u, v, SurfaceDerivatives(S, Su_all, Sv_all), converged
 
 
-def _near_mesh_hit(derivs: SurfaceDerivatives, O, D, t_mesh, chord) -> np.ndarray:
-    """Whether refined hits lie ahead and within reach of the mesh hit (not on another sheet)."""
+def _near_mesh_hit(derivs: SurfaceDerivatives, O, D, mesh_point, chord) -> tuple[np.ndarray, np.ndarray]:
+    """Whether refined hits lie ahead and within reach of the mesh hit (not on another sheet), and their t = (S − O)·D."""
     S = derivs.S
     cross = np.cross(derivs.Su, derivs.Sv)
     with np.errstate(divide="ignore", invalid="ignore"):
         cos = np.abs(np.einsum("ij,ij->i", cross, D)) / np.linalg.norm(cross, axis=1)
     allowance = np.clip(np.nan_to_num(1.0 / cos, nan=1.0), 1.0, GRAZING_ALLOWANCE)
-    ahead = np.einsum("ij,ij->i", S - O, D) > 0
-    jump = np.linalg.norm(S - (O + t_mesh[:, None] * D), axis=1)
-    return ahead & (jump <= JUMP_LIMIT * chord * allowance)
+    t = np.einsum("ij,ij->i", S - O, D)
+    jump = np.linalg.norm(S - mesh_point, axis=1)
+    return (t > 0) & (jump <= JUMP_LIMIT * chord * allowance), t
 
 
 def _on_domain_edge(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
@@ -137,10 +137,12 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     idx = np.flatnonzero(hits.hit)
     if len(idx):
         O, D, tm = origins[idx], directions[idx], mesh.t[idx]
+        mesh_point = O + tm[:, None] * D
         pk, us, vs = tessellation.start_parameters(mesh.prim[idx], mesh.b1[idx], mesh.b2[idx])
         with clock.stage("newton (exact hit)"):
             ur, vr, derivs, ok = refine(surfaces, pk, us, vs, O, D, tm, tessellation.extent)
-            ok &= _near_mesh_hit(derivs, O, D, tm, tessellation.chord_error[pk] + 1e-6 * tessellation.extent)
+            near, tr = _near_mesh_hit(derivs, O, D, mesh_point, tessellation.chord_error[pk] + 1e-6 * tessellation.extent)
+            ok &= near
             seam = np.flatnonzero(~ok & _on_domain_edge(surfaces, pk, ur, vr))
             if len(seam):
                 pn, un, vn, gap = tessellation.across_seam(derivs.S[seam], pk[seam])
@@ -148,15 +150,14 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 near = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[pk[seam]])
                 seam, pn, un, vn = (x[near] for x in (seam, pn, un, vn))
                 u2, v2, d2, ok2 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
-                ok2 &= _near_mesh_hit(d2, O[seam], D[seam], tm[seam],
-                                      tessellation.chord_error[pn] + 1e-6 * tessellation.extent)
+                near2, tr2 = _near_mesh_hit(d2, O[seam], D[seam], mesh_point[seam],
+                                            tessellation.chord_error[pn] + 1e-6 * tessellation.extent)
+                ok2 &= near2
                 won = seam[ok2]
-                pk[won], ur[won], vr[won], ok[won] = pn[ok2], u2[ok2], v2[ok2], True
+                pk[won], ur[won], vr[won], ok[won], tr[won] = pn[ok2], u2[ok2], v2[ok2], True, tr2[ok2]
                 for have, new in zip(derivs[:3], d2[:3]):
                     have[won] = new[ok2]
         S = derivs.S
-        tr = np.einsum("ij,ij->i", S - O, D)
-        mesh_point = O + tm[:, None] * D
         patch[idx] = pk
         u[idx] = np.where(ok, ur, us)
         v[idx] = np.where(ok, vr, vs)

@@ -47,7 +47,7 @@ from typing import Callable
 
 import numpy as np
 
-from .contours import ContourLines, UlmetField, analytic_contours
+from .contours import ContourLines, UlmetField, analytic_contours, reaches_light_plane
 from .film import Film
 from .lights import reflect
 from .render import Renderer
@@ -178,13 +178,16 @@ def _smooth_pairs(renderer: Renderer, aovs: PixelAOVs, axis: int,
     return a[ok], b[ok]
 
 
+def _resolved_pairs(renderer: Renderer, aovs: PixelAOVs) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """`_smooth_pairs` per axis (1: along rows, 0: down columns) where neighbouring lines are resolved (tube spacing)."""
+    return {axis: _smooth_pairs(renderer, aovs, axis, renderer.lights.spacing) for axis in (1, 0)}
+
+
 def _unblocked(renderer: Renderer, aovs: PixelAOVs, pixels: np.ndarray) -> np.ndarray:
     """True where the pixel's reflected ray reaches the light plane without meeting the surface."""
     P, n, s = aovs.P.reshape(-1, 3)[pixels], aovs.N.reshape(-1, 3)[pixels], aovs.s.reshape(-1, 3)[pixels]
-    t = renderer.lights.plane_t(P, s)
     patch = aovs.patch.ravel()[pixels].astype(int)
-    start = renderer.accelerator.surface_origins(P, n, patch)
-    return (t > 0) & ~renderer.accelerator.occluded(start, s, np.where(t > 0, t, 0.0))
+    return reaches_light_plane(renderer.accelerator, renderer.lights, P, n, patch, s)
 
 
 def _crossing(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, smooth_next: np.ndarray,
@@ -223,8 +226,13 @@ def _crossing(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, smooth
     return delta, ok
 
 
-def traced_centres(renderer: Renderer, aovs: PixelAOVs) -> TracedCentres:
-    """Where f − c_k changes sign between neighbouring pixel centres, on the cubic through four pixels (module doc)."""
+def traced_centres(renderer: Renderer, aovs: PixelAOVs,
+                   pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> TracedCentres:
+    """Where f − c_k changes sign between neighbouring pixel centres, on the cubic through four pixels (module doc).
+
+    ``pairs``: `_resolved_pairs` of these AOVs, when the caller has them already.
+    """
+    pairs = pairs if pairs is not None else _resolved_pairs(renderer, aovs)
     height, width = aovs.f.shape
     c_k = renderer.lights.c_k
     order = np.argsort(c_k)
@@ -232,7 +240,7 @@ def traced_centres(renderer: Renderer, aovs: PixelAOVs) -> TracedCentres:
     f, line_id = aovs.f.ravel(), aovs.line_id.ravel()
     pos, light, first_pixel, second_pixel = [], [], [], []
     for axis in (1, 0):
-        a, b = _smooth_pairs(renderer, aovs, axis, renderer.lights.spacing)
+        a, b = pairs[axis]
         smooth_next = np.zeros(f.size, dtype=bool)  # pair (p, p + step) is smooth, keyed by p
         smooth_next[a] = True
         lo_f, hi_f = np.fmin(f[a], f[b]), np.fmax(f[a], f[b])
@@ -312,18 +320,14 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
         inside = (line_id >= 0) & (d + 0.71 * g < radius)
         outside = (line_id < 0) | (d - 0.71 * g > radius)
     # Occlusion of the reflected ray, for every pixel with a tube ahead: up to the nearest tube within the
-    # radius along the ray (as the renderer does), else up to the nearest tube ahead. In chunks: (pixels × tubes).
+    # radius along the ray (as the renderer does), else up to the nearest tube ahead.
     ahead = np.flatnonzero(line_id >= 0)
     blocked = np.zeros(size, dtype=bool)
-    chunk = max(1, (1 << 22) // max(1, len(renderer.lights.c_k)))
-    for lo in range(0, len(ahead), chunk):
-        rows = ahead[lo:lo + chunk]
-        P, n, s = aovs.P.reshape(-1, 3)[rows], aovs.N.reshape(-1, 3)[rows], aovs.s.reshape(-1, 3)[rows]
-        dist = renderer.lights.distances(P, s)
-        within, t_within = renderer.lights.candidates(dist)
-        t = np.where(within, t_within, dist.t[np.arange(len(rows)), line_id[rows].astype(int)])
-        start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[rows].astype(int))
-        blocked[rows] = renderer.accelerator.occluded(start, s, t)
+    P, n, s = aovs.P.reshape(-1, 3)[ahead], aovs.N.reshape(-1, 3)[ahead], aovs.s.reshape(-1, 3)[ahead]
+    tubes = renderer.lights.reach(P, s, tube=line_id[ahead].astype(int))
+    t = np.where(tubes.candidate, tubes.t_candidate, tubes.t_of)
+    start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[ahead].astype(int))
+    blocked[ahead] = renderer.accelerator.occluded(start, s, t)
     blocked_grid = blocked.reshape(height, width)
     padded = np.pad(blocked_grid, 1, mode="edge")
     uniform = ((padded[1:-1, :-2] == blocked_grid) & (padded[1:-1, 2:] == blocked_grid)
@@ -428,8 +432,13 @@ def _checkable_points(contours: ContourLines, light: int, clean: np.ndarray) -> 
     return np.concatenate(out) if out else np.zeros((0, 2))
 
 
-def clean_pixels(renderer: Renderer, aovs: PixelAOVs) -> np.ndarray:
-    """(H, W) True where every pixel within CLEAN_MARGIN_PX hits one smooth piece of one patch (see module doc)."""
+def clean_pixels(renderer: Renderer, aovs: PixelAOVs,
+                 pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> np.ndarray:
+    """(H, W) True where every pixel within CLEAN_MARGIN_PX hits one smooth piece of one patch (see module doc).
+
+    ``pairs``: `_resolved_pairs` of these AOVs, when the caller has them already.
+    """
+    pairs = pairs if pairs is not None else _resolved_pairs(renderer, aovs)
     height, width = aovs.f.shape
     bad = ~(aovs.patch >= 0) | aovs.fallback
     flat_bad = bad.ravel().copy()
@@ -437,7 +446,7 @@ def clean_pixels(renderer: Renderer, aovs: PixelAOVs) -> np.ndarray:
         index = np.arange(height * width).reshape(height, width)
         a = (index[:, :-1] if axis == 1 else index[:-1, :]).ravel()
         b = (index[:, 1:] if axis == 1 else index[1:, :]).ravel()
-        good_a, good_b = _smooth_pairs(renderer, aovs, axis, renderer.lights.spacing)
+        good_a, _ = pairs[axis]
         smooth = np.zeros(height * width, dtype=bool)
         smooth[good_a] = True  # pair (a, a + step) is smooth, keyed by a
         edge = ~smooth[a]
@@ -531,8 +540,9 @@ class SceneReport:
 
 def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, tolerance: float) -> SceneReport:
     """Deviation of traced centres from the analytic contours, misses both ways and colour mismatches, per line."""
-    centres = _filter_unblocked(renderer, aovs, traced_centres(renderer, aovs))
-    clean = clean_pixels(renderer, aovs)
+    pairs = _resolved_pairs(renderer, aovs)
+    centres = _filter_unblocked(renderer, aovs, traced_centres(renderer, aovs, pairs))
+    clean = clean_pixels(renderer, aovs, pairs)
     checked, wrong = colour_mismatches(renderer, aovs)
     wrong_light = aovs.line_id[wrong].astype(int)
     c_k = renderer.lights.c_k

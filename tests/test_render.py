@@ -234,3 +234,34 @@ def test_hits_across_teapot_seams_refine_on_the_neighbour_patch():
     exact = hits.hit & ~hits.fallback
     P_ref = renderer.surfaces.evaluate(hits.patch[exact], hits.u[exact], hits.v[exact]).S
     assert np.max(np.linalg.norm(aovs["P"][exact] - P_ref, axis=1)) <= 1e-9 * renderer.tessellation.extent
+
+
+def test_tube_reach_in_chunks_matches_least_squares_closest_approach(monkeypatch):
+    """TubeLights.reach (eq. 4 in chunks of a few points) against a least-squares closest approach per ray and tube."""
+    import rtreflect.lights as lights_module
+    from rtreflect.lights import TubeLights
+
+    rng = np.random.default_rng(7)
+    c = np.array([0.0, 1.0, 0.0])
+    m = np.array([0.0, 0.0, 1.0])
+    tubes = TubeLights(np.array([0.0, 0.0, 5.0]), m, c, np.cross(c, m), np.array([-2.0, -0.5, 0.0, 1.0, 3.0]),
+                       0.4, float("inf"))
+    R = rng.uniform(-2, 2, (40, 3))
+    s = rng.normal(size=(40, 3))
+    s /= np.linalg.norm(s, axis=1, keepdims=True)
+    tube = rng.integers(0, len(tubes.c_k), 40)
+    monkeypatch.setattr(lights_module, "TUBE_ENTRIES_PER_CHUNK", 12)  # chunks of two points
+    reach = tubes.reach(R, s, tube=tube)
+    for row in range(len(R)):
+        found = [closest_line_distance(R[row], s[row], B, c) for B in tubes.points]
+        ahead = [(d, t, k) for k, (d, t) in enumerate(found) if t > 0]
+        within = [t for d, t, _ in ahead if d <= tubes.radius]
+        if ahead:
+            d_best, _, k_best = min(ahead)
+            assert reach.line_id[row] == k_best
+            assert abs(reach.line_dist[row] - d_best) <= 1e-9
+        else:
+            assert reach.line_id[row] == -1 and np.isnan(reach.line_dist[row])
+        assert reach.candidate[row] == bool(within)
+        assert reach.t_candidate[row] == pytest.approx(min(within, default=np.inf), rel=1e-9)
+        assert reach.t_of[row] == pytest.approx(found[tube[row]][1], rel=1e-9, abs=1e-9)

@@ -566,3 +566,29 @@ def test_bad_scene_fails_alone_in_a_batch(case: Case, tmp_path: Path) -> None:
     bad = scenes["scene.toml"]
     assert bad["status"] == "failed" and "\n" not in bad["error"]
     assert f"{case.expected_file(scene_path)}: {case.field}" in bad["error"], bad["error"]
+
+
+def test_render_overrides_are_read_like_the_scene_file(tmp_path: Path) -> None:
+    """Scene.with_render re-reads [render] as load_scene does: the same settings and the same one-line messages."""
+    import numpy as np
+
+    from rtreflect.errors import SceneError
+    from rtreflect.scene import load_scene
+
+    base = load_scene(write_scene(tmp_path, Case("base", lambda scene: None, "")))
+    with pytest.raises(SceneError) as override:
+        base.with_render(normals="smooth")
+    write_scene(tmp_path, Case("bad mode", put("render.normals", "smooth"), "render.normals"))
+    with pytest.raises(SceneError) as in_file:
+        load_scene(tmp_path / "scene.toml")
+    assert str(override.value) == str(in_file.value)
+    assert "render.normals" in str(override.value)
+    with pytest.raises(SceneError, match="render.overlay"):
+        base.with_render(overlay="yes")  # type: ignore[arg-type]
+
+    write_scene(tmp_path, Case("mesh overlay", together(put("render.normals", "mesh"), put("render.overlay", True)), ""))
+    expected = load_scene(tmp_path / "scene.toml").render
+    got = base.with_render(overlay=True, normals="mesh").render
+    assert vars(got).keys() == vars(expected).keys()
+    for key, value in vars(expected).items():
+        assert np.array_equal(vars(got)[key], value), key
