@@ -32,7 +32,7 @@ from .surfaces import SurfaceSet
 from .tessellation import tessellate
 from .tracing import Hits, trace
 
-#: Most rays per tile (about 1.3 kB each in flight, see `tiling`): larger tiles buy no speed over numpy's per-call overhead.
+#: Most rays per tile (about 1.2 kB each in flight, see `tiling`): larger tiles buy no speed over numpy's overhead.
 RAYS_PER_TILE = 1 << 16
 
 

@@ -2,10 +2,11 @@
 
 A render streams its image tile by tile (`Renderer.stream` → `ImageWriter`), so its
 working memory is the tiles in flight plus one partial row, not the image. A tile's
-memory grows with its rays, and a ray's with the number of tubes K (the (N, K) arrays
-of skew-line distances, eq. 4) and the surface degree (basis functions). The cost per
-ray below was measured with tracemalloc on the shipped scenes (about 1.3 kB plus 43 B
-per tube for bicubic patches) and rounded up; it is an estimate, not a hard limit.
+memory grows with its rays (about 1 kB each, more for higher surface degrees) plus the
+skew-line distances of eq. (4): rays × tubes pairs of about 48 B, computed in chunks of
+at most `TUBE_ENTRIES_PER_CHUNK` pairs, so that part stops growing at about 50 MB.
+The costs were measured with tracemalloc on the shipped scenes and rounded up; they are
+an estimate, not a hard limit.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import re
 from .camera import rays_per_pixel
 from .errors import RtreflectError
 from .film import CHANNELS
+from .lights import TUBE_ENTRIES_PER_CHUNK
 from .render import RAYS_PER_TILE
 from .scene import Scene
 
@@ -58,11 +60,20 @@ def default_max_memory() -> int:
         return FALLBACK_BYTES
 
 
+#: Bytes per point × tube pair of eq. (4)'s temporaries (distances, ray parameters, flags).
+BYTES_PER_TUBE_ENTRY = 48
+
+
 def bytes_per_ray(scene: Scene) -> int:
-    """Estimated peak working memory of one ray through shading: fixed arrays, per-tube distances, basis functions."""
-    tubes = len(scene.lights.positions)
+    """Estimated peak working memory of one ray through shading, apart from eq. (4)'s tube pairs."""
     basis = max((s.degree_u + 1) * (s.degree_v + 1) for s in scene.surfaces)
-    return 1024 + 48 * tubes + 16 * basis
+    return 1024 + 16 * basis
+
+
+def tile_bytes(scene: Scene, rays: int) -> int:
+    """Estimated working memory of a tile of ``rays`` rays: the rays, and their tube pairs up to one chunk."""
+    tube_pairs = min(rays * len(scene.lights.positions), TUBE_ENTRIES_PER_CHUNK)
+    return rays * bytes_per_ray(scene) + BYTES_PER_TUBE_ENTRY * tube_pairs
 
 
 def rays_per_tile(scene: Scene, max_memory: int, tiles_in_flight: int) -> int:
@@ -73,14 +84,18 @@ def rays_per_tile(scene: Scene, max_memory: int, tiles_in_flight: int) -> int:
     before anything is built or allocated.
     """
     per_pixel = rays_per_pixel(scene.image.samples)
-    per_ray = bytes_per_ray(scene)
     pixel_bytes = len(CHANNELS) * 4
     # The writer holds a partial row; OpenImageIO's EXR writer holds scanline buffers (`WRITER_ROWS`).
     rows = (2 + WRITER_ROWS) * scene.image.width * pixel_bytes
     usable = (max_memory - rows) // max(1, tiles_in_flight)
-    rays = usable // (per_ray + pixel_bytes // per_pixel + 1)
+    per_ray = bytes_per_ray(scene) + pixel_bytes // per_pixel + 1
+    tubes = max(1, len(scene.lights.positions))
+    # tile_bytes is linear in the rays up to a full chunk of tube pairs, then grows by per_ray only.
+    below_chunk = min(max(0, usable) // (per_ray + BYTES_PER_TUBE_ENTRY * tubes), TUBE_ENTRIES_PER_CHUNK // tubes)
+    beyond_chunk = (usable - BYTES_PER_TUBE_ENTRY * TUBE_ENTRIES_PER_CHUNK) // per_ray
+    rays = max(below_chunk, beyond_chunk)
     if rays < per_pixel:
-        need = rows + tiles_in_flight * per_pixel * (per_ray + pixel_bytes)
+        need = rows + tiles_in_flight * (tile_bytes(scene, per_pixel) + per_pixel * pixel_bytes)
         raise RtreflectError(
             f"{scene.path}: image: needs about {format_size(need)} of working memory even with one-pixel tiles "
             f"({per_pixel} rays/pixel, {len(scene.lights.positions)} tubes, {scene.image.width} px rows, "

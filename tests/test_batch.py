@@ -315,3 +315,26 @@ def test_outputs_rendered_with_other_settings_are_not_up_to_date(tmp_path):
     assert read_image(out / "hood.exr")[0].shape[:2] == (90, 160)  # the scene's own size now
     code, output, report = run_batch(scene_path, "-o", out, "--json", tmp_path / "r.json")
     assert report["counts"]["skipped"] == 1
+
+
+@pytest.mark.parametrize("budget_mb", [64, 128, 1024])
+def test_tiles_fit_the_budget_and_tube_pairs_stop_growing_at_a_chunk(tmp_path, budget_mb):
+    """Tiles of the estimate fit the budget; past one chunk of tube pairs (eq. 4), more tubes do not shrink them."""
+    from dataclasses import replace
+
+    from rtreflect.camera import rays_per_pixel
+    from rtreflect.tiling import WRITER_ROWS, rays_per_tile, tile_bytes
+
+    base = load_scene(small_scene("hood", tmp_path / "hood.toml", samples=4))
+    budget = budget_mb << 20
+    sizes = {}
+    for tubes in (1, 20, 2000, 10000):
+        scene = replace(base, lights=replace(base.lights, positions=np.linspace(-2, 2, tubes)))
+        rays = rays_per_tile(scene, budget, 2)
+        rows = (2 + WRITER_ROWS) * scene.image.width * len(CHANNELS) * 4
+        pixels = -(-rays // rays_per_pixel(scene.image.samples))
+        assert rows + 2 * (tile_bytes(scene, rays) + pixels * len(CHANNELS) * 4) <= budget
+        sizes[tubes] = rays
+    assert sizes[1] >= sizes[20] >= sizes[2000] >= sizes[10000] > 0
+    if budget_mb >= 128:  # room for a whole chunk per tile: past it, more tubes cost nothing more
+        assert sizes[2000] == sizes[10000] > 1000
