@@ -206,7 +206,7 @@ def test_interrupted_batch_leaves_only_complete_files_and_resumes(tmp_path):
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     # Interrupt once the workers are writing (their temporary files exist).
-    while not (out.is_dir() and any(p.name.startswith(".") for p in out.iterdir())):
+    while not (out.is_dir() and any(p.name.startswith(".") and p.suffix in (".exr", ".png") for p in out.iterdir())):
         assert batch.poll() is None and time.monotonic() < deadline, batch.communicate()
         time.sleep(0.02)
     batch.send_signal(signal.SIGINT)
