@@ -112,13 +112,18 @@ def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, toler
 def _near_mesh_hit(derivs: SurfaceDerivatives, O, D, mesh_point, chord) -> tuple[np.ndarray, np.ndarray]:
     """Whether refined hits lie ahead and within reach of the mesh hit (not on another sheet), and their t = (S − O)·D."""
     S = derivs.S
-    cross = np.cross(derivs.Su, derivs.Sv)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cos = np.abs(np.einsum("ij,ij->i", cross, D)) / np.linalg.norm(cross, axis=1)
-    allowance = np.clip(np.nan_to_num(1.0 / cos, nan=1.0), 1.0, GRAZING_ALLOWANCE)
     t = np.einsum("ij,ij->i", S - O, D)
     jump = np.linalg.norm(S - mesh_point, axis=1)
-    return (t > 0) & (jump <= JUMP_LIMIT * chord * allowance), t
+    near = jump <= JUMP_LIMIT * chord
+    # The grazing allowance (≥ 1) only matters for the few hits beyond the plain limit: the normal only for those.
+    far = np.flatnonzero(~near)
+    if len(far):
+        cross = np.cross(derivs.Su[far], derivs.Sv[far])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cos = np.abs(np.einsum("ij,ij->i", cross, D[far])) / np.linalg.norm(cross, axis=1)
+        allowance = np.clip(np.nan_to_num(1.0 / cos, nan=1.0), 1.0, GRAZING_ALLOWANCE)
+        near[far] = jump[far] <= JUMP_LIMIT * chord[far] * allowance
+    return (t > 0) & near, t
 
 
 def _on_domain_edge(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
