@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rtreflect.render import Renderer
-from rtreflect.scene import load_scene
+from rtreflect.integrator.renderer import Renderer
+from rtreflect.exchange.scene import load_scene
 
 
 def bench_scene_text(width: int, height: int) -> str:

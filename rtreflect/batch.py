@@ -28,11 +28,11 @@ from typing import Callable
 
 from . import __version__
 from .errors import RtreflectError
-from .imagefiles import (OUTPUT_KEY_ATTRIBUTE, VERSION_ATTRIBUTE, check_distinct_outputs, output_paths, read_provenance,
+from .output.imagefiles import (OUTPUT_KEY_ATTRIBUTE, VERSION_ATTRIBUTE, check_distinct_outputs, output_paths, read_provenance,
                          write_json)
-from .overlay import contours_file_name
-from .scene import Scene, load_scene
-from .tiling import default_max_memory
+from .analysis.overlay import contours_file_name
+from .exchange.scene import Scene, load_scene
+from .integrator.tiling import default_max_memory
 
 RENDERED, SKIPPED, FAILED, INTERRUPTED = "rendered", "skipped", "failed", "interrupted"
 
@@ -142,7 +142,7 @@ def failure_reason(exc: BaseException) -> str:
 def render_job(scene: Scene, outdir: Path, threads: int | None, max_memory: int | None,
                progress: Callable[[int], None] | None = None) -> SceneReport:
     """Render one scene to its files (`streaming.render_to_files`); failures become a failed report, not an exception."""
-    from .streaming import render_to_files
+    from .output.streaming import render_to_files
 
     start = time.perf_counter()
     report = SceneReport(str(scene.path), scene.output.name, RENDERED)

@@ -16,13 +16,13 @@ from tqdm import tqdm
 
 from . import __version__
 from .errors import RtreflectError, one_line
-from .imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, write_json
+from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, write_json
 from .interrupts import Interrupted, signals_as_exceptions
-from .overlay import contours_file_name
-from .scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, load_scene
-from .streaming import render_to_files
-from .tiling import parse_size
-from .validate import DEFAULT_TOLERANCE_PX, validate_scene
+from .analysis.overlay import contours_file_name
+from .exchange.scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, load_scene
+from .output.streaming import render_to_files
+from .integrator.tiling import parse_size
+from .analysis.validate import DEFAULT_TOLERANCE_PX, validate_scene
 
 EXIT_BAD_INPUT = 2
 EXIT_CHECK_FAILED = 1
@@ -174,7 +174,7 @@ def diff(a: Path, b: Path, fail_threshold, failrelative, failpercent, hardfail, 
       rtreflect diff out/hood.exr golden_images/hood.exr --channels N.X,N.Y,N.Z --fail 1e-5
       rtreflect diff out/hood.png golden_images/hood.png --failpercent 0.05 --json report.json
     """
-    from .diff import Tolerance, compare_images
+    from .ci.diff import Tolerance, compare_images
 
     tolerance = Tolerance(fail=fail_threshold, failrelative=failrelative, failpercent=failpercent, hardfail=hardfail, warn=warn,
                           warnrelative=warnrelative, warnpercent=warnpercent)

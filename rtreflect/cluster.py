@@ -27,11 +27,11 @@ import numpy as np
 from . import __version__
 from .batch import FAILED, RENDERED, Job, SceneReport, failure_reason
 from .errors import RtreflectError
-from .imagefiles import ImageWriter, open_outputs, output_paths
-from .render import Renderer, pixel_spans
-from .scene import Scene
-from .streaming import overlay_for
-from .tiling import default_max_memory, rays_per_tile
+from .output.imagefiles import ImageWriter, open_outputs, output_paths
+from .integrator.renderer import Renderer, pixel_spans
+from .exchange.scene import Scene
+from .output.streaming import overlay_for
+from .integrator.tiling import default_max_memory, rays_per_tile
 
 #: Seconds to wait for the scheduler before giving up.
 CONNECT_TIMEOUT = 20

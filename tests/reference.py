@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import rhino3dm
 
-from rtreflect.surfaces import NurbsSurface
+from rtreflect.geometry.surfaces import NurbsSurface
 
 
 def to_rhino(surface: NurbsSurface) -> rhino3dm.NurbsSurface:

@@ -25,11 +25,11 @@ from click.testing import CliRunner
 
 from rtreflect import batch as batching
 from rtreflect.cli import cli
-from rtreflect.film import CHANNELS
-from rtreflect.imagefiles import ImageWriter, open_outputs, read_image, read_provenance, save_render
-from rtreflect.render import Renderer
-from rtreflect.scene import load_scene
-from rtreflect.streaming import render_to_files
+from rtreflect.integrator.film import CHANNELS
+from rtreflect.output.imagefiles import ImageWriter, open_outputs, read_image, read_provenance, save_render
+from rtreflect.integrator.renderer import Renderer
+from rtreflect.exchange.scene import load_scene
+from rtreflect.output.streaming import render_to_files
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 RTREFLECT = Path(sys.executable).parent / "rtreflect"
@@ -322,8 +322,8 @@ def test_tiles_fit_the_budget_and_tube_pairs_stop_growing_at_a_chunk(tmp_path, b
     """Tiles of the estimate fit the budget; past one chunk of tube pairs (eq. 4), more tubes do not shrink them."""
     from dataclasses import replace
 
-    from rtreflect.camera import rays_per_pixel
-    from rtreflect.tiling import WRITER_ROWS, rays_per_tile, tile_bytes
+    from rtreflect.trace.camera import rays_per_pixel
+    from rtreflect.integrator.tiling import WRITER_ROWS, rays_per_tile, tile_bytes
 
     base = load_scene(small_scene("hood", tmp_path / "hood.toml", samples=4))
     budget = budget_mb << 20

@@ -17,13 +17,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from rtreflect.camera import Camera
+from rtreflect.trace.camera import Camera
 from rtreflect.cli import cli
-from rtreflect.contours import MAX_SEGMENT_PX, ContourLine, ContourLines, Polyline, UlmetField, analytic_contours
-from rtreflect.lights import TubeLights
-from rtreflect.overlay import coverage
-from rtreflect.render import Renderer
-from rtreflect.scene import LightSpec, load_scene
+from rtreflect.analysis.contours import MAX_SEGMENT_PX, ContourLine, ContourLines, Polyline, UlmetField, analytic_contours
+from rtreflect.modes.lights import TubeLights
+from rtreflect.analysis.overlay import coverage
+from rtreflect.integrator.renderer import Renderer
+from rtreflect.exchange.scene import LightSpec, load_scene
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 I, J, K = np.eye(3)
@@ -157,7 +157,7 @@ def test_render_overlay_writes_contours_json_and_draws_them(tmp_path):
     assert plain.exit_code == 0, plain.stderr
     drawn = CliRunner().invoke(cli, ["render", str(scene), "-o", str(tmp_path / "overlay"), "--overlay", *options])
     assert drawn.exit_code == 0, drawn.stderr
-    from rtreflect.imagefiles import read_image
+    from rtreflect.output.imagefiles import read_image
 
     a, _, _ = read_image(tmp_path / "plain" / "hood.png")
     b, _, _ = read_image(tmp_path / "overlay" / "hood.png")

@@ -19,8 +19,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rtreflect.cli import cli
-from rtreflect.diff import DiffInputError, Tolerance, compare_images
-from rtreflect.imagefiles import read_image
+from rtreflect.ci.diff import DiffInputError, Tolerance, compare_images
+from rtreflect.output.imagefiles import read_image
 from rtreflect.testing import assert_images_match
 
 GOLDEN_HOOD = Path(__file__).resolve().parent.parent / "golden_images" / "hood.exr"

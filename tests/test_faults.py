@@ -31,9 +31,9 @@ import OpenImageIO as oiio
 import pytest
 from click.testing import CliRunner
 
-import rtreflect.imagefiles as imagefiles
+import rtreflect.output.imagefiles as imagefiles
 from rtreflect.cli import cli
-from rtreflect.imagefiles import read_image
+from rtreflect.output.imagefiles import read_image
 from rtreflect.interrupts import Interrupted
 from test_scene_errors import RENDER_OPTIONS, control_net, toml_document, valid_scene
 
@@ -112,7 +112,7 @@ def test_output_folder_not_writable(tmp_path: Path, monkeypatch: pytest.MonkeyPa
 
     monkeypatch.setattr(tempfile, "mkstemp", refuse)
     rendered = []
-    monkeypatch.setattr("rtreflect.streaming.Renderer", lambda scene: rendered.append(scene))
+    monkeypatch.setattr("rtreflect.output.streaming.Renderer", lambda scene: rendered.append(scene))
     line = assert_one_line_error(render_in_process(scene_path, outdir), str(outdir), "Permission denied")
     assert rendered == [], f"rendered before finding the folder unwritable: {line}"
     assert snapshot(outdir) == {}
@@ -196,7 +196,7 @@ def test_folder_in_place_of_an_output_is_found_before_rendering(previous_output,
     (outdir / "base.exr").unlink()
     (outdir / "base.exr").mkdir()
     rendered = []
-    monkeypatch.setattr("rtreflect.streaming.Renderer", lambda scene: rendered.append(scene))
+    monkeypatch.setattr("rtreflect.output.streaming.Renderer", lambda scene: rendered.append(scene))
     assert_one_line_error(render_in_process(scene_path, outdir), f"{outdir / 'base.exr'}: cannot write output")
     assert rendered == []
     assert (outdir / "base.png").read_bytes() == before["base.png"]
@@ -409,8 +409,8 @@ def shading_peak_bytes(tmp_path: Path, tubes: int) -> int:
     """Peak memory numpy allocates while shading 4000 pixel-centre rays under ``tubes`` tubes."""
     import tracemalloc
 
-    from rtreflect.render import Renderer
-    from rtreflect.scene import load_scene
+    from rtreflect.integrator.renderer import Renderer
+    from rtreflect.exchange.scene import load_scene
 
     scene = copy.deepcopy(valid_scene())
     scene["lights"]["positions"] = [-1.5 + 3.0 * k / tubes for k in range(tubes)]

@@ -25,7 +25,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from rtreflect.cli import cli
-from rtreflect.imagefiles import read_image
+from rtreflect.output.imagefiles import read_image
 from test_scene_errors import toml_document
 
 #: Examples per run: about 20 s on the 2-core CI machine. Derandomized and without a database, so

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtreflect.imagefiles import read_image
+from rtreflect.output.imagefiles import read_image
 from rtreflect.testing import (GOLDEN_CHECKS, GOLDEN_HEIGHT, GOLDEN_WIDTH, assert_images_match, assert_matches_golden,
                                golden_reports, golden_scene, render_golden)
 

@@ -20,10 +20,10 @@ import pytest
 
 from reference import angle_between, closest_line_distance, rhino_points_normals
 from rtreflect import __version__
-from rtreflect.film import CHANNELS
-from rtreflect.imagefiles import read_image, save_render
-from rtreflect.render import Renderer
-from rtreflect.scene import load_scene
+from rtreflect.integrator.film import CHANNELS
+from rtreflect.output.imagefiles import read_image, save_render
+from rtreflect.integrator.renderer import Renderer
+from rtreflect.exchange.scene import load_scene
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 SCENE_FILES = sorted(SCENES.glob("*.toml"))
@@ -212,7 +212,7 @@ def test_command_line_render_writes_exr_and_png(tmp_path):
     assert png.shape == (36, 64, 4) and names == ("R", "G", "B", "A")
     exr, exr_names, _ = read_image(tmp_path / "hood.exr")
     # PNG is the sRGB encoding of the EXR's linear colour.
-    from rtreflect.imagefiles import encode_srgb
+    from rtreflect.output.imagefiles import encode_srgb
 
     expected = encode_srgb(np.stack([exr[..., exr_names.index(c)] for c in "RGBA"], axis=-1))
     assert np.array_equal(np.round(png * 255).astype(np.uint8), expected)
@@ -238,8 +238,8 @@ def test_hits_across_teapot_seams_refine_on_the_neighbour_patch():
 
 def test_tube_reach_in_chunks_matches_least_squares_closest_approach(monkeypatch):
     """TubeLights.reach (eq. 4 in chunks of a few points) against a least-squares closest approach per ray and tube."""
-    import rtreflect.lights as lights_module
-    from rtreflect.lights import TubeLights
+    import rtreflect.modes.lights as lights_module
+    from rtreflect.modes.lights import TubeLights
 
     rng = np.random.default_rng(7)
     c = np.array([0.0, 1.0, 0.0])

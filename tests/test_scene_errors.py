@@ -573,7 +573,7 @@ def test_render_overrides_are_read_like_the_scene_file(tmp_path: Path) -> None:
     import numpy as np
 
     from rtreflect.errors import SceneError
-    from rtreflect.scene import load_scene
+    from rtreflect.exchange.scene import load_scene
 
     base = load_scene(write_scene(tmp_path, Case("base", lambda scene: None, "")))
     with pytest.raises(SceneError) as override:

@@ -28,8 +28,8 @@ import rhino3dm
 from hypothesis import given, settings, strategies as st
 
 from reference import angle_between, to_rhino, xyz
-from rtreflect.bpt import read_bpt
-from rtreflect.surfaces import NurbsSurface, basis_derivatives, find_span
+from rtreflect.exchange.bpt import read_bpt
+from rtreflect.geometry.surfaces import NurbsSurface, basis_derivatives, find_span
 
 TEAPOT = Path(__file__).resolve().parents[1] / "scenes" / "teapot.bpt"
 LID_APEX = np.array([0.0, 0.0, 3.15])

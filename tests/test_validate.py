@@ -23,9 +23,9 @@ import pytest
 from click.testing import CliRunner
 
 from rtreflect.cli import cli
-from rtreflect.render import Renderer
-from rtreflect.scene import load_scene
-from rtreflect.validate import (TracedCentres, _filter_unblocked, film_aovs, line_coverage, nearest_segment,
+from rtreflect.integrator.renderer import Renderer
+from rtreflect.exchange.scene import load_scene
+from rtreflect.analysis.validate import (TracedCentres, _filter_unblocked, film_aovs, line_coverage, nearest_segment,
                                 traced_centres, validate_scene)
 
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
@@ -270,7 +270,7 @@ def test_both_pixels_of_a_centre_are_occlusion_checked_even_on_a_pixel_centre():
 
 
 def test_line_coverage_inverts_the_films_colour_blend():
-    from rtreflect.film import coverage_color
+    from rtreflect.integrator.film import coverage_color
 
     rng = np.random.default_rng(5)
     hit = rng.random((200, 9)) < 0.8

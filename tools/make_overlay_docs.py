@@ -17,8 +17,8 @@ import colour
 import numpy as np
 
 from rtreflect.errors import RtreflectError
-from rtreflect.imagefiles import atomic_path, read_image, write_png
-from rtreflect.scene import load_scene
+from rtreflect.output.imagefiles import atomic_path, read_image, write_png
+from rtreflect.exchange.scene import load_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"

@@ -28,12 +28,12 @@ from dataclasses import dataclass
 import contourpy
 import numpy as np
 
-from .accelerator import Accelerator
-from .camera import Camera
-from .lights import TubeLights, reflect
-from .surfaces import SurfaceSet
-from .tessellation import Tessellation
-from .tracing import facing
+from ..trace.accelerator import Accelerator
+from ..trace.camera import Camera
+from ..modes.lights import TubeLights, reflect
+from ..geometry.surfaces import SurfaceSet
+from ..geometry.tessellation import Tessellation
+from ..trace.tracing import facing
 
 #: Target size in pixels of one cell of the (u, v) grid that contourpy sees.
 GRID_CELL_PX = 2.0

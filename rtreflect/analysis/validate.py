@@ -48,10 +48,10 @@ from typing import Callable
 import numpy as np
 
 from .contours import ContourLines, UlmetField, analytic_contours, reaches_light_plane
-from .film import Film
-from .lights import reflect
-from .render import Renderer
-from .scene import Scene
+from ..integrator.film import Film
+from ..modes.lights import reflect
+from ..integrator.renderer import Renderer
+from ..exchange.scene import Scene
 
 DEFAULT_TOLERANCE_PX = 0.5
 #: Neighbouring hit points farther apart than this many pixel footprints straddle an edge (or graze).

@@ -36,9 +36,9 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")  # colour-science warns at import about optional features we do not use
     import colour
 
-from .errors import RtreflectError
-from .film import COLOR_CHANNELS
-from .imagefiles import atomic_path, read_image, write_png
+from ..errors import RtreflectError
+from ..integrator.film import COLOR_CHANNELS
+from ..output.imagefiles import atomic_path, read_image, write_png
 
 #: Default ``fail`` for float images: float32 noise passes, any real change fails.
 FLOAT_FAIL = 1e-6

@@ -20,11 +20,14 @@ from dataclasses import replace
 from pathlib import Path
 
 from .diff import DiffReport, Tolerance, compare_images
-from .errors import RtreflectError
-from .film import COLOR_CHANNELS
-from .imagefiles import read_image, save_render
-from .render import Renderer
-from .scene import Scene, load_scene
+from ..errors import RtreflectError
+from ..integrator.film import COLOR_CHANNELS
+from ..output.imagefiles import read_image, save_render
+from ..integrator.renderer import Renderer
+from ..exchange.scene import Scene, load_scene
+
+__all__ = ["GOLDEN_WIDTH", "GOLDEN_HEIGHT", "GOLDEN_MAX_SAMPLES", "GOLDEN_CHECKS", "golden_scene", "render_golden",
+           "golden_reports", "assert_matches_golden", "assert_images_match"]
 
 #: Golden images are rendered at this size (small: the folder stays a few MB, a render takes a second).
 GOLDEN_WIDTH, GOLDEN_HEIGHT = 320, 180

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SceneError, quote, read_text
-from .surfaces import NurbsSurface
+from ..errors import SceneError, quote, read_text
+from ..geometry.surfaces import NurbsSurface
 
 #: The numbers a .bpt file may hold: plain ASCII decimals (Python's int and float would also take
 #: "1_000", non-ASCII digits and surrounding blanks). nan and inf are matched so they can be named as such.

@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from .bpt import read_bpt
-from .errors import SceneError, quote, read_text
-from .surfaces import NurbsSurface
+from ..errors import SceneError, quote, read_text
+from ..geometry.surfaces import NurbsSurface
 
 #: Largest image side. The film keeps 17 float32 planes per pixel, and beyond this
 #: the planes alone pass the memory of a workstation.

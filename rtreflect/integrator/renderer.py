@@ -21,16 +21,16 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from .accelerator import Accelerator
-from .camera import Camera, rays_per_pixel, sample_offsets
-from .clock import StageClock
+from ..trace.accelerator import Accelerator
+from ..trace.camera import Camera, rays_per_pixel, sample_offsets
+from ..clock import StageClock
 from .film import CHANNELS, Film, aov_planes, coverage_color
-from .lights import TubeLights, reflect
-from .meshnormals import trace_mesh, vertex_normals
-from .scene import ImageSpec, Scene
-from .surfaces import SurfaceSet
-from .tessellation import tessellate
-from .tracing import Hits, trace
+from ..modes.lights import TubeLights, reflect
+from ..trace.meshnormals import trace_mesh, vertex_normals
+from ..exchange.scene import ImageSpec, Scene
+from ..geometry.surfaces import SurfaceSet
+from ..geometry.tessellation import tessellate
+from ..trace.tracing import Hits, trace
 
 #: Most rays per tile (about 1.2 kB each in flight, see `tiling`): larger tiles buy no speed over numpy's overhead.
 RAYS_PER_TILE = 1 << 16

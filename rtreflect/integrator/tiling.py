@@ -14,12 +14,12 @@ from __future__ import annotations
 import os
 import re
 
-from .camera import rays_per_pixel
-from .errors import RtreflectError
+from ..trace.camera import rays_per_pixel
+from ..errors import RtreflectError
 from .film import CHANNELS
-from .lights import TUBE_ENTRIES_PER_CHUNK
-from .render import RAYS_PER_TILE
-from .scene import Scene
+from ..modes.lights import TUBE_ENTRIES_PER_CHUNK
+from .renderer import RAYS_PER_TILE
+from ..exchange.scene import Scene
 
 #: Default budget: this fraction of the machine's physical memory.
 DEFAULT_FRACTION = 0.25

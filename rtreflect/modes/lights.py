@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import LightSpec
+from ..exchange.scene import LightSpec
 
 #: Point × tube pairs per chunk of the skew-line distances (eq. 4): about 80 MB of temporaries.
 TUBE_ENTRIES_PER_CHUNK = 1 << 20

@@ -22,12 +22,12 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     import colour
 
-from .errors import RtreflectError
-from .film import CHANNELS, Film
+from ..errors import RtreflectError
+from ..integrator.film import CHANNELS, Film
 
 if TYPE_CHECKING:
-    from .render import RenderResult
-    from .scene import Scene
+    from ..integrator.renderer import RenderResult
+    from ..exchange.scene import Scene
 
 #: EXR header attributes that record where an image came from.
 SCENE_HASH_ATTRIBUTE = "rtreflect:scene_sha256"
@@ -167,7 +167,7 @@ def prepare_output_folder(outdir: Path, targets: list[Path] = ()) -> None:
 
 def provenance_attributes(scene: "Scene") -> dict[str, str]:
     """What each output records of its origin: the scene file's hash, all inputs' hash, the rtreflect version."""
-    from . import __version__
+    from .. import __version__
 
     return {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
             OUTPUT_KEY_ATTRIBUTE: scene.output_key, VERSION_ATTRIBUTE: __version__}

@@ -14,10 +14,10 @@ from pathlib import Path
 from typing import Callable
 
 from .imagefiles import PngFilter, open_outputs, output_paths
-from .overlay import overlay_outputs
-from .render import Renderer, RenderStats, default_threads
-from .scene import Scene
-from .tiling import default_max_memory, rays_per_tile
+from ..analysis.overlay import overlay_outputs
+from ..integrator.renderer import Renderer, RenderStats, default_threads
+from ..exchange.scene import Scene
+from ..integrator.tiling import default_max_memory, rays_per_tile
 
 
 @dataclass

@@ -13,7 +13,7 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-from .tessellation import Tessellation
+from ..geometry.tessellation import Tessellation
 
 
 class MeshHits(NamedTuple):

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import CameraSpec
+from ..exchange.scene import CameraSpec
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

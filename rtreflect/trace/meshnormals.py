@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from .accelerator import Accelerator
-from .clock import NULL_CLOCK, StageClock
-from .surfaces import SurfaceSet
-from .tessellation import Tessellation
+from ..clock import NULL_CLOCK, StageClock
+from ..geometry.surfaces import SurfaceSet
+from ..geometry.tessellation import Tessellation
 from .tracing import Hits, facing
 
 

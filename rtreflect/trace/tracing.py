@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .accelerator import Accelerator
-from .clock import NULL_CLOCK, StageClock
-from .surfaces import SurfaceDerivatives, SurfaceSet
-from .tessellation import Tessellation
+from ..clock import NULL_CLOCK, StageClock
+from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
+from ..geometry.tessellation import Tessellation
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance.
 NEWTON_TOLERANCE = 1e-12
