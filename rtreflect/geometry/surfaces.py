@@ -14,9 +14,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .trims import Trim
 
 #: Points evaluated per chunk: bounds the (chunk, p+1, q+1, 4) gather of control points and keeps it in cache.
 CHUNK = 1 << 12
@@ -133,6 +136,9 @@ class NurbsSurface:
     """A tensor-product NURBS surface with full (clamped) knot vectors.
 
     ``points`` is (nu, nv, 3): row i is u index i. ``weights`` is (nu, nv), all > 0.
+    A CAD face also carries its ``trim`` (the face is the part of the surface inside it) and may
+    carry ``mesh_uv``, a triangulation of the trimmed face in (u, v) from its reader
+    (nodes (m, 2), triangles (k, 3)); the tessellation then maps those nodes onto the surface.
     """
 
     degree_u: int
@@ -142,6 +148,8 @@ class NurbsSurface:
     points: np.ndarray
     weights: np.ndarray
     name: str = ""
+    trim: "Trim | None" = None
+    mesh_uv: tuple[np.ndarray, np.ndarray] | None = None
     _pw: np.ndarray = field(init=False, repr=False)
 
     _power: tuple | None = field(init=False, repr=False)
