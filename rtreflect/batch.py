@@ -66,7 +66,9 @@ def discover(paths: list[Path], recursive: bool = False) -> list[Path]:
     """Scene files named by ``paths``: files as given, folders searched for ``*.toml`` (sub-folders with ``recursive``).
 
     Each file appears once, in the order given (folders sorted); a path that does not
-    exist, or no scene file at all, is an `RtreflectError`.
+    exist, or no scene file at all, is an `RtreflectError`. "Once" is by the path as named
+    (made absolute, symlinks not followed): outputs are named after each file's stem, so a
+    symlink ``current.toml -> v3.toml`` is a scene of its own, writing ``current.*``.
     """
     found: list[Path] = []
     seen: set[Path] = set()
@@ -80,8 +82,9 @@ def discover(paths: list[Path], recursive: bool = False) -> list[Path]:
         else:
             raise RtreflectError(f"{path}: no such file or folder")
         for file in files:
-            if file.resolve() not in seen:
-                seen.add(file.resolve())
+            key = Path(os.path.abspath(file))  # not resolve(): a symlink's stem names its own outputs
+            if key not in seen:
+                seen.add(key)
                 found.append(file)
     if not found:
         where = ", ".join(str(p) for p in paths)

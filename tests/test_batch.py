@@ -338,3 +338,18 @@ def test_tiles_fit_the_budget_and_tube_pairs_stop_growing_at_a_chunk(tmp_path, b
     assert sizes[1] >= sizes[20] >= sizes[2000] >= sizes[10000] > 0
     if budget_mb >= 128:  # room for a whole chunk per tile: past it, more tubes cost nothing more
         assert sizes[2000] == sizes[10000] > 1000
+
+
+# -- issue 11: files, workers and the cluster ---------------------------------------------------
+def test_symlinked_scene_renders_under_its_own_name(tmp_path):
+    """`current.toml -> v3.toml`: outputs are named by each file's stem, so both scenes render (not deduplicated)."""
+    folder = tmp_path / "scenes"
+    small_scene("hood", folder / "v3.toml", width=32, height=18)
+    (folder / "current.toml").symlink_to("v3.toml")
+    code, output, report = run_batch(folder, "-o", tmp_path / "out", "-j", "1", "--json", tmp_path / "r.json")
+    assert code == 0, output
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["current.exr", "current.png", "v3.exr", "v3.png"]
+    assert sorted(by_name(report)) == ["current", "v3"] and report["counts"]["rendered"] == 2
+    # The same file named twice is still one scene.
+    code, output, report = run_batch(folder / "v3.toml", folder, "-o", tmp_path / "out", "--json", tmp_path / "r.json")
+    assert code == 0 and len(report["scenes"]) == 2, output
