@@ -265,3 +265,28 @@ def test_tube_reach_in_chunks_matches_least_squares_closest_approach(monkeypatch
         assert reach.candidate[row] == bool(within)
         assert reach.t_candidate[row] == pytest.approx(min(within, default=np.inf), rel=1e-9)
         assert reach.t_of[row] == pytest.approx(found[tube[row]][1], rel=1e-9, abs=1e-9)
+
+
+@pytest.mark.parametrize("samples", [1, 2])
+def test_fallback_count_includes_the_pixel_centre_rays(monkeypatch, samples):
+    """At even s the AOVs come from separate pixel-centre rays: their Newton fallbacks count too (issue 11).
+
+    Every hit is flagged as a fallback, so the count must equal the hit rays counted from the
+    film: s² × A per pixel for the samples, plus one per pixel whose centre ray hits (patch ≥ 0)
+    when s is even (at odd s the centre ray is one of the samples).
+    """
+    original = Renderer.trace
+
+    def all_fallbacks(self, origins, directions):
+        hits = original(self, origins, directions)
+        hits.fallback[:] = hits.hit
+        return hits
+
+    monkeypatch.setattr(Renderer, "trace", all_fallbacks)
+    scene = load_scene(SCENES / "hood.toml").with_image(48, 27, samples)
+    result = Renderer(scene).render()
+    sample_hits = int(np.rint(result.film.channel("A").astype(np.float64) * samples**2).sum())
+    centre_hit = result.film.channel("patch") >= 0
+    expected = sample_hits + (int(centre_hit.sum()) if samples % 2 == 0 else 0)
+    assert result.stats.fallbacks == expected
+    assert result.stats.fallback_pixels == int(((result.film.channel("A") > 0) | centre_hit).sum())

@@ -181,7 +181,7 @@ class Renderer:
         rgba = coverage_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
                               self.scene.render.surface_color, self.scene.render.line_color, self.scene.render.background)
         fallbacks = int(shading.hits.fallback.sum())
-        fallback_pixels = int(shading.hits.fallback.reshape(-1, ns).any(axis=1).sum())
+        fell_back = shading.hits.fallback.reshape(-1, ns).any(axis=1)
         rays = len(origins)
         del origins, directions
         if s % 2 == 1:  # the middle sample of an odd s×s grid is the pixel-centre ray
@@ -190,6 +190,11 @@ class Renderer:
             del shading  # free the samples' shading before tracing the centre rays
             aovs = self.pixel_aovs(rows, cols)
             rays += len(rows)
+            # The centre ray's hit is what the AOVs (P, N, f) store: its fallbacks count too.
+            centre = aovs["shading"].hits.fallback
+            fallbacks += int(centre.sum())
+            fell_back |= centre
+        fallback_pixels = int(fell_back.sum())
         pixels = np.empty((len(rows), len(CHANNELS)), dtype=np.float32)
         pixels[:, :4] = rgba
         pixels[:, 4:] = aov_planes(aovs)
