@@ -328,6 +328,8 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         loaded = batching.load_jobs(batching.discover(list(paths), recursive))
         batching.check_collisions(loaded, outdir)
         todo, reports = batching.plan(loaded, outdir, force)
+        if todo:  # as `render`: an unusable folder is one error up front, not one failure per scene
+            prepare_output_folder(outdir, [path for job in todo for path in output_paths(job.scene, outdir)])
     except RtreflectError as exc:
         fail(str(exc))
     except STOPS as exc:
@@ -348,7 +350,8 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         bar.set_description(f"{finished[0]}/{len(todo)} scenes")
         _print_scene(report)
 
-    where = scheduler or f"local, -j {jobs or batching.default_jobs()}"
+    # The workers that run: never more than the scenes to render (run_local caps them alike).
+    where = scheduler or f"local, -j {max(1, min(jobs or batching.default_jobs(), len(todo)))}"
     try:
         with bar:
             if scheduler and todo:

@@ -353,3 +353,13 @@ def test_symlinked_scene_renders_under_its_own_name(tmp_path):
     # The same file named twice is still one scene.
     code, output, report = run_batch(folder / "v3.toml", folder, "-o", tmp_path / "out", "--json", tmp_path / "r.json")
     assert code == 0 and len(report["scenes"]) == 2, output
+
+
+def test_batch_echoes_the_workers_that_run(tmp_path):
+    """`-j 64` with two scenes runs two workers: the summary and the report say -j 2 (issue 11)."""
+    for name in ("a", "b"):
+        small_scene("hood", tmp_path / "scenes" / f"{name}.toml", width=24, height=14)
+    code, output, report = run_batch(tmp_path / "scenes", "-o", tmp_path / "out", "-j", "64",
+                                     "--json", tmp_path / "r.json")
+    assert code == 0, output
+    assert report["where"] == "local, -j 2" and "(local, -j 2)" in output

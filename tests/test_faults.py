@@ -118,6 +118,40 @@ def test_output_folder_not_writable(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     assert snapshot(outdir) == {}
 
 
+def test_batch_into_an_unwritable_folder_fails_up_front(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`batch` as `render`: exit 2 with one line before building any scene, not one failure per scene (issue 11)."""
+    write_scene(tmp_path, name="a.toml")
+    write_scene(tmp_path, scene={**valid_scene(), "output": {"name": "other"}}, name="b.toml")
+    outdir = tmp_path / "out"
+    outdir.mkdir()
+    real_mkstemp = tempfile.mkstemp
+
+    def refuse(*args, dir=None, **kwargs):
+        if dir is not None and Path(dir) == outdir:
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(outdir))
+        return real_mkstemp(*args, dir=dir, **kwargs)
+
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    rendered = []
+    monkeypatch.setattr("rtreflect.output.streaming.Renderer", lambda scene: rendered.append(scene))
+    result = CliRunner().invoke(cli, ["batch", str(tmp_path), "-o", str(outdir), "-j", "1"])
+    line = assert_one_line_error(result, str(outdir), "Permission denied")
+    assert rendered == [] and result.stdout == "", line
+    assert snapshot(outdir) == {}
+
+
+def test_one_scene_named_twice_is_not_a_collision_with_itself(tmp_path: Path) -> None:
+    """`render X X` must not say X's outputs "are also written from X" (issue 11)."""
+    scene_path = write_scene(tmp_path)
+    outdir = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["render", str(scene_path), str(scene_path), "-o", str(outdir), *RENDER_OPTIONS])
+    if result.exit_code == 0:  # repeated scenes deduplicated: rendered once
+        assert sorted(snapshot(outdir)) == ["base.exr", "base.png"]
+    else:
+        line = assert_one_line_error(result, str(scene_path), "more than once")
+        assert "also written from" not in line and snapshot(outdir) == {}
+
+
 def test_two_scenes_with_one_output_name(tmp_path: Path) -> None:
     """The second would silently overwrite the first: refused before anything renders."""
     first, second = write_scene(tmp_path, name="a.toml"), write_scene(tmp_path, name="b.toml")

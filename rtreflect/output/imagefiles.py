@@ -140,6 +140,9 @@ def check_distinct_outputs(scenes: list["Scene"], outdir: Path) -> None:
     clashes = [(name, files) for name, files in by_name.items() if len(files) > 1]
     if clashes:
         name, files = clashes[0]
+        if len(set(files)) == 1:  # one file named twice, not two scenes sharing a name
+            raise RtreflectError(f"{files[0]}: scene file given more than once (its outputs {Path(outdir) / name}.* "
+                                 "would be written twice)")
         more = f"; {len(clashes) - 1} more names collide" if len(clashes) > 1 else ""
         raise RtreflectError(f"{files[-1]}: output.name: outputs collide: {Path(outdir) / name}.* is also written from "
                              f"{' and '.join(map(str, files[:-1]))}{more} (give each scene its own [output] name)")
