@@ -16,6 +16,7 @@ import math
 import os
 import pty
 import re
+import resource
 import select
 import signal
 import struct
@@ -467,3 +468,46 @@ def test_tube_memory_is_bounded_however_many_tubes(tmp_path: Path) -> None:
     tubes must not cost ten times the memory (whole (rays, tubes) tables would: 4000 × 2000 × 8 bytes each)."""
     few, many = shading_peak_bytes(tmp_path, 200), shading_peak_bytes(tmp_path, 2000)
     assert many < 2 * few, (few, many)
+
+
+# --- A real full disk: the file-size limit (issue 11) ---------------------------------------
+
+
+def _file_size_limit(limit: int):
+    def apply() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # writes past the limit fail with EFBIG, as ENOSPC would
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return apply
+
+
+@pytest.mark.parametrize("exr", [True, False], ids=["EXR and PNG", "PNG only"])
+def test_disk_filling_up_gives_one_line_and_no_file(tmp_path: Path, exr: bool) -> None:
+    """libpng prints "libpng error: ..." itself, and OpenImageIO's PNG writer may report a cut-off file as written:
+    one line on stderr, exit 2, nothing left, whichever file the disk stops."""
+    scene = valid_scene()
+    scene["image"] = {"width": 800, "height": 600, "samples": 1}
+    scene["output"] = {"name": "big", "exr": exr, "png": True}
+    scene_path = write_scene(tmp_path, scene)
+    outdir = tmp_path / "out"
+    run = subprocess.run([str(RTREFLECT), "render", str(scene_path), "-o", str(outdir)], capture_output=True,
+                         text=True, preexec_fn=_file_size_limit(4000), timeout=120)
+    assert run.returncode == EXIT_BAD_INPUT, (run.stdout, run.stderr)
+    lines = run.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rtreflect: error: ") and "cannot write image" in lines[0], lines
+    assert snapshot(outdir) == {}
+
+
+def test_abandoned_png_prints_nothing(tmp_path: Path, capfd: pytest.CaptureFixture) -> None:
+    """A PNG closed before any row (a failed or cancelled tile stream): libpng's "No IDATs" line must not reach fd 2."""
+    from rtreflect.exchange.scene import load_scene
+    from rtreflect.output.imagefiles import open_outputs
+
+    scene = load_scene(write_scene(tmp_path))
+    with pytest.raises(imagefiles.RtreflectError, match="stopped at pixel 0"):
+        with open_outputs(scene, tmp_path / "out"):
+            pass
+    with pytest.raises(RuntimeError):
+        with open_outputs(scene, tmp_path / "out"):
+            raise RuntimeError("tile lost")
+    assert "libpng" not in capfd.readouterr().err
+    assert snapshot(tmp_path / "out") == {}

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import sys
 import tempfile
 import warnings
 from pathlib import Path
@@ -43,6 +44,67 @@ def _umask() -> int:
     return mask
 
 
+#: The last 12 bytes of every complete PNG: the empty IEND chunk (length 0, type, CRC), PNG spec 11.2.5.
+PNG_END = bytes.fromhex("0000000049454e44ae426082")
+#: Most bytes kept of what libpng prints while muted: its messages are one short line each.
+MUTED_BYTES = 4096
+
+
+@contextlib.contextmanager
+def muted_stderr(active: bool = True) -> Iterator[list[str]]:
+    """File descriptor 2 into a pipe while the block runs; the lines printed there are appended to the list yielded.
+
+    libpng's default error handler, which OpenImageIO's PNG writer keeps, prints
+    ``libpng error: ...`` to stderr itself (closing a PNG that got no rows, a failed write):
+    lines that would break the one-line error rule. The caller turns them into its own
+    message. The pipe lives in memory (a full disk cannot stop it) and is non-blocking: what
+    does not fit in its buffer is dropped, never waited for.
+    """
+    lines: list[str] = []
+    if not active:
+        yield lines
+        return
+    with contextlib.suppress(Exception):
+        sys.stderr.flush()  # Python's own buffered text goes out before the switch, not into the pipe
+    read_end, write_end = os.pipe()
+    os.set_blocking(write_end, False)
+    os.set_blocking(read_end, False)
+    saved = os.dup(2)
+    os.dup2(write_end, 2)
+    os.close(write_end)
+    try:
+        yield lines
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        with contextlib.suppress(BlockingIOError):
+            lines.extend(os.read(read_end, MUTED_BYTES).decode(errors="replace").splitlines())
+        os.close(read_end)
+
+
+def _png_incomplete(path: Path) -> bool:
+    """True when the file does not end with PNG's IEND chunk: libpng was cut off by a write that failed.
+
+    OpenImageIO's PNG writer reports success even when the disk filled up under it (the file
+    is then cut short); checking the last 12 bytes finds it without reading the image.
+    """
+    try:
+        with open(path, "rb") as stream:
+            stream.seek(0, os.SEEK_END)
+            if stream.tell() < len(PNG_END):
+                return True
+            stream.seek(-len(PNG_END), os.SEEK_END)
+            return stream.read() != PNG_END
+    except OSError:
+        return True
+
+
+def _png_failure(final: Path, out, muted: list[str]) -> RtreflectError:
+    """The one-line error of a PNG that could not be written: OpenImageIO's reason, else libpng's, else the likely one."""
+    libpng = next((line.removeprefix("libpng error: ") for line in muted if line.strip()), "")
+    return RtreflectError(f"{final}: cannot write image ({out.geterror() or libpng or 'file cut short: disk full?'})")
+
+
 @contextlib.contextmanager
 def atomic_path(final: Path) -> Iterator[Path]:
     """A temporary path beside ``final`` (same extension, so OpenImageIO picks the format), renamed on success."""
@@ -62,13 +124,16 @@ def atomic_path(final: Path) -> Iterator[Path]:
 def _write(path: Path, spec: oiio.ImageSpec, pixels: np.ndarray, final: Path | None = None) -> None:
     """Write an image to ``path`` as is; errors name ``final`` (the name the user asked for)."""
     shown = final or path
-    out = oiio.ImageOutput.create(str(path))
-    if out is None or not out.open(str(path), spec):
-        raise RtreflectError(f"{shown}: cannot write image ({oiio.geterror() or 'unknown OpenImageIO error'})")
-    ok = out.write_image(pixels)
-    ok = out.close() and ok
-    if not ok:
-        raise RtreflectError(f"{shown}: cannot write image ({out.geterror() or 'disk full?'})")
+    is_png = Path(path).suffix == ".png"
+    with muted_stderr(is_png) as muted:  # libpng's own stderr lines (see muted_stderr)
+        out = oiio.ImageOutput.create(str(path))
+        if out is None or not out.open(str(path), spec):
+            raise RtreflectError(f"{shown}: cannot write image ({oiio.geterror() or 'unknown OpenImageIO error'})")
+        ok = out.write_image(pixels)
+        ok = out.close() and ok
+    if not ok or (is_png and _png_incomplete(path)):
+        raise _png_failure(shown, out, muted) if is_png else \
+            RtreflectError(f"{shown}: cannot write image ({out.geterror() or 'disk full?'})")
 
 
 def _exr_spec(width: int, height: int, attributes: dict[str, str]) -> oiio.ImageSpec:
@@ -207,12 +272,17 @@ class ImageWriter:
         self.next_pixel = 0
         self._partial = np.empty((0, len(CHANNELS)), dtype=np.float32)
         self._outputs: list[tuple[oiio.ImageOutput, Path, bool]] = []
+        self._temporaries = {final: Path(tmp) for tmp, final in paths}
+        # libpng prints its errors to stderr itself: muted around every call into a PNG (`muted_stderr`).
+        self._has_png = any(final.suffix != ".exr" for _, final in paths)
         attributes = provenance_attributes(scene)
         for tmp, final in paths:
             is_exr = final.suffix == ".exr"
             spec = (_exr_spec if is_exr else _png_spec)(self.width, self.height, attributes)
-            out = oiio.ImageOutput.create(str(tmp))
-            if out is None or not out.open(str(tmp), spec):
+            with muted_stderr(not is_exr):
+                out = oiio.ImageOutput.create(str(tmp))
+                opened = out is not None and out.open(str(tmp), spec)
+            if not opened:
                 self.abandon()
                 raise RtreflectError(f"{final}: cannot write image ({oiio.geterror() or 'unknown OpenImageIO error'})")
             self._outputs.append((out, final, is_exr))
@@ -239,33 +309,34 @@ class ImageWriter:
             else:
                 rgba = rows[..., :4] if self.png_filter is None else self.png_filter(row0, rows[..., :4])
                 data = encode_srgb(rgba)
-            if not out.write_scanlines(row0, row1, 0, data):
-                raise RtreflectError(f"{final}: cannot write image ({out.geterror() or 'disk full?'})")
+            with muted_stderr(not is_exr) as muted:
+                ok = out.write_scanlines(row0, row1, 0, data)
+            if not ok:
+                raise _png_failure(final, out, muted) if not is_exr else \
+                    RtreflectError(f"{final}: cannot write image ({out.geterror() or 'disk full?'})")
 
     def abandon(self) -> None:
         """Close the files without checks (their temporaries are about to be removed)."""
         outputs, self._outputs = self._outputs, []
-        next_row = (self.next_pixel - len(self._partial)) // self.width  # the first row not yet written
-        for out, _, is_exr in outputs:
-            if not is_exr:
-                # libpng prints "No IDATs written into file" when closing a PNG before zlib emitted any data;
-                # filling the rest with zeros keeps a discarded file quiet (deflate on zeros is fast).
-                chunk = max(1, (16 << 20) // (4 * self.width))
-                for row in range(next_row, self.height, chunk):
-                    rows = min(chunk, self.height - row)
-                    out.write_scanlines(row, row + rows, 0, np.zeros((rows, self.width, 4), dtype=np.uint8))
-            out.close()
+        # libpng prints "No IDATs written into file" when a PNG is closed before zlib emitted any data
+        # (and more on a full disk): the discarded file is closed with stderr muted.
+        with muted_stderr(self._has_png):
+            for out, _, _ in outputs:
+                out.close()
 
     def close(self) -> None:
         """Finish the files; an image with pixels missing is an error (it must not be renamed into place)."""
         outputs, self._outputs = self._outputs, []
-        ok = [out.close() for out, _, _ in outputs]
+        with muted_stderr(self._has_png) as muted:
+            ok = [out.close() for out, _, _ in outputs]
         if self.next_pixel != self.width * self.height:
             raise RtreflectError(f"{outputs[0][1] if outputs else 'image'}: render stopped at pixel {self.next_pixel} "
                                  f"of {self.width * self.height}")
-        for (out, final, _), closed in zip(outputs, ok):
-            if not closed:
+        for (out, final, is_exr), closed in zip(outputs, ok):
+            if is_exr and not closed:
                 raise RtreflectError(f"{final}: cannot write image ({out.geterror() or 'disk full?'})")
+            if not is_exr and (not closed or _png_incomplete(self._temporaries[final])):
+                raise _png_failure(final, out, muted)
 
 
 @contextlib.contextmanager
