@@ -511,3 +511,53 @@ def test_abandoned_png_prints_nothing(tmp_path: Path, capfd: pytest.CaptureFixtu
             raise RuntimeError("tile lost")
     assert "libpng" not in capfd.readouterr().err
     assert snapshot(tmp_path / "out") == {}
+
+
+# --- Concurrent runs and dead runs (issue 11) --------------------------------------------------
+
+
+def test_concurrent_renders_of_one_name_leave_a_matching_pair(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two runs finishing NAME at once: b saves its pair while a sleeps between its PNG and EXR renames; the files
+    left must still come from one scene (the same scene hash in both headers), and no lock file stays."""
+    import threading
+
+    from rtreflect.exchange.scene import load_scene
+    from rtreflect.integrator.renderer import Renderer
+
+    results = {}
+    for name, width in (("a", 40), ("b", 48)):
+        scene = valid_scene()
+        scene["image"] = {"width": width, "height": 24, "samples": 1}
+        results[name] = Renderer(load_scene(write_scene(tmp_path, scene, name=f"{name}.toml"))).render()
+    outdir = tmp_path / "out"
+    real_replace = os.replace
+    a_renaming = threading.Event()
+
+    def slow_replace(src, dst):
+        real_replace(src, dst)
+        if threading.current_thread().name == "a" and str(dst).endswith(".png"):
+            a_renaming.set()
+            time.sleep(1.0)  # b saves its pair now, unless a lock makes it wait
+
+    monkeypatch.setattr(imagefiles.os, "replace", slow_replace)
+    errors = []
+
+    def run(name):
+        try:
+            if name == "b":
+                assert a_renaming.wait(30)
+            imagefiles.save_render(results[name], outdir)
+        except BaseException as exc:  # noqa: BLE001 - reported by the assertion below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=run, args=(name,), name=name) for name in ("a", "b")]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(60)
+    assert not errors
+    assert sorted(snapshot(outdir)) == ["base.exr", "base.png"]  # no lock file left either
+    exr, png = (imagefiles.read_provenance(outdir / f"base.{ext}")[imagefiles.SCENE_HASH_ATTRIBUTE]
+                for ext in ("exr", "png"))
+    assert exr == png
+    assert read_image(outdir / "base.exr")[0].shape[1] == read_image(outdir / "base.png")[0].shape[1] == 48

@@ -25,6 +25,7 @@ with warnings.catch_warnings():
 
 from ..errors import RtreflectError
 from ..integrator.film import CHANNELS, Film
+from .sharing import NameLock, remove_dead_temporaries, temporary_prefix
 
 if TYPE_CHECKING:
     from ..integrator.renderer import RenderResult
@@ -109,7 +110,8 @@ def _png_failure(final: Path, out, muted: list[str]) -> RtreflectError:
 def atomic_path(final: Path) -> Iterator[Path]:
     """A temporary path beside ``final`` (same extension, so OpenImageIO picks the format), renamed on success."""
     final = Path(final)
-    fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=final.suffix, dir=final.parent)
+    # The name carries this host and process: a run killed before it could clean up is recognised later.
+    fd, tmp = tempfile.mkstemp(prefix=temporary_prefix(final), suffix=final.suffix, dir=final.parent)
     os.close(fd)
     try:
         yield Path(tmp)
@@ -213,10 +215,12 @@ def check_distinct_outputs(scenes: list["Scene"], outdir: Path) -> None:
                              f"{' and '.join(map(str, files[:-1]))}{more} (give each scene its own [output] name)")
 
 
-def prepare_output_folder(outdir: Path, targets: list[Path] = ()) -> None:
+def prepare_output_folder(outdir: Path, targets: list[Path] = ()) -> list[Path]:
     """Create ``outdir`` if missing and prove a file can be made in it: a bad folder fails before the render, not after.
 
     A folder standing where one of ``targets`` goes would stop its rename after the other files were replaced.
+    Temporaries left in the folder by dead runs of this host (`sharing.remove_dead_temporaries`) are removed:
+    the paths removed are returned, for the caller to say so.
     """
     outdir = Path(outdir)
     if outdir.exists() and not outdir.is_dir():
@@ -231,6 +235,13 @@ def prepare_output_folder(outdir: Path, targets: list[Path] = ()) -> None:
         os.unlink(probe)
     except OSError as exc:
         raise RtreflectError(f"{outdir}: -o/--output: output folder is not writable ({exc.strerror or exc})") from None
+    return remove_dead_temporaries(outdir)
+
+
+def removed_note(removed: list[Path]) -> str:
+    """The line saying which dead runs' temporaries were removed."""
+    names = ", ".join(p.name for p in removed[:3]) + (f" and {len(removed) - 3} more" if len(removed) > 3 else "")
+    return f"removed {len(removed)} temporary file{'s' if len(removed) != 1 else ''} left by dead runs: {names}"
 
 
 def provenance_attributes(scene: "Scene") -> dict[str, str]:
@@ -353,14 +364,20 @@ def open_outputs(scene: "Scene", outdir: Path, png_filter: PngFilter | None = No
     targets = output_paths(scene, outdir)
     prepare_output_folder(outdir, output_paths(scene, outdir, extra_files))
     target = outdir
+    # The set is renamed into place under a lock on its name (`sharing`): a concurrent run writing
+    # the same NAME cannot interleave its renames with ours and leave a mixed pair.
+    lock = NameLock(outdir, scene.output.name)
     try:
         with contextlib.ExitStack() as stack:
+            stack.callback(lock.release)  # exits last: after every rename
             for name, text in (extra_files or {}).items():
                 target = outdir / name
                 stack.enter_context(atomic_path(target)).write_text(text, encoding="utf-8")
             paths = []
             for target in targets:
                 paths.append((stack.enter_context(atomic_path(target)), target))
+            # Exits first, before the renames, and only on success (a failure renames nothing).
+            stack.push(lambda kind, value, traceback: lock.acquire() if kind is None else None)
             writer = ImageWriter(scene, paths, png_filter)
             try:
                 yield writer
