@@ -16,6 +16,7 @@ geometry files) and `rtreflect:version` as this run would write.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import multiprocessing
 import os
 import queue
@@ -31,10 +32,13 @@ from .errors import RtreflectError
 from .output.imagefiles import (OUTPUT_KEY_ATTRIBUTE, VERSION_ATTRIBUTE, check_distinct_outputs, output_paths, read_provenance,
                          write_json)
 from .analysis.overlay import contours_file_name
+from .output.sharing import remove_dead_temporaries
 from .exchange.scene import Scene, load_scene
 from .integrator.tiling import default_max_memory
 
 RENDERED, SKIPPED, FAILED, INTERRUPTED = "rendered", "skipped", "failed", "interrupted"
+#: A pool worker's message that it started a scene: (STARTED, pid, scene path).
+STARTED = "started"
 
 
 @dataclass
@@ -195,6 +199,8 @@ def _worker_init(progress_queue) -> None:
 def _worker_render(scene: Scene, outdir: Path, max_memory: int | None) -> SceneReport:
     global _busy
     _busy = True
+    # Which process renders which scene: if this one dies, the parent knows the scene it took along.
+    _progress_queue.put((STARTED, os.getpid(), str(scene.path)))
     try:
         return render_job(scene, outdir, 1, max_memory, progress=_progress_queue.put)
     except _Terminated:
@@ -231,6 +237,21 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
     progress_queue = context.Queue()
     waiting = list(reversed(jobs))  # popped from the end: scenes start in the given order
     attempts: dict[int, int] = {}
+    started: dict[str, int] = {}  # scene path → PID of the worker that took it
+    processes: dict[int, multiprocessing.Process] = {}  # every worker seen, by PID, for its exit code
+
+    def died(job: Job) -> str | None:
+        """How the worker that rendered ``job`` ended, when it died on its own (a signal, not the pool's SIGTERM)."""
+        process = processes.get(started.get(str(job.path), -1))
+        if process is None:
+            return None
+        process.join(timeout=5)  # dead already when the pool broke; this reaps it and sets its exit code
+        code = process.exitcode
+        if code is None or code >= 0 or code == -signal.SIGTERM:
+            return None  # still running, exited, or stopped by the pool after another worker died
+        with contextlib.suppress(ValueError):
+            return signal.Signals(-code).name
+        return f"signal {-code}"
 
     def settle(job: Job, future: cf.Future) -> bool:
         """Report a finished scene; True when its worker died (the pool is then broken)."""
@@ -238,13 +259,20 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
             on_done(future.result())
             return False
         except cf.process.BrokenProcessPool:
+            _drain(progress_queue, on_progress, started)
             # A worker died (killed, out of memory, crashed) and took every scene in flight with it.
-            # Each is tried again once in a fresh pool; a scene in flight at two deaths is reported failed.
+            # The scene whose own worker was killed fails (it may well kill the next one too); the others
+            # are tried again once in a fresh pool, and a scene in flight at two deaths is reported failed.
+            how = died(job)
             attempts[id(job)] = attempts.get(id(job), 0) + 1
-            if attempts[id(job)] >= 2:
+            if how is not None or attempts[id(job)] >= 2:
+                pid = started.get(str(job.path))
+                removed = remove_dead_temporaries(outdir, pid) if pid is not None else []
+                cleanup = f"; removed its {len(removed)} temporary file{'s' * (len(removed) != 1)}" if removed else ""
+                cause = f" (PID {pid}) was killed by {how}" if how else " died"
                 on_done(SceneReport(str(job.path), job.scene.output.name, FAILED,
-                                    error=f"{job.path}: the worker process rendering it died "
-                                          "(out of memory? see --max-memory)"))
+                                    error=f"{job.path}: the worker process rendering it{cause} "
+                                          f"(out of memory? see --max-memory){cleanup}"))
             else:
                 waiting.append(job)
             return True
@@ -262,8 +290,9 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
                     except cf.process.BrokenProcessPool:
                         waiting.append(job)
                         broken = True
+                processes.update(getattr(pool, "_processes", None) or {})  # no public API before Python 3.14
                 finished, _ = cf.wait(running, timeout=0.2, return_when=cf.FIRST_COMPLETED)
-                _drain(progress_queue, on_progress)
+                _drain(progress_queue, on_progress, started)
                 for future in finished:
                     broken |= settle(running.pop(future), future)
             if broken:  # a broken pool fails all its futures at once
@@ -274,15 +303,20 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
             pool.shutdown(wait=False, cancel_futures=True)
             raise
         pool.shutdown(wait=True)
-    _drain(progress_queue, on_progress)
+    _drain(progress_queue, on_progress, started)
 
 
-def _drain(progress_queue, on_progress: Callable[[int], None]) -> None:
+def _drain(progress_queue, on_progress: Callable[[int], None], started: dict[str, int]) -> None:
+    """Hand the workers' messages on: pixels done to ``on_progress``, (STARTED, pid, scene) into ``started``."""
     while True:
         try:
-            on_progress(progress_queue.get_nowait())
+            message = progress_queue.get_nowait()
         except queue.Empty:
             return
+        if isinstance(message, tuple) and message[0] == STARTED:
+            started[message[2]] = message[1]
+        else:
+            on_progress(message)
 
 
 def _terminate(pool: cf.ProcessPoolExecutor) -> None:

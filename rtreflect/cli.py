@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from . import __version__
 from .errors import RtreflectError, one_line
-from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, write_json
+from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, removed_note, write_json
 from .interrupts import Interrupted, signals_as_exceptions
 from .analysis.overlay import contours_file_name
 from .exchange.scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, load_scene
@@ -94,9 +94,11 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     try:
         loaded = [load_scene(path).with_image(width, height, samples).with_render(overlay, normals) for path in scenes]
         check_distinct_outputs(loaded, outdir)
-        prepare_output_folder(outdir, [path for scene in loaded for path in output_paths(scene, outdir)])
+        removed = prepare_output_folder(outdir, [path for scene in loaded for path in output_paths(scene, outdir)])
     except RtreflectError as exc:
         fail(str(exc))
+    if removed:
+        click.echo(f"{outdir}: {removed_note(removed)}")
     for scene in loaded:
         image = scene.image
         try:
@@ -328,13 +330,15 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         loaded = batching.load_jobs(batching.discover(list(paths), recursive))
         batching.check_collisions(loaded, outdir)
         todo, reports = batching.plan(loaded, outdir, force)
-        if todo:  # as `render`: an unusable folder is one error up front, not one failure per scene
-            prepare_output_folder(outdir, [path for job in todo for path in output_paths(job.scene, outdir)])
+        # As `render`: an unusable folder is one error up front, not one failure per scene.
+        removed = prepare_output_folder(outdir, [p for job in todo for p in output_paths(job.scene, outdir)]) if todo else []
     except RtreflectError as exc:
         fail(str(exc))
     except STOPS as exc:
         click.echo(f"rtreflect: interrupted by {stop_name(exc)} before rendering; nothing written", err=True)
         sys.exit(stop_status(exc))
+    if removed:
+        click.echo(f"{outdir}: {removed_note(removed)}")
     for report in reports:
         _print_scene(report)
     order = {str(job.path): i for i, job in enumerate(loaded)}

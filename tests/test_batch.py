@@ -363,3 +363,53 @@ def test_batch_echoes_the_workers_that_run(tmp_path):
                                      "--json", tmp_path / "r.json")
     assert code == 0, output
     assert report["where"] == "local, -j 2" and "(local, -j 2)" in output
+
+
+def test_worker_killed_by_sigkill_fails_its_scene_and_leaves_no_temporaries(tmp_path):
+    """The OOM killer's way: SIGKILL to a `-j` worker while it writes. Its scene is reported failed (exit 1),
+    its hidden temporaries are removed and the removal is said; the other scene renders."""
+    folder = tmp_path / "scenes"
+    small_scene("hood", folder / "big.toml", width=960, height=540, samples=3)
+    small_scene("hood", folder / "small.toml", width=48, height=27)
+    out, report_path = tmp_path / "out", tmp_path / "report.json"
+    batch = subprocess.Popen([str(RTREFLECT), "batch", str(folder), "-o", str(out), "-j", "2",
+                              "--json", str(report_path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    victim = None
+    while victim is None:
+        assert batch.poll() is None and time.monotonic() < deadline, batch.communicate()
+        for path in out.glob(".big.*.exr") if out.is_dir() else ():
+            match = re.search(r"\.rtreflect-.*-(\d+)\.[a-z0-9_]{8}\.exr$", path.name)
+            assert match, path.name  # temporaries name their writer
+            victim = int(match[1])
+        time.sleep(0.02)
+    os.kill(victim, signal.SIGKILL)
+    stdout, stderr = batch.communicate(timeout=300)
+    assert batch.returncode == 1, (stdout, stderr)
+    report = by_name(json.loads(report_path.read_text()))
+    assert report["small"]["status"] == "rendered"
+    assert report["big"]["status"] == "failed" and "killed by SIGKILL" in report["big"]["error"], report["big"]
+    assert "removed its" in report["big"]["error"] and "temporary file" in report["big"]["error"]
+    assert sorted(p.name for p in out.iterdir()) == ["small.exr", "small.png"]
+
+
+def test_temporaries_of_dead_runs_are_removed_and_said(tmp_path):
+    """Leftovers of a killed run (this host, its PID gone) are removed by the next render; a live process's and
+    another host's temporaries are not touched."""
+    from rtreflect.output import sharing
+
+    scene_path = small_scene("hood", tmp_path / "hood.toml", width=24, height=14)
+    out = tmp_path / "out"
+    out.mkdir()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    host = sharing._host()
+    stale = out / f".hood.rtreflect-{host}-{dead.pid}.abcd_123.exr"
+    live = out / f".hood.rtreflect-{host}-1.abcd_123.png"  # PID 1 always runs
+    remote = out / f".hood.rtreflect-elsewhere-{dead.pid}.abcd_123.exr"
+    for path in (stale, live, remote):
+        path.write_bytes(b"partial")
+    result = CliRunner().invoke(cli, ["render", str(scene_path), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "removed 1 temporary file left by dead runs" in result.output and stale.name in result.output
+    assert sorted(p.name for p in out.iterdir()) == sorted(["hood.exr", "hood.png", live.name, remote.name])

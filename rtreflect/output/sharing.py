@@ -63,10 +63,10 @@ def _alive(pid: int) -> bool:
         return True  # no /proc: os.kill said it exists
 
 
-def remove_dead_temporaries(folder: Path) -> list[Path]:
+def remove_dead_temporaries(folder: Path, pid: int | None = None) -> list[Path]:
     """Remove the temporaries in ``folder`` left by dead rtreflect processes of this host; the paths removed.
 
-    Lock files no process holds are removed too.
+    With ``pid``, only that (dead) process's. Lock files no process holds are removed too.
     """
     removed: list[Path] = []
     try:
@@ -78,7 +78,8 @@ def remove_dead_temporaries(folder: Path) -> list[Path]:
         if not entry.name.startswith(".") or not entry.is_file(follow_symlinks=False):
             continue
         match = _TEMPORARY.match(entry.name)
-        if match and match["host"] == host and int(match["pid"]) != os.getpid() and not _alive(int(match["pid"])):
+        if (match and match["host"] == host and int(match["pid"]) != os.getpid() and pid in (None, int(match["pid"]))
+                and not _alive(int(match["pid"]))):
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(entry.path)
                 removed.append(Path(entry.path))
