@@ -5,16 +5,21 @@ for one tile per task); each span is a Dask task (`render_tile`) that a worker r
 with the same `Renderer.render_span` as a local render. Results come back to this
 client, which writes them in image order with the same `ImageWriter` as `rtreflect
 render`, so the files are byte-identical to a local run. A window of about two tasks
-per worker thread is in flight at once: the cluster stays busy, and the client holds
-at most that many tiles. Dask is imported only here, only when ``--scheduler`` is given.
+per worker thread is in flight or back and waiting for an earlier tile: the cluster
+stays busy, and the client holds at most that many tiles, however slow one tile is.
+Dask is imported only here, only when ``--scheduler`` is given.
 
 Workers need rtreflect (the same version: a task refuses to run otherwise) but not
-the scene files: the parsed scene, geometry included, is sent to the cluster.
+the scene files: the parsed scene, geometry included, is sent to the cluster. A cluster
+with no worker is an error after `WORKER_TIMEOUT` seconds; a scheduler lost mid-batch
+fails each scene not finished with one line, and the batch ends normally (its summary and
+report written).
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import threading
 import time
 from collections import OrderedDict
@@ -35,8 +40,12 @@ from .integrator.tiling import default_max_memory, rays_per_tile
 
 #: Seconds to wait for the scheduler before giving up.
 CONNECT_TIMEOUT = 20
+#: Seconds to wait, once connected, for a first worker: a cluster without workers would queue the tiles forever.
+WORKER_TIMEOUT = 20
 #: Renderers a worker keeps built (tessellation + BVH), most recently used first.
 CACHED_RENDERERS = 4
+#: Characters of the lost connection's message kept in each failed scene's one line (Dask's are long).
+LOST_DETAIL = 100
 #: Tile tasks in flight per worker thread.
 TASKS_PER_THREAD = 2
 
@@ -121,14 +130,34 @@ def run_on_cluster(address: str, jobs: list[Job], outdir: Path, *, max_memory: i
         client = distributed.Client(address, timeout=CONNECT_TIMEOUT, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as exc:
         raise RtreflectError(f"--scheduler {address}: cannot connect ({' '.join(str(exc).split()) or type(exc).__name__})") from None
-    with client:
+    # Dask logs a lost scheduler with multi-line tracebacks on stderr (its loggers have their own levels, and
+    # propagate to the handler on "distributed"); the batch reports it per scene instead.
+    handlers = [h for h in logging.getLogger("distributed").handlers if h.level <= logging.CRITICAL]
+    levels = [h.level for h in handlers]
+    for handler in handlers:
+        handler.setLevel(logging.CRITICAL + 1)
+    try:
+        try:
+            client.wait_for_workers(1, timeout=WORKER_TIMEOUT)
+        except Exception:  # TimeoutError, or the scheduler went away meanwhile
+            raise RtreflectError(f"--scheduler {address}: no worker connected within {WORKER_TIMEOUT} s "
+                                 f"(start workers with: dask worker {address})") from None
         _ClusterBatch(client, distributed, jobs, Path(outdir), max_memory or default_max_memory(),
-                      on_progress, on_done).run()
+                      on_progress, on_done, address).run()
+    finally:
+        with contextlib.suppress(Exception):  # a lost scheduler cannot be said goodbye to
+            client.close(timeout=5)
+        for handler, level in zip(handlers, levels):
+            handler.setLevel(level)
+
+
+class _ClusterLost(Exception):
+    """The connection to the scheduler is gone: no scene can go on."""
 
 
 class _ClusterBatch:
-    def __init__(self, client, distributed, jobs, outdir, max_memory, on_progress, on_done):
-        self.client, self.distributed = client, distributed
+    def __init__(self, client, distributed, jobs, outdir, max_memory, on_progress, on_done, address=""):
+        self.client, self.distributed, self.address = client, distributed, address
         self.outdir, self.max_memory = outdir, max_memory
         self.on_progress, self.on_done = on_progress, on_done
         self.queue = list(jobs)
@@ -138,6 +167,7 @@ class _ClusterBatch:
         self.window = max(2, TASKS_PER_THREAD * threads)
 
     def run(self) -> None:
+        """Every job to its files or a failed report; a lost cluster fails the scenes left, each with one line."""
         tasks = self.distributed.as_completed(loop=self.client.loop)
         try:
             self._fill(tasks)
@@ -149,21 +179,56 @@ class _ClusterBatch:
                 run.futures.discard(future)
                 if future.status == "finished":
                     pixels, rays, _ = future.result()
-                    run.waiting[index] = (pixels, rays)
+                    # Dask may hand back an array inside its message buffer, not aligned for float32, which
+                    # OpenImageIO refuses ("buffer is wrong size"): copied then, else used as is.
+                    run.waiting[index] = (np.require(pixels, np.float32, ["C", "A"]), rays)
                     self._write_ready(run)
                 elif run in self.active:
-                    self._fail(run, _task_error(future))
+                    error = _task_error(future)
+                    if self.client.status != "running":
+                        raise _ClusterLost(error)
+                    self._fail(run, error)
                 del future  # release the result on the cluster
                 self._fill(tasks)
-        except BaseException:
-            self.client.cancel(list(self.owner))
-            for run in self.active:
-                self._close(run, failed=True)
+        except (KeyboardInterrupt, RtreflectError) as exc:
+            self._abandon_all()
+            raise
+        except BaseException as exc:
+            if isinstance(exc, Exception) and (isinstance(exc, _ClusterLost) or self.client.status != "running"):
+                self._lost(exc.args[0] if isinstance(exc, _ClusterLost) else exc)
+                return
+            self._abandon_all()
             raise
 
+    def _abandon_all(self) -> None:
+        with contextlib.suppress(Exception):
+            self.client.cancel(list(self.owner))
+        for run in list(self.active):
+            self._close(run, failed=True)
+
+    def _lost(self, cause: BaseException) -> None:
+        """The scheduler is gone: each scene not finished fails with one line (partial files removed); the batch
+        then ends normally, so its summary and report are written."""
+        detail = " ".join(str(cause).split())
+        detail = f"{type(cause).__name__}: {detail[:LOST_DETAIL]}" if detail else type(cause).__name__
+        error = RtreflectError(f"--scheduler {self.address}: lost the connection to the cluster ({detail})")
+        self.owner.clear()
+        for run in list(self.active):
+            self._close(run, failed=True)
+            self._report_failure(run, error)
+        while self.queue:
+            job = self.queue.pop(0)
+            self._report_failure(_SceneRun(job, [], started=time.perf_counter()), error)
+
     def _fill(self, tasks) -> None:
-        """Submit tiles, scene after scene, until the window is full."""
-        while len(self.owner) < self.window:
+        """Submit tiles, scene after scene, until the window is full.
+
+        The window counts the tiles that came back but wait for an earlier one to be written, not only
+        those in flight: with one slow tile first, the client would otherwise hold every other tile of
+        the image. No deadlock: each scene's tiles are submitted in order, so its next tile to write is
+        always in flight or back already.
+        """
+        while len(self.owner) + sum(len(run.waiting) for run in self.active) < self.window:
             run = next((r for r in self.active if r.submitted < len(r.spans)), None) or self._start_next()
             if run is None:
                 return
@@ -188,8 +253,8 @@ class _ClusterBatch:
             except RtreflectError as exc:
                 self._report_failure(run, exc)
                 continue
+            self.active.append(run)  # before the scatter: a cluster lost during it fails this scene too
             run.scattered = self.client.scatter(job.scene, hash=False)
-            self.active.append(run)
             return run
         return None
 

@@ -413,3 +413,94 @@ def test_temporaries_of_dead_runs_are_removed_and_said(tmp_path):
     assert result.exit_code == 0, result.output
     assert "removed 1 temporary file left by dead runs" in result.output and stale.name in result.output
     assert sorted(p.name for p in out.iterdir()) == sorted(["hood.exr", "hood.png", live.name, remote.name])
+
+
+def test_cluster_without_workers_is_one_line_after_a_bounded_wait(tmp_path, monkeypatch):
+    distributed = pytest.importorskip("distributed")
+    from rtreflect import cluster as clustering
+
+    monkeypatch.setattr(clustering, "WORKER_TIMEOUT", 1)
+    scene_path = small_scene("hood", tmp_path / "hood.toml", width=24, height=14)
+    with distributed.LocalCluster(n_workers=0, processes=False, protocol="tcp://", dashboard_address=":0") as empty:
+        result = CliRunner().invoke(cli, ["batch", str(scene_path), "-o", str(tmp_path / "out"),
+                                          "--scheduler", empty.scheduler_address])
+    assert result.exit_code == 2, result.output
+    assert result.stderr.count("\n") == 1 and "no worker connected within 1 s" in result.stderr, result.stderr
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_scheduler_killed_mid_batch_fails_the_scenes_left_and_writes_the_report(tmp_path):
+    """The scheduler dies after the first scene: each scene left fails with one line, the table and the JSON report
+    are still written, nothing half-written stays, exit 1; no traceback on stderr."""
+    pytest.importorskip("distributed")
+    import socket
+
+    folder = tmp_path / "scenes"
+    for name in ("a", "b", "c"):
+        small_scene("hood", folder / f"{name}.toml", width=480, height=270, samples=2)
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                  "--port", str(port), "--no-dashboard"], **quiet)
+    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+                               "--no-dashboard"], **quiet)
+    out, report_path = tmp_path / "out", tmp_path / "report.json"
+    try:
+        batch = subprocess.Popen([str(RTREFLECT), "batch", str(folder), "-o", str(out), "--scheduler", address,
+                                  "--max-memory", "16M", "--json", str(report_path)],
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 120
+        while not (out / "a.png").exists():
+            assert batch.poll() is None and time.monotonic() < deadline, batch.communicate()
+            time.sleep(0.02)
+        scheduler.kill()
+        stdout, stderr = batch.communicate(timeout=120)
+    finally:
+        for process in (scheduler, worker):
+            process.kill()
+            process.wait()
+    assert batch.returncode == 1, (stdout, stderr)
+    assert stderr.strip() == "", stderr
+    report = by_name(json.loads(report_path.read_text()))
+    assert report["a"]["status"] == "rendered"
+    for name in ("b", "c"):
+        assert report[name]["status"] == "failed", report[name]
+        assert "lost the connection to the cluster" in report[name]["error"] and "\n" not in report[name]["error"]
+    assert re.search(r"b\.toml +failed", stdout) and "1 rendered, 0 up to date, 2 failed" in stdout
+    assert sorted(p.name for p in out.iterdir()) == ["a.exr", "a.png"]
+
+
+def test_cluster_client_holds_a_bounded_number_of_tiles_behind_a_slow_one(tmp_path, monkeypatch):
+    """The first tile is slow: the tiles after it come back and must wait to be written in order. What waits
+    counts against the window, so the client never holds more than the window's tiles (not the whole image)."""
+    distributed = pytest.importorskip("distributed")
+    from rtreflect import cluster as clustering
+
+    scene_path = small_scene("teapot", tmp_path / "scenes" / "tea.toml", width=320, height=180, samples=2)
+    expected = reference_files(scene_path, tmp_path / "local")
+    render_tile = clustering.render_tile
+
+    def slow_first(scene, key, start, stop, version):
+        if start == 0:
+            time.sleep(3.0)
+        return render_tile(scene, key, start, stop, version)
+
+    monkeypatch.setattr(clustering, "render_tile", slow_first)
+    held, write_ready = [], clustering._ClusterBatch._write_ready
+
+    def watch(self, run):
+        held.append((sum(len(r.waiting) for r in self.active) + len(self.owner), self.window))
+        write_ready(self, run)
+
+    monkeypatch.setattr(clustering._ClusterBatch, "_write_ready", watch)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp://",
+                                  dashboard_address=":0") as local:
+        code, output, report = run_batch(scene_path, "-o", tmp_path / "out", "--scheduler", local.scheduler_address,
+                                         "--max-memory", "12M", "--json", tmp_path / "r.json")
+    assert code == 0, output
+    assert by_name(report)["tea"]["tiles"] >= 8
+    assert max(count for count, _ in held) <= held[0][1], held  # tiles waiting + in flight ≤ the window
+    assert folder_bytes(tmp_path / "out") == expected
