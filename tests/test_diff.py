@@ -166,8 +166,10 @@ def test_nan_against_nan_is_equal_and_against_a_number_fails(tmp_path):
     # The max error is infinite, at the first such value in scan order (rows from the top).
     assert report.max_error.value == np.inf
     assert (report.max_error.x, report.max_error.y, report.max_error.channel) == (5, 2, "f")
-    # Mean and RMS stay finite: over the finite pairs only (OpenImageIO alone would make them NaN).
-    assert report.mean_error == pytest.approx(0.5 / (6 * 8 * 2), rel=1e-6)
+    # Mean and RMS stay finite: over the finite pairs only (OpenImageIO alone would make them NaN). Of the
+    # 96 values, 47 are NaN in both images and 2 in one only: 47 finite pairs (issue 11: the count was 96).
+    assert report.mean_error == pytest.approx(0.5 / 47, rel=1e-6)
+    assert report.rms_error == pytest.approx(np.sqrt(0.5**2 / 47), rel=1e-6)
     assert report.status == "mismatch"
     # A pixel that fails both ways is counted once.
     b[2, 5, 0] = 7.0
@@ -315,3 +317,61 @@ def test_console_script_exit_codes(pair, tmp_path):
     assert (same.returncode, differ.returncode, missing.returncode) == (0, 1, 2)
     assert "MISMATCH" in differ.stdout and missing.stdout == ""
     assert missing.stderr.strip().endswith("x.exr: no such file") and len(missing.stderr.strip().splitlines()) == 1
+
+
+# -- windows and bounded memory (issue 11) -----------------------------------------------------------
+
+
+def test_data_window_offset_is_not_identical(tmp_path):
+    """The same pixels with the data window moved by 10 px sit elsewhere in the image: bad input, not "identical"."""
+    pixels = np.random.default_rng(4).uniform(0, 1, (20, 40, 4)).astype(np.float32)
+    a = write_exr(tmp_path / "a.exr", pixels)
+    spec = oiio.ImageSpec(40, 20, 4, oiio.FLOAT)
+    spec.channelnames = RGBA
+    spec.x, spec.y = 10, 10
+    spec.full_x, spec.full_y, spec.full_width, spec.full_height = 0, 0, 40, 20
+    out = oiio.ImageOutput.create(str(tmp_path / "b.exr"))
+    assert out.open(str(tmp_path / "b.exr"), spec) and out.write_image(pixels) and out.close()
+    result = run(a, tmp_path / "b.exr")
+    assert result.exit_code == 2, result.output
+    assert result.output.count("\n") == 1 and "different image windows" in result.output
+    assert "data window 40×20 at (10, 10)" in result.output
+
+
+@pytest.mark.parametrize("chunk_values", [1, 37 * 4, 1 << 22])
+def test_chunked_comparison_equals_the_whole_image_result(tmp_path, monkeypatch, chunk_values):
+    """Any chunking gives the whole-image numbers: counts, max error and its pixel, the first NaN mismatch
+    (in a later chunk than a finite error), mean and RMS over the finite pairs (recomputed here with numpy),
+    the excess map and the diff image."""
+    import rtreflect.ci.diff as diffing
+
+    rng = np.random.default_rng(11)
+    a = rng.uniform(0, 1, (31, 37, 4)).astype(np.float32)
+    a[:, :5] = np.nan  # background
+    b = a.copy()
+    b[3, 20, 1] += 0.25  # the max error, early
+    b[17:19, 8:30, 0] += rng.normal(0, 0.01, (2, 22)).astype(np.float32)
+    b[25, 30, 2] = np.nan  # a hit became a miss, later
+    pa, pb = write_exr(tmp_path / "a.exr", a), write_exr(tmp_path / "b.exr", b)
+    monkeypatch.setattr(diffing, "CHUNK_VALUES", chunk_values)
+    report = compare_images(pa, pb)
+    assert report.failing_pixels == 1 + int((np.abs(b[17:19, 8:30, 0] - a[17:19, 8:30, 0]) > 1e-6).sum()) + 1
+    assert report.nonfinite_mismatch_pixels == 1
+    first = report.first_nonfinite_mismatch
+    assert (first.x, first.y, first.channel) == (30, 25, "B") and report.max_error == first
+    finite = np.isfinite(a) & np.isfinite(b)
+    error = np.abs(a[finite].astype(np.float64) - b[finite])
+    assert report.mean_error == pytest.approx(error.mean(), rel=1e-5)
+    assert report.rms_error == pytest.approx(np.sqrt((error**2).mean()), rel=1e-5)
+    whole = tmp_path / "whole.png"
+    monkeypatch.setattr(diffing, "CHUNK_VALUES", 1 << 30)
+    reference = compare_images(pa, pb)
+    reference.write_diff_image(whole)
+    np.testing.assert_array_equal(report.excess, reference.excess)
+    report.write_diff_image(tmp_path / "chunked.png")
+    assert (tmp_path / "chunked.png").read_bytes() == whole.read_bytes()
+    b[25, 30, 2] = a[25, 30, 2]  # no mismatch now: the max error is the finite one, at its pixel
+    monkeypatch.setattr(diffing, "CHUNK_VALUES", chunk_values)
+    report = compare_images(pa, write_exr(tmp_path / "c.exr", b))
+    assert (report.max_error.x, report.max_error.y, report.max_error.channel) == (20, 3, "G")
+    assert report.max_error.value == pytest.approx(0.25, rel=1e-5)

@@ -17,7 +17,16 @@ RMS. So non-finite values are settled here before OpenImageIO sees them: where b
 images hold the same non-finite value the pair compares equal; where only one does
 (a silhouette moved, a hit became a miss) the pixel fails, the max error is infinite
 at the first such value (as OpenImageIO reports it), and mean, RMS and PSNR are taken
-over the finite pairs only (the non-finite pair contributes 0).
+over the pairs where both values are finite (a pair with a non-finite value is not counted at all).
+
+**Windows.** An EXR's pixels cover its data window, which need not start at (0, 0). Two images
+whose data or display windows differ hold their values at different image positions: that is
+bad input (one line, exit 2), not a comparison of the stored arrays.
+
+**Bounded memory.** The files are read in chunks of scanlines (`CHUNK_VALUES` values per
+image) and OpenImageIO compares chunk by chunk; counts, sums and maxima add up across
+chunks. The diff image is drawn in further passes over the files (its colour scale, then
+its pixels), chunk by chunk, and streamed to its PNG, so no whole image is ever held.
 """
 
 from __future__ import annotations
@@ -28,6 +37,7 @@ import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 import OpenImageIO as oiio
@@ -38,7 +48,7 @@ with warnings.catch_warnings():
 
 from ..errors import RtreflectError
 from ..integrator.film import COLOR_CHANNELS
-from ..output.imagefiles import atomic_path, read_image, write_png
+from ..output.imagefiles import atomic_path, write_png_rows
 
 #: Default ``fail`` for float images: float32 noise passes, any real change fails.
 FLOAT_FAIL = 1e-6
@@ -102,11 +112,20 @@ class DiffReport:
     nonfinite_mismatch_pixels: int  # pixels where only one image is NaN/Inf (counted as failing)
     first_nonfinite_mismatch: PixelError | None
     status: str  # "match", "warn" or "mismatch"
-    # For the diff image, not part of the report proper: per pixel, the largest ratio over the channels
-    # of |A − B| to its warn or fail threshold, whichever is lower (> 1: the pixel warns or fails; inf where
-    # only one image is non-finite), and A's greyscale.
-    excess: np.ndarray = field(repr=False, default=None)
-    background: np.ndarray = field(repr=False, default=None)
+    # For the diff image, not part of the report proper: drawn from the files again, chunk by chunk.
+    picture: "_Picture" = field(repr=False, default=None)
+
+    @property
+    def excess(self) -> np.ndarray:
+        """(H, W): per pixel, the largest ratio over the channels of |A − B| to its warn or fail threshold,
+        whichever is lower (> 1: the pixel warns or fails; inf where only one image is non-finite).
+        Assembled whole from the files: for small images and tests; the diff image streams it."""
+        return np.concatenate([excess for _, _, excess in self.picture.rows()])
+
+    @property
+    def background(self) -> np.ndarray:
+        """(H, W): A's greyscale in [0, 1] under the diff image (assembled whole, as `excess`)."""
+        return np.concatenate([grey for _, grey, _ in self.picture.rows()])
 
     @property
     def pixels(self) -> int:
@@ -168,8 +187,10 @@ class DiffReport:
         writers = []
         if diff_png is not None:
             final = Path(diff_png)
-            writers.append((final, lambda tmp, final=final: write_png(tmp, diff_image(self.background, self.excess),
-                                                                      final=final)))
+            top = self.picture.top if diff_png is not None else None
+            rows = lambda: (diff_image(grey, excess, top) for _, grey, excess in self.picture.rows())  # noqa: E731
+            writers.append((final, lambda tmp, final=final: write_png_rows(tmp, self.width, self.height, rows(),
+                                                                           final=final)))
         if json_path is not None:
             writers.append((Path(json_path), lambda tmp: tmp.write_text(json.dumps(self.to_json(), indent=2) + "\n")))
         target = None
@@ -188,17 +209,58 @@ def _threshold(absolute: float, relative: float) -> str:
 
 # -- loading ----------------------------------------------------------------------------------
 
+#: Values read per image and chunk of scanlines (float32: 16 MiB): memory stays bounded whatever the image size.
+CHUNK_VALUES = 1 << 22
+
+
+def _open_input(path: Path) -> oiio.ImageInput:
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)  # as stored: do not premultiply a PNG's colour by its alpha
+    source = oiio.ImageInput.open(str(path), config)
+    if source is None:
+        raise DiffInputError(f"{path}: cannot read image ({' '.join(oiio.geterror().split()) or 'unknown format'})")
+    return source
+
 
 @dataclass
 class _Image:
+    """An image file's header; its pixels are read in chunks of scanlines (`rows`), never whole."""
+
     path: Path
-    pixels: np.ndarray  # (H, W, C) float32
+    spec: oiio.ImageSpec
     channels: tuple[str, ...]
     quantum: float  # default ``fail``: float noise for float data, one code value for integer data
 
     @property
     def size(self) -> str:
-        return f"{self.pixels.shape[1]}×{self.pixels.shape[0]}"
+        return f"{self.spec.width}×{self.spec.height}"
+
+    @property
+    def window(self) -> tuple[int, int, int, int, int, int, int, int]:
+        """Data window (x, y, width, height) and display (full) window, as stored."""
+        s = self.spec
+        return s.x, s.y, s.width, s.height, s.full_x, s.full_y, s.full_width, s.full_height
+
+    def describe_window(self) -> str:
+        x, y, w, h, fx, fy, fw, fh = self.window
+        return f"{self.path} has data window {w}×{h} at ({x}, {y}), display window {fw}×{fh} at ({fx}, {fy})"
+
+    def chunk_rows(self) -> int:
+        return max(1, CHUNK_VALUES // max(1, self.spec.width * self.spec.nchannels))
+
+    def rows(self, chunk_rows: int) -> Iterator[tuple[int, np.ndarray]]:
+        """(first row, pixels (rows, W, C) float32) down the data window; row 0 is the window's top."""
+        spec = self.spec
+        source = _open_input(self.path)
+        try:
+            for row in range(0, spec.height, chunk_rows):
+                end = min(spec.height, row + chunk_rows)
+                data = source.read_scanlines(0, 0, spec.y + row, spec.y + end, spec.z, 0, spec.nchannels, oiio.FLOAT)
+                if data is None or not isinstance(data, np.ndarray):
+                    raise DiffInputError(f"{self.path}: cannot read image ({' '.join(source.geterror().split())})")
+                yield row, data.reshape(end - row, spec.width, spec.nchannels)
+        finally:
+            source.close()
 
 
 def _load(path: Path) -> _Image:
@@ -207,18 +269,15 @@ def _load(path: Path) -> _Image:
         raise DiffInputError(f"{path}: no such file")
     if path.is_dir():
         raise DiffInputError(f"{path}: is a folder, not an image")
-    try:
-        pixels, channels, _ = read_image(path)
-    except RtreflectError as exc:
-        raise DiffInputError(str(exc)) from None
-    source = oiio.ImageInput.open(str(path))
-    stored = source.spec().format
+    source = _open_input(path)
+    spec = oiio.ImageSpec(source.spec())
     source.close()
+    stored = spec.format
     if stored.basetype in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):
         quantum = FLOAT_FAIL
     else:
         quantum = 1.0 / (2 ** (8 * stored.size()) - 1) + CODE_VALUE_SLACK
-    return _Image(path, pixels, channels, quantum)
+    return _Image(path, spec, tuple(spec.channelnames), quantum)
 
 
 def _select_channels(a: _Image, b: _Image, channels: tuple[str, ...] | None) -> tuple[str, ...]:
@@ -246,34 +305,54 @@ def _buffer(pixels: np.ndarray) -> oiio.ImageBuf:
     return buf
 
 
-def _greyscale(image: _Image, channels: tuple[str, ...]) -> np.ndarray:
-    """A's picture in [0, 1] (linear) to draw the differences over: its colour if it has any, else its first
-    compared channel stretched over its finite range."""
-    if all(c in image.channels for c in "RGB"):
-        rgb = np.stack([image.pixels[..., image.channels.index(c)] for c in "RGB"], axis=-1).astype(np.float64)
-        weights = colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ[1]  # the Y row: luminance of linear sRGB
-        return np.clip(np.nan_to_num(rgb @ weights, nan=0.0), 0.0, 1.0)
-    plane = image.pixels[..., image.channels.index(channels[0])].astype(np.float64)
-    finite = np.isfinite(plane)
-    if not finite.any():
-        return np.zeros(plane.shape)
-    low, high = plane[finite].min(), plane[finite].max()
-    return np.where(finite, (plane - low) / (high - low) if high > low else 0.5, 0.0)
-
-
 # -- comparison -------------------------------------------------------------------------------
+
+
+@dataclass
+class _Pair:
+    """A and B read side by side, chunk by chunk, over the compared channels, with non-finite values settled."""
+
+    a: _Image
+    b: _Image
+    names: tuple[str, ...]
+    thresholds: tuple[float, float, float, float]  # fail, warn, failrelative, warnrelative
+
+    def chunks(self) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]]:
+        """(first row, A's chunk with all its channels, finite A, finite B, mismatch, finite pairs) per chunk of rows.
+
+        Non-finite values are settled before OpenImageIO sees them (module docstring): where either
+        image is non-finite both become 0; ``mismatch`` marks the values non-finite in one image only
+        (or non-finite in both but different, such as +Inf against −Inf); the last item counts the
+        values finite in both images.
+        """
+        chunk_rows = min(self.a.chunk_rows(), self.b.chunk_rows())
+        ia = [self.a.channels.index(c) for c in self.names]
+        ib = [self.b.channels.index(c) for c in self.names]
+        for (row, a_all), (_, b_all) in zip(self.a.rows(chunk_rows), self.b.rows(chunk_rows)):
+            pa, pb = a_all[..., ia], b_all[..., ib]
+            nonfinite_a, nonfinite_b = ~np.isfinite(pa), ~np.isfinite(pb)
+            either = nonfinite_a | nonfinite_b
+            same = (np.isnan(pa) & np.isnan(pb)) | (nonfinite_a & nonfinite_b & (pa == pb))
+            mismatch = either & ~same
+            yield (row, a_all, np.where(either, np.float32(0), pa).astype(np.float32),
+                   np.where(either, np.float32(0), pb).astype(np.float32), mismatch, int(either.size - either.sum()))
 
 
 def compare_images(a_path: Path, b_path: Path, channels: tuple[str, ...] | None = None,
                    tolerance: Tolerance = Tolerance()) -> DiffReport:
     """Compare image A with image B over ``channels`` (default: R,G,B,A, or all when the images have none
-    of those); raises `DiffInputError` for missing files, different sizes or channel sets."""
+    of those); raises `DiffInputError` for missing files, different sizes, windows or channel sets.
+
+    The images are read in chunks of scanlines (`CHUNK_VALUES` values each) and OpenImageIO compares
+    chunk by chunk; the counts and sums add up, so memory does not grow with the image size.
+    """
     a, b = _load(a_path), _load(b_path)
-    if a.pixels.shape[:2] != b.pixels.shape[:2]:
+    if (a.spec.width, a.spec.height) != (b.spec.width, b.spec.height):
         raise DiffInputError(f"different sizes: {a.path} is {a.size}, {b.path} is {b.size}")
+    if a.window != b.window:
+        # The same values at other image positions are not the same image (idiff counts them as failing).
+        raise DiffInputError(f"different image windows: {a.describe_window()}; {b.describe_window()}")
     names = _select_channels(a, b, channels)
-    pa = np.stack([a.pixels[..., a.channels.index(c)] for c in names], axis=-1)
-    pb = np.stack([b.pixels[..., b.channels.index(c)] for c in names], axis=-1)
 
     fail = tolerance.fail if tolerance.fail is not None else max(a.quantum, b.quantum)
     warn = tolerance.warn if tolerance.warn is not None else fail
@@ -283,54 +362,63 @@ def compare_images(a_path: Path, b_path: Path, channels: tuple[str, ...] | None 
         # |a − b| / mean(|a|, |b|) never exceeds 2: a larger bound would pass everything.
         raise DiffInputError(f"relative thresholds must lie in [0, 2), not {failrelative:g}/{warnrelative:g}")
     thresholds = (fail, warn, failrelative, warnrelative)
+    pair = _Pair(a, b, names, thresholds)
+    x0, y0 = a.spec.x, a.spec.y  # pixel positions are reported in the file's coordinates
 
-    # Non-finite values, settled before OpenImageIO sees them (module docstring).
-    nonfinite_a, nonfinite_b = ~np.isfinite(pa), ~np.isfinite(pb)
-    same = (np.isnan(pa) & np.isnan(pb)) | (nonfinite_a & nonfinite_b & (pa == pb))
-    mismatch = (nonfinite_a | nonfinite_b) & ~same
-    finite_a = np.where(nonfinite_a | nonfinite_b, 0.0, pa).astype(np.float32)
-    finite_b = np.where(nonfinite_a | nonfinite_b, 0.0, pb).astype(np.float32)
-
-    stats = oiio.ImageBufAlgo.compare(_buffer(finite_a), _buffer(finite_b), *thresholds)  # .error: "some failed"
-    failing, warning = stats.nfail, stats.nwarn
-    mismatch_pixels = int(mismatch.any(axis=-1).sum())
-    first_mismatch = None
-    if mismatch_pixels:
-        # Count each pixel once whether it fails by a finite error, a non-finite mismatch or both:
-        # OpenImageIO counts the pixels again with the mismatched values replaced by a sure failure
-        # (against 0 it is over both absolute thresholds, and its relative difference is 2).
-        sure_failure = 2.0 * max(fail, warn) + 1.0
-        counts = oiio.ImageBufAlgo.compare(_buffer(finite_a), _buffer(np.where(mismatch, sure_failure, finite_b)),
-                                           *thresholds)
-        failing, warning = counts.nfail, counts.nwarn
-        y, x, c = (int(i) for i in np.argwhere(mismatch)[0])
-        first_mismatch = PixelError(math.inf, x, y, names[c])
+    failing = warning = mismatch_pixels = finite_values = 0
+    error_sum = error_squares = 0.0
+    max_error: PixelError | None = None
+    first_mismatch: PixelError | None = None
+    grey = _GreyRange(a, names)
+    for row, a_all, finite_a, finite_b, mismatch, finite_pairs in pair.chunks():
+        stats = oiio.ImageBufAlgo.compare(_buffer(finite_a), _buffer(finite_b), *thresholds)  # .error: "some failed"
+        nfail, nwarn = stats.nfail, stats.nwarn
+        if mismatch.any():
+            # Count each pixel once whether it fails by a finite error, a non-finite mismatch or both:
+            # OpenImageIO counts the pixels again with the mismatched values replaced by a sure failure
+            # (against 0 it is over both absolute thresholds, and its relative difference is 2).
+            sure_failure = 2.0 * max(fail, warn) + 1.0
+            counts = oiio.ImageBufAlgo.compare(_buffer(finite_a), _buffer(np.where(mismatch, sure_failure, finite_b)),
+                                               *thresholds)
+            nfail, nwarn = counts.nfail, counts.nwarn
+            mismatch_pixels += int(mismatch.any(axis=-1).sum())
+            if first_mismatch is None:
+                y, x, c = (int(i) for i in np.argwhere(mismatch)[0])
+                first_mismatch = PixelError(math.inf, x0 + x, y0 + row + y, names[c])
+        failing, warning = failing + nfail, warning + nwarn
+        # OpenImageIO's mean and RMS are over every value of the chunk; settled pairs contributed 0 to its sums.
+        values = finite_a.size
+        error_sum += float(stats.meanerror) * values
+        error_squares += float(stats.rms_error) ** 2 * values
+        finite_values += finite_pairs
+        if stats.maxerror > 0 and (max_error is None or stats.maxerror > max_error.value):
+            max_error = PixelError(float(stats.maxerror), x0 + stats.maxx, y0 + row + stats.maxy, names[stats.maxc])
+        grey.update(a_all)
 
     if first_mismatch is not None:
         max_error = first_mismatch  # non-finite errors trump finite ones, as in OpenImageIO
-    elif stats.maxerror > 0:
-        max_error = PixelError(float(stats.maxerror), stats.maxx, stats.maxy, names[stats.maxc])
-    else:
-        max_error = None
+    # Mean and RMS over the pairs where both values are finite (the README's contract).
+    mean_error = error_sum / finite_values if finite_values else 0.0
+    rms_error = math.sqrt(error_squares / finite_values) if finite_values else 0.0
+    psnr = 20.0 * math.log10(1.0 / rms_error) if rms_error > 0 else math.inf  # OpenImageIO's definition (peak 1)
 
-    allowed_fail = tolerance.failpercent / 100.0 * a.pixels.shape[0] * a.pixels.shape[1]
-    allowed_warn = tolerance.warnpercent / 100.0 * a.pixels.shape[0] * a.pixels.shape[1]
+    pixels = a.spec.width * a.spec.height
     worst = max_error.value if max_error else 0.0
-    if failing > allowed_fail or worst > tolerance.hardfail:
+    if failing > tolerance.failpercent / 100.0 * pixels or worst > tolerance.hardfail:
         status = "mismatch"
-    elif warning > allowed_warn:
+    elif warning > tolerance.warnpercent / 100.0 * pixels:
         status = "warn"
     else:
         status = "match"
 
     return DiffReport(
-        a=a.path, b=b.path, width=a.pixels.shape[1], height=a.pixels.shape[0], channels=names,
+        a=a.path, b=b.path, width=a.spec.width, height=a.spec.height, channels=names,
         fail=fail, failrelative=failrelative, failpercent=tolerance.failpercent, hardfail=tolerance.hardfail,
         warn=warn, warnrelative=warnrelative, warnpercent=tolerance.warnpercent,
-        mean_error=float(stats.meanerror), rms_error=float(stats.rms_error), psnr=float(stats.PSNR),
+        mean_error=mean_error, rms_error=rms_error, psnr=psnr,
         max_error=max_error, failing_pixels=int(failing), warning_pixels=int(warning),
         nonfinite_mismatch_pixels=mismatch_pixels, first_nonfinite_mismatch=first_mismatch, status=status,
-        excess=_excess(finite_a, finite_b, mismatch, thresholds), background=_greyscale(a, names),
+        picture=_Picture(pair, grey),
     )
 
 
@@ -356,6 +444,62 @@ def _excess(a: np.ndarray, b: np.ndarray, mismatch: np.ndarray, thresholds: tupl
 # -- the diff image ---------------------------------------------------------------------------
 
 
+class _GreyRange:
+    """What A's greyscale needs beyond one chunk: for an image without colour, its first compared channel's
+    finite range (gathered chunk by chunk)."""
+
+    def __init__(self, image: _Image, names: tuple[str, ...]):
+        self.rgb = [image.channels.index(c) for c in "RGB"] if all(c in image.channels for c in "RGB") else None
+        self.plane = image.channels.index(names[0])
+        self.low, self.high = math.inf, -math.inf
+
+    def update(self, a_all: np.ndarray) -> None:
+        if self.rgb is None:
+            plane = a_all[..., self.plane]
+            finite = plane[np.isfinite(plane)]
+            if finite.size:
+                self.low, self.high = min(self.low, float(finite.min())), max(self.high, float(finite.max()))
+
+    def grey(self, a_all: np.ndarray) -> np.ndarray:
+        """A's picture in [0, 1] (linear) to draw the differences over: its colour's luminance if it has
+        colour, else its first compared channel stretched over its finite range."""
+        if self.rgb is not None:
+            rgb = a_all[..., self.rgb].astype(np.float64)
+            weights = colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ[1]  # the Y row: luminance of linear sRGB
+            return np.clip(np.nan_to_num(rgb @ weights, nan=0.0), 0.0, 1.0)
+        plane = a_all[..., self.plane].astype(np.float64)
+        finite = np.isfinite(plane)
+        if self.high < self.low:
+            return np.zeros(plane.shape)
+        stretched = (plane - self.low) / (self.high - self.low) if self.high > self.low else np.full(plane.shape, 0.5)
+        return np.where(finite, stretched, 0.0)
+
+
+@dataclass
+class _Picture:
+    """The diff image, drawn chunk by chunk from the files on demand: a pass for the colour scale (`top`),
+    then one for the pixels. Only a diff image pays for them."""
+
+    pair: _Pair
+    grey: _GreyRange
+    _top: float | None = None
+
+    @property
+    def top(self) -> float:
+        """The largest finite excess over a threshold anywhere: the top of the diff image's colour scale."""
+        if self._top is None:
+            self._top = 0.0
+            for _, _, excess in self.rows():
+                marked = excess[(excess > 1.0) & np.isfinite(excess)]
+                self._top = max(self._top, float(marked.max()) if marked.size else 0.0)
+        return self._top
+
+    def rows(self) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+        """(first row, A's greyscale, excess) per chunk of rows."""
+        for row, a_all, finite_a, finite_b, mismatch, _ in self.pair.chunks():
+            yield row, self.grey.grey(a_all), _excess(finite_a, finite_b, mismatch, self.pair.thresholds)
+
+
 def error_colormap(t: np.ndarray) -> np.ndarray:
     """Linear sRGB colours for t in [0, 1]: a perceptually uniform ramp from red through orange to yellow.
 
@@ -370,11 +514,12 @@ def error_colormap(t: np.ndarray) -> np.ndarray:
     return np.clip(rgb, 0.0, 1.0)
 
 
-def diff_image(background: np.ndarray, excess: np.ndarray) -> np.ndarray:
+def diff_image(background: np.ndarray, excess: np.ndarray, top: float | None = None) -> np.ndarray:
     """(H, W, 4) linear RGBA: A (``background``, greyscale in [0, 1]) dimmed, and every pixel whose
     ``excess`` (error over threshold, see `compare_images`) is above 1 coloured by how much, on a log
     scale from just over the threshold (red) to the largest finite excess (yellow); pixels that
-    are NaN/Inf in one image only get the top colour.
+    are NaN/Inf in one image only get the top colour. ``top``: that largest excess when ``excess`` is
+    one chunk of a larger image (from the first pass); by default the chunk's own.
 
     Amplified this way, a line that moved by a fraction of a pixel shows as a coloured seam along the
     line, however small the value change.
@@ -382,8 +527,10 @@ def diff_image(background: np.ndarray, excess: np.ndarray) -> np.ndarray:
     rgb = np.repeat((DIM * background)[..., None], 3, axis=-1)
     marked = excess > 1.0
     if marked.any():
-        finite = excess[marked & np.isfinite(excess)]
-        top = max(finite.max() if finite.size else 1.0, 10.0)  # at least a decade, so a tiny excess stays red
+        if top is None:  # the whole image is here: its own largest finite excess
+            finite = excess[marked & np.isfinite(excess)]
+            top = finite.max() if finite.size else 1.0
+        top = max(top, 10.0)  # at least a decade, so a tiny excess stays red
         t = np.log(excess[marked]) / np.log(top)
         rgb[marked] = error_colormap(np.where(np.isfinite(t), t, 1.0))
     return np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,))], axis=-1)

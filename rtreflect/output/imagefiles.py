@@ -13,7 +13,7 @@ import sys
 import tempfile
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
 import numpy as np
 import OpenImageIO as oiio
@@ -186,6 +186,27 @@ def write_png(path: Path, rgba: np.ndarray, final: Path | None = None) -> None:
     """An 8-bit sRGB PNG of a linear (H, W, 4) RGBA image (not atomic: wrap it in `atomic_path`)."""
     height, width = rgba.shape[:2]
     _write(path, _png_spec(width, height, {}), encode_srgb(rgba), final)
+
+
+def write_png_rows(path: Path, width: int, height: int, blocks: Iterable[np.ndarray], final: Path | None = None) -> None:
+    """An 8-bit sRGB PNG from blocks of linear RGBA rows (k, W, 4), top to bottom, streamed: memory holds one block.
+
+    Not atomic (wrap it in `atomic_path`); errors name ``final``, with libpng's stderr muted as in `ImageWriter`.
+    """
+    shown = final or path
+    with muted_stderr() as muted:
+        out = oiio.ImageOutput.create(str(path))
+        if out is None or not out.open(str(path), _png_spec(width, height, {})):
+            raise RtreflectError(f"{shown}: cannot write image ({oiio.geterror() or 'unknown OpenImageIO error'})")
+        row, ok = 0, True
+        try:
+            for block in blocks:
+                ok = ok and out.write_scanlines(row, row + len(block), 0, encode_srgb(block))
+                row += len(block)
+        finally:
+            ok = out.close() and ok
+    if not ok or row != height or _png_incomplete(path):
+        raise _png_failure(shown, out, muted)
 
 
 def output_paths(scene: "Scene", outdir: Path, extra_files: dict[str, str] | None = None) -> list[Path]:
