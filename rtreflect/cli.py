@@ -261,6 +261,8 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
                    f"{report.colour_checked} pixels' colour checked)")
         for reason in report.reasons:
             click.echo(f"  FAIL: {reason}")
+        for note in report.notes:
+            click.echo(f"  note: {note}")
     if report_path is not None:
         document = {"scenes": {}}
         for report in reports:

@@ -279,3 +279,34 @@ def test_line_coverage_inverts_the_films_colour_blend():
     rgba = coverage_color(hit, lit, surface, line, background)
     np.testing.assert_allclose(line_coverage(rgba, surface, line, background), (hit & lit).sum(axis=1) / 9, atol=1e-12)
     assert np.all(np.isnan(line_coverage(rgba, surface, surface, background)))
+
+
+@pytest.mark.parametrize("offset", [0.001, 0.1])
+def test_resolution_is_decided_per_line(offset, tmp_path):
+    """An extra tube `offset` from tube 5 (c = 0.5) of the hood (spacing 0.5): only that pair's lines crowd.
+    The render is correct, so it passes; every other line is checked exactly as without the extra tube, and
+    the pair, whose lines the pixels cannot tell apart, is reported (issue 11: the smallest spacing anywhere
+    was applied to every line, so 0.001 failed the scene and 0.1 checked a tenth of the points)."""
+    scene = load_scene(SCENES / "hood.toml").with_image(WIDTH, HEIGHT, 1)
+    baseline = validate_scene(scene)
+    crowded = replace(scene, lights=replace(scene.lights, positions=np.append(scene.lights.positions, 0.5 + offset)))
+    report = validate_scene(crowded)
+    assert report.passed and not report.reasons, report.reasons
+    pair = (5, len(report.lines) - 1)
+    for line, before in zip(report.lines, baseline.lines):
+        if line.light not in pair:
+            assert (line.points, line.misses, line.unresolved_points) == (before.points, before.misses, 0)
+    for k in pair:
+        assert report.lines[k].neighbour_gap == pytest.approx(offset)
+        assert report.lines[k].unresolved_points > 0.5 * report.lines[k].clean_points
+        assert any(note.startswith(f"light {k} ") for note in report.notes), report.notes
+    assert report.points >= baseline.points - baseline.lines[5].points
+    if offset == 0.1:  # the command line shows the notes, and the JSON the per-line counts
+        path = tmp_path / "crowded.toml"
+        path.write_text((SCENES / "hood.toml").read_text().replace("2.0]\nradius", f"2.0, {0.5 + offset}]\nradius"))
+        result = CliRunner().invoke(cli, ["validate", str(path), "--width", str(WIDTH), "--height", str(HEIGHT),
+                                          "--json", str(tmp_path / "r.json")])
+        assert result.exit_code == 0, result.output
+        assert "note: light 5 (c_k = 0.5)" in result.output and "note: light 9 (c_k = 0.6)" in result.output
+        lines = json.loads((tmp_path / "r.json").read_text())["scenes"]["crowded"]["lines"]
+        assert lines[9]["unresolved_points"] > 0 and lines[0]["unresolved_points"] == 0
