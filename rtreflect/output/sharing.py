@@ -10,7 +10,7 @@ another host (a shared network folder) is never touched, since its process canno
 **A lock per output name.** A scene's outputs (``NAME.exr``, ``NAME.png``, ``NAME.contours.json``)
 are renamed into place one after the other. Two runs finishing the same NAME at once (two
 scenes with one ``[output] name``, in two processes) could interleave those renames and
-leave ``NAME.exr`` from one and ``NAME.png`` from the other. `name_lock` is an advisory
+leave ``NAME.exr`` from one and ``NAME.png`` from the other. `NameLock` is an advisory
 lock (``flock(2)``) on ``.NAME.rtreflect-lock`` held while a set is renamed, so each set
 lands whole: the last run to finish wins every file. The lock file is removed by its holder
 while still locked; a waiter that then holds a removed file tries again (the classic
@@ -130,7 +130,8 @@ def _locked(path: Path, wait: bool = True) -> Iterator[bool]:
 
 
 class NameLock:
-    """`name_lock` split in two, for an ExitStack: `acquire` as the renames start, `release` after the last."""
+    """The lock on one output name, in two steps for an ExitStack: `acquire` as the renames start, `release`
+    after the last (the lock file removed)."""
 
     def __init__(self, folder: Path, name: str):
         self.path = _lock_path(folder, name)
@@ -147,13 +148,3 @@ class NameLock:
         if held is not None:
             held.close()
 
-
-@contextlib.contextmanager
-def name_lock(folder: Path, name: str) -> Iterator[None]:
-    """Hold the lock on output ``name`` in ``folder`` for the block (see the module doc)."""
-    lock = NameLock(folder, name)
-    lock.acquire()
-    try:
-        yield
-    finally:
-        lock.release()
