@@ -191,7 +191,8 @@ class Scene:
 
         A mapping changes only the keys it names (``replace(camera={"fov": 30})``); a spec object
         (`CameraSpec`, ...) replaces the whole table; ``surfaces`` replaces the list (entries as for
-        `Scene`). For the tubes, ``positions`` replaces ``spacing``/``count`` and the other way round.
+        `Scene`). For the tubes, ``spacing`` and/or ``count`` replace ``positions`` (the one not given is the
+        current row's), and ``positions`` replaces them.
         """
         changes = {"image": image, "camera": camera, "lights": lights, "render": render, "output": output}
         changes = {name: value for name, value in changes.items() if value is not None}
@@ -201,7 +202,11 @@ class Scene:
                 table = _spec_table(getattr(self, name))
                 change = _toml_value(change)
                 if name == "lights" and ("spacing" in change or "count" in change):
-                    table.pop("positions")
+                    # Tubes given by spacing and count: the one not given is that of the current row of tubes.
+                    positions = table.pop("positions")
+                    change = {"count": len(positions), **change}
+                    if "spacing" not in change and len(positions) > 1:
+                        change["spacing"] = positions[1] - positions[0]
                 table.update(change)
             else:
                 table = _toml_value(change)
