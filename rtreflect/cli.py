@@ -193,11 +193,15 @@ def diff(a: Path, b: Path, fail_threshold, failrelative, failpercent, hardfail, 
     Exit status: 0 match (or a warning within tolerance), 1 mismatch,
     2 bad input: a missing file, different sizes or channel sets.
 
+    A PNG (8-bit sRGB) against an EXR (linear float): the EXR's R,G,B,A are
+    first encoded as rtreflect writes PNGs, and the two compared as PNGs.
+
     \b
-    Examples:
-      rtreflect diff out/hood.exr golden_images/hood.exr --diff-image hood.diff.png
+    Examples (the golden images are 320×180):
+      rtreflect render scenes/hood.toml -o out/ --width 320 --height 180
+      rtreflect diff out/hood.exr golden_images/hood.exr --diff-image out/hood.diff.png
       rtreflect diff out/hood.exr golden_images/hood.exr --channels N.X,N.Y,N.Z --fail 1e-5
-      rtreflect diff out/hood.png golden_images/hood.png --failpercent 0.05 --json report.json
+      rtreflect diff out/hood.png golden_images/hood.exr --json out/report.json
     """
     from .ci.diff import Tolerance, compare_images
 

@@ -38,7 +38,7 @@ with warnings.catch_warnings():
 
 from ..errors import RtreflectError
 from ..integrator.film import COLOR_CHANNELS
-from ..output.imagefiles import atomic_path, read_image, write_png
+from ..output.imagefiles import atomic_path, encode_srgb, read_image, write_png
 
 #: Default ``fail`` for float images: float32 noise passes, any real change fails.
 FLOAT_FAIL = 1e-6
@@ -107,6 +107,7 @@ class DiffReport:
     # only one image is non-finite), and A's greyscale.
     excess: np.ndarray = field(repr=False, default=None)
     background: np.ndarray = field(repr=False, default=None)
+    converted: str | None = None  # which image was converted to the other's colour encoding, and how
 
     @property
     def pixels(self) -> int:
@@ -122,6 +123,7 @@ class DiffReport:
         pct = lambda n: 100.0 * n / self.pixels  # noqa: E731
         lines = [
             f"{self.a} vs {self.b}: {self.width}×{self.height}, channels {','.join(self.channels)}",
+            *([f"  {self.converted}"] if self.converted else []),
             f"  mean error {self.mean_error:.6g}, RMS error {self.rms_error:.6g}, PSNR {self.psnr:.2f} dB",
             f"  max error {self.max_error}" if self.max_error else "  max error 0 (identical)",
             f"  failing pixels (error > {_threshold(self.fail, self.failrelative)}): {self.failing_pixels} "
@@ -156,7 +158,7 @@ class DiffReport:
             "pixels": self.pixels, "failing_pixels": self.failing_pixels, "warning_pixels": self.warning_pixels,
             "nonfinite_mismatch_pixels": self.nonfinite_mismatch_pixels,
             "first_nonfinite_mismatch": where(self.first_nonfinite_mismatch),
-            "status": self.status,
+            "status": self.status, "converted": self.converted,
         }
 
     def write_diff_image(self, path: Path) -> None:
@@ -221,6 +223,26 @@ def _load(path: Path) -> _Image:
     return _Image(path, pixels, channels, quantum)
 
 
+def _same_encoding(a: _Image, b: _Image) -> tuple[_Image, _Image, str | None]:
+    """A float image (EXR: linear) compared with an 8-bit one (PNG: sRGB-encoded) is first turned into the PNG
+    rtreflect would write of it (`encode_srgb`: colour-science's sRGB curve, 8-bit codes, alpha linear), so like
+    values are compared; its AOVs, which no PNG has, are left out. Returns both images and a note saying so."""
+    a_float, b_float = a.quantum == FLOAT_FAIL, b.quantum == FLOAT_FAIL
+    if a_float == b_float:
+        return a, b, None
+    linear, coded = (a, b) if a_float else (b, a)
+    missing = [c for c in COLOR_CHANNELS if c not in linear.channels]
+    if missing:
+        raise DiffInputError(f"{linear.path}: a float image compared with the 8-bit sRGB {coded.path} needs the "
+                             f"channels R,G,B,A to encode as sRGB; it has no {','.join(missing)}")
+    rgba = np.stack([linear.pixels[..., linear.channels.index(c)] for c in COLOR_CHANNELS], axis=-1)
+    codes = encode_srgb(rgba).astype(np.float32) / np.float32(255.0)
+    converted = _Image(linear.path, codes, COLOR_CHANNELS, coded.quantum)
+    note = (f"{linear.path} (linear float) converted to 8-bit sRGB as rtreflect writes PNGs, "
+            f"to compare with {coded.path}")
+    return (converted, b, note) if a_float else (a, converted, note)
+
+
 def _select_channels(a: _Image, b: _Image, channels: tuple[str, ...] | None) -> tuple[str, ...]:
     """The channel names to compare; `DiffInputError` naming the file and the missing channels."""
     if channels:
@@ -271,6 +293,7 @@ def compare_images(a_path: Path, b_path: Path, channels: tuple[str, ...] | None 
     a, b = _load(a_path), _load(b_path)
     if a.pixels.shape[:2] != b.pixels.shape[:2]:
         raise DiffInputError(f"different sizes: {a.path} is {a.size}, {b.path} is {b.size}")
+    a, b, converted = _same_encoding(a, b)
     names = _select_channels(a, b, channels)
     pa = np.stack([a.pixels[..., a.channels.index(c)] for c in names], axis=-1)
     pb = np.stack([b.pixels[..., b.channels.index(c)] for c in names], axis=-1)
@@ -331,6 +354,7 @@ def compare_images(a_path: Path, b_path: Path, channels: tuple[str, ...] | None 
         max_error=max_error, failing_pixels=int(failing), warning_pixels=int(warning),
         nonfinite_mismatch_pixels=mismatch_pixels, first_nonfinite_mismatch=first_mismatch, status=status,
         excess=_excess(finite_a, finite_b, mismatch, thresholds), background=_greyscale(a, names),
+        converted=converted,
     )
 
 
