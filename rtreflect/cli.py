@@ -199,7 +199,7 @@ def diff(a: Path, b: Path, fail_threshold, failrelative, failpercent, hardfail, 
     \b
     Examples (the golden images are 320×180):
       rtreflect render scenes/hood.toml -o out/ --width 320 --height 180
-      rtreflect diff out/hood.exr golden_images/hood.exr --diff-image out/hood.diff.png
+      rtreflect diff out/hood.exr golden_images/hood.exr --diff-image out/hood.diff.png --json out/hood.json
       rtreflect diff out/hood.exr golden_images/hood.exr --channels N.X,N.Y,N.Z --fail 1e-5
       rtreflect diff out/hood.png golden_images/hood.exr --json out/report.json
     """
