@@ -181,3 +181,15 @@ def test_png_against_exr_compares_like_values(tmp_path: Path) -> None:
     assert out.open(str(aov_only), spec) and out.write_image(np.zeros((36, 64, 1), np.float32)) and out.close()
     result = CliRunner().invoke(cli, ["diff", str(png), str(aov_only)])
     assert result.exit_code == 2 and "needs the channels R,G,B,A to encode as sRGB; it has no R,G,B,A" in result.stderr
+
+
+def test_batch_lists_every_problem_of_a_scene_on_its_one_line(tmp_path: Path) -> None:
+    scene = valid_scene()
+    scene["image"]["width"] = 0
+    scene["lights"]["raduis"] = 0.1
+    path = write(tmp_path / "s.toml", scene)
+    result = CliRunner().invoke(cli, ["batch", str(path), "-o", str(tmp_path / "out"), "--json", str(tmp_path / "r.json")])
+    assert result.exit_code == 1
+    error = __import__("json").loads((tmp_path / "r.json").read_text())["scenes"][0]["error"]
+    assert error == (f"{path}: image.width: must be >= 1, got 0; "
+                     f"{path}: lights.raduis: unknown key; did you mean radius?")
