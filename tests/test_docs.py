@@ -75,3 +75,15 @@ def test_unknown_key_message_points_to_the_reference(tmp_path: Path) -> None:
     (tmp_path / "b.toml").write_text(text.replace("radius = 0.05", "raduis = 0.05", 1))
     with pytest.raises(SceneError, match=re.escape("lights.raduis: unknown key; did you mean radius?")):
         load_scene(tmp_path / "b.toml")
+
+
+def test_a_table_nested_in_another_is_named_as_such(tmp_path: Path) -> None:
+    from rtreflect.errors import SceneError
+
+    text = (ROOT / "scenes" / "hood.toml").read_text().replace("[lights]", "[camera.lights]", 1)
+    (tmp_path / "a.toml").write_text(text)
+    with pytest.raises(SceneError) as error:
+        load_scene(tmp_path / "a.toml")
+    assert getattr(error.value, "errors", [error.value]) == [error.value]  # "lights missing" follows: not repeated
+    assert str(error.value) == f"{tmp_path / 'a.toml'}: camera.lights: unknown key; [lights] is a table of its own, " \
+                               f"not a key of [camera]"

@@ -321,10 +321,15 @@ class _Table:
         errors = []
         for key in unknown:
             near = difflib.get_close_matches(str(key), [k for k in self.keys if k != key], n=1)
-            hint = f"did you mean {near[0]}?" if near else f"see {SCHEMA_DOC} for the keys of this table"
+            if near:
+                hint = f"did you mean {near[0]}?"
+            elif self.prefix and key in TABLE_KEYS[""]:  # a table nested one level too deep
+                hint = f"[{key}] is a table of its own, not a key of [{self.prefix}]"
+            else:
+                hint = f"see {SCHEMA_DOC} for the keys of this table"
             errors.append(self.error(key, f"unknown key; {hint}"))
         if errors:
-            raise SceneErrors(errors)
+            raise errors[0] if len(errors) == 1 else SceneErrors(errors)
 
 
 def _kind(value: Any) -> str:
