@@ -31,17 +31,19 @@ __all__ = ["Scene", "load_scene", "render", "save", "validate", "RenderResult", 
 
 def _overridden(scene: Scene, width: int | None, height: int | None, samples: int | None,
                 normals: str | None, overlay: bool | None = None) -> Scene:
-    """The scene with the command line's overrides, checked as the command line checks them."""
+    """The scene (a `Scene`, or the path of a scene file) with the command line's overrides, checked alike."""
+    if isinstance(scene, (str, Path)):
+        scene = load_scene(scene)
     if not isinstance(scene, Scene):
-        raise TypeError(f"expected an rtreflect.Scene (from rtreflect.load_scene or rtreflect.Scene(...)), "
-                        f"got {type(scene).__name__}")
+        raise TypeError(f"expected an rtreflect.Scene (from rtreflect.load_scene or rtreflect.Scene(...)) or the "
+                        f"path of a scene file, got {type(scene).__name__}")
     return scene.with_image(width, height, samples).with_render(overlay, normals)
 
 
-def render(scene: Scene, width: int | None = None, height: int | None = None, samples: int | None = None, *,
+def render(scene: Scene | str | Path, width: int | None = None, height: int | None = None, samples: int | None = None, *,
            normals: str | None = None, overlay: bool | None = None, threads: int | None = None,
            progress: Callable[[int], None] | None = None) -> RenderResult:
-    """Render ``scene`` into an in-memory film, as `rtreflect render` would (``--width`` ... ``--normals``).
+    """Render ``scene`` (or the scene file at that path) into an in-memory film, as `rtreflect render` would.
 
     ``width``, ``height``, ``samples`` (s: s×s samples per pixel), ``normals`` and ``overlay``
     override the scene's values (None keeps them). The result has ``rgba`` (H, W, 4 linear
@@ -61,7 +63,7 @@ def save(result: RenderResult, outdir: str | Path = "out") -> list[Path]:
     return save_render(result, Path(outdir), png_filter, extra_files)
 
 
-def validate(scene: Scene, tolerance: float = DEFAULT_TOLERANCE_PX, width: int | None = None,
+def validate(scene: Scene | str | Path, tolerance: float = DEFAULT_TOLERANCE_PX, width: int | None = None,
              height: int | None = None, samples: int | None = None, *, normals: str | None = None,
              threads: int | None = None, progress: Callable[[int], None] | None = None) -> SceneReport:
     """Check the scene's render against Ulmet's analytic reflection lines, as `rtreflect validate` does.

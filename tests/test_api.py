@@ -165,6 +165,11 @@ def test_render_result_channels() -> None:
     assert np.all(np.isnan(result.aov("f")[result.aov("patch") < 0]))
     with pytest.raises(ValueError, match="no channel 'F'"):
         result.aov("F")
+    # A path stands for its scene file; anything else is a TypeError saying what is expected.
+    by_path = rtreflect.render(str(SCENES / "cylinder.toml"), **SMALL)
+    assert np.array_equal(by_path.film.pixels, result.film.pixels, equal_nan=True)
+    with pytest.raises(TypeError, match="expected an rtreflect.Scene"):
+        rtreflect.render({"image": {}})
 
 
 def test_save_writes_the_bytes_render_writes(tmp_path: Path) -> None:
