@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Callable
 
 from . import __version__
-from .errors import RtreflectError
+from .errors import RtreflectError, error_lines
 from .output.imagefiles import (OUTPUT_KEY_ATTRIBUTE, VERSION_ATTRIBUTE, check_distinct_outputs, output_paths, read_provenance,
                          write_json)
 from .analysis.overlay import contours_file_name
@@ -102,7 +102,7 @@ def load_jobs(files: list[Path]) -> list[Job]:
         try:
             jobs.append(Job(file, scene=load_scene(file)))
         except RtreflectError as exc:
-            jobs.append(Job(file, error=str(exc)))
+            jobs.append(Job(file, error="; ".join(error_lines(exc))))  # every problem of the file, on one line
     return jobs
 
 

@@ -1,4 +1,4 @@
-"""Command line: `rtreflect render SCENE... -o DIR` (DESIGN.md, "Command line").
+"""Command line: `rtreflect render SCENE... -o DIR` (contracts in docs/scene-format.md, "Command line").
 
 Exit status: 0 success, 1 a check failed, 2 bad input (one line naming file and field),
 128 + signal number when stopped by SIGINT, SIGTERM or SIGHUP (one line; unfinished files removed).
@@ -15,7 +15,7 @@ import click
 from tqdm import tqdm
 
 from . import __version__
-from .errors import RtreflectError, one_line
+from .errors import RtreflectError, error_lines, one_line
 from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, removed_note, write_json
 from .interrupts import Interrupted, signals_as_exceptions
 from .analysis.overlay import contours_file_name
@@ -30,9 +30,29 @@ EXIT_CHECK_FAILED = 1
 NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
 
 
-def fail(message: str) -> "NoReturn":  # noqa: F821
-    click.echo(f"rtreflect: error: {one_line(message)}", err=True)
+def fail(message: str | RtreflectError) -> "NoReturn":  # noqa: F821
+    """Exit 2 with ``rtreflect: error: ...``: one line per problem (several for a scene with several errors)."""
+    lines = error_lines(message) if isinstance(message, RtreflectError) else [message]
+    for line in lines:
+        click.echo(f"rtreflect: error: {one_line(line)}", err=True)
     sys.exit(EXIT_BAD_INPUT)
+
+
+def samples_text(s: int) -> str:
+    """Samples per pixel as the s×s grid they are: "4×4 = 16 samples/px", "1×1 = 1 sample/px"."""
+    return f"{s}×{s} = {s * s} sample{'' if s == 1 else 's'}/px"
+
+
+def unique_scenes(paths: tuple[Path, ...]) -> list[Path]:
+    """Each scene file once, in the order given (as `batch` does): a file named twice renders once."""
+    seen: set[Path] = set()
+    unique = []
+    for path in paths:
+        key = Path(path).resolve() if Path(path).exists() else Path(path)
+        if key not in seen:
+            seen.add(key)
+            unique.append(path)
+    return unique
 
 
 def memory_option(text: str | None) -> int | None:
@@ -53,7 +73,7 @@ def cli() -> None:
     A row of parallel tube lights is mirrored in the surface; kinks and wobbles
     in the mirrored lines reveal curvature breaks and dents. Scene files (TOML)
     describe the image, camera, light tubes and NURBS surfaces: see scenes/ and
-    DESIGN.md.
+    docs/scene-format.md.
     """
 
 
@@ -91,12 +111,17 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
       rtreflect render scenes/*.toml -o out/ --width 480 --height 270 --samples 2
     """
     budget = memory_option(max_memory)
+    for path in scenes:
+        if Path(path).is_dir():
+            fail(f"{path}: is a folder; `rtreflect render` takes scene files: render every scene in a folder with "
+                 f"`rtreflect batch {path} -o {outdir}`")
     try:
-        loaded = [load_scene(path).with_image(width, height, samples).with_render(overlay, normals) for path in scenes]
+        loaded = [load_scene(path).with_image(width, height, samples).with_render(overlay, normals)
+                  for path in unique_scenes(scenes)]
         check_distinct_outputs(loaded, outdir)
         removed = prepare_output_folder(outdir, [path for scene in loaded for path in output_paths(scene, outdir)])
     except RtreflectError as exc:
-        fail(str(exc))
+        fail(exc)
     if removed:
         click.echo(f"{outdir}: {removed_note(removed)}")
     for scene in loaded:
@@ -112,7 +137,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
             fail(str(exc))
         st, written = done.stats, done.files
         click.echo(
-            f"{scene.output.name}: {image.width}×{image.height}, {image.samples**2} samples/px, "
+            f"{scene.output.name}: {image.width}×{image.height}, {samples_text(image.samples)}, "
             f"{st.seconds:.2f} s, {st.mrays_per_second:.2f} Mrays/s, "
             f"{st.fallbacks} Newton fallbacks in {st.fallback_pixels} pixels"
             f" → {', '.join(str(p) for p in written)}"
@@ -170,11 +195,15 @@ def diff(a: Path, b: Path, fail_threshold, failrelative, failpercent, hardfail, 
     Exit status: 0 match (or a warning within tolerance), 1 mismatch,
     2 bad input: a missing file, different sizes or channel sets.
 
+    A PNG (8-bit sRGB) against an EXR (linear float): the EXR's R,G,B,A are
+    first encoded as rtreflect writes PNGs, and the two compared as PNGs.
+
     \b
-    Examples:
-      rtreflect diff out/hood.exr golden_images/hood.exr --diff-image hood.diff.png
+    Examples (the golden images are 320×180):
+      rtreflect render scenes/hood.toml -o out/ --width 320 --height 180
+      rtreflect diff out/hood.exr golden_images/hood.exr --diff-image out/hood.diff.png --json out/hood.json
       rtreflect diff out/hood.exr golden_images/hood.exr --channels N.X,N.Y,N.Z --fail 1e-5
-      rtreflect diff out/hood.png golden_images/hood.png --failpercent 0.05 --json report.json
+      rtreflect diff out/hood.png golden_images/hood.exr --json out/report.json
     """
     from .ci.diff import Tolerance, compare_images
 
@@ -238,7 +267,7 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
     try:
         loaded = [load_scene(path).with_image(width, height, samples).with_render(normals=normals) for path in scenes]
     except RtreflectError as exc:
-        fail(str(exc))
+        fail(exc)
     reports = []
     for scene in loaded:
         image = scene.image
@@ -292,8 +321,8 @@ def stop_status(exc: BaseException) -> int:
 
 @cli.command()
 @click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("-o", "--output", "outdir", type=click.Path(path_type=Path), required=True,
-              help="Folder for every scene's NAME.exr and NAME.png (created if missing).")
+@click.option("-o", "--output", "outdir", type=click.Path(path_type=Path), default=Path("out"), show_default=True,
+              help="Folder for every scene's NAME.exr and NAME.png (created if missing), as for `render`.")
 @click.option("-r", "--recursive", is_flag=True, help="Search folders' sub-folders for *.toml too.")
 @click.option("-j", "--jobs", type=click.IntRange(1, 1024), default=None,
               help="Scenes rendered at once on this machine (default: the number of cores).")

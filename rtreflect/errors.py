@@ -36,6 +36,25 @@ class SceneError(RtreflectError):
         super().__init__(one_line(f"{where}: {message}"))
 
 
+class SceneErrors(SceneError):
+    """Several independent problems of one scene, each a `SceneError`; the first stands for all of them.
+
+    ``str()`` is the first error's line (so one-line reporters such as a batch summary keep
+    working); `error_lines` gives every line, which the command line prints one per line.
+    """
+
+    def __init__(self, errors: list[SceneError]):
+        # Flatten nested collections (a table's unknown keys inside a scene's errors).
+        self.errors = [leaf for error in errors for leaf in getattr(error, "errors", [error])]
+        first = self.errors[0]
+        super().__init__(first.file, first.field, first.reason)
+
+
+def error_lines(exc: BaseException) -> list[str]:
+    """The one-line message of each problem ``exc`` stands for (several for a `SceneErrors`)."""
+    return [str(error) for error in getattr(exc, "errors", [exc])]
+
+
 #: Largest scene or geometry text read: about two million control points of .bpt text, whose parse
 #: already takes a gigabyte. The cap also stops /dev/zero or an endless pipe from filling memory.
 MAX_TEXT_BYTES = 64 << 20

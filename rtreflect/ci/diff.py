@@ -35,7 +35,7 @@ import contextlib
 import json
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Iterator
 
@@ -48,7 +48,7 @@ with warnings.catch_warnings():
 
 from ..errors import RtreflectError
 from ..integrator.film import COLOR_CHANNELS
-from ..output.imagefiles import atomic_path, write_png_rows
+from ..output.imagefiles import atomic_path, encode_srgb, write_png_rows
 
 #: Default ``fail`` for float images: float32 noise passes, any real change fails.
 FLOAT_FAIL = 1e-6
@@ -126,6 +126,7 @@ class DiffReport:
     def background(self) -> np.ndarray:
         """(H, W): A's greyscale in [0, 1] under the diff image (assembled whole, as `excess`)."""
         return np.concatenate([grey for _, grey, _ in self.picture.rows()])
+    converted: str | None = None  # which image was converted to the other's colour encoding, and how
 
     @property
     def pixels(self) -> int:
@@ -141,6 +142,7 @@ class DiffReport:
         pct = lambda n: 100.0 * n / self.pixels  # noqa: E731
         lines = [
             f"{self.a} vs {self.b}: {self.width}×{self.height}, channels {','.join(self.channels)}",
+            *([f"  {self.converted}"] if self.converted else []),
             f"  mean error {self.mean_error:.6g}, RMS error {self.rms_error:.6g}, PSNR {self.psnr:.2f} dB",
             f"  max error {self.max_error}" if self.max_error else "  max error 0 (identical)",
             f"  failing pixels (error > {_threshold(self.fail, self.failrelative)}): {self.failing_pixels} "
@@ -175,7 +177,7 @@ class DiffReport:
             "pixels": self.pixels, "failing_pixels": self.failing_pixels, "warning_pixels": self.warning_pixels,
             "nonfinite_mismatch_pixels": self.nonfinite_mismatch_pixels,
             "first_nonfinite_mismatch": where(self.first_nonfinite_mismatch),
-            "status": self.status,
+            "status": self.status, "converted": self.converted,
         }
 
     def write_diff_image(self, path: Path) -> None:
@@ -230,6 +232,7 @@ class _Image:
     spec: oiio.ImageSpec
     channels: tuple[str, ...]
     quantum: float  # default ``fail``: float noise for float data, one code value for integer data
+    srgb_from: tuple[int, ...] | None = None  # linear R,G,B,A at these stored channels, read as 8-bit sRGB codes
 
     @property
     def size(self) -> str:
@@ -258,7 +261,10 @@ class _Image:
                 data = source.read_scanlines(0, 0, spec.y + row, spec.y + end, spec.z, 0, spec.nchannels, oiio.FLOAT)
                 if data is None or not isinstance(data, np.ndarray):
                     raise DiffInputError(f"{self.path}: cannot read image ({' '.join(source.geterror().split())})")
-                yield row, data.reshape(end - row, spec.width, spec.nchannels)
+                data = data.reshape(end - row, spec.width, spec.nchannels)
+                if self.srgb_from is not None:
+                    data = encode_srgb(data[..., list(self.srgb_from)]).astype(np.float32) / np.float32(255.0)
+                yield row, data
         finally:
             source.close()
 
@@ -278,6 +284,25 @@ def _load(path: Path) -> _Image:
     else:
         quantum = 1.0 / (2 ** (8 * stored.size()) - 1) + CODE_VALUE_SLACK
     return _Image(path, spec, tuple(spec.channelnames), quantum)
+
+
+def _same_encoding(a: _Image, b: _Image) -> tuple[_Image, _Image, str | None]:
+    """A float image (EXR: linear) compared with an 8-bit one (PNG: sRGB-encoded) is first turned into the PNG
+    rtreflect would write of it (`encode_srgb`: colour-science's sRGB curve, 8-bit codes, alpha linear), so like
+    values are compared; its AOVs, which no PNG has, are left out. Returns both images and a note saying so."""
+    a_float, b_float = a.quantum == FLOAT_FAIL, b.quantum == FLOAT_FAIL
+    if a_float == b_float:
+        return a, b, None
+    linear, coded = (a, b) if a_float else (b, a)
+    missing = [c for c in COLOR_CHANNELS if c not in linear.channels]
+    if missing:
+        raise DiffInputError(f"{linear.path}: a float image compared with the 8-bit sRGB {coded.path} needs the "
+                             f"channels R,G,B,A to encode as sRGB; it has no {','.join(missing)}")
+    converted = replace(linear, channels=COLOR_CHANNELS, quantum=coded.quantum,
+                        srgb_from=tuple(linear.channels.index(c) for c in COLOR_CHANNELS))
+    note = (f"{linear.path} (linear float) converted to 8-bit sRGB as rtreflect writes PNGs, "
+            f"to compare with {coded.path}")
+    return (converted, b, note) if a_float else (a, converted, note)
 
 
 def _select_channels(a: _Image, b: _Image, channels: tuple[str, ...] | None) -> tuple[str, ...]:
@@ -352,6 +377,7 @@ def compare_images(a_path: Path, b_path: Path, channels: tuple[str, ...] | None 
     if a.window != b.window:
         # The same values at other image positions are not the same image (idiff counts them as failing).
         raise DiffInputError(f"different image windows: {a.describe_window()}; {b.describe_window()}")
+    a, b, converted = _same_encoding(a, b)
     names = _select_channels(a, b, channels)
 
     fail = tolerance.fail if tolerance.fail is not None else max(a.quantum, b.quantum)
@@ -419,6 +445,7 @@ def compare_images(a_path: Path, b_path: Path, channels: tuple[str, ...] | None 
         max_error=max_error, failing_pixels=int(failing), warning_pixels=int(warning),
         nonfinite_mismatch_pixels=mismatch_pixels, first_nonfinite_mismatch=first_mismatch, status=status,
         picture=_Picture(pair, grey),
+        converted=converted,
     )
 
 

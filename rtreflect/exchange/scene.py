@@ -1,26 +1,32 @@
 """Scene files (TOML) → a validated, immutable `Scene`.
 
-The schema is the contract in DESIGN.md ("Scene files"): tables ``[image]``,
+The schema is documented for users in docs/scene-format.md: tables ``[image]``,
 ``[camera]``, ``[lights]``, one or more ``[[surface]]``, ``[render]``, ``[output]``.
 Every problem is reported as a `SceneError` naming the file and the field, so a
-user can fix it from a single line.
+user can fix it from a single line; independent problems (one per table and per
+surface) are reported together as `SceneErrors`. A `Scene` built in code
+(`Scene(surfaces=..., lights=...)`) and `Scene.replace` go through the same readers.
 """
 
 from __future__ import annotations
 
+import contextlib
+import difflib
 import hashlib
+import json
 import math
 import os
 import re
 import tomllib
-from dataclasses import dataclass, field, replace
+from collections import Counter
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
 from .bpt import read_bpt
-from ..errors import SceneError, quote, read_text
+from ..errors import SceneError, SceneErrors, quote, read_text
 from ..geometry.surfaces import NurbsSurface
 
 #: Largest image side. The film keeps 17 float32 planes per pixel, and beyond this
@@ -103,8 +109,51 @@ class OutputSpec:
     png: bool = True
 
 
-@dataclass(frozen=True)
+REQUIRED_MISSING = "required field is missing"
+#: The scene-format reference shipped with the package, named by messages that send users to the schema.
+SCHEMA_DOC = "docs/scene-format.md"
+
+#: Every key each table accepts (the readers below may read only these; docs/scene-format.md documents each).
+#: A ``[[surface]]`` with ``file`` takes only ``file`` and ``name``.
+TABLE_KEYS: dict[str, tuple[str, ...]] = {
+    "": ("image", "camera", "lights", "surface", "render", "output"),
+    "image": ("width", "height", "samples"),
+    "camera": ("projection", "eye", "look_at", "up", "fov", "view_height"),
+    "lights": ("point", "normal", "direction", "positions", "spacing", "count", "radius", "length"),
+    "surface": ("name", "degree", "points", "knots_u", "knots_v", "weights", "file"),
+    "render": ("tessellation", "surface_color", "line_color", "background", "overlay", "overlay_color", "normals"),
+    "output": ("name", "exr", "png"),
+}
+#: The tables `Scene.replace` re-reads, in the order a scene file is read (so the first error is the file's first).
+SCENE_TABLES = ("image", "camera", "lights", "render", "output")
+#: Fields `Scene.output_key` names itself (the command line overrides them); changing any other field of a
+#: scene in code changes its `inputs_sha256`, so `batch` never takes an old render for it.
+KEYED_FIELDS = {"image": ("width", "height", "samples"), "render": ("overlay", "normals")}
+#: Path and default output name of a scene built in code: messages read ``<scene>: lights.radius: ...``.
+CODE_SCENE_PATH = Path("<scene>")
+CODE_SCENE_NAME = "scene"
+
+
+@dataclass(frozen=True, init=False)
 class Scene:
+    """A validated, immutable scene: read from a file (`load_scene`) or built in code.
+
+    In code, pass the tables as keyword arguments, with the keys and meanings of the
+    scene file (docs/scene-format.md); numpy arrays stand for TOML arrays::
+
+        Scene(surfaces=[{"degree": 3, "points": P, "knots_u": ku, "knots_v": kv, "weights": w}],
+              lights={"point": [0, 0, 3], "normal": [0, 0, 1], "direction": [0, 1, 0], "spacing": 0.4, "count": 9},
+              camera={"eye": [0, -3, 2]}, image={"width": 320, "height": 180}, output={"name": "part"})
+
+    ``surfaces`` entries may also be `NurbsSurface` objects or ``{"file": "part.bpt"}``
+    (relative to ``path``'s folder, by default the working folder). Every value is checked
+    by the same readers as a scene file, with the same one-line `SceneError` messages
+    (FILE is ``path``, by default ``<scene>``); several independent errors come together
+    as `SceneErrors`. The internal form, ``Scene(path, image, camera, lights, surfaces,
+    render, output, sha256, inputs_sha256)`` with the parsed specs, is what `load_scene`
+    and ``dataclasses.replace`` use.
+    """
+
     path: Path
     image: ImageSpec
     camera: CameraSpec
@@ -112,8 +161,23 @@ class Scene:
     surfaces: tuple[NurbsSurface, ...]
     render: RenderSettings
     output: OutputSpec
-    sha256: str  # of the scene file's bytes
-    inputs_sha256: str  # of the scene file and every geometry file it reads
+    sha256: str  # of the scene file's bytes (in code: of the tables' canonical JSON)
+    inputs_sha256: str  # of the scene file and every geometry file it reads (in code: with the geometry files')
+
+    def __init__(self, path=None, image=None, camera=None, lights=None, surfaces=None, render=None, output=None,
+                 sha256=None, inputs_sha256=None):
+        parsed = (isinstance(image, ImageSpec) and isinstance(camera, CameraSpec) and isinstance(lights, LightSpec)
+                  and isinstance(render, RenderSettings) and isinstance(output, OutputSpec)
+                  and isinstance(surfaces, tuple) and all(isinstance(s, NurbsSurface) for s in surfaces))
+        if parsed and sha256 is not None and inputs_sha256 is not None:
+            values = (Path(path), image, camera, lights, surfaces, render, output, sha256, inputs_sha256)
+        else:
+            if sha256 is not None or inputs_sha256 is not None:
+                raise TypeError("Scene: sha256 and inputs_sha256 are computed for a scene built from tables")
+            values = _scene_from_code(Path(path) if path is not None else CODE_SCENE_PATH, image, camera, lights,
+                                      surfaces, render, output)
+        for f, value in zip(fields(Scene), values):
+            object.__setattr__(self, f.name, value)
 
     @property
     def output_key(self) -> str:
@@ -122,32 +186,78 @@ class Scene:
         return (f"{self.inputs_sha256}-{image.width}x{image.height}x{image.samples}-{render.normals}"
                 f"{'-overlay' if render.overlay else ''}")
 
+    def replace(self, *, image=None, camera=None, lights=None, surfaces=None, render=None, output=None) -> "Scene":
+        """A copy with some tables changed, validated as a scene file is (one-line `SceneError`s naming the field).
+
+        A mapping changes only the keys it names (``replace(camera={"fov": 30})``); a spec object
+        (`CameraSpec`, ...) replaces the whole table; ``surfaces`` replaces the list (entries as for
+        `Scene`). For the tubes, ``spacing`` and/or ``count`` replace ``positions`` (the one not given is the
+        current row's), and ``positions`` replaces them.
+        """
+        changes = {"image": image, "camera": camera, "lights": lights, "render": render, "output": output}
+        changes = {name: value for name, value in changes.items() if value is not None}
+        tables = {}
+        for name, change in changes.items():
+            if isinstance(change, dict):
+                table = _spec_table(getattr(self, name))
+                change = _toml_value(change)
+                if name == "lights" and ("spacing" in change or "count" in change):
+                    # Tubes given by spacing and count: the one not given is that of the current row of tubes.
+                    positions = table.pop("positions")
+                    change = {"count": len(positions), **change}
+                    if "spacing" not in change and len(positions) > 1:
+                        change["spacing"] = positions[1] - positions[0]
+                table.update(change)
+            else:
+                table = _toml_value(change)
+            tables[name] = table
+        errors = _Errors()
+        specs: dict[str, Any] = {}
+        for name in SCENE_TABLES:
+            if name in tables:
+                with errors.collect():
+                    specs[name] = _PARSERS[name](_Table(self.path, name, tables[name]), self.path)
+        new_surfaces, geometry_files = self.surfaces, []
+        if surfaces is not None:
+            new_surfaces, geometry_files = _parse_surfaces(self.path, _toml_value(list(surfaces)), errors)
+        errors.raise_any()
+        changed = replace(self, **specs, surfaces=tuple(new_surfaces))
+        if surfaces is not None or "render" in specs:
+            _check_mesh_size(self.path, list(changed.surfaces), changed.render.tessellation)
+        moved = {name: _unkeyed(name, specs[name]) for name in specs
+                 if _unkeyed(name, specs[name]) != _unkeyed(name, getattr(self, name))}
+        if moved or surfaces is not None:
+            # The output no longer follows from the input files alone: mix the changes into their hash.
+            digest = hashlib.sha256(self.inputs_sha256.encode())
+            digest.update(_canonical(moved).encode())
+            if surfaces is not None:
+                digest.update(_surfaces_digest(changed.surfaces, geometry_files).encode())
+            changed = replace(changed, inputs_sha256=digest.hexdigest())
+        return changed
+
     def with_image(self, width: int | None = None, height: int | None = None, samples: int | None = None) -> "Scene":
         """The same scene with some `[image]` values overridden (command-line options), validated alike."""
         values = {"width": width, "height": height, "samples": samples}
-        table = {k: v for k, v in vars(self.image).items()}
-        table.update({k: v for k, v in values.items() if v is not None})
-        return replace(self, image=_parse_image(_Table(self.path, "image", table)))
+        return self.replace(image={k: v for k, v in values.items() if v is not None})
 
     def with_render(self, overlay: bool | None = None, normals: str | None = None) -> "Scene":
         """The same scene with `[render] overlay` and/or `normals` overridden (command-line options), validated alike."""
         values = {"overlay": overlay, "normals": normals}
-        # Back to TOML's own types (colours as lists) so the table reads as the scene file's did.
-        table = {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in vars(self.render).items()}
-        table.update({k: v for k, v in values.items() if v is not None})
-        return replace(self, render=_parse_render(_Table(self.path, "render", table)))
+        return self.replace(render={k: v for k, v in values.items() if v is not None})
 
 
 class _Table:
     """One TOML table being read: tracks which keys were used so unknown ones are errors."""
 
-    def __init__(self, file: Path, prefix: str, data: Any):
+    def __init__(self, file: Path, prefix: str, data: Any, keys: tuple[str, ...] | None = None):
         self.file = file
         self.prefix = prefix
         if not isinstance(data, dict):
             raise SceneError(file, prefix, f"must be a table, got {_kind(data)}")
         self.data = data
         self.used: set[str] = set()
+        #: The keys this table accepts (`TABLE_KEYS`), for the nearest-key suggestion of `finish`.
+        self.keys = keys if keys is not None else TABLE_KEYS[re.sub(r"\[\d+\]$", "", prefix)]
 
     def name(self, key: str) -> str:
         return f"{self.prefix}.{key}" if self.prefix else key
@@ -159,11 +269,12 @@ class _Table:
         return key in self.data
 
     def raw(self, key: str, default: Any = ..., required: bool = False) -> Any:
+        assert key in self.keys, f"{self.name(key)} is read but not in TABLE_KEYS"  # keeps the documented list true
         self.used.add(key)
         if key in self.data:
             return self.data[key]
         if required or default is ...:
-            raise self.error(key, "required field is missing")
+            raise self.error(key, REQUIRED_MISSING)
         return default
 
     def number(self, key: str, default: Any = ..., *, low: float | None = None, high: float | None = None,
@@ -205,9 +316,20 @@ class _Table:
         return vec
 
     def finish(self) -> None:
-        unknown = sorted(set(self.data) - self.used)
-        if unknown:
-            raise self.error(unknown[0], "unknown key (check the spelling; see DESIGN.md for the scene schema)")
+        """Every key not read is an error, each suggesting the nearest accepted key (difflib) if one is close."""
+        unknown = sorted(set(self.data) - self.used, key=str)
+        errors = []
+        for key in unknown:
+            near = difflib.get_close_matches(str(key), [k for k in self.keys if k != key], n=1)
+            if near:
+                hint = f"did you mean {near[0]}?"
+            elif self.prefix and key in TABLE_KEYS[""]:  # a table nested one level too deep
+                hint = f"[{key}] is a table of its own, not a key of [{self.prefix}]"
+            else:
+                hint = f"see {SCHEMA_DOC} for the keys of this table"
+            errors.append(self.error(key, f"unknown key; {hint}"))
+        if errors:
+            raise errors[0] if len(errors) == 1 else SceneErrors(errors)
 
 
 def _kind(value: Any) -> str:
@@ -254,12 +376,26 @@ def _number(table: _Table, key: str, value: Any, low, high, open_low, open_high,
 
 
 def _array(table: _Table, key: str, value: Any, shape: tuple[int | None, ...]) -> np.ndarray:
-    """A nested list of numbers with the given shape; a None length is set by the first list at that depth.
+    """A nested list of numbers with the given shape; a None length is the one most lists at that depth have.
 
     Every list at one depth must have the same length, so numpy never sees a ragged
-    nesting (which it refuses with a ValueError) and the message names the odd row.
+    nesting (which it refuses with a ValueError) and the message names the odd row:
+    the one that differs from the majority (on a tie, from the first row), not the
+    row after a short one.
     """
     lengths = list(shape)
+    seen: list[Counter] = [Counter() for _ in shape]
+
+    def count(item: Any, depth: int) -> None:
+        if depth < len(shape) and isinstance(item, list):
+            seen[depth][len(item)] += 1
+            for sub in item:
+                count(sub, depth + 1)
+
+    count(value, 0)
+    for depth, expected in enumerate(shape):
+        if expected is None and seen[depth]:
+            lengths[depth] = seen[depth].most_common(1)[0][0]  # ties: the first row's length (Counter keeps order)
 
     def walk(item: Any, depth: int, where: str) -> None:
         if depth == len(shape):
@@ -272,10 +408,11 @@ def _array(table: _Table, key: str, value: Any, shape: tuple[int | None, ...]) -
             raise table.error(key + where, f"must be an array{f' of {expected}' if expected else ''}, got {_kind(item)}")
         if not item:
             raise table.error(key + where, "must not be empty")
-        if lengths[depth] is None:
-            lengths[depth] = len(item)
-        elif len(item) != lengths[depth]:
-            like = "" if shape[depth] else f" like {table.name(key)}{where[:where.rfind('[')]}[0]"
+        if len(item) != lengths[depth]:
+            like = ""
+            if not shape[depth]:
+                agree = seen[depth][lengths[depth]]
+                like = f" like the other {agree} rows" if agree > 1 else f" like {table.name(key)}{where[:where.rfind('[')]}[0]"
             raise table.error(key + where, f"must have {lengths[depth]} entries{like}, got {len(item)}")
         for i, sub in enumerate(item):
             walk(sub, depth + 1, f"{where}[{i}]")
@@ -361,7 +498,7 @@ def _parse_render(t: _Table) -> RenderSettings:
 
 
 def _parse_output(t: _Table, path: Path) -> OutputSpec:
-    name = t.string("name", path.stem)
+    name = t.string("name", CODE_SCENE_NAME if path == CODE_SCENE_PATH else path.stem)
     if not name or name in (".", "..") or "/" in name or "\\" in name or not name.isprintable():
         raise t.error("name", f"must be a plain file stem without path separators or control characters, got {quote(name)}")
     if len(name.encode("utf-8", "surrogatepass")) > MAX_NAME_BYTES:
@@ -409,14 +546,17 @@ def _has_area(surface: NurbsSurface) -> bool:
     return bool(sv[1] > 1e-12 * max(sv[0], 1e-300))
 
 
-def _check_geometry_patch(file: Path, index: int, surface: NurbsSurface) -> None:
-    """What `_parse_inline_surface` checks of its numbers, for a patch read from a geometry file."""
+def _check_geometry_patch(file: Path, index: int, surface: NurbsSurface, where: str | None = None) -> None:
+    """What `_parse_inline_surface` checks of its numbers, for a patch read from a geometry file or given in code."""
+    where = where or f"patch {index}"
+    if not np.all(np.isfinite(surface.points)):
+        raise SceneError(file, where, "coordinates must be finite")
     largest = float(np.max(np.abs(surface.points)))
     if largest > MAX_MAGNITUDE:
-        raise SceneError(file, f"patch {index}", f"coordinates must be at most {MAX_MAGNITUDE:g} in magnitude "
+        raise SceneError(file, where, f"coordinates must be at most {MAX_MAGNITUDE:g} in magnitude "
                                                  f"(float32 tracing overflows beyond it), got {largest:g}")
     if not _has_area(surface):
-        raise SceneError(file, f"patch {index}", ZERO_AREA)
+        raise SceneError(file, where, ZERO_AREA)
 
 
 def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
@@ -481,39 +621,65 @@ def _long_number_position(text: str) -> str:
     return f"line {text.count(chr(10), 0, found.start()) + 1}, column {found.start() - line_start + 1}"
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene file; raises `SceneError` naming the file and field."""
-    path = Path(path)
-    text = read_text(path, "scene file")
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        # tomllib puts the position at the end ("... (at line 3, column 7)"); lead with it instead.
-        where = re.fullmatch(r"(.*) \((at line \d+, column \d+|at end of document)\)", str(exc), re.S)
-        if where:
-            raise SceneError(path, where[2].removeprefix("at "), f"TOML syntax error: {where[1]}") from None
-        raise SceneError(path, "", f"TOML syntax error: {exc}") from None
-    except RecursionError:  # tomllib reads nested arrays and inline tables recursively
-        raise SceneError(path, "", "TOML syntax error: arrays or inline tables nested too deeply to read") from None
-    except ValueError as exc:
-        # int() refuses more than 4300 digits (Python's guard against slow conversions); tomllib passes that on.
-        raise SceneError(path, _long_number_position(text), "TOML syntax error: a number with more than 4300 digits") from None
+#: Reader of each table of `SCENE_TABLES`, as (table, scene path) → spec.
+_PARSERS = {
+    "image": lambda t, path: _parse_image(t),
+    "camera": lambda t, path: _parse_camera(t),
+    "lights": lambda t, path: _parse_lights(t),
+    "render": lambda t, path: _parse_render(t),
+    "output": _parse_output,
+}
 
-    root = _Table(path, "", doc)
-    image = _parse_image(_Table(path, "image", root.raw("image", {})))
-    camera = _parse_camera(_Table(path, "camera", root.raw("camera", {})))
-    lights = _parse_lights(_Table(path, "lights", root.raw("lights", required=True)))
-    render = _parse_render(_Table(path, "render", root.raw("render", {})))
-    output = _parse_output(_Table(path, "output", root.raw("output", {})), path)
 
-    entries = root.raw("surface", required=True)
-    if not isinstance(entries, list) or not entries:
-        raise SceneError(path, "surface", "needs one or more [[surface]] tables")
+class _Errors:
+    """Collects the `SceneError`s of independent parts of a scene (tables, surfaces) to report them together."""
+
+    def __init__(self) -> None:
+        self.found: list[SceneError] = []
+
+    @contextlib.contextmanager
+    def collect(self) -> Iterator[None]:
+        try:
+            yield
+        except SceneError as exc:
+            self.found.append(exc)
+
+    def drop_consequences(self) -> None:
+        """Leave out a required table reported missing when it was found misplaced (``camera.lights``: unknown key):
+        one mistake, one line."""
+        leaves = [leaf for error in self.found for leaf in getattr(error, "errors", [error])]
+        misplaced = {leaf.field.rsplit(".", 1)[-1] for leaf in leaves
+                     if leaf.reason.startswith("unknown key") and "." in leaf.field}
+        self.found = [error for error in self.found
+                      if not (error.reason == REQUIRED_MISSING and error.field in misplaced)]
+
+    def raise_any(self) -> None:
+        if len(self.found) == 1:
+            raise self.found[0]
+        if self.found:
+            raise SceneErrors(self.found)
+
+
+def _parse_surfaces(path: Path, entries: Any, errors: _Errors) -> tuple[list[NurbsSurface], list[Path]]:
+    """The ``[[surface]]`` entries (tables, or `NurbsSurface` objects given in code) and the geometry files read."""
     surfaces: list[NurbsSurface] = []
     geometry_files: list[Path] = []
+    if not isinstance(entries, list) or not entries:
+        errors.found.append(SceneError(path, "surface", "needs one or more [[surface]] tables"))
+        return surfaces, geometry_files
     for i, entry in enumerate(entries):
-        t = _Table(path, f"surface[{i}]", entry)
-        if t.has("file"):
+        with errors.collect():
+            if isinstance(entry, NurbsSurface) and entry.trim is None and entry.mesh_uv is None:
+                entry = _surface_table(entry)  # built in code: read as an inline [[surface]], every check applies
+            if isinstance(entry, NurbsSurface):  # a trimmed CAD face: checked as a geometry file's patch
+                _check_geometry_patch(path, i, entry, f"surface[{i}]")
+                surfaces.append(entry)
+                continue
+            t = _Table(path, f"surface[{i}]", entry)
+            if not t.has("file"):
+                surfaces.append(_parse_inline_surface(t, i))
+                continue
+            t.keys = ("file", "name")
             given = t.string("file")
             if not given.strip() or "\0" in given:
                 raise t.error("file", f"must name a geometry file (.bpt), got {quote(given)}")
@@ -531,9 +697,129 @@ def load_scene(path: str | Path) -> Scene:
                 raise SceneError(exc.file, exc.field, f"{exc.reason} (from {path}: {t.name('file')})") from None
             surfaces.extend(patches)
             geometry_files.append(file)
-        else:
-            surfaces.append(_parse_inline_surface(t, i))
-    root.finish()
-    _check_mesh_size(path, surfaces, render.tessellation)
+    return surfaces, geometry_files
+
+
+def _parse_document(path: Path, doc: Any) -> tuple[dict[str, Any], list[NurbsSurface], list[Path]]:
+    """Every table of a scene document (TOML's types) read and checked; all independent errors raised together.
+
+    One error per table and per surface (a table's unknown keys all), in the order of the
+    scene file's reading, so the first line is the first problem.
+    """
+    errors = _Errors()
+    root = _Table(path, "", doc)
+    specs: dict[str, Any] = {}
+    for name in SCENE_TABLES:
+        with errors.collect():
+            table = root.raw(name, required=True) if name == "lights" else root.raw(name, {})
+            specs[name] = _PARSERS[name](_Table(path, name, table), path)
+    surfaces, geometry_files = [], []
+    with errors.collect():
+        surfaces, geometry_files = _parse_surfaces(path, root.raw("surface", required=True), errors)
+    with errors.collect():
+        root.finish()
+    errors.drop_consequences()
+    errors.raise_any()
+    _check_mesh_size(path, surfaces, specs["render"].tessellation)
+    return specs, surfaces, geometry_files
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene file; raises `SceneError` naming the file and field (`SceneErrors`: several)."""
+    path = Path(path)
+    if path.is_dir():
+        raise SceneError(path, "", "is a folder, not a scene file: render every scene in it with "
+                                   f"`rtreflect batch {quote(str(path))[1:-1]}`")
+    text = read_text(path, "scene file")
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        # tomllib puts the position at the end ("... (at line 3, column 7)"); lead with it instead.
+        where = re.fullmatch(r"(.*) \((at line \d+, column \d+|at end of document)\)", str(exc), re.S)
+        if where:
+            raise SceneError(path, where[2].removeprefix("at "), f"TOML syntax error: {where[1]}") from None
+        raise SceneError(path, "", f"TOML syntax error: {exc}") from None
+    except RecursionError:  # tomllib reads nested arrays and inline tables recursively
+        raise SceneError(path, "", "TOML syntax error: arrays or inline tables nested too deeply to read") from None
+    except ValueError as exc:
+        # int() refuses more than 4300 digits (Python's guard against slow conversions); tomllib passes that on.
+        raise SceneError(path, _long_number_position(text), "TOML syntax error: a number with more than 4300 digits") from None
+
+    specs, surfaces, geometry_files = _parse_document(path, doc)
     sha, inputs = _hash_files([path, *geometry_files])
-    return Scene(path, image, camera, lights, tuple(surfaces), render, output, sha, inputs)
+    return Scene(path, specs["image"], specs["camera"], specs["lights"], tuple(surfaces), specs["render"],
+                 specs["output"], sha, inputs)
+
+
+# -- scenes built in code ---------------------------------------------------------------------
+
+
+def _toml_value(value: Any) -> Any:
+    """A value given in code in TOML's own types, so the scene file's readers check it: arrays and tuples as
+    lists, numpy scalars as Python numbers, spec objects as their tables. `NurbsSurface`s pass through."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (list, tuple)):
+        return [_toml_value(item) for item in value]
+    if isinstance(value, dict):
+        return {key: _toml_value(item) for key, item in value.items()}
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, (ImageSpec, CameraSpec, LightSpec, RenderSettings, OutputSpec)):
+        return _spec_table(value)
+    return value
+
+
+def _spec_table(spec: Any) -> dict[str, Any]:
+    """A parsed table back in TOML's types (what the scene file would say): reading it again gives ``spec``."""
+    return {f.name: _toml_value(getattr(spec, f.name)) for f in fields(spec)}
+
+
+def _surface_table(surface: NurbsSurface) -> dict[str, Any]:
+    """An untrimmed patch as the ``[[surface]]`` table that describes it."""
+    return {"name": surface.name, "degree": [surface.degree_u, surface.degree_v], "points": surface.points.tolist(),
+            "knots_u": surface.knots_u.tolist(), "knots_v": surface.knots_v.tolist(),
+            "weights": surface.weights.tolist()}
+
+
+def _unkeyed(name: str, spec: Any) -> dict[str, Any]:
+    """A table without the fields `Scene.output_key` names itself."""
+    table = _spec_table(spec)
+    for key in KEYED_FIELDS.get(name, ()):
+        table.pop(key, None)
+    return table
+
+
+def _canonical(document: Any) -> str:
+    """One text per document (sorted keys, floats by repr) to hash; +inf as the string "inf" (JSON has none)."""
+    return json.dumps(document, sort_keys=True, default=str, allow_nan=True)
+
+
+def _surfaces_digest(surfaces: tuple[NurbsSurface, ...], geometry_files: list[Path]) -> str:
+    """sha256 of the patches' numbers (degrees, knots, points, weights) and of the geometry files read."""
+    digest = hashlib.sha256()
+    for surface in surfaces:
+        digest.update(f"{surface.degree_u} {surface.degree_v} {surface.name}".encode())
+        for array in (surface.knots_u, surface.knots_v, surface.points, surface.weights):
+            digest.update(np.ascontiguousarray(array, dtype=np.float64).tobytes())
+    for file in geometry_files:
+        digest.update(str(file).encode())
+    return digest.hexdigest()
+
+
+def _scene_from_code(path: Path, image, camera, lights, surfaces, render, output) -> tuple:
+    """`Scene`'s fields from tables given in code, read by the scene file's readers (see `Scene`)."""
+    doc = {name: _toml_value(value) for name, value in
+           (("image", image), ("camera", camera), ("lights", lights), ("render", render), ("output", output))
+           if value is not None}
+    if surfaces is not None:
+        doc["surface"] = _toml_value(list(surfaces)) if isinstance(surfaces, (list, tuple)) else _toml_value(surfaces)
+    specs, parsed, geometry_files = _parse_document(path, doc)
+    sha = hashlib.sha256(_canonical({k: v for k, v in doc.items() if k != "surface"}).encode()
+                         + _surfaces_digest(tuple(parsed), []).encode()).hexdigest()
+    _, inputs = _hash_files(geometry_files) if geometry_files else ("", "")
+    inputs = hashlib.sha256(f"{sha}\n{inputs}".encode()).hexdigest()
+    return (path, specs["image"], specs["camera"], specs["lights"], tuple(parsed), specs["render"], specs["output"],
+            sha, inputs)

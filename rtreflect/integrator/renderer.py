@@ -24,7 +24,7 @@ import numpy as np
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
-from .film import CHANNELS, Film, aov_planes, coverage_color
+from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color
 from ..modes.lights import TubeLights, reflect
 from ..trace.meshnormals import trace_mesh, vertex_normals
 from ..exchange.scene import ImageSpec, Scene
@@ -87,9 +87,24 @@ class Tile:
 
 @dataclass
 class RenderResult:
+    """A render in memory: the scene rendered, its `Film` (every EXR channel) and its `RenderStats`."""
+
     scene: Scene
     film: Film
     stats: RenderStats
+
+    @property
+    def rgba(self) -> np.ndarray:
+        """(H, W, 4) linear RGBA, float32: the supersampled colour the EXR's R G B A hold."""
+        return self.film.pixels[..., :len(COLOR_CHANNELS)]
+
+    def aov(self, name: str) -> np.ndarray:
+        """(H, W) values of one EXR channel (``"f"``, ``"line.id"``, ``"N.Z"``, ...), or (H, W, 3) for ``"P"`` and ``"N"``."""
+        if name in ("P", "N"):
+            return self.film.pixels[..., [CHANNELS.index(f"{name}.{axis}") for axis in "XYZ"]]
+        if name not in CHANNELS:
+            raise ValueError(f"no channel {name!r}; the channels are {', '.join(CHANNELS)} (and P, N as vectors)")
+        return self.film.channel(name)
 
 
 def default_threads() -> int:
