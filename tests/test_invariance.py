@@ -146,10 +146,12 @@ def test_translated_scene_renders_the_same_pixels(original):
 
 
 def test_validate_passes_the_translated_scene_and_fails_mesh_hits_kept_there(monkeypatch):
-    """Far from the origin Newton used to give up on nearly every hit, keeping the mesh hit 0.01 off the surface.
+    """The old render far from the origin: the BVH in world float32 coordinates, and Newton giving up on the hits.
 
-    validate's on-surface test allowed 1e-5 |P| (1.7 units at 1e5 on a 2.85-unit part) and passed
-    that render; relative to the part's size it sees the mesh hits, and interior fallbacks fail.
+    It kept mesh hits ~0.01 off the surface; validate's on-surface test allowed 1e-5 |P| (1.7 units
+    at 1e5 on a 2.85-unit part) and passed it. Relative to the part's size it sees the mesh hits,
+    and fallbacks inside the surface fail. (The correct render used to fail on misses instead:
+    validate's checks ran on float32 P, 1/128 coarse at 1e5.)
     """
     far = hood(offset=OFFSET, samples=1)
     assert validate_scene(far, threads=1).passed
@@ -160,6 +162,7 @@ def test_validate_passes_the_translated_scene_and_fails_mesh_hits_kept_there(mon
         return u, v, derivs, np.zeros_like(converged)
 
     monkeypatch.setattr(tracing_module, "refine", gives_up)
+    monkeypatch.setattr(accelerator_module, "bvh_centre", lambda vertices: np.zeros(3))
     report = validate_scene(far, threads=1)
     assert not report.passed
     assert any("Newton fallback" in reason for reason in report.reasons), report.reasons
