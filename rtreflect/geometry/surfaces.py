@@ -165,7 +165,8 @@ class NurbsSurface:
             np.concatenate([self.points * self.weights[..., None], self.weights[..., None]], axis=-1), dtype=np.float64)
         object.__setattr__(self, "_pw", pw)
         net = self.points.reshape(-1, 3)
-        object.__setattr__(self, "reach", float(np.linalg.norm(np.ptp(net, axis=0)) + np.abs(net).max()))
+        with np.errstate(over="ignore"):  # inf for coordinates beyond ~1e154, which the readers refuse anyway
+            object.__setattr__(self, "reach", float(np.linalg.norm(np.ptp(net, axis=0)) + np.abs(net).max()))
         object.__setattr__(self, "_power", self._power_form(pw))
 
     def _power_form(self, pw: np.ndarray) -> tuple | None:
