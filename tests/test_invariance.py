@@ -21,12 +21,14 @@ import rtreflect.geometry.surfaces as surfaces_module
 import rtreflect.trace.accelerator as accelerator_module
 import rtreflect.trace.tracing as tracing_module
 from rtreflect.analysis.validate import validate_scene
+from rtreflect.exchange.bpt import read_bpt
 from rtreflect.exchange.scene import load_scene
 from rtreflect.integrator.film import CHANNELS
 from rtreflect.integrator.renderer import Renderer
 from rtreflect.trace.accelerator import Accelerator
 
 HOOD = Path(__file__).resolve().parent.parent / "scenes" / "hood.toml"
+TEAPOT = HOOD.with_name("teapot.bpt")
 WIDTH, HEIGHT = 320, 180
 #: Knot scalings per direction (k_u, k_v): the issue's cases, both ways round.
 SCALINGS = [(1e5, 1e-5), (1e6, 1e-6), (1e-6, 1e6)]
@@ -95,6 +97,23 @@ def test_rescaled_surface_normals_agree_with_rhino(k_u, k_v):
     corners = np.array([xyz(rh_original.NormalAt(float(a), float(b))) for a, b in zip(cu, cv)])
     assert angle_between(scaled.normals(k_u * cu, k_v * cv), corners).max() < 1e-9
     assert angle_between(scaled.normals(k_u * u, k_v * v), surface.normals(u, v)).max() < 1e-12
+
+
+@pytest.mark.parametrize("k_u, k_v, offset", [(1e5, 1e-5, 0.0), (1e-6, 1e6, 0.0), (1.0, 1.0, OFFSET), (1e6, 1e-6, OFFSET)],
+                         ids=["1e5x1e-5", "1e-6x1e6", "moved", "1e6x1e-6 moved"])
+def test_teapot_pole_normals_survive_rescaling_and_moving(k_u, k_v, offset):
+    """The teapot's poles (a collapsed u = 0 row): the limit normal stays vertical, and near the pole (where a
+    partial is tiny and its rounding counts) the normals stay those of the original patch."""
+    patches = read_bpt(TEAPOT)
+    for pole, z in ((np.array([0.0, 0.0, 3.15]), -1.0), (np.zeros(3), 1.0)):
+        for patch in (p for p in patches if np.all(p.points[0] == pole)):
+            moved = replace(patch, knots_u=patch.knots_u * k_u, knots_v=patch.knots_v * k_v, points=patch.points + offset)
+            v = np.linspace(0.0, 1.0, 21)
+            at_pole = moved.normals(np.zeros_like(v), k_v * v)
+            assert angle_between(at_pole, np.broadcast_to([0.0, 0.0, z], at_pole.shape)).max() < 1e-9
+            for d in (1e-9, 1e-7, 1e-5, 1e-3):
+                near = moved.normals(np.full_like(v, k_u * d), k_v * v)
+                assert angle_between(near, patch.normals(np.full_like(v, d), v)).max() < 1e-6, (patch.name, d)
 
 
 def test_validate_fails_normals_taken_as_degenerate_everywhere(monkeypatch):

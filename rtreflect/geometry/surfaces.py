@@ -33,10 +33,13 @@ POWER_FORM_MAX_BYTES = 64 << 20
 #: from the interior: the sine of the angle between S_u and S_v, |S_u × S_v| / (|S_u| |S_v|), below this.
 #: A ratio of like quantities, so rescaling u or v (knots in mm or in m) cannot change the verdict.
 DEGENERATE_SINE = 1e-10
-#: ... or a partial that vanishes: |S_u| (u1 − u0) below this fraction of the net's reach (its size plus its
-#: distance from the origin, which sets the rounding floor of S_u). At a pole rounding leaves S_v a random
-#: vector of that order, whose angle with S_u means nothing. Also unchanged by rescaling u or v.
-VANISHING_PARTIAL = 1e-10
+#: ... or a partial that vanishes: |S_u| (u1 − u0) below this fraction of √(size · reach), the net's size and
+#: its reach (size plus distance from the origin, which sets the rounding floor of S_u). At a pole rounding
+#: leaves S_v a random vector of ε·reach (ε ~ 1e-15, up to 1e-12 at degree 7), whose angle with S_u means
+#: nothing; with |S_v| (v1 − v0) = x·size that turns the normal by ε·reach/(x·size), while the limit normal
+#: used instead is off by about x: the bound balances the two (√ε, times √(reach/size) far from the origin).
+#: Also unchanged by rescaling u or v.
+VANISHING_PARTIAL = 1e-8
 
 
 class SurfaceDerivatives(NamedTuple):
@@ -156,7 +159,8 @@ class NurbsSurface:
     trim: "Trim | None" = None
     mesh_uv: tuple[np.ndarray, np.ndarray] | None = None
     _pw: np.ndarray = field(init=False, repr=False)
-    reach: float = field(init=False, repr=False)  # the net's bounding-box diagonal + its largest |coordinate|
+    size: float = field(init=False, repr=False)  # the control net's bounding-box diagonal
+    reach: float = field(init=False, repr=False)  # size + the net's largest |coordinate|
 
     _power: tuple | None = field(init=False, repr=False)
 
@@ -166,7 +170,8 @@ class NurbsSurface:
         object.__setattr__(self, "_pw", pw)
         net = self.points.reshape(-1, 3)
         with np.errstate(over="ignore"):  # inf for coordinates beyond ~1e154, which the readers refuse anyway
-            object.__setattr__(self, "reach", float(np.linalg.norm(np.ptp(net, axis=0)) + np.abs(net).max()))
+            object.__setattr__(self, "size", float(np.linalg.norm(np.ptp(net, axis=0))))
+        object.__setattr__(self, "reach", self.size + float(np.abs(net).max()))
         object.__setattr__(self, "_power", self._power_form(pw))
 
     def _power_form(self, pw: np.ndarray) -> tuple | None:
@@ -300,7 +305,7 @@ class NurbsSurface:
         norm = np.linalg.norm(cross, axis=1)
         len_u, len_v = np.linalg.norm(d.Su, axis=1), np.linalg.norm(d.Sv, axis=1)
         (u0, u1), (v0, v1) = self.domain
-        floor = VANISHING_PARTIAL * self.reach
+        floor = VANISHING_PARTIAL * math.sqrt(self.size * self.reach)
         degenerate = ~((norm > DEGENERATE_SINE * len_u * len_v)
                        & (len_u * (u1 - u0) > floor) & (len_v * (v1 - v0) > floor))
         if np.any(degenerate):
