@@ -197,6 +197,12 @@ def wider_v(nv: int, knots_v: list[float]) -> Defect:
                     put(f"{S}.knots_v", knots_v))
 
 
+def wider_u(nu: int, knots_u: list[float]) -> Defect:
+    """The surface with nu control points in u (and matching weights) and the given u knots."""
+    return together(put(f"{S}.points", control_net(nu, 4)), put(f"{S}.weights", [[1.0] * 4 for _ in range(nu)]),
+                    put(f"{S}.knots_u", knots_u))
+
+
 def fine_grid(n: int) -> Defect:
     """A bilinear surface of n×n control points: n − 1 knot spans each way."""
     knots = [0.0] + [i / (n - 1) for i in range(n)] + [1.0]
@@ -269,6 +275,9 @@ CASES = [
     Case("knot multiplicity above degree+1", put(f"{S}.knots_v", [0.0] * 4 + [1.0] * 3), f"{S}.knots_v"),
     Case("inner knot multiplicity above degree+1", wider_v(7, [0.0] * 3 + [0.5] * 4 + [1.0] * 3),
          f"{S}.knots_v: an inner knot (0.5) is repeated 4 times"),
+    # Degree 3 in u: a knot repeated 4 times inside the domain cuts the surface in two pieces (OpenNURBS refuses it).
+    Case("inner knot repeated degree+1 times", wider_u(8, [0.0] * 4 + [0.5] * 4 + [1.0] * 4),
+         f"{S}.knots_u: an inner knot (0.5) is repeated 4 times; at most the degree (3) allowed"),
     Case("knot span too narrow for float64", put(f"{S}.knots_v", [0.0, 0.0, 0.0, 1e-300, 1.0, 1.0, 1.0]),
          f"{S}.knots_v: knots 2 and 3 differ by only 1e-300"),
     Case("parameter domain too narrow", put(f"{S}.knots_u", [0.0] * 4 + [1e-200] * 4), f"{S}.knots_u"),
@@ -450,6 +459,7 @@ VALID_VARIANTS = [
     Case("one degree for both directions",
          together(put(f"{S}.degree", 3), put(f"{S}.knots_v", [0.0] * 4 + [1.0] * 4)), ""),
     Case("no weights", drop(f"{S}.weights"), ""),
+    Case("C0 crease: inner knot repeated degree times", wider_u(7, [0.0] * 4 + [0.5] * 3 + [1.0] * 4), ""),
     Case("exr only", put("output.png", False), ""),
     Case("mesh normals with overlay", together(put("render.normals", "mesh"), put("render.overlay", True),
                                                put("render.overlay_color", [0.0, 1.0, 0.0])), ""),

@@ -29,6 +29,7 @@ from hypothesis import given, settings, strategies as st
 
 from reference import angle_between, to_rhino, xyz
 from rtreflect.exchange.bpt import read_bpt
+from rtreflect.geometry.knots import knot_vector_problem
 from rtreflect.geometry.surfaces import NurbsSurface, basis_derivatives, find_span
 
 TEAPOT = Path(__file__).resolve().parents[1] / "scenes" / "teapot.bpt"
@@ -430,3 +431,30 @@ def test_basis_is_a_partition_of_unity(degree, multiplicities, seed):
     # A clamped basis interpolates at the ends: there only the first (last) function is 1.
     np.testing.assert_allclose(ders[0, 0], np.eye(degree + 1)[0], rtol=0, atol=1e-15, err_msg="at the start")
     np.testing.assert_allclose(ders[1, 0], np.eye(degree + 1)[-1], rtol=0, atol=1e-15, err_msg="at the end")
+
+
+# --------------------------------------------------------------------------- knot vectors
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(
+    degree=st.integers(1, 5),
+    multiplicities=st.lists(st.integers(1, 6), max_size=3),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_knot_multiplicities_are_accepted_exactly_where_rhino_accepts_them(degree, multiplicities, seed):
+    """Inner knots up to the degree (a C0 crease at most) are fine; degree + 1 splits the surface: OpenNURBS agrees."""
+    rng = np.random.default_rng(seed)
+    multiplicities = [min(m, degree + 1) for m in multiplicities]
+    knots = clamped_knots(rng, degree, multiplicities)
+    n_ctrl = len(knots) - degree - 1
+    rh = rhino3dm.NurbsSurface.Create(3, False, degree + 1, 2, n_ctrl, 2)
+    for i in range(n_ctrl):
+        for j in range(2):
+            rh.Points[i, j] = rhino3dm.Point4d(float(i), float(j), float((i * j) % 3), 1.0)
+    for k, t in enumerate(knots[1:-1]):  # OpenNURBS leaves out the two outermost knots
+        rh.KnotsU[k] = float(t)
+    rh.KnotsV[0], rh.KnotsV[1] = 0.0, 1.0
+    problem = knot_vector_problem(knots, degree, n_ctrl)
+    assert (problem is None) == rh.IsValid, (knots, problem)
+    assert (problem is None) == all(m <= degree for m in multiplicities)

@@ -142,7 +142,9 @@ class UlmetField:
         ∇f by one-sided differences stepped into the domain. A point on an edge of the
         domain stays on it (the edge's own parameter is held fixed), so contours end
         exactly on patch boundaries. Points that would move farther than ``max_move``
-        (in the (u, v) metric) jumped to another branch and are reported unconverged.
+        jumped to another branch and are reported unconverged. Steps and moves are measured
+        in the domain's unit square, (u/(u1 − u0), v/(v1 − v0)): a metric that mixed u's and
+        v's own units would aim along whichever parameter happens to be scaled smaller.
         """
         u0, u1, v0, v1 = self.surfaces.domains(patch)
         u, v = u.astype(np.float64).copy(), v.astype(np.float64).copy()
@@ -165,19 +167,20 @@ class UlmetField:
             values = self.f(np.concatenate([p, p, p]), np.concatenate([ua, ua + su, ua]),
                             np.concatenate([va, va, va + sv])).reshape(3, -1)
             r = values[0] - c[active]
-            gu = np.where(hold_u[active], 0.0, (values[1] - values[0]) / su)
-            gv = np.where(hold_v[active], 0.0, (values[2] - values[0]) / sv)
+            # ∇f in unit-square coordinates: ∂f/∂(u/(u1 − u0)) = (u1 − u0) ∂f/∂u.
+            gu = np.where(hold_u[active], 0.0, (values[1] - values[0]) / su * (u1[active] - u0[active]))
+            gv = np.where(hold_v[active], 0.0, (values[2] - values[0]) / sv * (v1[active] - v0[active]))
             done = np.abs(r) <= NEWTON_TOLERANCE * scale
             ok[active[done]] = True
             g2 = gu * gu + gv * gv
             step = ~done & np.isfinite(r) & np.isfinite(g2) & (g2 > 0)
             active, r, gu, gv, g2 = (x[step] for x in (active, r, gu, gv, g2))
-            u[active] = np.clip(u[active] - r * gu / g2, u0[active], u1[active])
-            v[active] = np.clip(v[active] - r * gv / g2, v0[active], v1[active])
+            u[active] = np.clip(u[active] - r * gu / g2 * (u1[active] - u0[active]), u0[active], u1[active])
+            v[active] = np.clip(v[active] - r * gv / g2 * (v1[active] - v0[active]), v0[active], v1[active])
         if len(active):  # the last step's result
             r = self.f(patch[active], u[active], v[active]) - c[active]
             ok[active] = np.abs(r) <= 1e3 * NEWTON_TOLERANCE * scale
-        ok &= np.hypot(u - start_u, v - start_v) <= max_move
+        ok &= np.hypot((u - start_u) / (u1 - u0), (v - start_v) / (v1 - v0)) <= max_move
         return u, v, ok
 
     # -- where a contour is seen --------------------------------------------------------------
@@ -306,7 +309,7 @@ def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float
     lengths = [len(a) for a in lines_u]
     chains = _Chains(np.concatenate(lines_u), np.concatenate(lines_v), np.repeat(np.arange(len(lengths)), lengths),
                      np.ones(sum(lengths), dtype=bool))
-    cell = math.hypot((u1 - u0) / (n_u - 1), (v1 - v0) / (n_v - 1))
+    cell = math.hypot(1.0 / (n_u - 1), 1.0 / (n_v - 1))  # in the domain's unit square, like `UlmetField.polish`
     return chains, np.asarray(chain_light), cell
 
 
@@ -355,7 +358,8 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.
             break
         mid_u = 0.5 * (chains.u[seg] + chains.u[seg + 1])
         mid_v = 0.5 * (chains.v[seg] + chains.v[seg + 1])
-        half = 0.5 * np.hypot(chains.u[seg + 1] - chains.u[seg], chains.v[seg + 1] - chains.v[seg])
+        (u0, u1), (v0, v1) = field.surfaces.patches[k].domain
+        half = 0.5 * np.hypot((chains.u[seg + 1] - chains.u[seg]) / (u1 - u0), (chains.v[seg + 1] - chains.v[seg]) / (v1 - v0))
         mu, mv, mok = field.polish(np.full(len(seg), k), mid_u, mid_v, c_of(seg), np.maximum(half, 1e-3 * cell))
         mpx, mdepth = field.project(np.full(len(seg), k), mu, mv)
         chord_mid = 0.5 * (px[seg] + px[seg + 1])

@@ -77,6 +77,22 @@ END_MARGIN_PX = 2.0
 CLEAN_MARGIN_PX = 2
 #: A tube with this many analytic points in clean view (checked for misses) must have compared points.
 NOTHING_COMPARED_POINTS = 5
+#: A stored hit is on the surface when the pixel-centre ray at the stored distance Z meets S(u, v) within this
+#: fraction of the part's size (bounding-box diagonal), beyond the rounding of the stored float32 Z, u and v.
+#: Relative to the part, not to |P|: far from the origin |P| would allow whole chord errors (10⁵ |P| ≈ 1 unit).
+ON_SURFACE = 1e-5
+#: Float32's unit roundoff, 2⁻²⁴: the rounding of a stored AOV value relative to its magnitude.
+FLOAT32_ROUNDOFF = 2.0**-24
+#: A ray meeting the surface at cos θ = |N·D| at least this (θ ≤ 84°) does not graze it: Newton converges there, so
+#: a fallback there, with the pixel's four neighbours on the same patch (no silhouette or seam), is a fault.
+GRAZING_COS = 0.1
+#: The stored N must lie within this angle (radians) of the normal S_u × S_v at the stored (u, v). Float32 storage
+#: moves both by ~1e-7; a normal from a wrong formula or a wrong degenerate-point verdict is off by far more.
+NORMAL_ANGLE = 1e-4
+#: S_u × S_v is a trustworthy reference only where the partials are well apart (sine of their angle) and
+#: clear of rounding (|S_u| (u1 − u0) against the net's reach): generous bounds, unlike the renderer's own.
+TANGENT_SINE = 1e-3
+TANGENT_FLOOR = 1e-6
 #: A line whose neighbour is too close for more than this share of its clean-view points gets a note: a few
 #: points where lines crowd (near a silhouette, at grazing angles) are normal; most of a line is worth saying.
 NOTE_UNRESOLVED_SHARE = 0.5
@@ -100,10 +116,12 @@ class PixelAOVs:
     """Per-pixel values of a finished render, (H, W) or (H, W, 3), in float64.
 
     From the film (`Renderer.render`): the AOVs of the pixel-centre ray (f, patch, P, N, Z,
-    line.id, line.dist) and A; ``s`` is recomputed from N and the camera's pixel-centre ray
-    (paper eq. 3); ``line_coverage`` is the fraction of samples showing a tube, read back from
+    line.id, line.dist) and A, with P of exact hits replaced by S(u, v) in float64; ``s`` is
+    recomputed from N and the camera's pixel-centre ray (paper eq. 3); ``line_coverage`` is the fraction of samples showing a tube, read back from
     RGB (see `line_coverage`); ``fallback`` marks hits off the surface (Newton failed, the
-    mesh hit kept: P ≠ S(u, v)).
+    mesh hit kept: P ≠ S(u, v), or the ray at distance Z ≠ S(u, v)); ``incidence`` is |N·D|
+    for the pixel-centre ray D; ``normal_error`` the angle between N and S_u × S_v at (u, v)
+    on exact hits where that reference is trustworthy (NaN elsewhere).
     """
 
     f: np.ndarray
@@ -117,6 +135,8 @@ class PixelAOVs:
     fallback: np.ndarray
     coverage: np.ndarray  # A: fraction of samples that hit the surface
     line_coverage: np.ndarray  # fraction of samples that see a tube (NaN where colours cannot tell)
+    incidence: np.ndarray | None = None
+    normal_error: np.ndarray | None = None
 
 
 def line_coverage(rgba: np.ndarray, surface_color, line_color, background) -> np.ndarray:
@@ -147,24 +167,85 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
     patch = channel("patch")
     hit = np.flatnonzero(patch.ravel() >= 0)
     rows, cols = np.divmod(hit, width)
-    _, directions = renderer.camera.rays(rows, cols)
+    origins, directions = renderer.camera.rays(rows, cols)
     s = np.full((height * width, 3), np.nan)
     s[hit] = reflect(-directions, N.reshape(-1, 3)[hit])
     fallback = np.zeros(height * width, dtype=bool)
+    incidence = np.full(height * width, np.nan)
+    incidence[hit] = np.abs(np.einsum("ij,ij->i", N.reshape(-1, 3)[hit], directions))
+    normal_error = np.full(height * width, np.nan)
     if renderer.vertex_normals is None:  # exact mode; mesh mode never falls back (and is never on S)
-        u, v = channel("u").ravel()[hit], channel("v").ravel()[hit]
-        S = renderer.surfaces.evaluate(patch.ravel()[hit].astype(int), u, v).S
-        P_hit = P.reshape(-1, 3)[hit]
-        # float32 storage moves P and S(u, v) by ~1e-7 relative; a mesh hit is off by up to the chord error.
-        tolerance = 1e-5 * (renderer.tessellation.extent + np.abs(P_hit).max(axis=1))
-        fallback[hit] = ~(np.linalg.norm(S - P_hit, axis=1) <= tolerance)
+        fallback[hit], normal_error[hit], S = _stored_hit_errors(
+            renderer, patch.ravel()[hit].astype(int), channel("u").ravel()[hit], channel("v").ravel()[hit],
+            P.reshape(-1, 3)[hit], N.reshape(-1, 3)[hit], channel("Z").ravel()[hit], origins, directions)
+        # Exact hits: P as S(u, v) in float64. Far from the origin float32 P is coarse (1/128 at 10⁵), and the
+        # checks below (occlusion rays, neighbour distances) need the point as the renderer had it.
+        exact = hit[~fallback[hit]]
+        P.reshape(-1, 3)[exact] = S[~fallback[hit]]
     render = renderer.scene.render
     return PixelAOVs(
         f=channel("f"), patch=patch, P=P, N=N, s=s.reshape(height, width, 3), Z=channel("Z"),
         line_id=channel("line.id"), line_dist=channel("line.dist"), fallback=fallback.reshape(height, width),
         coverage=channel("A"),
         line_coverage=line_coverage(film.pixels[..., :4], render.surface_color, render.line_color, render.background),
+        incidence=incidence.reshape(height, width), normal_error=normal_error.reshape(height, width),
     )
+
+
+def _stored_hit_errors(renderer: Renderer, patch: np.ndarray, u: np.ndarray, v: np.ndarray, P: np.ndarray,
+                       N: np.ndarray, Z: np.ndarray, origins: np.ndarray,
+                       directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per stored hit: off the surface (a fallback), the angle of N to S_u × S_v (NaN where not checked), S(u, v).
+
+    On the surface: the pixel-centre ray at the stored distance, O + Z D, and the stored P both
+    meet S(u, v) within `ON_SURFACE` of the part's size, plus what float32 storage of Z, u, v
+    (and of P: its coordinates' own rounding) can move them. O + Z D keeps its precision far
+    from the origin, where P's float32 coordinates cannot tell a mesh hit from the surface.
+    """
+    derivs = renderer.surfaces.evaluate(patch, u, v)
+    S, Su, Sv = derivs.S, derivs.Su, derivs.Sv
+    len_u, len_v = np.linalg.norm(Su, axis=1), np.linalg.norm(Sv, axis=1)
+    rounding = FLOAT32_ROUNDOFF * (np.abs(Z) + len_u * np.abs(u) + len_v * np.abs(v))
+    allowed = ON_SURFACE * renderer.tessellation.extent + 2.0 * rounding
+    on_ray = np.linalg.norm(origins + Z[:, None] * directions - S, axis=1) <= allowed
+    on_point = np.linalg.norm(P - S, axis=1) <= allowed + 2.0 * FLOAT32_ROUNDOFF * np.linalg.norm(P, axis=1)
+    fallback = ~(on_ray & on_point)
+    cross = np.cross(Su, Sv)
+    norm = np.linalg.norm(cross, axis=1)
+    u0, u1, v0, v1 = renderer.surfaces.domains(patch)
+    reach = np.array([surface.reach for surface in renderer.surfaces.patches])[patch]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        trusted = ~fallback & (norm > TANGENT_SINE * len_u * len_v) \
+            & (len_u * (u1 - u0) > TANGENT_FLOOR * reach) & (len_v * (v1 - v0) > TANGENT_FLOOR * reach)
+        angle = np.arctan2(np.linalg.norm(np.cross(N, cross), axis=1), np.abs(np.einsum("ij,ij->i", N, cross)))
+    return fallback, np.where(trusted, angle, np.nan), S
+
+
+def hit_faults(aovs: PixelAOVs) -> list[str]:
+    """Reasons to fail found in the stored hits alone: normals off the surface, and fallbacks where none belong.
+
+    A fallback (Newton failed, the mesh hit kept) is expected where the ray grazes the surface
+    or at a silhouette or seam; one on a ray at cos θ ≥ `GRAZING_COS` whose four neighbouring
+    pixels hit the same patch is a wrong pixel (e.g. a BVH that lost precision).
+    """
+    reasons = []
+    if aovs.normal_error is not None:
+        with np.errstate(invalid="ignore"):
+            off = aovs.normal_error > NORMAL_ANGLE
+        if off.any():
+            reasons.append(f"{int(off.sum())} pixels store a normal N off the surface normal S_u × S_v at (u, v) "
+                           f"(by up to {float(np.nanmax(aovs.normal_error)):.3g} rad)")
+    if aovs.incidence is not None:
+        patch = np.pad(aovs.patch, 1, constant_values=-1)
+        centre = patch[1:-1, 1:-1]
+        inside = ((centre >= 0) & (patch[:-2, 1:-1] == centre) & (patch[2:, 1:-1] == centre)
+                  & (patch[1:-1, :-2] == centre) & (patch[1:-1, 2:] == centre))
+        with np.errstate(invalid="ignore"):
+            stray = aovs.fallback & inside & (aovs.incidence >= GRAZING_COS)
+        if stray.any():
+            reasons.append(f"{int(stray.sum())} pixels inside the surface, not grazing it, keep a mesh hit off the "
+                           f"surface (Newton fallback)")
+    return reasons
 
 
 @dataclass
@@ -632,6 +713,7 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
         why = ("every line's neighbour lies closer than the pixels resolve" if notes and len(notes) == sum(counted)
                else "no tube reflected where the camera sees the surface")
         reasons.insert(0, f"no traced line centre was compared ({why})")
+    reasons.extend(hit_faults(aovs))
     camera = renderer.camera
     scene = renderer.scene
     return SceneReport(scene.output.name, str(scene.path), camera.width, camera.height, scene.render.normals,

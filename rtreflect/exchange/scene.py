@@ -27,6 +27,7 @@ import numpy as np
 
 from .bpt import read_bpt
 from ..errors import SceneError, SceneErrors, quote, read_text
+from ..geometry.knots import knot_vector_problem
 from ..geometry.surfaces import NurbsSurface
 
 #: Largest image side. The film keeps 17 float32 planes per pixel, and beyond this
@@ -42,9 +43,6 @@ MAX_TUBES = 10000
 #: Most mesh vertices over all patches (tessellation × knot spans, squared): about 1.5 GB of mesh,
 #: (u, v) table and Embree copy. Newton refines hits onto the surface, so a finer mesh buys nothing.
 MAX_MESH_VERTICES = 1 << 23
-#: Narrowest non-empty knot span, relative to the largest knot magnitude (at least 1): below it the
-#: basis functions keep fewer than 4 of float64's 16 digits, and their derivatives overflow.
-MIN_KNOT_SPAN = 1e-12
 #: Longest output name in UTF-8 bytes: file names stop at 255 bytes, and the temporary name
 #: written first adds a dot, a random part and the extension.
 MAX_NAME_BYTES = 200
@@ -513,26 +511,9 @@ def _parse_output(t: _Table, path: Path) -> OutputSpec:
 
 
 def _check_knots(t: _Table, key: str, knots: np.ndarray, degree: int, n_ctrl: int) -> None:
-    if knots.size != n_ctrl + degree + 1:
-        raise t.error(key, f"needs {n_ctrl + degree + 1} knots for degree {degree} and {n_ctrl} control points, got {knots.size}")
-    if np.any(np.diff(knots) < 0):
-        i = int(np.flatnonzero(np.diff(knots) < 0)[0])
-        raise t.error(key, f"knots must not decrease (knot {i + 1} = {knots[i + 1]:g} < knot {i} = {knots[i]:g})")
-    values, counts = np.unique(knots, return_counts=True)
-    if counts.max() > degree + 1:
-        k = int(np.argmax(counts))
-        where = "an end knot" if k in (0, len(values) - 1) else "an inner knot"
-        raise t.error(key, f"{where} ({values[k]:g}) is repeated {counts[k]} times; at most degree + 1 = {degree + 1} allowed")
-    if not knots[n_ctrl] > knots[degree]:
-        raise t.error(key, "the parameter domain is empty (knot[degree] == knot[count])")
-    inside = knots[degree:n_ctrl + 1]
-    spans = np.diff(inside)
-    narrowest = MIN_KNOT_SPAN * max(1.0, float(np.max(np.abs(knots))))
-    thin = np.flatnonzero((spans > 0) & (spans < narrowest))
-    if len(thin):
-        i = degree + int(thin[0])
-        raise t.error(key, f"knots {i} and {i + 1} differ by only {spans[thin[0]]:.3g}, too little for float64 "
-                           f"(at least {narrowest:.3g}): merge them or rescale the knot vector")
+    problem = knot_vector_problem(knots, degree, n_ctrl)
+    if problem:
+        raise t.error(key, problem)
 
 
 ZERO_AREA = "the control points lie on a point or a line: the patch has zero area"

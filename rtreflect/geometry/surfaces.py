@@ -29,9 +29,17 @@ CHUNK = 1 << 12
 POWER_FORM_MAX_DEGREE = 5
 POWER_FORM_MAX_BYTES = 64 << 20
 
-#: |S_u × S_v| below this fraction of |S_u|² + |S_v|² marks a degenerate point
-#: (collapsed edge, pole), where the normal is taken as the limit from the interior.
-DEGENERATE_RATIO = 1e-10
+#: A degenerate point (collapsed edge, pole, parallel partials), where the normal is taken as the limit
+#: from the interior: the sine of the angle between S_u and S_v, |S_u × S_v| / (|S_u| |S_v|), below this.
+#: A ratio of like quantities, so rescaling u or v (knots in mm or in m) cannot change the verdict.
+DEGENERATE_SINE = 1e-10
+#: ... or a partial that vanishes: |S_u| (u1 − u0) below this fraction of √(size · reach), the net's size and
+#: its reach (size plus distance from the origin, which sets the rounding floor of S_u). At a pole rounding
+#: leaves S_v a random vector of ε·reach (ε ~ 1e-15, up to 1e-12 at degree 7), whose angle with S_u means
+#: nothing; with |S_v| (v1 − v0) = x·size that turns the normal by ε·reach/(x·size), while the limit normal
+#: used instead is off by about x: the bound balances the two (√ε, times √(reach/size) far from the origin).
+#: Also unchanged by rescaling u or v.
+VANISHING_PARTIAL = 1e-8
 
 
 class SurfaceDerivatives(NamedTuple):
@@ -151,6 +159,8 @@ class NurbsSurface:
     trim: "Trim | None" = None
     mesh_uv: tuple[np.ndarray, np.ndarray] | None = None
     _pw: np.ndarray = field(init=False, repr=False)
+    size: float = field(init=False, repr=False)  # the control net's bounding-box diagonal
+    reach: float = field(init=False, repr=False)  # size + the net's largest |coordinate|
 
     _power: tuple | None = field(init=False, repr=False)
 
@@ -158,6 +168,10 @@ class NurbsSurface:
         pw = np.ascontiguousarray(
             np.concatenate([self.points * self.weights[..., None], self.weights[..., None]], axis=-1), dtype=np.float64)
         object.__setattr__(self, "_pw", pw)
+        net = self.points.reshape(-1, 3)
+        with np.errstate(over="ignore"):  # inf for coordinates beyond ~1e154, which the readers refuse anyway
+            object.__setattr__(self, "size", float(np.linalg.norm(np.ptp(net, axis=0))))
+        object.__setattr__(self, "reach", self.size + float(np.abs(net).max()))
         object.__setattr__(self, "_power", self._power_form(pw))
 
     def _power_form(self, pw: np.ndarray) -> tuple | None:
@@ -281,14 +295,19 @@ class NurbsSurface:
         Where S_u × S_v vanishes (a collapsed edge, a pole) the normal is the limit
         from the interior along the line towards the domain centre: the first
         non-vanishing term of the Taylor expansion of S_u × S_v. Never NaN.
+        Whether it vanishes is decided by scale-free ratios (`DEGENERATE_SINE`,
+        `VANISHING_PARTIAL`), so the normals do not depend on how u and v are scaled.
         """
         u = np.asarray(u, dtype=np.float64).ravel()
         v = np.asarray(v, dtype=np.float64).ravel()
         d = derivs if derivs is not None else self.evaluate(u, v, order=1)
         cross = np.cross(d.Su, d.Sv)
         norm = np.linalg.norm(cross, axis=1)
-        scale = np.einsum("ij,ij->i", d.Su, d.Su) + np.einsum("ij,ij->i", d.Sv, d.Sv)
-        degenerate = ~(norm > DEGENERATE_RATIO * scale)
+        len_u, len_v = np.linalg.norm(d.Su, axis=1), np.linalg.norm(d.Sv, axis=1)
+        (u0, u1), (v0, v1) = self.domain
+        floor = VANISHING_PARTIAL * math.sqrt(self.size * self.reach)
+        degenerate = ~((norm > DEGENERATE_SINE * len_u * len_v)
+                       & (len_u * (u1 - u0) > floor) & (len_v * (v1 - v0) > floor))
         if np.any(degenerate):
             cross[degenerate] = self._limit_cross(u[degenerate], v[degenerate])
             norm[degenerate] = np.linalg.norm(cross[degenerate], axis=1)
@@ -299,21 +318,24 @@ class NurbsSurface:
         return cross / norm[:, None]
 
     def _limit_cross(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Leading Taylor term of S_u × S_v at (u + h δu, v + h δv) as h → 0+."""
+        """Leading Taylor term of S_u × S_v at (u + h δu, v + h δv) as h → 0+.
+
+        (δu, δv) points to the domain centre in the parameters' own units (not normalised
+        across u and v, which would mix their scales): the same path on the surface however
+        u and v are scaled. Then ∂_h S_u scales like S_u and ∂_h S_v like S_v, so the test
+        whether the first-order term vanishes is a scale-free ratio, as in `normals`.
+        """
         (u0, u1), (v0, v1) = self.domain
         du = 0.5 * (u0 + u1) - u
         dv = 0.5 * (v0 + v1) - v
-        length = np.hypot(du, dv)
-        length[length == 0] = 1.0
-        du, dv = du / length, dv / length
         d = self.evaluate(u, v, order=2)
         Su_h = d.Suu * du[:, None] + d.Suv * dv[:, None]  # d/dh of S_u along (δu, δv)
         Sv_h = d.Suv * du[:, None] + d.Svv * dv[:, None]
         first = np.cross(Su_h, d.Sv) + np.cross(d.Su, Sv_h)
         second = np.cross(Su_h, Sv_h)
-        ref = np.einsum("ij,ij->i", d.Suu, d.Suu) + np.einsum("ij,ij->i", d.Svv, d.Svv) + np.einsum("ij,ij->i", d.Suv, d.Suv)
-        ref = np.sqrt(ref * (np.einsum("ij,ij->i", d.Su, d.Su) + np.einsum("ij,ij->i", d.Sv, d.Sv)) + ref)
-        use_first = np.linalg.norm(first, axis=1) > DEGENERATE_RATIO * ref
+        ref = ((np.linalg.norm(d.Su, axis=1) + np.linalg.norm(Su_h, axis=1))
+               * (np.linalg.norm(d.Sv, axis=1) + np.linalg.norm(Sv_h, axis=1)))
+        use_first = np.linalg.norm(first, axis=1) > DEGENERATE_SINE * ref
         return np.where(use_first[:, None], first, second)
 
     def _mean_normal(self) -> np.ndarray:

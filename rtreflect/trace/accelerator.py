@@ -2,7 +2,12 @@
 
 trimesh's own ray wrapper drops the barycentrics, which are what turn a triangle
 hit into a starting (u, v) for the exact hit; so the Embree scene is built here.
-Embree works in float32; everything around it stays float64.
+Embree works in float32; everything around it stays float64. Float32 keeps 24 bits
+of a coordinate's magnitude, so the BVH holds the mesh moved to its own centre
+(bounding-box centre) and every ray origin is moved likewise before conversion:
+a part 10⁵ units from the origin then intersects as precisely as one at the origin
+(in world coordinates, hits were 0.01 off on a 3-unit part and Newton gave up).
+Ray distances do not change under the move, so callers never see it.
 """
 
 from __future__ import annotations
@@ -23,11 +28,18 @@ class MeshHits(NamedTuple):
     t: np.ndarray  # ray distance (float64 of Embree's float32)
 
 
+def bvh_centre(vertices: np.ndarray) -> np.ndarray:
+    """The centre of the vertices' bounding box: the origin of the BVH's float32 coordinates."""
+    return 0.5 * (vertices.min(axis=0) + vertices.max(axis=0)) if len(vertices) else np.zeros(3)
+
+
 class Accelerator:
     def __init__(self, tessellation: Tessellation):
         self.scene = rtcore_scene.EmbreeScene()
+        vertices = tessellation.vertices
+        self.centre = bvh_centre(vertices)  # the BVH's origin, in world coordinates (float64)
         # Keep references: embreex shares these buffers with Embree.
-        self._vertices = np.ascontiguousarray(tessellation.vertices, dtype=np.float32)
+        self._vertices = np.ascontiguousarray(vertices - self.centre, dtype=np.float32)
         self._faces = np.ascontiguousarray(tessellation.faces, dtype=np.int32)
         self._mesh = TriangleMesh(self.scene, self._vertices, self._faces)
         self._chord_error = tessellation.chord_error
@@ -37,15 +49,20 @@ class Accelerator:
         """Origins for rays leaving the surface at R on ``patch``'s side n (unit normal facing the ray's side).
 
         Offset along n by more than the mesh's chord error (twice it, plus a relative 1e-6 for
-        float32), so the mesh standing in for the surface does not shadow the point it approximates.
+        float32 in the BVH's centred coordinates), so the mesh standing in for the surface does not
+        shadow the point it approximates.
         """
-        eps = 2.0 * self._chord_error[patch] + 1e-6 * (self._extent + np.abs(R).max(axis=1))
+        eps = 2.0 * self._chord_error[patch] + 1e-6 * (self._extent + np.abs(R - self.centre).max(axis=1))
         return R + eps[:, None] * n
+
+    def _local(self, origins: np.ndarray) -> np.ndarray:
+        """Ray origins in the BVH's centred float32 coordinates (moved in float64, then converted)."""
+        return np.ascontiguousarray(np.asarray(origins, dtype=np.float64) - self.centre, dtype=np.float32)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray) -> MeshHits:
         """Nearest triangle hit of each ray."""
         result = self.scene.run(
-            np.ascontiguousarray(origins, dtype=np.float32),
+            self._local(origins),
             np.ascontiguousarray(directions, dtype=np.float32),
             query="INTERSECT",
             output=1,
@@ -58,7 +75,7 @@ class Accelerator:
         if len(origins) == 0:
             return np.zeros(0, dtype=bool)
         result = self.scene.run(
-            np.ascontiguousarray(origins, dtype=np.float32),
+            self._local(origins),
             np.ascontiguousarray(directions, dtype=np.float32),
             dists=np.ascontiguousarray(np.minimum(max_distance, np.finfo(np.float32).max), dtype=np.float32),
             query="OCCLUDED",

@@ -21,7 +21,9 @@ from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation
 
-#: Newton stops once the point is this close to the ray, relative to the ray distance.
+#: Newton stops once the point is this close to the ray, relative to the ray distance (or the part's size),
+#: and at least to the hit's distance from the origin: S's coordinates cannot be computed more finely than
+#: that (float64 rounding of sums of control points ~1e5 units out), so far from the origin Newton never stopped.
 NEWTON_TOLERANCE = 1e-12
 NEWTON_MAX_STEPS = 8
 #: A refined hit farther than this many chord errors (plus a little) from the mesh hit went to another sheet.
@@ -74,7 +76,8 @@ def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, toler
     u, v = u.copy(), v.copy()
     u0, u1, v0, v1 = surfaces.domains(patch)
     e1, e2 = _across(directions)
-    tol = NEWTON_TOLERANCE * np.maximum(t_mesh, tolerance_distance)
+    magnitude = np.abs(origins + t_mesh[:, None] * directions).max(axis=1)  # |S| near the mesh hit
+    tol = NEWTON_TOLERANCE * np.maximum(np.maximum(t_mesh, tolerance_distance), magnitude)
     converged = np.zeros(len(u), dtype=bool)
     singular = np.zeros(len(u), dtype=bool)
     active = np.arange(len(u))
