@@ -37,11 +37,12 @@ from ..geometry.surfaces import NurbsSurface
 #: What to install for CAD input (pyproject.toml's [cad] extra).
 CAD_EXTRA = "pip install 'rtreflect[cad]'"
 #: Mesh chord deflection relative to the part's bounding-box diagonal. The mesh only seeds Newton
-#: (hits are refined onto the exact surface), so it can be coarse: 1e-3 keeps a 200-face part near
-#: 10k nodes and meshing under 0.2 s.
-MESH_DEFLECTION = 1e-3
-#: Mesh angular deflection (radians): bounds the normal turn across a triangle on small, curved features.
-MESH_ANGLE = 0.35
+#: (hits are refined onto the exact surface), so it can be coarse: 2e-3 keeps a 200-face part near
+#: 10k nodes and meshing near 0.1 s.
+MESH_DEFLECTION = 2e-3
+#: Mesh angular deflection (radians): bounds the normal turn across a triangle on small, curved features
+#: (OCCT's default; finer multiplies the nodes on small fillets without helping Newton).
+MESH_ANGLE = 0.5
 #: Largest model-space distance between a trim polyline and its pcurve's image, relative to the part's
 #: diagonal: 1e-5 is 0.01 px when the part spans 1000 px, far below what a pixel shows.
 TRIM_TOLERANCE = 1e-5
@@ -52,6 +53,10 @@ TRIM_MAX_ROUNDS = 14
 #: Narrowest knot span kept, relative to the largest knot magnitude (at least 1): the scene reader's
 #: limit (exchange/scene.py MIN_KNOT_SPAN), below which the basis functions lose their digits.
 MIN_KNOT_SPAN = 1e-12
+#: (u, v) closer than this fraction of the domain to one of its sides is put on that side, and consecutive loop
+#: points closer than it are one point: pcurves meet their vertices and the domain's sides only to OCCT's
+#: tolerances (1e-16 on seams, 1e-9 at cut corners), and a loop touching itself there reads as self-intersecting.
+SIDE_SNAP = 1e-9
 #: Faces beyond which a progress bar is shown while a model loads (small parts load in well under a second).
 PROGRESS_FACES = 200
 
@@ -276,8 +281,9 @@ def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float) -> np.nda
     for _ in range(TRIM_MAX_ROUNDS):
         mids_t = 0.5 * (ts[:-1] + ts[1:])
         mids = at(mids_t)
-        chord = 0.5 * (uv[:-1] + uv[1:])
-        error = np.linalg.norm(surface.evaluate(mids[:, 0], mids[:, 1], 1).S - surface.evaluate(chord[:, 0], chord[:, 1], 1).S, axis=1)
+        both = np.concatenate([mids, 0.5 * (uv[:-1] + uv[1:])])  # the pcurve's midpoints, then the chords'
+        image = surface.evaluate(both[:, 0], both[:, 1]).S
+        error = np.linalg.norm(image[:len(mids)] - image[len(mids):], axis=1)
         bad = error > tolerance
         if not bad.any():
             break
@@ -302,9 +308,13 @@ def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float) -> np.ndarra
     if not pieces:
         raise FaceError("a wire of the face has no edges")
     loop = np.concatenate(pieces)
-    keep = np.r_[True, np.any(np.abs(np.diff(loop, axis=0)) > 0, axis=1)]
+    close = SIDE_SNAP * np.array([hi - lo for lo, hi in surface.domain])
+    for axis, (lo, hi) in enumerate(surface.domain):
+        loop[np.abs(loop[:, axis] - lo) < close[axis], axis] = lo
+        loop[np.abs(loop[:, axis] - hi) < close[axis], axis] = hi
+    keep = np.r_[True, np.any(np.abs(np.diff(loop, axis=0)) > close, axis=1)]
     loop = loop[keep]
-    if len(loop) > 1 and np.all(loop[0] == loop[-1]):
+    if len(loop) > 1 and np.all(np.abs(loop[0] - loop[-1]) <= close):
         loop = loop[:-1]
     if len(loop) < 3:
         raise FaceError("a trim loop has fewer than 3 distinct (u, v) points")
@@ -418,8 +428,11 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
                     raise SceneError(path, f"face {index}", f"{reason} (--skip-bad-faces renders the other faces)") from None
                 skipped.append((index, reason))
                 continue
-            surfaces.append(NurbsSurface(surface.degree_u, surface.degree_v, surface.knots_u, surface.knots_v,
-                                         surface.points, surface.weights, f"{stem}[{index}]", trim=trim, mesh_uv=mesh))
+            # The surface was built before its trim (sampling the trim needs its evaluator); setting the
+            # remaining fields in place spares rebuilding its per-span power form.
+            for key, value in (("name", f"{stem}[{index}]"), ("trim", trim), ("mesh_uv", mesh)):
+                object.__setattr__(surface, key, value)
+            surfaces.append(surface)
             reversed_flags.append(reversed_face)
     if not surfaces:
         raise SceneError(path, "", f"no face of the {len(faces)} could be read (first: face {skipped[0][0]}: {skipped[0][1]})")
