@@ -20,6 +20,8 @@ SNIFF_BYTES = 4096
 IGES_LINE = 80
 #: Names users know the formats by, for messages.
 FORMAT_NAMES = {"STEP": "STEP", "IGES": "IGES", "3DM": "Rhino .3dm"}
+#: Each format with its article, for "a STEP file was expected".
+ARTICLES = {"STEP": "a STEP", "IGES": "an IGES", "3DM": "a Rhino .3dm"}
 
 
 def is_cad_path(path: str | Path) -> bool:
@@ -59,10 +61,10 @@ def read_cad(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
     except ValueError as exc:  # a NUL character in the path
         raise SceneError(path, "", f"cannot read geometry file ({exc})") from None
     if not head:
-        raise SceneError(path, "", f"empty file: a {FORMAT_NAMES[expected]} file was expected")
+        raise SceneError(path, "", f"empty file: {ARTICLES[expected]} file was expected")
     found = sniff(head)
     if found is None:
-        raise SceneError(path, "", f"not a {FORMAT_NAMES[expected]} file: its content is not in that format "
+        raise SceneError(path, "", f"not {ARTICLES[expected]} file: its content is not in that format "
                                    "(corrupt, binary garbage, or another kind of file)")
     if found != expected:
         raise SceneError(path, "", f"the extension says {FORMAT_NAMES[expected]} but the content is {FORMAT_NAMES[found]}: "

@@ -161,7 +161,7 @@ def no_surfaces_error(path: Path, shape, what: str) -> SceneError:
     if counts.get("edges") or counts.get("vertices"):
         held = f"only curves or points ({counts['edges']} edges, {counts['vertices']} vertices)"
     else:
-        held = "nothing rtreflect can render (no supported surface entities)"
+        held = "no surface Open CASCADE can transfer (the file is corrupt, or its entities are not supported)"
     return SceneError(path, "", f"no surfaces to render: the {what} holds {held}")
 
 

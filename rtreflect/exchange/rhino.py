@@ -19,6 +19,9 @@ import numpy as np
 from ..errors import SceneError
 from .occt import CAD_EXTRA, CadModel, FaceError, import_ocp, read_faces
 
+#: Rhino's unit systems by the short names the model summary uses (others are reported by their Rhino name).
+UNIT_NAMES = {"Millimeters": "mm", "Centimeters": "cm", "Meters": "m", "Inches": "in", "Feet": "ft",
+              "Microns": "µm", "Kilometers": "km", "None": "unitless"}
 #: Gap closing tolerance when the file does not state one (Rhino's default absolute tolerance, model units).
 DEFAULT_TOLERANCE = 1e-3
 
@@ -142,7 +145,8 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
     if model is None:
         raise SceneError(path, "", "not a readable .3dm file (rhino3dm cannot open it): truncated, corrupt or not Rhino")
     tolerance = float(model.Settings.ModelAbsoluteTolerance) or DEFAULT_TOLERANCE
-    unit = str(model.Settings.ModelUnitSystem).rsplit(".", 1)[-1].lower()
+    unit_name = str(model.Settings.ModelUnitSystem).rsplit(".", 1)[-1]
+    unit = UNIT_NAMES.get(unit_name, unit_name.lower())
     compound = TopoDS_Compound()
     builder = BRep_Builder()
     builder.MakeCompound(compound)
