@@ -14,8 +14,8 @@ Steps (DESIGN.md, "CAD input"; measured facts in the project's OCP notes):
    (``BRepAdaptor_Curve2d``, seam edges once per orientation, pole edges included) sampled by
    bisection until the polyline's midpoints lie within `TRIM_TOLERANCE` × the part's diagonal
    of the pcurve's **in model space** (measured on the surface with rtreflect's evaluator).
-4. ``mesh_uv``: ``BRepMesh_IncrementalMesh`` on the converted shape, per face the nodes' (u, v)
-   and the triangles (flipped on reversed faces so they wind like the face's normal).
+4. ``mesh_uv``: ``BRepMesh_IncrementalMesh`` on each converted face, the nodes' (u, v) and the
+   triangles (flipped on reversed faces so they wind like the face's normal).
 
 OCP is imported only here and in the per-format readers; without it the user is told which extra
 to install.
@@ -384,6 +384,7 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     ``CadModel.skipped`` and the others are read.
     """
     from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.BRepTools import BRepTools
     from OCP.TopAbs import TopAbs_FACE, TopAbs_REVERSED
     from OCP.TopExp import TopExp_Explorer
     from OCP.TopoDS import TopoDS
@@ -399,8 +400,6 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     diagonal = float(np.linalg.norm(hi - lo))
     if not (np.isfinite(diagonal) and diagonal > 0):
         raise SceneError(path, "", f"the model's bounding box is empty or not finite ({lo.tolist()} .. {hi.tolist()})")
-    with quiet_stdout():
-        BRepMesh_IncrementalMesh(converted, MESH_DEFLECTION * diagonal, False, MESH_ANGLE, False)
 
     faces = []
     explorer = TopExp_Explorer(converted, TopAbs_FACE)
@@ -416,7 +415,11 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
                 reversed_face = (face.Orientation() == TopAbs_REVERSED) if reversed_faces is None else reversed_faces[index]
                 surface = bspline_of_face(face)
                 trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal)
+                # Meshed face by face, its triangulation dropped once read: memory stays that of one face's
+                # mesh (the whole shape's at once took 560 MB on a 2000-face plate).
+                BRepMesh_IncrementalMesh(face, MESH_DEFLECTION * diagonal, False, MESH_ANGLE, False)
                 mesh = mesh_of_face(face, reversed_face)
+                BRepTools.Clean_s(face)
             except FaceError as exc:
                 if not skip_bad_faces:
                     raise SceneError(path, f"face {index}", f"{exc} (--skip-bad-faces renders the other faces)") from None
