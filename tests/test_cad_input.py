@@ -316,3 +316,18 @@ def test_step_in_inches_reads_in_millimetres_and_says_so(tmp_path):
     model = read_cad(path)
     assert model.unit == "mm" and "inch" in model.unit_note and "read in mm" in model.unit_note
     np.testing.assert_allclose(model.bounds[1] - model.bounds[0], [25.4, 50.8, 76.2], rtol=1e-9)
+
+
+def test_open_cascade_prints_nothing_to_stdout(tmp_path):
+    """OCCT's readers print transfer statistics straight to file descriptor 1 (past Python): silenced."""
+    import subprocess
+    import sys
+
+    code = "from rtreflect.cli import main; main()"
+    result = subprocess.run([sys.executable, "-c", code, "render", str(PARTS / "assembly.step"), str(PARTS / "filleted_block.igs"),
+                             "-o", str(tmp_path), *TINY], capture_output=True, text=True, timeout=300,
+                            cwd=Path(__file__).resolve().parents[1])
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert len(lines) == 4, result.stdout  # two summaries of the models, two render lines
+    assert lines[0].startswith(f"{PARTS / 'assembly.step'}: 52 faces") and lines[2].startswith("assembly: ")
