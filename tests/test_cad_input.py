@@ -331,3 +331,35 @@ def test_open_cascade_prints_nothing_to_stdout(tmp_path):
     lines = result.stdout.splitlines()
     assert len(lines) == 4, result.stdout  # two summaries of the models, two render lines
     assert lines[0].startswith(f"{PARTS / 'assembly.step'}: 52 faces") and lines[2].startswith("assembly: ")
+
+
+def test_real_degenerate_face_is_named_and_skippable(tmp_path):
+    """A box (faces 0–5) and a face whose control points lie on a line (face 6): an error naming face 6;
+    --skip-bad-faces renders the box and lists face 6."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.collections import Array1_double, Array1_int, Array2_gp_Pnt
+    from OCP.gp import gp_Pnt
+
+    poles = Array2_gp_Pnt(1, 2, 1, 2)
+    for i in range(2):
+        for j in range(2):
+            poles.SetValue(i + 1, j + 1, gp_Pnt(20 + i + j, 0, 0))  # on one line: no area
+    line = Geom_BSplineSurface(poles, _array([0, 1], Array1_double), _array([0, 1], Array1_double),
+                               _array([2, 2], Array1_int), _array([2, 2], Array1_int), 1, 1)
+    compound, builder = TopoDS_Compound(), BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, BRepPrimAPI_MakeBox(10, 10, 10).Shape())
+    builder.Add(compound, BRepBuilderAPI_MakeFace(line, 1e-7).Face())
+    path = _write_step(compound, tmp_path / "degenerate.step")
+    outdir = tmp_path / "out"
+    code, output, _ = run("render", path, "-o", outdir, *TINY)
+    line_text = assert_bad_input(code, output, f"{path}: face 6:", outdir)
+    assert "zero area" in line_text
+    code, output, _ = run("render", path, "-o", outdir, *TINY, "--skip-bad-faces")
+    assert code == 0, output
+    assert "6 faces" in output and "skipped 1 of 7 faces (--skip-bad-faces): face 6:" in output
+    assert (outdir / "degenerate.png").is_file()

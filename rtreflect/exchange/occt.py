@@ -256,7 +256,16 @@ def bspline_of_face(face) -> NurbsSurface:
     knots_v, poles, weights = clean_knots(knots_v, q, poles, weights, 1)
     if not (np.isfinite(poles).all() and np.isfinite(weights).all() and (weights > 0).all()):
         raise FaceError("its surface has control points or weights that are not finite, or weights <= 0")
-    return NurbsSurface(p, q, knots_u, knots_v, poles, weights)
+    from .scene import MAX_MAGNITUDE, ZERO_AREA, _has_area  # the checks inline and .bpt patches get
+
+    largest = float(np.max(np.abs(poles)))
+    if largest > MAX_MAGNITUDE:
+        raise FaceError(f"coordinates must be at most {MAX_MAGNITUDE:g} in magnitude (float32 tracing overflows beyond it), "
+                        f"got {largest:g}")
+    surface = NurbsSurface(p, q, knots_u, knots_v, poles, weights)
+    if not _has_area(surface):
+        raise FaceError(ZERO_AREA)
+    return surface
 
 
 def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float) -> np.ndarray:
