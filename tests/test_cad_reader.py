@@ -260,3 +260,13 @@ def test_mesh_uv_covers_the_trimmed_face_and_winds_with_its_normal(part):
         expected_sign = -1.0 if model.reversed[k] else 1.0
         assert np.all(signed * expected_sign >= 0), f"face {k}: triangles wind against the face"
         assert abs(signed.sum()) == pytest.approx(surface.trim._polygon.area, rel=1e-2), f"face {k}"
+
+
+def test_3dm_trims_follow_the_exact_edges():
+    """The cylinder's caps are trimmed by its exact rational circles (radius 10 about (70, 0)): the trim
+    loops' images lie on them to float precision, not just to ShapeFix's pcurve fit (7.6e-3 mm)."""
+    pytest.importorskip("rhino3dm")
+    model = read_cad(PARTS / "trimmed.3dm")
+    for cap in model.surfaces[2:]:
+        points = cap.evaluate(cap.trim.outer[:, 0], cap.trim.outer[:, 1]).S
+        assert np.max(np.abs(np.hypot(points[:, 0] - 70, points[:, 1]) - 10)) < 1e-9
