@@ -363,3 +363,24 @@ def test_real_degenerate_face_is_named_and_skippable(tmp_path):
     assert code == 0, output
     assert "6 faces" in output and "skipped 1 of 7 faces (--skip-bad-faces): face 6:" in output
     assert (outdir / "degenerate.png").is_file()
+
+
+def test_batch_skip_bad_faces_lists_them(tmp_path, monkeypatch):
+    """batch --skip-bad-faces renders a part with a failing face and lists the face it left out."""
+    original = occt.bspline_of_face
+    calls = {"n": 0}
+
+    def failing(face):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise occt.FaceError("its surface cannot be converted (test)")
+        return original(face)
+
+    monkeypatch.setattr(occt, "bspline_of_face", failing)
+    folder = tmp_path / "in"
+    folder.mkdir()
+    shutil.copy(PARTS / "filleted_block.step", folder / "block.step")
+    code, output, _ = run("batch", folder, "-o", tmp_path / "out", "-j", "1", "--skip-bad-faces")
+    assert code == 0, output
+    assert "skipped 1 of 26 faces (--skip-bad-faces): face 1: its surface cannot be converted" in output
+    assert (tmp_path / "out" / "block.png").is_file()
