@@ -34,7 +34,8 @@ from .output.imagefiles import (OUTPUT_KEY_ATTRIBUTE, VERSION_ATTRIBUTE, check_d
 from .analysis.overlay import contours_file_name
 from .exchange.cad import CAD_SUFFIXES
 from .output.sharing import remove_dead_temporaries
-from .exchange.scene import Scene, load_scene
+from .exchange.load import load_scene
+from .exchange.scene import Scene
 from .integrator.tiling import default_max_memory
 
 #: What a folder is searched for: scene files, and CAD files (each rendered in the default scene around the part).

@@ -19,7 +19,8 @@ from .errors import RtreflectError, error_lines, one_line
 from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, removed_note, write_json
 from .interrupts import Interrupted, signals_as_exceptions
 from .analysis.overlay import contours_file_name
-from .exchange.scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, load_scene
+from .exchange.load import load_scene
+from .exchange.scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES
 from .output.streaming import render_to_files
 from .integrator.tiling import parse_size
 from .analysis.validate import DEFAULT_TOLERANCE_PX, validate_scene

@@ -21,7 +21,8 @@ OCP = pytest.importorskip("OCP")
 from rtreflect.cli import cli  # noqa: E402
 from rtreflect.exchange import occt  # noqa: E402
 from rtreflect.exchange.cad import read_cad  # noqa: E402
-from rtreflect.exchange.scene import _check_knots, _Table, load_scene  # noqa: E402
+from rtreflect.exchange.load import load_scene  # noqa: E402
+from rtreflect.exchange.scene import _check_knots, _Table  # noqa: E402
 from rtreflect.trace.camera import Camera  # noqa: E402
 
 PARTS = Path(__file__).resolve().parents[1] / "parts"

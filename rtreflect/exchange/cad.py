@@ -80,3 +80,21 @@ def read_cad(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
     from .rhino import read_3dm
 
     return read_3dm(path, name, skip_bad_faces)
+
+
+def read_part(path: Path, name: str = "", skip_bad_faces: bool = False) -> tuple[list, list[str], bool]:
+    """A CAD file's faces for a scene's ``[[surface]] file``: surfaces, summary lines, and whether faces were skipped."""
+    model = read_cad(path, name, skip_bad_faces)
+    return model.surfaces, model_summary(path, model), bool(model.skipped)
+
+
+def model_summary(path: Path, model: CadModel) -> list[str]:
+    """Lines telling what was read: faces, unit, bounding box, skipped faces (printed before a render)."""
+    lo, hi = model.bounds
+    fmt = lambda v: "[" + ", ".join(f"{x:.4g}" for x in v) + "]"  # noqa: E731
+    unit = model.unit + (f" ({model.unit_note})" if model.unit_note else "")
+    lines = [f"{path}: {len(model.surfaces)} faces, unit {unit}, bounding box {fmt(lo)} .. {fmt(hi)}"]
+    if model.skipped:
+        lines.append(f"{path}: skipped {len(model.skipped)} of {model.faces} faces (--skip-bad-faces): "
+                     + "; ".join(f"face {index}: {reason}" for index, reason in model.skipped))
+    return lines

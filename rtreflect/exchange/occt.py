@@ -33,6 +33,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..geometry.knots import MIN_KNOT_SPAN, knot_vector_problem
+from ..geometry.patches import patch_problem
 from ..geometry.surfaces import NurbsSurface
 
 #: What to install for CAD input (pyproject.toml's [cad] extra).
@@ -258,15 +259,10 @@ def bspline_of_face(face) -> NurbsSurface:
             raise FaceError(f"knots in {direction}: {problem}")
     if not (np.isfinite(poles).all() and np.isfinite(weights).all() and (weights > 0).all()):
         raise FaceError("its surface has control points or weights that are not finite, or weights <= 0")
-    from .scene import MAX_MAGNITUDE, ZERO_AREA, _has_area  # the checks inline and .bpt patches get
-
-    largest = float(np.max(np.abs(poles)))
-    if largest > MAX_MAGNITUDE:
-        raise FaceError(f"coordinates must be at most {MAX_MAGNITUDE:g} in magnitude (float32 tracing overflows beyond it), "
-                        f"got {largest:g}")
     surface = NurbsSurface(p, q, knots_u, knots_v, poles, weights)
-    if not _has_area(surface):
-        raise FaceError(ZERO_AREA)
+    problem = patch_problem(surface)  # the checks inline and .bpt patches get
+    if problem:
+        raise FaceError(problem)
     return surface
 
 

@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.surfaces import NurbsSurface
+from .cad import model_summary, read_cad
 from .occt import CadModel
-from .scene import CameraSpec, ImageSpec, LightSpec, OutputSpec, RenderSettings, Scene
+from .scene import CameraSpec, ImageSpec, LightSpec, OutputSpec, RenderSettings, Scene, _hash_files
 
 #: Bumped when the default scene changes, so resumable outputs of CAD files given as scenes re-render.
 DEFAULT_SCENE_VERSION = 1
@@ -74,19 +75,8 @@ def bank_above(lo: np.ndarray, hi: np.ndarray) -> LightSpec:
     return LightSpec(point, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), positions, TUBE_RADIUS * spacing)
 
 
-def read_part(path: Path, name: str = "", skip_bad_faces: bool = False) -> tuple[list[NurbsSurface], list[str], bool]:
-    """A CAD file's faces for a scene's ``[[surface]] file``: surfaces, summary lines, and whether faces were skipped."""
-    from .cad import read_cad
-
-    model = read_cad(path, name, skip_bad_faces)
-    return model.surfaces, model_summary(path, model), bool(model.skipped)
-
-
 def load_part_scene(path: Path, skip_bad_faces: bool = False) -> Scene:
     """A CAD file given where a scene file is expected: the part in the default scene (`part_scene`)."""
-    from .cad import read_cad
-    from .scene import _hash_files
-
     model = read_cad(path, "", skip_bad_faces)
     digest, _ = _hash_files([path])
     return part_scene(path, model, digest)
@@ -103,15 +93,3 @@ def part_scene(path: Path, model: CadModel, digest: str) -> Scene:
     inputs = hashlib.sha256(f"{digest}\ndefault-scene-{DEFAULT_SCENE_VERSION}\nskipped:{skipped}".encode()).hexdigest()
     return Scene(path, IMAGE, camera, lights, surfaces, RenderSettings(), OutputSpec(path.stem), digest, inputs,
                  notes=tuple(model_summary(path, model)))
-
-
-def model_summary(path: Path, model: CadModel) -> list[str]:
-    """Lines telling what was read: faces, unit, bounding box, skipped faces (printed before a render)."""
-    lo, hi = model.bounds
-    fmt = lambda v: "[" + ", ".join(f"{x:.4g}" for x in v) + "]"  # noqa: E731
-    unit = model.unit + (f" ({model.unit_note})" if model.unit_note else "")
-    lines = [f"{path}: {len(model.surfaces)} faces, unit {unit}, bounding box {fmt(lo)} .. {fmt(hi)}"]
-    if model.skipped:
-        lines.append(f"{path}: skipped {len(model.skipped)} of {model.faces} faces (--skip-bad-faces): "
-                     + "; ".join(f"face {index}: {reason}" for index, reason in model.skipped))
-    return lines

@@ -26,9 +26,10 @@ from typing import Any, Iterator
 import numpy as np
 
 from .bpt import read_bpt
-from .cad import CAD_SUFFIXES, is_cad_path
+from .cad import CAD_SUFFIXES, is_cad_path, read_part
 from ..errors import SceneError, SceneErrors, quote, read_text
 from ..geometry.knots import knot_vector_problem
+from ..geometry.patches import MAX_MAGNITUDE, ZERO_AREA, has_area, patch_problem
 from ..geometry.surfaces import NurbsSurface
 
 #: Largest image side. The film keeps 17 float32 planes per pixel, and beyond this
@@ -55,10 +56,6 @@ MAX_TESSELLATION = 256
 IN_PLANE_TOLERANCE = 1e-6
 #: `[render] normals`: the exact NURBS normal, or the analysis-mesh normal CAD tools use (for comparison).
 NORMALS_MODES = ("exact", "mesh")
-#: Largest magnitude of any number in a scene. Embree intersects in float32 and forms
-#: products of up to three coordinates (a triangle's plane offset); beyond this they
-#: overflow float32's 3.4e38 and the image turns to noise without any error.
-MAX_MAGNITUDE = 1e12
 
 
 @dataclass(frozen=True)
@@ -519,28 +516,11 @@ def _check_knots(t: _Table, key: str, knots: np.ndarray, degree: int, n_ctrl: in
         raise t.error(key, problem)
 
 
-ZERO_AREA = "the control points lie on a point or a line: the patch has zero area"
-
-
-def _has_area(surface: NurbsSurface) -> bool:
-    """False when the control points all lie on a point or a line: no area to reflect in."""
-    pts = surface.points.reshape(-1, 3)
-    centred = pts - pts.mean(axis=0)
-    sv = np.linalg.svd(centred, compute_uv=False)
-    return bool(sv[1] > 1e-12 * max(sv[0], 1e-300))
-
-
 def _check_geometry_patch(file: Path, index: int, surface: NurbsSurface, where: str | None = None) -> None:
     """What `_parse_inline_surface` checks of its numbers, for a patch read from a geometry file or given in code."""
-    where = where or f"patch {index}"
-    if not np.all(np.isfinite(surface.points)):
-        raise SceneError(file, where, "coordinates must be finite")
-    largest = float(np.max(np.abs(surface.points)))
-    if largest > MAX_MAGNITUDE:
-        raise SceneError(file, where, f"coordinates must be at most {MAX_MAGNITUDE:g} in magnitude "
-                                                 f"(float32 tracing overflows beyond it), got {largest:g}")
-    if not _has_area(surface):
-        raise SceneError(file, where, ZERO_AREA)
+    problem = patch_problem(surface)
+    if problem:
+        raise SceneError(file, where or f"patch {index}", problem)
 
 
 def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
@@ -570,7 +550,7 @@ def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
         weights = np.ones((nu, nv))
     t.finish()
     surface = NurbsSurface(p, q, knots_u, knots_v, points, weights, name)
-    if not _has_area(surface):
+    if not has_area(surface):
         raise t.error("points", ZERO_AREA)
     return surface
 
@@ -692,8 +672,6 @@ def _parse_surfaces(path: Path, entries: Any, errors: _Errors, skip_bad_faces: b
             t.finish()
             try:
                 if is_cad_path(file):
-                    from .partscene import read_part
-
                     patches, summary, skipped = read_part(file, name, skip_bad_faces)
                     geometry.notes.extend(summary)
                     geometry.faces_skipped = geometry.faces_skipped or skipped
@@ -733,20 +711,16 @@ def _parse_document(path: Path, doc: Any, skip_bad_faces: bool = False) -> tuple
 
 
 def load_scene(path: str | Path, skip_bad_faces: bool = False) -> Scene:
-    """Read and validate a scene file; raises `SceneError` naming the file and field (`SceneErrors`: several).
+    """Read and validate a TOML scene file; raises `SceneError` naming the file and field (`SceneErrors`: several).
 
-    A CAD file (STEP, IGES, .3dm) in place of the scene file gets the default scene around the
-    part (exchange/partscene.py). ``skip_bad_faces``: CAD faces that cannot be read are left out
-    (and listed in `Scene.notes`) instead of failing the scene.
+    ``skip_bad_faces``: faces of CAD files the scene names that cannot be read are left out (and
+    listed in `Scene.notes`) instead of failing the scene. (`exchange.load.load_scene` also takes
+    a CAD file in place of the scene file.)
     """
     path = Path(path)
     if path.is_dir():
         raise SceneError(path, "", "is a folder, not a scene file: render every scene in it with "
                                    f"`rtreflect batch {quote(str(path))[1:-1]}`")
-    if is_cad_path(path):
-        from .partscene import load_part_scene
-
-        return load_part_scene(path, skip_bad_faces)
     text = read_text(path, "scene file")
     try:
         doc = tomllib.loads(text)
