@@ -3,6 +3,12 @@
 The mesh only *finds* hits (DESIGN.md); the exact point and normal come from the
 NURBS evaluator afterwards. Each knot span gets ``tessellation`` segments per
 direction, so the mesh follows the surface's own pieces.
+
+A trimmed CAD face (``NurbsSurface.trim``, DESIGN.md "CAD input") is meshed from its reader's
+triangulation in (u, v) when it has one (``mesh_uv``: vertices S(nodes) by rtreflect's own
+evaluator), else from the span grid keeping the triangles that touch the face (a triangle
+overlapping the trim polygon in (u, v)). Either way the mesh only finds hits: the tracer
+tests each refined hit against the trim (tracing.py).
 """
 
 from __future__ import annotations
@@ -30,15 +36,22 @@ def grid_faces(nu: int, nv: int) -> np.ndarray:
 
 
 def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int) -> trimesh.Trimesh:
-    """A mesh of one patch; ``vertex_attributes`` hold ``uv`` (V, 2) and ``patch`` (V,)."""
-    breaks_u, breaks_v = surface.span_breaks()
-    us, vs = span_samples(breaks_u, per_span), span_samples(breaks_v, per_span)
-    uu, vv = np.meshgrid(us, vs, indexing="ij")
-    uv = np.stack([uu.ravel(), vv.ravel()], axis=1)
+    """A mesh of one patch (of its trimmed face, see the module doc); ``vertex_attributes`` hold ``uv`` (V, 2) and ``patch`` (V,)."""
+    if surface.mesh_uv is not None:
+        nodes, triangles = surface.mesh_uv
+        uv, faces = np.asarray(nodes, dtype=np.float64).reshape(-1, 2), np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    else:
+        breaks_u, breaks_v = surface.span_breaks()
+        us, vs = span_samples(breaks_u, per_span), span_samples(breaks_v, per_span)
+        uu, vv = np.meshgrid(us, vs, indexing="ij")
+        uv = np.stack([uu.ravel(), vv.ravel()], axis=1)
+        faces = grid_faces(len(us), len(vs))
+        if surface.trim is not None:
+            uv, faces = _clip_to_trim(uv, faces, surface.trim)
     points = surface.evaluate(uv[:, 0], uv[:, 1]).S
     return trimesh.Trimesh(
         vertices=points,
-        faces=grid_faces(len(us), len(vs)),
+        faces=faces,
         vertex_attributes={"uv": uv, "patch": np.full(len(uv), patch_index)},
         process=False,  # keep the grid as built: merging would mix vertices of different (u, v)
         validate=False,
@@ -56,8 +69,14 @@ class Tessellation:
     face_patch: np.ndarray  # (F,)
     chord_error: np.ndarray  # per patch: largest mesh-to-surface distance found at edge midpoints
     meshes: tuple[trimesh.Trimesh, ...]
-    boundary: np.ndarray  # indices of the vertices on a patch's domain boundary (where a neighbour may join)
+    boundary: np.ndarray  # indices of the vertices on a face's mesh boundary (where a neighbour may join)
     edge_length: np.ndarray  # per patch: its longest mesh edge
+    trims: tuple = ()  # per patch: its `Trim`, or None for a whole patch
+
+    @property
+    def trimmed(self) -> bool:
+        """Whether any face is trimmed (then hits and occlusions are tested against the trims)."""
+        return any(t is not None for t in self.trims)
 
     @property
     def extent(self) -> float:
@@ -109,7 +128,7 @@ def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:
     uv = mesh.vertex_attributes["uv"][edges].mean(axis=1)
     exact = surface.evaluate(uv[:, 0], uv[:, 1]).S
     chord_mid = mesh.vertices[edges].mean(axis=1)
-    return float(np.max(np.linalg.norm(exact - chord_mid, axis=1)))
+    return float(np.max(np.linalg.norm(exact - chord_mid, axis=1), initial=0.0))
 
 
 def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span: int) -> Tessellation:
@@ -123,13 +142,46 @@ def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span
         face_patch=np.concatenate([np.full(len(m.faces), k) for k, m in enumerate(meshes)]),
         chord_error=np.array([_chord_error(s, m) for s, m in zip(surfaces, meshes)]),
         meshes=meshes,
-        boundary=np.concatenate([_boundary_vertices(m) + off for m, off in zip(meshes, offsets)]),
-        edge_length=np.array([float(m.edges_unique_length.max()) for m in meshes]),
+        boundary=np.concatenate([_boundary_vertices(m, s.trim is not None or s.mesh_uv is not None) + off
+                                 for s, m, off in zip(surfaces, meshes, offsets)]).astype(np.int64),
+        edge_length=np.array([float(m.edges_unique_length.max(initial=0.0)) for m in meshes]),
+        trims=tuple(s.trim for s in surfaces),
     )
 
 
-def _boundary_vertices(mesh: trimesh.Trimesh) -> np.ndarray:
-    """Indices of the grid vertices on the patch's parameter-domain boundary."""
+def _clip_to_trim(uv: np.ndarray, faces: np.ndarray, trim) -> tuple[np.ndarray, np.ndarray]:
+    """The grid's triangles that overlap the trimmed face in (u, v), and the vertices they use (renumbered).
+
+    Overlap of each triangle with the trim polygon (GEOS, vectorised), not a vertex test: a
+    triangle crossing a thin part of the face with all three corners outside still carries it.
+    """
+    import shapely
+
+    corners = uv[faces]  # (F, 3, 2)
+    if trim.u_period or trim.v_period:  # a periodic face's loops live in one period: test wrapped corners
+        wu, wv = trim.wrap(corners[..., 0], corners[..., 1])
+        corners = np.stack([wu, wv], axis=-1)
+    triangles = shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
+    keep = shapely.intersects(triangles, trim._polygon)
+    if trim.u_period or trim.v_period:  # a wrapped triangle may straddle the period's cut: keep it too
+        span = np.ptp(corners, axis=1)
+        keep |= (span[:, 0] > 0.5 * (trim.u_period or np.inf)) | (span[:, 1] > 0.5 * (trim.v_period or np.inf))
+    faces = faces[keep]
+    used = np.unique(faces)
+    renumber = np.full(len(uv), -1)
+    renumber[used] = np.arange(len(used))
+    return uv[used], renumber[faces]
+
+
+def _boundary_vertices(mesh: trimesh.Trimesh, trimmed: bool = False) -> np.ndarray:
+    """Indices of the vertices where a neighbouring face may join: the ends of the mesh's boundary edges.
+
+    For an untrimmed patch, the grid vertices on the parameter-domain boundary (the same set).
+    """
+    if trimmed:
+        edges = mesh.edges_sorted
+        once = trimesh.grouping.group_rows(edges, require_count=1)
+        return np.unique(edges[once])
     uv = mesh.vertex_attributes["uv"]
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     return np.flatnonzero(np.any((uv == lo) | (uv == hi), axis=1))

@@ -42,13 +42,20 @@ class Accelerator:
         eps = 2.0 * self._chord_error[patch] + 1e-6 * (self._extent + np.abs(R).max(axis=1))
         return R + eps[:, None] * n
 
-    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> MeshHits:
-        """Nearest triangle hit of each ray."""
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, max_distance: np.ndarray | None = None) -> MeshHits:
+        """Nearest triangle hit of each ray (within ``max_distance`` along it, when given)."""
+        extra = {}
+        if max_distance is not None:
+            extra["dists"] = np.ascontiguousarray(np.minimum(max_distance, np.finfo(np.float32).max), dtype=np.float32)
+        if len(origins) == 0:
+            empty = np.zeros(0)
+            return MeshHits(np.zeros(0, dtype=np.int64), empty, empty, empty)
         result = self.scene.run(
             np.ascontiguousarray(origins, dtype=np.float32),
             np.ascontiguousarray(directions, dtype=np.float32),
             query="INTERSECT",
             output=1,
+            **extra,
         )
         prim = np.where(result["geomID"] >= 0, result["primID"], -1).astype(np.int64)
         return MeshHits(prim, result["u"].astype(np.float64), result["v"].astype(np.float64), result["tfar"].astype(np.float64))

@@ -4,10 +4,34 @@ The BVH hit on the mesh gives a triangle and barycentrics, hence a starting
 (u, v). Newton on S(u, v) = O + tD then moves the hit onto the true surface.
 The ray condition is written as two equations across the ray,
 e1·(S − O) = 0 and e2·(S − O) = 0 with e1, e2 ⊥ D, whose Jacobian is
-[[e1·S_u, e1·S_v], [e2·S_u, e2·S_v]]; t = D·(S − O) follows. Where Newton fails
-(grazing rays, degenerate points, silhouettes) the mesh hit is kept and flagged.
-A refinement that runs off its patch's edge restarts once on the neighbouring patch
-across the seam, where the exact hit then lies.
+[[e1·S_u, e1·S_v], [e2·S_u, e2·S_v]]; t = D·(S − O) follows.
+
+**The exact first hit** (DESIGN.md, "Exact hit" and "CAD input"). The first mesh hit need not
+carry the first exact hit: where two sheets come closer than the mesh's chord error
+(intersecting patches, thin parts, faces meeting at a sharp edge) the nearer exact surface may
+belong to a mesh hit a little farther along the ray; a refined point may lie outside its face's
+trim; and near a silhouette the mesh is hit where the exact surface is not. So each ray gathers
+its **candidates**: mesh hits from the first up to the error band (`BAND_CHORDS` chord errors,
+grown at grazing incidence) beyond the nearest exact hit found so far, each found by re-querying
+Embree from just beyond the previous one (vectorised over the rays still open, at most
+`MAX_CANDIDATES` per ray). Every candidate is refined and classified:
+
+- *valid*: Newton converged near its mesh hit, ahead of the origin, inside its face's trim;
+- *miss*: the surface is not there: the refinement left the face (ran off the patch's domain
+  or out of its trim) and no neighbouring face across that edge takes it (a restart on the
+  nearest face sharing the edge, `Tessellation.across_seam`), or a Levenberg–Marquardt search
+  for the ray–surface distance stalls at a positive minimum (the ray passes the surface's
+  silhouette);
+- *unresolved*: neither could be shown (Newton and the search failed in the face's interior, or
+  Newton converged on another sheet far from its mesh hit).
+
+The ray keeps the nearest valid candidate. An unresolved candidate that could hide a nearer
+exact hit (its mesh hit within the error band of the kept one) flags the ray as a **fallback**:
+where no valid hit lies within the band beyond it, the ray keeps that candidate's mesh point
+(as before this mechanism); otherwise the valid hit, still flagged. A ray whose candidates
+are all misses continues to the next mesh hit, and to the background when there is none.
+So the fallback count covers every stored point that might not be the nearest exact surface
+point on its ray.
 """
 
 from __future__ import annotations
@@ -29,6 +53,21 @@ NEWTON_MAX_STEPS = 8
 #: the limit grows with it, up to GRAZING_ALLOWANCE times.
 JUMP_LIMIT = 8.0
 GRAZING_ALLOWANCE = 10.0
+#: Mesh hits examined per ray: the first and those behind it within the error band (or past misses).
+#: Bounds the work on a ray through a stack of sheets; a ray still open after them is a fallback.
+MAX_CANDIDATES = 8
+#: A mesh lies within its chord error of the surface along the normal (measured at edge midpoints,
+#: which can fall a little short of the true maximum): twice it bounds the mesh-to-surface gap.
+BAND_CHORDS = 2.0
+#: Relative size of float32 rounding (Embree's coordinates) with margin: ~8 ulps. Where the query for
+#: the next mesh hit starts beyond the last one, so Embree does not return the same triangle.
+FLOAT32_SLACK = 1e-6
+#: Levenberg–Marquardt steps of the search for the ray–surface distance where Newton failed.
+RESCUE_STEPS = 30
+#: At a stationary point of |r|² the residual r is normal to the columns of the Jacobian: cosine below this.
+STATIONARY_COSINE = 1e-6
+
+VALID, MISS, UNRESOLVED = 0, 1, 2
 
 
 @dataclass
@@ -131,49 +170,244 @@ def _on_domain_edge(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
     return (u == u0) | (u == u1) | (v == v0) | (v == v1)
 
 
+
+def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol):
+    """Levenberg–Marquardt on the ray residual r = (e1·(S − O), e2·(S − O)) where Newton failed.
+
+    A descent on |r|² from the mesh hit's (u, v), damped by Marquardt's diagonal scaling
+    (JᵀJ + λ diag JᵀJ), which makes it invariant under rescaling u or v. It either reaches
+    |r| ≤ tol (the ray meets the surface: Newton's answer), or stalls where r is normal to the
+    surface's tangent plane with |r| > tol: a positive local minimum of the distance, the ray
+    passes the surface. Returns (u, v, derivatives, converged, stationary, on the domain edge).
+    """
+    n = len(u)
+    u, v = u.copy(), v.copy()
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    e1, e2 = _across(directions)
+    lam = np.full(n, 1e-3)
+    d = surfaces.evaluate(patch, u, v)
+    S, Su, Sv = d.S.copy(), d.Su.copy(), d.Sv.copy()
+    converged = np.zeros(n, dtype=bool)
+    stationary = np.zeros(n, dtype=bool)
+    active = np.arange(n)
+    for _ in range(RESCUE_STEPS):
+        rel = S[active] - origins[active]
+        r1 = np.einsum("ij,ij->i", e1[active], rel)
+        r2 = np.einsum("ij,ij->i", e2[active], rel)
+        a = np.einsum("ij,ij->i", e1[active], Su[active])
+        b = np.einsum("ij,ij->i", e1[active], Sv[active])
+        c = np.einsum("ij,ij->i", e2[active], Su[active])
+        dd = np.einsum("ij,ij->i", e2[active], Sv[active])
+        rn = np.hypot(r1, r2)
+        done = rn <= tol[active]
+        converged[active[done]] = True
+        g1, g2 = a * r1 + c * r2, b * r1 + dd * r2  # Jᵀ r
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cosine = np.hypot(g1, g2) / (np.sqrt(a * a + b * b + c * c + dd * dd) * rn)
+        flat = ~done & ~(cosine > STATIONARY_COSINE)
+        stationary[active[flat]] = True
+        keep = ~done & ~flat
+        active, r1, r2, a, b, c, dd, g1, g2, rn = (x[keep] for x in (active, r1, r2, a, b, c, dd, g1, g2, rn))
+        if len(active) == 0:
+            break
+        A11, A12, A22 = a * a + c * c, a * b + c * dd, b * b + dd * dd
+        l = lam[active]
+        M11, M22 = A11 * (1.0 + l), A22 * (1.0 + l)
+        det = M11 * M22 - A12 * A12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            du = -(M22 * g1 - A12 * g2) / det
+            dv = -(M11 * g2 - A12 * g1) / det
+        good = np.isfinite(du) & np.isfinite(dv)
+        tu = np.clip(u[active] + np.where(good, du, 0.0), u0[active], u1[active])
+        tv = np.clip(v[active] + np.where(good, dv, 0.0), v0[active], v1[active])
+        trial = surfaces.evaluate(patch[active], tu, tv)
+        rel = trial.S - origins[active]
+        trial_r = np.hypot(np.einsum("ij,ij->i", e1[active], rel), np.einsum("ij,ij->i", e2[active], rel))
+        better = good & (trial_r < rn)
+        take = active[better]
+        u[take], v[take] = tu[better], tv[better]
+        S[take], Su[take], Sv[take] = trial.S[better], trial.Su[better], trial.Sv[better]
+        lam[active] = np.where(better, lam[active] / 3.0, lam[active] * 4.0)
+    edge = ~converged & _on_domain_edge(surfaces, patch, u, v)
+    return u, v, SurfaceDerivatives(S, Su, Sv), converged, stationary & ~edge, edge
+
+
+def _inside(tessellation: Tessellation, patch, u, v) -> np.ndarray:
+    """True where (u, v) lies on the face of ``patch``: inside its trim, or anywhere for an untrimmed patch."""
+    inside = np.ones(len(patch), dtype=bool)
+    if not tessellation.trimmed:
+        return inside
+    for k in np.unique(patch):
+        trim = tessellation.trims[k]
+        if trim is not None:
+            rows = np.flatnonzero(patch == k)
+            inside[rows] = trim.contains(u[rows], v[rows])
+    return inside
+
+
+@dataclass
+class _Candidates:
+    """Mesh hits of some rays refined onto the exact surface and classified (VALID, MISS, UNRESOLVED)."""
+
+    status: np.ndarray
+    patch: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    t: np.ndarray  # exact t where VALID, the mesh hit's t otherwise
+    derivs: SurfaceDerivatives
+    start_u: np.ndarray  # the mesh hit's interpolated (u, v): kept by an unresolved candidate
+    start_v: np.ndarray
+    mesh_point: np.ndarray
+
+
+def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1, b2, tm) -> _Candidates:
+    """Refine and classify one mesh hit per ray (module doc): Newton, then the seam restart and the rescue."""
+    mesh_point = O + tm[:, None] * D
+    band_of = lambda p: tessellation.chord_error[p] + 1e-6 * tessellation.extent  # noqa: E731
+    pk, us, vs = tessellation.start_parameters(prim, b1, b2)
+    ur, vr, derivs, conv = refine(surfaces, pk, us, vs, O, D, tm, tessellation.extent)
+    near, tr = _near_mesh_hit(derivs, O, D, mesh_point, band_of(pk))
+    status = np.full(len(pk), UNRESOLVED)
+    edge = ~conv & _on_domain_edge(surfaces, pk, ur, vr)
+    inside = _inside(tessellation, pk, ur, vr)
+    status[conv & near & inside] = VALID
+    left = edge | (conv & near & ~inside)  # ran off the face: the ray may go on on a neighbour, else it misses
+    # Newton failed inside the face: search for the ray's distance to the surface instead.
+    stuck = np.flatnonzero(~conv & ~edge)
+    if len(stuck):
+        tol = NEWTON_TOLERANCE * np.maximum(tm[stuck], tessellation.extent)
+        u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
+        near2, t2 = _near_mesh_hit(d2, O[stuck], D[stuck], mesh_point[stuck], band_of(pk[stuck]))
+        in2 = _inside(tessellation, pk[stuck], u2, v2)
+        ur[stuck], vr[stuck], tr[stuck] = u2, v2, t2
+        for have, new in zip(derivs[:3], d2[:3]):
+            have[stuck] = new
+        status[stuck[ok2 & near2 & in2]] = VALID
+        status[stuck[flat2]] = MISS
+        left[stuck[edge2 | (ok2 & near2 & ~in2)]] = True
+    seam = np.flatnonzero(left)
+    status[seam] = MISS
+    if len(seam):
+        # From the edge point Newton stopped at (a domain edge), or the mesh hit (a trim edge, where the
+        # converged point lies on the surface's extension beyond the face).
+        at = np.where(edge[seam, None], derivs.S[seam], mesh_point[seam])
+        pn, un, vn, gap = tessellation.across_seam(at, pk[seam])
+        # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
+        close = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[pk[seam]])
+        seam, pn, un, vn = (x[close] for x in (seam, pn, un, vn))
+        if len(seam):
+            u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
+            near3, t3 = _near_mesh_hit(d3, O[seam], D[seam], mesh_point[seam], band_of(pn))
+            ok3 &= near3 & _inside(tessellation, pn, u3, v3)
+            won = seam[ok3]
+            pk[won], ur[won], vr[won], tr[won], status[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], VALID
+            for have, new in zip(derivs[:3], d3[:3]):
+                have[won] = new[ok3]
+    t = np.where(status == VALID, tr, tm)
+    return _Candidates(status, pk, ur, vr, t, derivs, us, vs, mesh_point)
+
+
+def _band(tessellation: Tessellation, derivs: SurfaceDerivatives | None, D: np.ndarray) -> np.ndarray:
+    """How far beyond an exact hit (along the ray) another sheet's mesh hit may hide a nearer exact hit.
+
+    `BAND_CHORDS` times the largest chord error, grown as 1/cos θ at incidence θ (up to
+    GRAZING_ALLOWANCE; the full allowance where the hit's normal is unknown), plus float32 slack.
+    """
+    allowance = np.full(len(D), GRAZING_ALLOWANCE)
+    if derivs is not None:
+        cross = np.cross(derivs.Su, derivs.Sv)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cos = np.abs(np.einsum("ij,ij->i", cross, D)) / np.linalg.norm(cross, axis=1)
+            allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
+    chord = float(tessellation.chord_error.max(initial=0.0))
+    return BAND_CHORDS * chord * allowance + FLOAT32_SLACK * tessellation.extent
+
+
 def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet,
-          origins: np.ndarray, directions: np.ndarray, clock: StageClock = NULL_CLOCK) -> Hits:
-    """Exact hits of rays (origins, unit directions), both (N, 3) float64."""
+          origins: np.ndarray, directions: np.ndarray, clock: StageClock = NULL_CLOCK,
+          max_distance: np.ndarray | None = None) -> Hits:
+    """Exact first hits of rays (origins, unit directions), both (N, 3) float64 (module doc).
+
+    With ``max_distance`` (N,), only hits with t below it count.
+    """
     n = len(origins)
-    with clock.stage("intersect (Embree)"):
-        mesh = accelerator.intersect(origins, directions)
-    hits = Hits.blank(n, mesh.prim >= 0)
-    patch, u, v, t, P, normal, fallback = hits.patch, hits.u, hits.v, hits.t, hits.P, hits.N, hits.fallback
-    idx = np.flatnonzero(hits.hit)
-    if len(idx):
-        O, D, tm = origins[idx], directions[idx], mesh.t[idx]
-        mesh_point = O + tm[:, None] * D
-        pk, us, vs = tessellation.start_parameters(mesh.prim[idx], mesh.b1[idx], mesh.b2[idx])
+    far = np.full(n, np.inf) if max_distance is None else np.asarray(max_distance, dtype=np.float64)
+    hits = Hits.blank(n, np.zeros(n, dtype=bool))
+    best = np.full(n, np.inf)  # t of the kept valid hit
+    Su, Sv = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    doubt = np.full(n, np.inf)  # mesh t of the nearest unresolved candidate
+    doubt_uv = np.full((n, 3), np.nan)  # its (patch, u, v)
+    doubt_point = np.full((n, 3), np.nan)
+    limit = far.copy()  # the next query looks no farther than this
+    rays, start = np.arange(n), np.zeros(n)
+    for _ in range(MAX_CANDIDATES):
+        if len(rays) == 0:
+            break
+        with clock.stage("intersect (Embree)"):
+            shifted = origins[rays] + start[:, None] * directions[rays] if start.any() else origins[rays]
+            mesh = accelerator.intersect(shifted, directions[rays], None if max_distance is None and not start.any()
+                                         else limit[rays] - start)
+        found = mesh.prim >= 0
+        rays, tm = rays[found], mesh.t[found] + start[found]
+        if len(rays) == 0:
+            break
+        O, D = origins[rays], directions[rays]
         with clock.stage("newton (exact hit)"):
-            ur, vr, derivs, ok = refine(surfaces, pk, us, vs, O, D, tm, tessellation.extent)
-            near, tr = _near_mesh_hit(derivs, O, D, mesh_point, tessellation.chord_error[pk] + 1e-6 * tessellation.extent)
-            ok &= near
-            seam = np.flatnonzero(~ok & _on_domain_edge(surfaces, pk, ur, vr))
-            if len(seam):
-                pn, un, vn, gap = tessellation.across_seam(derivs.S[seam], pk[seam])
-                # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
-                near = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[pk[seam]])
-                seam, pn, un, vn = (x[near] for x in (seam, pn, un, vn))
-                u2, v2, d2, ok2 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
-                near2, tr2 = _near_mesh_hit(d2, O[seam], D[seam], mesh_point[seam],
-                                            tessellation.chord_error[pn] + 1e-6 * tessellation.extent)
-                ok2 &= near2
-                won = seam[ok2]
-                pk[won], ur[won], vr[won], ok[won], tr[won] = pn[ok2], u2[ok2], v2[ok2], True, tr2[ok2]
-                for have, new in zip(derivs[:3], d2[:3]):
-                    have[won] = new[ok2]
-        S = derivs.S
-        patch[idx] = pk
-        u[idx] = np.where(ok, ur, us)
-        v[idx] = np.where(ok, vr, vs)
-        t[idx] = np.where(ok, tr, tm)
-        P[idx] = np.where(ok[:, None], S, mesh_point)
-        with clock.stage("exact normals"):
-            lost = np.flatnonzero(~ok)  # fallbacks: derivatives at the mesh hit's (u, v) instead
-            if len(lost):
-                again = surfaces.evaluate(pk[lost], us[lost], vs[lost])
-                for have, new in zip(derivs[:3], again):
-                    have[lost] = new
-            normal[idx] = facing(surfaces.normals(pk, u[idx], v[idx], derivs), D)
-        fallback[idx] = ~ok
+            c = _candidates(tessellation, surfaces, O, D, mesh.prim[found], mesh.b1[found], mesh.b2[found], tm)
+            take = (c.status == VALID) & (c.t < best[rays]) & (c.t < far[rays])
+            rows = rays[take]
+            best[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = c.t[take], c.patch[take], c.u[take], c.v[take]
+            hits.P[rows], Su[rows], Sv[rows] = c.derivs.S[take], c.derivs.Su[take], c.derivs.Sv[take]
+            odd = (c.status == UNRESOLVED) & (tm < doubt[rays])
+            rows = rays[odd]
+            doubt[rows], doubt_point[rows] = tm[odd], c.mesh_point[odd]
+            doubt_uv[rows] = np.column_stack([c.patch[odd], c.start_u[odd], c.start_v[odd]])
+            # Go on where a mesh hit behind this one could still carry a nearer exact hit.
+            anchor = np.minimum(best[rays], doubt[rays])
+            kept = SurfaceDerivatives(hits.P[rays], Su[rays], Sv[rays])  # NaN where nothing valid is kept yet
+            limit[rays] = np.minimum(far[rays], anchor + _band(tessellation, kept, D))
+            skip = FLOAT32_SLACK * (tessellation.extent + np.abs(c.mesh_point).max(axis=1))
+            nxt = tm + skip
+            go = nxt < limit[rays]
+            rays, start = rays[go], nxt[go]
+    open_rays = rays  # still had candidates to examine after MAX_CANDIDATES
+    hits.hit[:] = np.isfinite(best)
+    # Unresolved candidates that may hide a nearer exact hit than the kept one (module doc).
+    with np.errstate(invalid="ignore"):
+        hidden = np.isfinite(doubt) & (doubt < best + _band(tessellation, None, directions))
+        keep_mesh = hidden & ~(best < doubt)  # nothing valid in front of the unresolved mesh hit
+    hits.fallback[hidden] = True
+    hits.fallback[open_rays] = True
+    rows = np.flatnonzero(keep_mesh)
+    if len(rows):
+        hits.hit[rows] = True
+        hits.patch[rows] = doubt_uv[rows, 0].astype(int)
+        hits.u[rows], hits.v[rows] = doubt_uv[rows, 1], doubt_uv[rows, 2]
+        hits.P[rows] = doubt_point[rows]
+        best[rows] = doubt[rows]
+        again = surfaces.evaluate(hits.patch[rows], hits.u[rows], hits.v[rows])  # derivatives at the mesh hit's (u, v)
+        Su[rows], Sv[rows] = again.Su, again.Sv
+    idx = np.flatnonzero(hits.hit)
+    hits.t[idx] = best[idx]
+    with clock.stage("exact normals"):
+        derivs = SurfaceDerivatives(hits.P[idx], Su[idx], Sv[idx])
+        hits.N[idx] = facing(surfaces.normals(hits.patch[idx], hits.u[idx], hits.v[idx], derivs), directions[idx])
     return hits
+
+
+def occluded(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet, origins: np.ndarray,
+             directions: np.ndarray, max_distance: np.ndarray) -> np.ndarray:
+    """True where the surface lies on the segment from each origin to max_distance along its direction.
+
+    The mesh answers (Embree's occlusion query); where faces are trimmed, a ray the mesh blocks is
+    traced exactly (`trace`) so a ray through a hole or past a trim edge is not blocked by the
+    triangles that overhang it. A fallback on the way counts as blocking.
+    """
+    blocked = accelerator.occluded(origins, directions, max_distance)
+    if not tessellation.trimmed:
+        return blocked
+    idx = np.flatnonzero(blocked)
+    if len(idx):
+        hits = trace(accelerator, tessellation, surfaces, origins[idx], directions[idx], max_distance=max_distance[idx])
+        blocked[idx] = hits.fallback | (hits.hit & (hits.t < max_distance[idx]))
+    return blocked
