@@ -355,6 +355,21 @@ class SurfaceSet:
             out[idx] = self.patches[k].normals(u[idx], v[idx], sub)
         return out
 
+    @property
+    def trimmed(self) -> bool:
+        """Whether any patch is a trimmed face (then hits, occlusions and contours are tested against trims)."""
+        return any(p.trim is not None for p in self.patches)
+
+    def on_face(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """True where (u, v) lies on the face of ``patch``: inside its trim, anywhere on an untrimmed patch."""
+        patch = np.asarray(patch).ravel()
+        inside = np.ones(len(patch), dtype=bool)
+        for k, idx in self._by_patch(patch):
+            trim = self.patches[k].trim
+            if trim is not None:
+                inside[idx] = trim.contains(np.asarray(u)[idx], np.asarray(v)[idx])
+        return inside
+
     def domains(self, patch: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Per-point parameter domain bounds (u0, u1, v0, v1)."""
         table = np.array([[*p.domain[0], *p.domain[1]] for p in self.patches])

@@ -36,10 +36,16 @@ def grid_faces(nu: int, nv: int) -> np.ndarray:
 
 
 def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int) -> trimesh.Trimesh:
-    """A mesh of one patch (of its trimmed face, see the module doc); ``vertex_attributes`` hold ``uv`` (V, 2) and ``patch`` (V,)."""
+    """A mesh of one patch (of its trimmed face, see the module doc).
+
+    ``vertex_attributes`` hold ``uv`` (V, 2), ``patch`` (V,) and ``rim`` (V,): the vertices on the face's
+    boundary (domain edge, or the trimmed mesh's boundary), where a neighbouring face may join.
+    """
     if surface.mesh_uv is not None:
         nodes, triangles = surface.mesh_uv
         uv, faces = np.asarray(nodes, dtype=np.float64).reshape(-1, 2), np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        rim = np.unique(_boundary_edges(faces))  # on the trim: where a neighbouring face joins
+        uv, faces = _with_skirt(uv, faces, surface.domain)
     else:
         breaks_u, breaks_v = surface.span_breaks()
         us, vs = span_samples(breaks_u, per_span), span_samples(breaks_v, per_span)
@@ -48,11 +54,12 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int) -> 
         faces = grid_faces(len(us), len(vs))
         if surface.trim is not None:
             uv, faces = _clip_to_trim(uv, faces, surface.trim)
+        rim = np.unique(_boundary_edges(faces)) if surface.trim is not None else _domain_boundary(uv)
     points = surface.evaluate(uv[:, 0], uv[:, 1]).S
     return trimesh.Trimesh(
         vertices=points,
         faces=faces,
-        vertex_attributes={"uv": uv, "patch": np.full(len(uv), patch_index)},
+        vertex_attributes={"uv": uv, "patch": np.full(len(uv), patch_index), "rim": np.isin(np.arange(len(uv)), rim)},
         process=False,  # keep the grid as built: merging would mix vertices of different (u, v)
         validate=False,
     )
@@ -71,12 +78,6 @@ class Tessellation:
     meshes: tuple[trimesh.Trimesh, ...]
     boundary: np.ndarray  # indices of the vertices on a face's mesh boundary (where a neighbour may join)
     edge_length: np.ndarray  # per patch: its longest mesh edge
-    trims: tuple = ()  # per patch: its `Trim`, or None for a whole patch
-
-    @property
-    def trimmed(self) -> bool:
-        """Whether any face is trimmed (then hits and occlusions are tested against the trims)."""
-        return any(t is not None for t in self.trims)
 
     @property
     def extent(self) -> float:
@@ -142,11 +143,41 @@ def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span
         face_patch=np.concatenate([np.full(len(m.faces), k) for k, m in enumerate(meshes)]),
         chord_error=np.array([_chord_error(s, m) for s, m in zip(surfaces, meshes)]),
         meshes=meshes,
-        boundary=np.concatenate([_boundary_vertices(m, s.trim is not None or s.mesh_uv is not None) + off
-                                 for s, m, off in zip(surfaces, meshes, offsets)]).astype(np.int64),
+        boundary=np.concatenate([np.flatnonzero(m.vertex_attributes["rim"]) + off for m, off in zip(meshes, offsets)]),
         edge_length=np.array([float(m.edges_unique_length.max(initial=0.0)) for m in meshes]),
-        trims=tuple(s.trim for s in surfaces),
     )
+
+
+#: Width of the skirt around a reader's mesh, in lengths of the boundary edge it hangs from.
+#: A boundary chord cuts inside a face bulging beyond it by its sagitta, L²κ/8 ≤ L/2 while the
+#: loop turns by less than 4 rad per edge: a skirt one edge wide covers the face to its trim.
+SKIRT_EDGES = 1.0
+
+
+def _with_skirt(uv: np.ndarray, faces: np.ndarray, domain) -> tuple[np.ndarray, np.ndarray]:
+    """A reader's mesh with a strip of triangles outside every boundary edge, in (u, v) clamped to the domain.
+
+    The reader's boundary nodes lie on the trim, its boundary edges are chords of it: rays between
+    chord and trim would miss the mesh and never reach the exact face. The strip (SKIRT_EDGES wide)
+    lies on the untrimmed surface beyond the face, so rays there are refined and tested against the
+    trim like any other (tracing.py). The skirt's vertices come after the reader's.
+    """
+    if len(faces) == 0:
+        return uv, faces
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    third = np.concatenate([faces[:, 2], faces[:, 0], faces[:, 1]])
+    once = _once(edges)
+    a, b, c = edges[once, 0], edges[once, 1], third[once]
+    along = uv[b] - uv[a]
+    out = np.column_stack([along[:, 1], -along[:, 0]])  # ⊥ the edge, turned away from the triangle's third vertex
+    out *= np.where(np.einsum("ij,ij->i", out, uv[c] - uv[a]) > 0, -1.0, 1.0)[:, None]
+    (u0, u1), (v0, v1) = domain
+    lo, hi = np.array([u0, v0]), np.array([u1, v1])
+    a_out = np.clip(uv[a] + SKIRT_EDGES * out, lo, hi)
+    b_out = np.clip(uv[b] + SKIRT_EDGES * out, lo, hi)
+    k = len(uv) + 2 * np.arange(len(a))
+    skirt = np.concatenate([np.column_stack([a, b, k + 1]), np.column_stack([a, k + 1, k])])
+    return np.concatenate([uv, np.stack([a_out, b_out], axis=1).reshape(-1, 2)]), np.concatenate([faces, skirt])
 
 
 def _clip_to_trim(uv: np.ndarray, faces: np.ndarray, trim) -> tuple[np.ndarray, np.ndarray]:
@@ -173,15 +204,18 @@ def _clip_to_trim(uv: np.ndarray, faces: np.ndarray, trim) -> tuple[np.ndarray, 
     return uv[used], renumber[faces]
 
 
-def _boundary_vertices(mesh: trimesh.Trimesh, trimmed: bool = False) -> np.ndarray:
-    """Indices of the vertices where a neighbouring face may join: the ends of the mesh's boundary edges.
+def _once(edges: np.ndarray) -> np.ndarray:
+    """Rows of an (E, 2) edge list whose edge (either direction) occurs once: the mesh's boundary edges."""
+    return trimesh.grouping.group_rows(np.sort(edges, axis=1), require_count=1)
 
-    For an untrimmed patch, the grid vertices on the parameter-domain boundary (the same set).
-    """
-    if trimmed:
-        edges = mesh.edges_sorted
-        once = trimesh.grouping.group_rows(edges, require_count=1)
-        return np.unique(edges[once])
-    uv = mesh.vertex_attributes["uv"]
+
+def _boundary_edges(faces: np.ndarray) -> np.ndarray:
+    """(B, 2) vertex pairs of the edges used by one triangle only."""
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    return edges[_once(edges)]
+
+
+def _domain_boundary(uv: np.ndarray) -> np.ndarray:
+    """Indices of the grid vertices on the patch's parameter-domain boundary."""
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     return np.flatnonzero(np.any((uv == lo) | (uv == hi), axis=1))

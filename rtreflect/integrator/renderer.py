@@ -30,7 +30,7 @@ from ..trace.meshnormals import trace_mesh, vertex_normals
 from ..exchange.scene import ImageSpec, Scene
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
-from ..trace.tracing import Hits, trace
+from ..trace.tracing import Hits, occluded, trace
 
 #: Most rays per tile (about 1.2 kB each in flight, see `tiling`): larger tiles buy no speed over numpy's overhead.
 RAYS_PER_TILE = 1 << 16
@@ -146,7 +146,7 @@ class Renderer:
         if len(cand):
             start = self.accelerator.surface_origins(R[cand], n[cand], hits.patch[idx[cand]])
             with self.clock.stage("occlusion (Embree)"):
-                blocked = self.accelerator.occluded(start, s[idx[cand]], t_tube[cand])
+                blocked = occluded(self.accelerator, self.tessellation, self.surfaces, start, s[idx[cand]], t_tube[cand])
             lit[idx[cand]] = ~blocked
         return shading
 

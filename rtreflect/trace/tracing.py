@@ -232,19 +232,6 @@ def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol):
     return u, v, SurfaceDerivatives(S, Su, Sv), converged, stationary & ~edge, edge
 
 
-def _inside(tessellation: Tessellation, patch, u, v) -> np.ndarray:
-    """True where (u, v) lies on the face of ``patch``: inside its trim, or anywhere for an untrimmed patch."""
-    inside = np.ones(len(patch), dtype=bool)
-    if not tessellation.trimmed:
-        return inside
-    for k in np.unique(patch):
-        trim = tessellation.trims[k]
-        if trim is not None:
-            rows = np.flatnonzero(patch == k)
-            inside[rows] = trim.contains(u[rows], v[rows])
-    return inside
-
-
 @dataclass
 class _Candidates:
     """Mesh hits of some rays refined onto the exact surface and classified (VALID, MISS, UNRESOLVED)."""
@@ -269,7 +256,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     near, tr = _near_mesh_hit(derivs, O, D, mesh_point, band_of(pk))
     status = np.full(len(pk), UNRESOLVED)
     edge = ~conv & _on_domain_edge(surfaces, pk, ur, vr)
-    inside = _inside(tessellation, pk, ur, vr)
+    inside = surfaces.on_face(pk, ur, vr)
     status[conv & near & inside] = VALID
     left = edge | (conv & near & ~inside)  # ran off the face: the ray may go on on a neighbour, else it misses
     # Newton failed inside the face: search for the ray's distance to the surface instead.
@@ -278,7 +265,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         tol = NEWTON_TOLERANCE * np.maximum(tm[stuck], tessellation.extent)
         u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
         near2, t2 = _near_mesh_hit(d2, O[stuck], D[stuck], mesh_point[stuck], band_of(pk[stuck]))
-        in2 = _inside(tessellation, pk[stuck], u2, v2)
+        in2 = surfaces.on_face(pk[stuck], u2, v2)
         ur[stuck], vr[stuck], tr[stuck] = u2, v2, t2
         for have, new in zip(derivs[:3], d2[:3]):
             have[stuck] = new
@@ -298,7 +285,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         if len(seam):
             u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
             near3, t3 = _near_mesh_hit(d3, O[seam], D[seam], mesh_point[seam], band_of(pn))
-            ok3 &= near3 & _inside(tessellation, pn, u3, v3)
+            ok3 &= near3 & surfaces.on_face(pn, u3, v3)
             won = seam[ok3]
             pk[won], ur[won], vr[won], tr[won], status[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], VALID
             for have, new in zip(derivs[:3], d3[:3]):
@@ -404,7 +391,7 @@ def occluded(accelerator: Accelerator, tessellation: Tessellation, surfaces: Sur
     triangles that overhang it. A fallback on the way counts as blocking.
     """
     blocked = accelerator.occluded(origins, directions, max_distance)
-    if not tessellation.trimmed:
+    if not surfaces.trimmed:
         return blocked
     idx = np.flatnonzero(blocked)
     if len(idx):
