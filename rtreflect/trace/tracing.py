@@ -62,8 +62,10 @@ BAND_CHORDS = 2.0
 #: Relative size of float32 rounding (Embree's coordinates) with margin: ~8 ulps. Where the query for
 #: the next mesh hit starts beyond the last one, so Embree does not return the same triangle.
 FLOAT32_SLACK = 1e-6
-#: Levenberg–Marquardt steps of the search for the ray–surface distance where Newton failed.
-RESCUE_STEPS = 30
+#: Levenberg–Marquardt steps of the search for the ray–surface distance where Newton failed. On the
+#: teapot (960×540, s = 4) 60 steps settle 978 of its 993 such rays (30: 928); none of the 870 it
+#: calls misses is hit by that patch alone at tessellation 128.
+RESCUE_STEPS = 60
 #: At a stationary point of |r|² the residual r is normal to the columns of the Jacobian: cosine below this.
 STATIONARY_COSINE = 1e-6
 
