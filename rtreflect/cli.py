@@ -57,6 +57,13 @@ def cli() -> None:
     """
 
 
+def _print_notes(scenes) -> None:
+    """What each scene's CAD files gave (faces, unit, bounding box, skipped faces), before rendering."""
+    for scene in scenes:
+        for line in getattr(scene, "notes", ()):
+            click.echo(line)
+
+
 @cli.command()
 @click.argument("scenes", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--output", "outdir", type=click.Path(path_type=Path), default=Path("out"), show_default=True,
@@ -75,8 +82,10 @@ def cli() -> None:
 @click.option("--normals", type=click.Choice(NORMALS_MODES), default=None,
               help="exact: the NURBS normal at the exact hit; mesh: the CAD analysis-mesh normal, for comparison "
                    "(overrides [render] normals).")
+@click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
+              help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
 def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory, overlay,
-           normals) -> None:
+           normals, skip_bad_faces) -> None:
     """Render the reflection lines of each SCENE file to OUTPUT/NAME.exr and .png.
 
     The EXR holds linear RGBA plus per-pixel AOVs from the pixel-centre ray
@@ -86,17 +95,24 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     holds them (per line: light index, polylines in pixels and in (u, v)).
 
     \b
+    A STEP, IGES or .3dm file in place of a SCENE renders the part in a default scene
+    (camera fitted to its bounding box, tubes above it); NAME is the file's stem.
+
+    \b
     Example:
       rtreflect render scenes/hood.toml -o out/
       rtreflect render scenes/*.toml -o out/ --width 480 --height 270 --samples 2
+      rtreflect render parts/plate.step -o out/
     """
     budget = memory_option(max_memory)
     try:
-        loaded = [load_scene(path).with_image(width, height, samples).with_render(overlay, normals) for path in scenes]
+        loaded = [load_scene(path, skip_bad_faces).with_image(width, height, samples).with_render(overlay, normals)
+                  for path in scenes]
         check_distinct_outputs(loaded, outdir)
         prepare_output_folder(outdir, [path for scene in loaded for path in output_paths(scene, outdir)])
     except RtreflectError as exc:
         fail(str(exc))
+    _print_notes(loaded)
     for scene in loaded:
         image = scene.image
         try:
@@ -208,8 +224,10 @@ def _fmt(value: float | None) -> str:
 @click.option("--normals", type=click.Choice(NORMALS_MODES), default=None,
               help="Validate the exact renderer or the analysis-mesh one (overrides [render] normals).")
 @click.option("--threads", type=click.IntRange(1, 64), default=None, help="Render threads (default: up to 2).")
+@click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
+              help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
 def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: float, width, height, samples, normals,
-             threads) -> None:
+             threads, skip_bad_faces) -> None:
     """Check each SCENE's render against the analytic reflection lines (Ulmet's theorem).
 
     The reflection line of tube k is the image of the level set f(u, v) = c_k. The
@@ -234,9 +252,11 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
       rtreflect validate scenes/hood.toml --normals mesh
     """
     try:
-        loaded = [load_scene(path).with_image(width, height, samples).with_render(normals=normals) for path in scenes]
+        loaded = [load_scene(path, skip_bad_faces).with_image(width, height, samples).with_render(normals=normals)
+                  for path in scenes]
     except RtreflectError as exc:
         fail(str(exc))
+    _print_notes(loaded)
     reports = []
     for scene in loaded:
         image = scene.image
@@ -301,8 +321,13 @@ def stop_status(exc: BaseException) -> int:
                    "workers; with --scheduler, per tile task.")
 @click.option("--scheduler", metavar="tcp://HOST:PORT", default=None,
               help="Render on this dask.distributed cluster instead of locally (needs rtreflect[dask]).")
-def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, scheduler) -> None:
+@click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
+              help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
+def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, scheduler, skip_bad_faces) -> None:
     """Render folders of scenes: every *.toml in each PATH (or PATH itself) to OUTPUT/NAME.exr and .png.
+
+    CAD files in the folders (.step .stp .igs .iges .3dm) render too, each in the default
+    scene around its part (as `rtreflect render PART`).
 
     Scenes render in parallel; one that fails is reported and the others go on.
     A scene whose outputs exist and were rendered from the same scene and
@@ -325,7 +350,7 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
     start = time.perf_counter()
     budget = memory_option(max_memory)
     try:
-        loaded = batching.load_jobs(batching.discover(list(paths), recursive))
+        loaded = batching.load_jobs(batching.discover(list(paths), recursive), skip_bad_faces)
         batching.check_collisions(loaded, outdir)
         todo, reports = batching.plan(loaded, outdir, force)
     except RtreflectError as exc:

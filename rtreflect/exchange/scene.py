@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from .bpt import read_bpt
+from .cad import CAD_SUFFIXES, is_cad_path
 from ..errors import SceneError, quote, read_text
 from ..geometry.surfaces import NurbsSurface
 
@@ -114,6 +115,7 @@ class Scene:
     output: OutputSpec
     sha256: str  # of the scene file's bytes
     inputs_sha256: str  # of the scene file and every geometry file it reads
+    notes: tuple[str, ...] = ()  # what CAD files gave: faces, unit, bounding box, skipped faces (printed by the CLI)
 
     @property
     def output_key(self) -> str:
@@ -481,9 +483,18 @@ def _long_number_position(text: str) -> str:
     return f"line {text.count(chr(10), 0, found.start()) + 1}, column {found.start() - line_start + 1}"
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene file; raises `SceneError` naming the file and field."""
+def load_scene(path: str | Path, skip_bad_faces: bool = False) -> Scene:
+    """Read and validate a scene file; raises `SceneError` naming the file and field.
+
+    A CAD file (STEP, IGES, .3dm) in place of the scene file gets the default scene around the
+    part (exchange/partscene.py). ``skip_bad_faces``: CAD faces that cannot be read are left out
+    (and listed in `Scene.notes`) instead of failing the scene.
+    """
     path = Path(path)
+    if is_cad_path(path):
+        from .partscene import load_part_scene
+
+        return load_part_scene(path, skip_bad_faces)
     text = read_text(path, "scene file")
     try:
         doc = tomllib.loads(text)
@@ -511,12 +522,14 @@ def load_scene(path: str | Path) -> Scene:
         raise SceneError(path, "surface", "needs one or more [[surface]] tables")
     surfaces: list[NurbsSurface] = []
     geometry_files: list[Path] = []
+    notes: list[str] = []
+    faces_skipped = False
     for i, entry in enumerate(entries):
         t = _Table(path, f"surface[{i}]", entry)
         if t.has("file"):
             given = t.string("file")
             if not given.strip() or "\0" in given:
-                raise t.error("file", f"must name a geometry file (.bpt), got {quote(given)}")
+                raise t.error("file", f"must name a geometry file (.bpt{''.join(', ' + s for s in CAD_SUFFIXES)}), got {quote(given)}")
             try:
                 file = (path.parent / given).resolve()
             except (OSError, RuntimeError):  # a symlink loop (RuntimeError before Python 3.13): reading will say so
@@ -524,9 +537,16 @@ def load_scene(path: str | Path) -> Scene:
             name = t.string("name", "")
             t.finish()
             try:
-                patches = read_bpt(file, name)
-                for k, patch in enumerate(patches):
-                    _check_geometry_patch(file, k, patch)
+                if is_cad_path(file):
+                    from .partscene import read_part
+
+                    patches, summary, skipped = read_part(file, name, skip_bad_faces)
+                    notes.extend(summary)
+                    faces_skipped = faces_skipped or skipped
+                else:
+                    patches = read_bpt(file, name)
+                    for k, patch in enumerate(patches):
+                        _check_geometry_patch(file, k, patch)
             except SceneError as exc:
                 raise SceneError(exc.file, exc.field, f"{exc.reason} (from {path}: {t.name('file')})") from None
             surfaces.extend(patches)
@@ -536,4 +556,6 @@ def load_scene(path: str | Path) -> Scene:
     root.finish()
     _check_mesh_size(path, surfaces, render.tessellation)
     sha, inputs = _hash_files([path, *geometry_files])
-    return Scene(path, image, camera, lights, tuple(surfaces), render, output, sha, inputs)
+    if faces_skipped:  # the pixels lack those faces: not the output of the same inputs without --skip-bad-faces
+        inputs = hashlib.sha256(f"{inputs}\nskip-bad-faces".encode()).hexdigest()
+    return Scene(path, image, camera, lights, tuple(surfaces), render, output, sha, inputs, tuple(notes))
