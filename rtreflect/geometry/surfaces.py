@@ -332,11 +332,13 @@ class SurfaceSet:
         return len(self.patches)
 
     def _by_patch(self, patch: np.ndarray):
+        """(k, rows of patch k) for every patch index ≥ 0 present: one stable sort, not a scan per patch."""
         patch = np.asarray(patch).ravel()
-        for k in np.unique(patch):
-            if k < 0:
-                continue
-            yield int(k), np.flatnonzero(patch == k)
+        order = np.argsort(patch, kind="stable")
+        keys, starts = np.unique(patch[order], return_index=True)
+        for k, rows in zip(keys, np.split(order, starts[1:])):
+            if k >= 0:
+                yield int(k), rows
 
     def evaluate(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, order: int = 1) -> SurfaceDerivatives:
         """S and derivatives for points given by patch index and (u, v); rows with patch < 0 stay NaN."""

@@ -14,6 +14,7 @@ tests each refined hit against the trim (tracing.py).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import trimesh
@@ -65,6 +66,10 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int) -> 
     )
 
 
+#: Boundary vertices the seam restart asks the k-d tree for at first (more for points whose nearest all lie on their own face).
+SEAM_NEIGHBOURS = 8
+
+
 @dataclass(frozen=True)
 class Tessellation:
     """All patches' meshes in one vertex/face array, as Embree wants them."""
@@ -79,7 +84,7 @@ class Tessellation:
     boundary: np.ndarray  # indices of the vertices on a face's mesh boundary (where a neighbour may join)
     edge_length: np.ndarray  # per patch: its longest mesh edge
 
-    @property
+    @cached_property
     def extent(self) -> float:
         """Diagonal of the bounding box of all patches."""
         return float(np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)))
@@ -90,34 +95,49 @@ class Tessellation:
         uv = (1.0 - b1 - b2)[:, None] * corners[:, 0] + b1[:, None] * corners[:, 1] + b2[:, None] * corners[:, 2]
         return self.face_patch[prim], uv[:, 0], uv[:, 1]
 
-    def across_seam(self, points: np.ndarray, patch: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def across_seam(self, points: np.ndarray, patch: np.ndarray,
+                    tried: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For points on the boundary of ``patch``: the nearest boundary vertex of another patch.
 
-        Returns (patch, u, v) of that vertex, where a hit that ran off one patch's edge
+        ``tried`` (N, m) lists patches to pass over as well (neighbours already tried: where
+        several faces meet at a corner, their boundary vertices coincide).
+
+        Returns (patch, u, v) of that vertex, where a hit that ran off one face's edge
         can restart on its neighbour, and the distance to it (patch −1 and inf where there
-        is no other patch).
-        Brute force over boundary vertices, in row chunks: it serves the few hits at seams.
+        is no other patch). A k-d tree over the boundary vertices: the SEAM_NEIGHBOURS nearest,
+        then more for the points whose nearest all belong to their own patch.
         """
         patch_out = np.full(len(points), -1)
         uv_out = np.full((len(points), 2), np.nan)
         dist_out = np.full(len(points), np.inf)
-        candidates = self.boundary
-        if len(candidates) == 0:
+        if len(self.boundary) == 0 or len(points) == 0:
             return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
-        cand_xyz, cand_patch = self.vertices[candidates], self.vertex_patch[candidates]
-        cand_sq = np.einsum("ij,ij->i", cand_xyz, cand_xyz)
-        rows = max(1, (1 << 20) // len(candidates))  # bounds the (rows, candidates) distance table
-        for lo in range(0, len(points), rows):
-            hi = min(lo + rows, len(points))
-            pts = points[lo:hi]
-            d2 = np.maximum(np.einsum("ij,ij->i", pts, pts)[:, None] - 2.0 * pts @ cand_xyz.T + cand_sq, 0.0)
-            d2[cand_patch[None, :] == patch[lo:hi, None]] = np.inf
-            best = np.argmin(d2, axis=1)
-            dist_out[lo:hi] = np.sqrt(d2[np.arange(hi - lo), best])
-            found = np.isfinite(dist_out[lo:hi])
-            patch_out[lo:hi] = np.where(found, cand_patch[best], -1)
-            uv_out[lo:hi] = self.vertex_uv[candidates[best]]
+        tree, cand_patch = self._boundary_tree
+        todo = np.arange(len(points))
+        k = SEAM_NEIGHBOURS
+        while len(todo):
+            k = min(k, len(self.boundary))
+            dist, nearest = tree.query(points[todo], k=k)
+            dist, nearest = dist.reshape(len(todo), k), nearest.reshape(len(todo), k)
+            other = cand_patch[nearest] != patch[todo, None]
+            if tried is not None:
+                other &= ~np.any(cand_patch[nearest][:, :, None] == tried[todo, None, :], axis=2)
+            first = np.argmax(other, axis=1)
+            found = other[np.arange(len(todo)), first]
+            rows, best = todo[found], nearest[found, first[found]]
+            patch_out[rows] = cand_patch[best]
+            uv_out[rows] = self.vertex_uv[self.boundary[best]]
+            dist_out[rows] = dist[found, first[found]]
+            if k == len(self.boundary):
+                break
+            todo, k = todo[~found], 8 * k
         return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
+
+    @cached_property
+    def _boundary_tree(self):
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.vertices[self.boundary]), self.vertex_patch[self.boundary]
 
 
 def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:

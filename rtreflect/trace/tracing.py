@@ -69,6 +69,10 @@ RESCUE_STEPS = 60
 #: At a stationary point of |r|² the residual r is normal to the columns of the Jacobian: cosine below this.
 STATIONARY_COSINE = 1e-6
 
+#: Neighbouring faces tried in turn for a hit that ran off its face: where several faces meet at a
+#: corner their boundary vertices coincide, and the nearest need not be the one the ray goes on to.
+SEAM_TRIES = 3
+
 VALID, MISS, UNRESOLVED = 0, 1, 2
 
 
@@ -276,22 +280,25 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         left[stuck[edge2 | (ok2 & near2 & ~in2)]] = True
     seam = np.flatnonzero(left)
     status[seam] = MISS
-    if len(seam):
-        # From the edge point Newton stopped at (a domain edge), or the mesh hit (a trim edge, where the
-        # converged point lies on the surface's extension beyond the face).
-        at = np.where(edge[seam, None], derivs.S[seam], mesh_point[seam])
-        pn, un, vn, gap = tessellation.across_seam(at, pk[seam])
+    # From the edge point Newton stopped at (a domain edge), or the mesh hit (a trim edge, where the
+    # converged point lies on the surface's extension beyond the face).
+    at = np.where(edge[seam, None], derivs.S[seam], mesh_point[seam])
+    tried = pk[seam, None]
+    for _ in range(SEAM_TRIES):
+        if len(seam) == 0:
+            break
+        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried)
         # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
         close = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[pk[seam]])
-        seam, pn, un, vn = (x[close] for x in (seam, pn, un, vn))
-        if len(seam):
-            u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
-            near3, t3 = _near_mesh_hit(d3, O[seam], D[seam], mesh_point[seam], band_of(pn))
-            ok3 &= near3 & surfaces.on_face(pn, u3, v3)
-            won = seam[ok3]
-            pk[won], ur[won], vr[won], tr[won], status[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], VALID
-            for have, new in zip(derivs[:3], d3[:3]):
-                have[won] = new[ok3]
+        seam, at, tried, pn, un, vn = (x[close] for x in (seam, at, tried, pn, un, vn))
+        u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
+        near3, t3 = _near_mesh_hit(d3, O[seam], D[seam], mesh_point[seam], band_of(pn))
+        ok3 &= near3 & surfaces.on_face(pn, u3, v3)
+        won = seam[ok3]
+        pk[won], ur[won], vr[won], tr[won], status[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], VALID
+        for have, new in zip(derivs[:3], d3[:3]):
+            have[won] = new[ok3]
+        seam, at, tried = seam[~ok3], at[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
     t = np.where(status == VALID, tr, tm)
     return _Candidates(status, pk, ur, vr, t, derivs, us, vs, mesh_point)
 
