@@ -36,7 +36,7 @@ def grid_faces(nu: int, nv: int) -> np.ndarray:
     return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int64)
 
 
-def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int) -> trimesh.Trimesh:
+def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enclose: bool = False) -> trimesh.Trimesh:
     """A mesh of one patch (of its trimmed face, see the module doc).
 
     ``vertex_attributes`` hold ``uv`` (V, 2), ``patch`` (V,) and ``rim`` (V,): the vertices on the face's
@@ -57,6 +57,8 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int) -> 
             uv, faces = _clip_to_trim(uv, faces, surface.trim)
         rim = np.unique(_boundary_edges(faces)) if surface.trim is not None else _domain_boundary(uv)
     points = surface.evaluate(uv[:, 0], uv[:, 1]).S
+    if enclose:
+        points = _enclosing(surface, uv, points, faces, rim)
     return trimesh.Trimesh(
         vertices=points,
         faces=faces,
@@ -95,12 +97,15 @@ class Tessellation:
         uv = (1.0 - b1 - b2)[:, None] * corners[:, 0] + b1[:, None] * corners[:, 1] + b2[:, None] * corners[:, 2]
         return self.face_patch[prim], uv[:, 0], uv[:, 1]
 
-    def across_seam(self, points: np.ndarray, patch: np.ndarray,
-                    tried: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def across_seam(self, points: np.ndarray, patch: np.ndarray, tried: np.ndarray | None = None,
+                    uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For points on the boundary of ``patch``: the nearest boundary vertex of another patch.
 
         ``tried`` (N, m) lists patches to pass over as well (neighbours already tried: where
-        several faces meet at a corner, their boundary vertices coincide).
+        several faces meet at a corner, their boundary vertices coincide). With the points' own
+        ``uv`` (N, 2), a boundary vertex of the same patch counts too when its (u, v) lies more
+        than half the patch's domain away: the other side of a closed face's seam (a revolved
+        face's u = 0 and u = 2π), where the ray goes on on the same face.
 
         Returns (patch, u, v) of that vertex, where a hit that ran off one face's edge
         can restart on its neighbour, and the distance to it (patch −1 and inf where there
@@ -120,6 +125,9 @@ class Tessellation:
             dist, nearest = tree.query(points[todo], k=k)
             dist, nearest = dist.reshape(len(todo), k), nearest.reshape(len(todo), k)
             other = cand_patch[nearest] != patch[todo, None]
+            if uv is not None:
+                far_side = np.abs(self.vertex_uv[self.boundary[nearest]] - uv[todo, None, :]) > 0.5 * self._domain_span[patch[todo], None, :]
+                other |= np.any(far_side, axis=2)
             if tried is not None:
                 other &= ~np.any(cand_patch[nearest][:, :, None] == tried[todo, None, :], axis=2)
             first = np.argmax(other, axis=1)
@@ -134,6 +142,16 @@ class Tessellation:
         return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
 
     @cached_property
+    def _domain_span(self) -> np.ndarray:
+        """(patches, 2): the extent of each patch's vertices in u and in v."""
+        span = np.zeros((int(self.vertex_patch.max(initial=-1)) + 1, 2))
+        for k in range(len(span)):
+            uv = self.vertex_uv[self.vertex_patch == k]
+            if len(uv):
+                span[k] = np.ptp(uv, axis=0)
+        return span
+
+    @cached_property
     def _boundary_tree(self):
         from scipy.spatial import cKDTree
 
@@ -141,7 +159,8 @@ class Tessellation:
 
 
 def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:
-    """Largest distance between the mesh and the surface, sampled at the midpoints of every triangle edge.
+    """Largest distance between the mesh and the surface, sampled at the midpoints of every triangle edge
+    and at the vertices (which `_enclosing` moves off the surface).
 
     Edge midpoints, not centroids: a chord strays farthest from the surface at its middle.
     """
@@ -149,11 +168,47 @@ def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:
     uv = mesh.vertex_attributes["uv"][edges].mean(axis=1)
     exact = surface.evaluate(uv[:, 0], uv[:, 1]).S
     chord_mid = mesh.vertices[edges].mean(axis=1)
-    return float(np.max(np.linalg.norm(exact - chord_mid, axis=1), initial=0.0))
+    vertex_uv = mesh.vertex_attributes["uv"]
+    at_vertices = np.linalg.norm(surface.evaluate(vertex_uv[:, 0], vertex_uv[:, 1]).S - mesh.vertices, axis=1)
+    return float(max(np.max(np.linalg.norm(exact - chord_mid, axis=1), initial=0.0), np.max(at_vertices, initial=0.0)))
 
 
-def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span: int) -> Tessellation:
-    meshes = tuple(tessellate_patch(s, k, per_span) for k, s in enumerate(surfaces))
+#: `_enclosing` moves vertices by this many times the largest chord deviation of their edges: a
+#: triangle's interior can stray a little farther from its plane than its edges' midpoints do.
+ENCLOSE_MARGIN = 1.25
+
+
+def _enclosing(surface: NurbsSurface, uv: np.ndarray, points: np.ndarray, faces: np.ndarray, rim: np.ndarray) -> np.ndarray:
+    """Vertices moved along the normal to the convex side of the surface, so the mesh encloses it there.
+
+    A mesh with its vertices on the surface lies inside it where the surface is convex: rays near
+    a silhouette pass outside the mesh but meet the surface, and would miss (a chord-approximate
+    silhouette). Each vertex moves to the side its edges' chords fall short on (the sign of the
+    deviation S(mid) − chord midpoint along its normal, the larger side where a saddle has both),
+    by ENCLOSE_MARGIN times the largest such deviation: the mesh then covers the surface there and
+    the refinement moves every hit back onto it. Planes do not move.
+    """
+    if len(faces) == 0:
+        return points
+    edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
+    mid = uv[edges].mean(axis=1)
+    deviation = surface.evaluate(mid[:, 0], mid[:, 1]).S - points[edges].mean(axis=1)
+    normal = surface.normals(uv[:, 0], uv[:, 1])
+    out = np.zeros(len(points))
+    into = np.zeros(len(points))
+    for end in (0, 1):
+        along = np.einsum("ij,ij->i", deviation, normal[edges[:, end]])
+        np.maximum.at(out, edges[:, end], along)
+        np.minimum.at(into, edges[:, end], along)
+    shift = np.where(out >= -into, out, into)
+    shift[rim] = 0.0  # the face's edge stays where it is: moved along the normal it would slide across the view
+    return points + ENCLOSE_MARGIN * shift[:, None] * normal
+
+
+def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span: int,
+               enclose: bool = False) -> Tessellation:
+    """All patches' meshes; ``enclose``: vertices moved so the mesh covers the surface (`_enclosing`), for the exact tracer."""
+    meshes = tuple(tessellate_patch(s, k, per_span, enclose) for k, s in enumerate(surfaces))
     offsets = np.cumsum([0] + [len(m.vertices) for m in meshes])
     return Tessellation(
         vertices=np.concatenate([m.vertices for m in meshes]),

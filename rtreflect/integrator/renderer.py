@@ -110,7 +110,8 @@ class Renderer:
     def __init__(self, scene: Scene):
         self.scene = scene
         self.surfaces = SurfaceSet(list(scene.surfaces))
-        self.tessellation = tessellate(scene.surfaces, scene.render.tessellation)
+        # The exact tracer's mesh encloses the surface (silhouettes exact); the mesh-normals path keeps S(nodes).
+        self.tessellation = tessellate(scene.surfaces, scene.render.tessellation, enclose=scene.render.normals != "mesh")
         self.accelerator = Accelerator(self.tessellation)
         self.camera = Camera(scene.camera, scene.image.width, scene.image.height)
         self.lights = TubeLights.from_spec(scene.lights)

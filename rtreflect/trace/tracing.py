@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .accelerator import Accelerator
+from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation
@@ -65,7 +65,7 @@ FLOAT32_SLACK = 1e-6
 #: Levenberg–Marquardt steps of the search for the ray–surface distance where Newton failed. On the
 #: teapot (960×540, s = 4) 60 steps settle 978 of its 993 such rays (30: 928); none of the 870 it
 #: calls misses is hit by that patch alone at tessellation 128.
-RESCUE_STEPS = 60
+RESCUE_STEPS = 200
 #: At a stationary point of |r|² the residual r is normal to the columns of the Jacobian: cosine below this.
 STATIONARY_COSINE = 1e-6
 
@@ -283,11 +283,11 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     # From the edge point Newton stopped at (a domain edge), or the mesh hit (a trim edge, where the
     # converged point lies on the surface's extension beyond the face).
     at = np.where(edge[seam, None], derivs.S[seam], mesh_point[seam])
-    tried = pk[seam, None]
+    tried = np.zeros((len(seam), 0), dtype=int)  # neighbours tried so far (the patch itself: by `across_seam`)
     for _ in range(SEAM_TRIES):
         if len(seam) == 0:
             break
-        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried)
+        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]))
         # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
         close = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[pk[seam]])
         seam, at, tried, pn, un, vn = (x[close] for x in (seam, at, tried, pn, un, vn))
@@ -303,18 +303,14 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     return _Candidates(status, pk, ur, vr, t, derivs, us, vs, mesh_point)
 
 
-def _band(tessellation: Tessellation, derivs: SurfaceDerivatives | None, D: np.ndarray) -> np.ndarray:
+def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
     """How far beyond an exact hit (along the ray) another sheet's mesh hit may hide a nearer exact hit.
 
-    `BAND_CHORDS` times the largest chord error, grown as 1/cos θ at incidence θ (up to
-    GRAZING_ALLOWANCE; the full allowance where the hit's normal is unknown), plus float32 slack.
+    `BAND_CHORDS` times the largest chord error, grown as 1/cos θ at the hit's incidence θ (up to
+    GRAZING_ALLOWANCE; the full allowance where cos is NaN: no normal known), plus float32 slack.
     """
-    allowance = np.full(len(D), GRAZING_ALLOWANCE)
-    if derivs is not None:
-        cross = np.cross(derivs.Su, derivs.Sv)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cos = np.abs(np.einsum("ij,ij->i", cross, D)) / np.linalg.norm(cross, axis=1)
-            allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
+    with np.errstate(divide="ignore"):
+        allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
     chord = float(tessellation.chord_error.max(initial=0.0))
     return BAND_CHORDS * chord * allowance + FLOAT32_SLACK * tessellation.extent
 
@@ -330,64 +326,68 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     far = np.full(n, np.inf) if max_distance is None else np.asarray(max_distance, dtype=np.float64)
     hits = Hits.blank(n, np.zeros(n, dtype=bool))
     best = np.full(n, np.inf)  # t of the kept valid hit
-    Su, Sv = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    cos = np.full(n, np.nan)  # |n·D| there
     doubt = np.full(n, np.inf)  # mesh t of the nearest unresolved candidate
-    doubt_uv = np.full((n, 3), np.nan)  # its (patch, u, v)
-    doubt_point = np.full((n, 3), np.nan)
-    limit = far.copy()  # the next query looks no farther than this
-    rays, start = np.arange(n), np.zeros(n)
+    doubt_at: dict[int, tuple] = {}  # its (patch, u, v, mesh point), by ray
+    rays, start, limit = np.arange(n), None, far
+    # Past a mesh hit by float32 rounding of the scene's largest coordinates, with margin.
+    skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
     for _ in range(MAX_CANDIDATES):
         if len(rays) == 0:
             break
+        O, D = origins[rays], directions[rays]
         with clock.stage("intersect (Embree)"):
-            shifted = origins[rays] + start[:, None] * directions[rays] if start.any() else origins[rays]
-            mesh = accelerator.intersect(shifted, directions[rays], None if max_distance is None and not start.any()
-                                         else limit[rays] - start)
+            if start is None:
+                mesh = accelerator.intersect(O, D, max_distance)
+            else:  # beyond the last mesh hit: an any-hit test first, the full query only where it finds something
+                shifted = O + start[:, None] * D
+                some = accelerator.occluded(shifted, D, limit - start)
+                rays, O, D, shifted, start, limit = (x[some] for x in (rays, O, D, shifted, start, limit))
+                mesh = accelerator.intersect(shifted, D, limit - start)
+                mesh = mesh._replace(t=mesh.t + start)
         found = mesh.prim >= 0
-        rays, tm = rays[found], mesh.t[found] + start[found]
+        if not found.all():
+            rays, O, D = rays[found], O[found], D[found]
+            mesh = MeshHits(*(x[found] for x in mesh))
         if len(rays) == 0:
             break
-        O, D = origins[rays], directions[rays]
         with clock.stage("newton (exact hit)"):
-            c = _candidates(tessellation, surfaces, O, D, mesh.prim[found], mesh.b1[found], mesh.b2[found], tm)
+            c = _candidates(tessellation, surfaces, O, D, mesh.prim, mesh.b1, mesh.b2, mesh.t)
             take = (c.status == VALID) & (c.t < best[rays]) & (c.t < far[rays])
+            if take.all():  # the common case (every first hit valid): no gathers
+                take = slice(None)
             rows = rays[take]
             best[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = c.t[take], c.patch[take], c.u[take], c.v[take]
-            hits.P[rows], Su[rows], Sv[rows] = c.derivs.S[take], c.derivs.Su[take], c.derivs.Sv[take]
-            odd = (c.status == UNRESOLVED) & (tm < doubt[rays])
-            rows = rays[odd]
-            doubt[rows], doubt_point[rows] = tm[odd], c.mesh_point[odd]
-            doubt_uv[rows] = np.column_stack([c.patch[odd], c.start_u[odd], c.start_v[odd]])
-            # Go on where a mesh hit behind this one could still carry a nearer exact hit.
-            anchor = np.minimum(best[rays], doubt[rays])
-            kept = SurfaceDerivatives(hits.P[rays], Su[rays], Sv[rays])  # NaN where nothing valid is kept yet
-            limit[rays] = np.minimum(far[rays], anchor + _band(tessellation, kept, D))
-            skip = FLOAT32_SLACK * (tessellation.extent + np.abs(c.mesh_point).max(axis=1))
-            nxt = tm + skip
-            go = nxt < limit[rays]
-            rays, start = rays[go], nxt[go]
+            hits.P[rows] = c.derivs.S[take]
+            odd = np.flatnonzero((c.status == UNRESOLVED) & (mesh.t < doubt[rays]))
+            doubt[rays[odd]] = mesh.t[odd]
+            doubt_at.update(zip(rays[odd].tolist(), zip(c.patch[odd], c.start_u[odd], c.start_v[odd], c.mesh_point[odd])))
+        with clock.stage("exact normals"):
+            kept = SurfaceDerivatives(c.derivs.S[take], c.derivs.Su[take], c.derivs.Sv[take])
+            normal = facing(surfaces.normals(c.patch[take], c.u[take], c.v[take], kept), D[take])
+            hits.N[rows] = normal
+            cos[rows] = np.abs(np.einsum("ij,ij->i", normal, D[take]))
+        # Go on where a mesh hit behind this one could still carry a nearer exact hit.
+        limit = np.minimum(far[rays], np.minimum(best[rays], doubt[rays]) + _band(tessellation, cos[rays]))
+        nxt = mesh.t + skip
+        go = nxt < limit
+        rays, start, limit = rays[go], nxt[go], limit[go]
     open_rays = rays  # still had candidates to examine after MAX_CANDIDATES
     hits.hit[:] = np.isfinite(best)
     # Unresolved candidates that may hide a nearer exact hit than the kept one (module doc).
-    with np.errstate(invalid="ignore"):
-        hidden = np.isfinite(doubt) & (doubt < best + _band(tessellation, None, directions))
-        keep_mesh = hidden & ~(best < doubt)  # nothing valid in front of the unresolved mesh hit
+    hidden = np.flatnonzero(np.isfinite(doubt))
+    hidden = hidden[doubt[hidden] < best[hidden] + _band(tessellation, np.full(len(hidden), np.nan))]
     hits.fallback[hidden] = True
     hits.fallback[open_rays] = True
-    rows = np.flatnonzero(keep_mesh)
+    rows = hidden[~(best[hidden] < doubt[hidden])]  # nothing valid in front of the unresolved mesh hit: keep it
     if len(rows):
-        hits.hit[rows] = True
-        hits.patch[rows] = doubt_uv[rows, 0].astype(int)
-        hits.u[rows], hits.v[rows] = doubt_uv[rows, 1], doubt_uv[rows, 2]
-        hits.P[rows] = doubt_point[rows]
+        patch, u, v, point = (np.array(x) for x in zip(*(doubt_at[r] for r in rows.tolist())))
+        hits.hit[rows], hits.patch[rows], hits.u[rows], hits.v[rows], hits.P[rows] = True, patch, u, v, point
         best[rows] = doubt[rows]
-        again = surfaces.evaluate(hits.patch[rows], hits.u[rows], hits.v[rows])  # derivatives at the mesh hit's (u, v)
-        Su[rows], Sv[rows] = again.Su, again.Sv
+        with clock.stage("exact normals"):  # at the mesh hit's (u, v)
+            hits.N[rows] = facing(surfaces.normals(patch, u, v), directions[rows])
     idx = np.flatnonzero(hits.hit)
     hits.t[idx] = best[idx]
-    with clock.stage("exact normals"):
-        derivs = SurfaceDerivatives(hits.P[idx], Su[idx], Sv[idx])
-        hits.N[idx] = facing(surfaces.normals(hits.patch[idx], hits.u[idx], hits.v[idx], derivs), directions[idx])
     return hits
 
 
