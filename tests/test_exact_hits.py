@@ -195,3 +195,40 @@ def test_reflected_ray_through_a_hole_is_not_blocked():
     through_hole = np.isfinite(t_plate) & ~expected
     assert through_hole.sum() > 500 and expected.sum() > 500
     assert np.array_equal(blocked, expected), np.flatnonzero(blocked != expected)[:10]
+
+
+# --- Contours and validate on a trimmed face ---------------------------------------------------------
+
+
+def test_contours_stop_at_the_trim_and_validate_passes():
+    """On the trimmed hood every analytic contour point lies on the face, each cut lands on the trim
+    loop to a small fraction of a pixel, and `validate` passes with the usual tolerances."""
+    import shapely
+
+    from rtreflect.analysis.contours import UlmetField, analytic_contours
+    from rtreflect.analysis.validate import validate_scene
+
+    trim = wavy_trim()
+    scene = hood_scene(tessellation=8)
+    scene = replace(scene.with_image(320, 180, 2), surfaces=(replace(scene.surfaces[0], trim=trim),))
+    renderer = Renderer(scene)
+    field = UlmetField.of(renderer)
+    lines = analytic_contours(field)
+    boundary = shapely.MultiLineString([np.vstack([loop, loop[:1]]) for loop in (trim.outer, *trim.holes)])
+    ends = []
+    for line in lines.lines:
+        for poly in line.polylines:
+            assert trim.contains(poly.uv[:, 0], poly.uv[:, 1]).all()
+            ends += [poly.uv[0], poly.uv[-1]]
+    ends = np.array(ends)
+    gap_uv = shapely.distance(boundary, shapely.points(ends))
+    cut = ends[gap_uv < 0.02]  # ends near the trim (the others end at the image, an occlusion or the tube's end)
+    assert len(cut) >= 20
+    nearest = shapely.get_coordinates(shapely.shortest_line(shapely.points(cut), boundary)).reshape(-1, 2, 2)[:, 1]
+    px_end, _ = field.project(np.zeros(len(cut), dtype=int), cut[:, 0], cut[:, 1])
+    px_loop, _ = field.project(np.zeros(len(cut), dtype=int), nearest[:, 0], nearest[:, 1])
+    assert np.linalg.norm(px_end - px_loop, axis=1).max() <= 0.01
+
+    report = validate_scene(scene, renderer=renderer)
+    assert report.passed, (report.max_px, report.misses, report.colour_mismatches, report.reasons)
+    assert report.points > 200
