@@ -390,6 +390,10 @@ class SurfaceSet:
         return SurfaceDerivatives(*outs)
 
     @cached_property
+    def _domain_table(self) -> np.ndarray:
+        return np.array([[*p.domain[0], *p.domain[1]] for p in self.patches])
+
+    @cached_property
     def _power_groups(self) -> "_PowerGroups":
         return _PowerGroups.of_patches(self.patches)
 
@@ -441,8 +445,7 @@ class SurfaceSet:
 
     def domains(self, patch: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Per-point parameter domain bounds (u0, u1, v0, v1)."""
-        table = np.array([[*p.domain[0], *p.domain[1]] for p in self.patches])
-        rows = table[np.asarray(patch)]
+        rows = self._domain_table[np.asarray(patch)]
         return rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
 
 

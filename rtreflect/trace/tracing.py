@@ -68,6 +68,10 @@ FLOAT32_SLACK = 1e-6
 RESCUE_STEPS = 200
 #: At a stationary point of |r|² the residual r is normal to the columns of the Jacobian: cosine below this.
 STATIONARY_COSINE = 1e-6
+#: Marquardt's damping grows ×4 on every step that fails to lower |r|: beyond this (~20 failures in a
+#: row) the step is a vanishing fraction of the gradient step and still does not descend: a minimum
+#: to float precision (on the 206-face plate, rays passing a fillet's silhouette 0.02 away stalled so).
+STALLED_DAMPING = 1e9
 
 #: Neighbouring faces tried in turn for a hit that ran off its face: where several faces meet at a
 #: corner their boundary vertices coincide, and the nearest need not be the one the ray goes on to.
@@ -183,8 +187,8 @@ def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol):
     A descent on |r|² from the mesh hit's (u, v), damped by Marquardt's diagonal scaling
     (JᵀJ + λ diag JᵀJ), which makes it invariant under rescaling u or v. It either reaches
     |r| ≤ tol (the ray meets the surface: Newton's answer), or stalls where r is normal to the
-    surface's tangent plane with |r| > tol: a positive local minimum of the distance, the ray
-    passes the surface. Returns (u, v, derivatives, converged, stationary, on the domain edge).
+    surface's tangent plane, or where no step lowers |r| (`STALLED_DAMPING`), with |r| > tol: a
+    positive local minimum of the distance, the ray passes the surface. Returns (u, v, derivatives, converged, stationary, on the domain edge).
     """
     n = len(u)
     u, v = u.copy(), v.copy()
@@ -210,7 +214,8 @@ def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol):
         g1, g2 = a * r1 + c * r2, b * r1 + dd * r2  # Jᵀ r
         with np.errstate(divide="ignore", invalid="ignore"):
             cosine = np.hypot(g1, g2) / (np.sqrt(a * a + b * b + c * c + dd * dd) * rn)
-        flat = ~done & ~(cosine > STATIONARY_COSINE)
+        # Stationary: r ⊥ the tangent plane, or no step along the damped gradient lowers |r| any more.
+        flat = ~done & (~(cosine > STATIONARY_COSINE) | (lam[active] > STALLED_DAMPING))
         stationary[active[flat]] = True
         keep = ~done & ~flat
         active, r1, r2, a, b, c, dd, g1, g2, rn = (x[keep] for x in (active, r1, r2, a, b, c, dd, g1, g2, rn))
