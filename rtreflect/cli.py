@@ -358,6 +358,7 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
     except STOPS as exc:
         click.echo(f"rtreflect: interrupted by {stop_name(exc)} before rendering; nothing written", err=True)
         sys.exit(stop_status(exc))
+    _print_notes([job.scene for job in loaded if job.scene is not None])
     for report in reports:
         _print_scene(report)
     order = {str(job.path): i for i, job in enumerate(loaded)}

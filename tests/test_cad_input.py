@@ -316,3 +316,71 @@ def test_step_in_inches_reads_in_millimetres_and_says_so(tmp_path):
     model = read_cad(path)
     assert model.unit == "mm" and "inch" in model.unit_note and "read in mm" in model.unit_note
     np.testing.assert_allclose(model.bounds[1] - model.bounds[0], [25.4, 50.8, 76.2], rtol=1e-9)
+
+
+def test_open_cascade_prints_nothing_to_stdout(tmp_path):
+    """OCCT's readers print transfer statistics straight to file descriptor 1 (past Python): silenced."""
+    import subprocess
+    import sys
+
+    code = "from rtreflect.cli import main; main()"
+    result = subprocess.run([sys.executable, "-c", code, "render", str(PARTS / "assembly.step"), str(PARTS / "filleted_block.igs"),
+                             "-o", str(tmp_path), *TINY], capture_output=True, text=True, timeout=300,
+                            cwd=Path(__file__).resolve().parents[1])
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert len(lines) == 4, result.stdout  # two summaries of the models, two render lines
+    assert lines[0].startswith(f"{PARTS / 'assembly.step'}: 52 faces") and lines[2].startswith("assembly: ")
+
+
+def test_real_degenerate_face_is_named_and_skippable(tmp_path):
+    """A box (faces 0–5) and a face whose control points lie on a line (face 6): an error naming face 6;
+    --skip-bad-faces renders the box and lists face 6."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.collections import Array1_double, Array1_int, Array2_gp_Pnt
+    from OCP.gp import gp_Pnt
+
+    poles = Array2_gp_Pnt(1, 2, 1, 2)
+    for i in range(2):
+        for j in range(2):
+            poles.SetValue(i + 1, j + 1, gp_Pnt(20 + i + j, 0, 0))  # on one line: no area
+    line = Geom_BSplineSurface(poles, _array([0, 1], Array1_double), _array([0, 1], Array1_double),
+                               _array([2, 2], Array1_int), _array([2, 2], Array1_int), 1, 1)
+    compound, builder = TopoDS_Compound(), BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, BRepPrimAPI_MakeBox(10, 10, 10).Shape())
+    builder.Add(compound, BRepBuilderAPI_MakeFace(line, 1e-7).Face())
+    path = _write_step(compound, tmp_path / "degenerate.step")
+    outdir = tmp_path / "out"
+    code, output, _ = run("render", path, "-o", outdir, *TINY)
+    line_text = assert_bad_input(code, output, f"{path}: face 6:", outdir)
+    assert "zero area" in line_text
+    code, output, _ = run("render", path, "-o", outdir, *TINY, "--skip-bad-faces")
+    assert code == 0, output
+    assert "6 faces" in output and "skipped 1 of 7 faces (--skip-bad-faces): face 6:" in output
+    assert (outdir / "degenerate.png").is_file()
+
+
+def test_batch_skip_bad_faces_lists_them(tmp_path, monkeypatch):
+    """batch --skip-bad-faces renders a part with a failing face and lists the face it left out."""
+    original = occt.bspline_of_face
+    calls = {"n": 0}
+
+    def failing(face):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise occt.FaceError("its surface cannot be converted (test)")
+        return original(face)
+
+    monkeypatch.setattr(occt, "bspline_of_face", failing)
+    folder = tmp_path / "in"
+    folder.mkdir()
+    shutil.copy(PARTS / "filleted_block.step", folder / "block.step")
+    code, output, _ = run("batch", folder, "-o", tmp_path / "out", "-j", "1", "--skip-bad-faces")
+    assert code == 0, output
+    assert "skipped 1 of 26 faces (--skip-bad-faces): face 1: its surface cannot be converted" in output
+    assert (tmp_path / "out" / "block.png").is_file()

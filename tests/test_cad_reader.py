@@ -247,3 +247,26 @@ def test_3dm_surfaces_match_rhino3dm():
     caps = [s for s in model.surfaces[2:]]
     for cap in caps:
         assert cap.trim._polygon.area == pytest.approx(np.pi * 100, rel=1e-3)
+
+
+def test_mesh_uv_covers_the_trimmed_face_and_winds_with_its_normal(part):
+    """The reader's (u, v) triangulation covers what the trim encloses (areas agree to 1 %, the mesh's chords
+    cut the curved loops a little), and winds counter-clockwise in (u, v) unless the face is reversed."""
+    path, model, _ = part
+    for k, surface in enumerate(model.surfaces):
+        nodes, triangles = surface.mesh_uv
+        a, b, c = (nodes[triangles[:, i]] for i in range(3))
+        signed = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+        expected_sign = -1.0 if model.reversed[k] else 1.0
+        assert np.all(signed * expected_sign >= 0), f"face {k}: triangles wind against the face"
+        assert abs(signed.sum()) == pytest.approx(surface.trim._polygon.area, rel=1e-2), f"face {k}"
+
+
+def test_3dm_trims_follow_the_exact_edges():
+    """The cylinder's caps are trimmed by its exact rational circles (radius 10 about (70, 0)): the trim
+    loops' images lie on them to float precision, not just to ShapeFix's pcurve fit (7.6e-3 mm)."""
+    pytest.importorskip("rhino3dm")
+    model = read_cad(PARTS / "trimmed.3dm")
+    for cap in model.surfaces[2:]:
+        points = cap.evaluate(cap.trim.outer[:, 0], cap.trim.outer[:, 1]).S
+        assert np.max(np.abs(np.hypot(points[:, 0] - 70, points[:, 1]) - 10)) < 1e-9

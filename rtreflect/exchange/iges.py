@@ -38,4 +38,5 @@ def read_iges(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMo
     with quiet_stdout():
         reader.TransferRoots()
         shape = reader.OneShape()
+    reader = None  # its model of the file's entities (hundreds of MB for a large file) is not needed any more
     return read_faces(path, shape, name, unit=READ_UNIT, unit_note=note, what="IGES file", skip_bad_faces=skip_bad_faces)

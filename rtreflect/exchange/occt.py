@@ -14,8 +14,8 @@ Steps (DESIGN.md, "CAD input"; measured facts in the project's OCP notes):
    (``BRepAdaptor_Curve2d``, seam edges once per orientation, pole edges included) sampled by
    bisection until the polyline's midpoints lie within `TRIM_TOLERANCE` × the part's diagonal
    of the pcurve's **in model space** (measured on the surface with rtreflect's evaluator).
-4. ``mesh_uv``: ``BRepMesh_IncrementalMesh`` on the converted shape, per face the nodes' (u, v)
-   and the triangles (flipped on reversed faces so they wind like the face's normal).
+4. ``mesh_uv``: ``BRepMesh_IncrementalMesh`` on each converted face, the nodes' (u, v) and the
+   triangles (flipped on reversed faces so they wind like the face's normal).
 
 OCP is imported only here and in the per-format readers; without it the user is told which extra
 to install.
@@ -256,12 +256,27 @@ def bspline_of_face(face) -> NurbsSurface:
     knots_v, poles, weights = clean_knots(knots_v, q, poles, weights, 1)
     if not (np.isfinite(poles).all() and np.isfinite(weights).all() and (weights > 0).all()):
         raise FaceError("its surface has control points or weights that are not finite, or weights <= 0")
-    return NurbsSurface(p, q, knots_u, knots_v, poles, weights)
+    from .scene import MAX_MAGNITUDE, ZERO_AREA, _has_area  # the checks inline and .bpt patches get
+
+    largest = float(np.max(np.abs(poles)))
+    if largest > MAX_MAGNITUDE:
+        raise FaceError(f"coordinates must be at most {MAX_MAGNITUDE:g} in magnitude (float32 tracing overflows beyond it), "
+                        f"got {largest:g}")
+    surface = NurbsSurface(p, q, knots_u, knots_v, poles, weights)
+    if not _has_area(surface):
+        raise FaceError(ZERO_AREA)
+    return surface
 
 
-def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float) -> np.ndarray:
-    """One edge's pcurve as (u, v) points in the wire's direction, bisected until within ``tolerance`` in 3D."""
-    from OCP.BRepAdaptor import BRepAdaptor_Curve2d
+def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge: bool = False) -> np.ndarray:
+    """One edge's pcurve as (u, v) points in the wire's direction, bisected until within ``tolerance`` in 3D.
+
+    ``onto_edge``: each sample is then moved to the foot of the 3D edge's point at the same parameter
+    on the surface (`project_onto_surface`): for pcurves that only approximate the edge (fitted by
+    ShapeFix for .3dm faces, 7.6e-3 mm off a 10 mm circle) the loop follows the exact 3D edge.
+    """
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d
     from OCP.TopAbs import TopAbs_REVERSED
 
     curve = BRepAdaptor_Curve2d(edge, face)
@@ -291,19 +306,57 @@ def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float) -> np.nda
         order = np.argsort(np.r_[ts, mids_t[bad]], kind="stable")
         ts = np.r_[ts, mids_t[bad]][order]
         uv = np.r_[uv, mids[bad]][order]
+    # A pole edge has no 3D curve to follow; a seam's pcurves are the domain's sides, exact already (and
+    # projecting onto a seam could land on either side).
+    if onto_edge and not BRep_Tool.Degenerated_s(edge) and not BRep_Tool.IsClosed_s(edge, face):
+        curve3d = BRepAdaptor_Curve(edge)
+        target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(t)) for t in ts)])
+        uv = project_onto_surface(surface, target, uv)
     if edge.Orientation() == TopAbs_REVERSED:
         uv = uv[::-1]
     return uv
 
 
-def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float) -> np.ndarray:
+#: Gauss–Newton steps of `project_onto_surface`: from a start within the edge tolerance, 3 reach float64.
+PROJECTION_STEPS = 4
+
+
+def project_onto_surface(surface: NurbsSurface, target: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(u, v) of the surface points nearest ``target`` (N, 3), by Gauss–Newton from ``uv`` (vectorised).
+
+    Each step solves the normal equations [S_u·S_u S_u·S_v; S_u·S_v S_v·S_v] Δ = −[d·S_u, d·S_v] with
+    d = S(u, v) − target (the foot point condition d ⟂ S_u, S_v). Where the system is singular (a pole)
+    the start is kept; the result stays in the domain.
+    """
+    (u0, u1), (v0, v1) = surface.domain
+    start = uv
+    uv = uv.copy()
+    for _ in range(PROJECTION_STEPS):
+        ev = surface.evaluate(uv[:, 0], uv[:, 1])
+        d = ev.S - target
+        a, b, c = (np.einsum("ij,ij->i", x, y) for x, y in ((ev.Su, ev.Su), (ev.Su, ev.Sv), (ev.Sv, ev.Sv)))
+        gu, gv = np.einsum("ij,ij->i", d, ev.Su), np.einsum("ij,ij->i", d, ev.Sv)
+        det = a * c - b * b
+        ok = det > 1e-12 * (a * c + 1e-300)
+        safe = np.where(ok, det, 1.0)
+        du = np.where(ok, -(c * gu - b * gv) / safe, 0.0)
+        dv = np.where(ok, -(a * gv - b * gu) / safe, 0.0)
+        uv[:, 0] = np.clip(uv[:, 0] + du, u0, u1)
+        uv[:, 1] = np.clip(uv[:, 1] + dv, v0, v1)
+    # Keep the start where the steps did not bring the point closer (near a pole the metric degenerates).
+    before = np.linalg.norm(surface.evaluate(start[:, 0], start[:, 1]).S - target, axis=1)
+    after = np.linalg.norm(surface.evaluate(uv[:, 0], uv[:, 1]).S - target, axis=1)
+    return np.where((after <= before)[:, None], uv, start)
+
+
+def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float, onto_edges: bool = False) -> np.ndarray:
     """A wire's edges' samples joined into one closed (u, v) polyline (last point not repeated)."""
     from OCP.BRepTools import BRepTools_WireExplorer
 
     pieces = []
     explorer = BRepTools_WireExplorer(wire, face)
     while explorer.More():
-        pieces.append(_edge_samples(explorer.Current(), face, surface, tolerance))
+        pieces.append(_edge_samples(explorer.Current(), face, surface, tolerance, onto_edges))
         explorer.Next()
     if not pieces:
         raise FaceError("a wire of the face has no edges")
@@ -321,8 +374,11 @@ def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float) -> np.ndarra
     return loop
 
 
-def trim_of_face(face, surface: NurbsSurface, tolerance: float):
-    """The face's `Trim`: outer wire and holes as (u, v) polylines of ``surface`` (already un-periodised)."""
+def trim_of_face(face, surface: NurbsSurface, tolerance: float, onto_edges: bool = False):
+    """The face's `Trim`: outer wire and holes as (u, v) polylines of ``surface`` (already un-periodised).
+
+    ``onto_edges``: samples follow the 3D edges rather than the pcurves (see `_edge_samples`).
+    """
     from OCP.BRepTools import BRepTools
     from OCP.TopAbs import TopAbs_WIRE
     from OCP.TopExp import TopExp_Explorer
@@ -333,14 +389,14 @@ def trim_of_face(face, surface: NurbsSurface, tolerance: float):
     outer_wire = BRepTools.OuterWire_s(face)
     if outer_wire.IsNull():
         raise FaceError("the face has no outer wire")
-    outer = _wire_loop(outer_wire, face, surface, tolerance)
+    outer = _wire_loop(outer_wire, face, surface, tolerance, onto_edges)
     holes = []
     explorer = TopExp_Explorer(face, TopAbs_WIRE)
     while explorer.More():
         wire = TopoDS.Wire(explorer.Current())
         explorer.Next()
         if not wire.IsSame(outer_wire):
-            holes.append(_wire_loop(wire, face, surface, tolerance))
+            holes.append(_wire_loop(wire, face, surface, tolerance, onto_edges))
     trim = Trim(outer, tuple(holes))
     if trim._polygon.is_empty or trim._polygon.area <= 0:
         raise FaceError("its trim loops enclose no area")
@@ -376,14 +432,17 @@ def convert_shape(shape, path: Path):
 
 
 def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what: str,
-               skip_bad_faces: bool = False, reversed_faces: list[bool] | None = None) -> CadModel:
+               skip_bad_faces: bool = False, reversed_faces: list[bool] | None = None,
+               trims_onto_edges: bool = False) -> CadModel:
     """All faces of ``shape`` (every located instance, in explorer order) as trimmed `NurbsSurface`s.
 
-    ``reversed_faces`` overrides OCCT's face orientation (the .3dm reader knows Rhino's). A face
+    ``reversed_faces`` overrides OCCT's face orientation (the .3dm reader knows Rhino's);
+    ``trims_onto_edges`` makes trim samples follow the 3D edges (pcurves fitted by ShapeFix). A face
     that fails is a `SceneError` naming it, unless ``skip_bad_faces``: then it is listed in
     ``CadModel.skipped`` and the others are read.
     """
     from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.BRepTools import BRepTools
     from OCP.TopAbs import TopAbs_FACE, TopAbs_REVERSED
     from OCP.TopExp import TopExp_Explorer
     from OCP.TopoDS import TopoDS
@@ -399,8 +458,6 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     diagonal = float(np.linalg.norm(hi - lo))
     if not (np.isfinite(diagonal) and diagonal > 0):
         raise SceneError(path, "", f"the model's bounding box is empty or not finite ({lo.tolist()} .. {hi.tolist()})")
-    with quiet_stdout():
-        BRepMesh_IncrementalMesh(converted, MESH_DEFLECTION * diagonal, False, MESH_ANGLE, False)
 
     faces = []
     explorer = TopExp_Explorer(converted, TopAbs_FACE)
@@ -415,8 +472,12 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
             try:
                 reversed_face = (face.Orientation() == TopAbs_REVERSED) if reversed_faces is None else reversed_faces[index]
                 surface = bspline_of_face(face)
-                trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal)
+                trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal, trims_onto_edges)
+                # Meshed face by face, its triangulation dropped once read: memory stays that of one face's
+                # mesh (the whole shape's at once took 560 MB on a 2000-face plate).
+                BRepMesh_IncrementalMesh(face, MESH_DEFLECTION * diagonal, False, MESH_ANGLE, False)
                 mesh = mesh_of_face(face, reversed_face)
+                BRepTools.Clean_s(face)
             except FaceError as exc:
                 if not skip_bad_faces:
                     raise SceneError(path, f"face {index}", f"{exc} (--skip-bad-faces renders the other faces)") from None

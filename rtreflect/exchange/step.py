@@ -36,6 +36,7 @@ def read_step(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMo
     with quiet_stdout():
         reader.TransferRoots()
         shape = reader.OneShape()
+    reader = None  # its model of the file's entities (hundreds of MB for a large file) is not needed any more
     note = ""
     if file_units and file_units != ["millimetre"]:
         note = f"file in {', '.join(file_units)}, read in {READ_UNIT}"
