@@ -152,8 +152,13 @@ def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, toler
         ok = np.abs(det) > 1e-12 * np.linalg.norm(Su, axis=1) * np.linalg.norm(Sv, axis=1)
         singular[active[~ok]] = True
         active, a, b, c, dd, det, r1, r2 = (x[ok] for x in (active, a, b, c, dd, det, r1, r2))
-        u[active] = np.clip(u[active] - (dd * r1 - b * r2) / det, u0[active], u1[active])
-        v[active] = np.clip(v[active] - (a * r2 - c * r1) / det, v0[active], v1[active])
+        with np.errstate(over="ignore", invalid="ignore"):  # derivatives ~1e-296 pass the relative test, then overflow
+            du, dv = (dd * r1 - b * r2) / det, (a * r2 - c * r1) / det
+        finite = np.isfinite(du) & np.isfinite(dv)
+        singular[active[~finite]] = True
+        active, du, dv = active[finite], du[finite], dv[finite]
+        u[active] = np.clip(u[active] - du, u0[active], u1[active])
+        v[active] = np.clip(v[active] - dv, v0[active], v1[active])
     converged &= ~singular
     return u, v, SurfaceDerivatives(S, Su_all, Sv_all), converged
 
