@@ -62,7 +62,7 @@ class RenderStats:
     height: int
     samples: int
     rays: int = 0
-    fallbacks: int = 0  # samples whose Newton refinement failed (mesh hit kept)
+    fallbacks: int = 0  # samples whose nearest exact hit could not be decided (tracing.py)
     fallback_pixels: int = 0  # pixels with at least one such sample
     tiles: int = 0
     seconds: float = 0.0
