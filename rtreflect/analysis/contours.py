@@ -33,7 +33,7 @@ from ..trace.camera import Camera
 from ..modes.lights import TubeLights, reflect
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import Tessellation
-from ..trace.tracing import facing
+from ..trace.tracing import facing, occluded
 
 #: Target size in pixels of one cell of the (u, v) grid that contourpy sees.
 GRID_CELL_PX = 2.0
@@ -191,9 +191,10 @@ class UlmetField:
         return self.camera.project(R), depth
 
     def seen(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """True where the contour point S(u, v) shows its tube: visible, unblocked, on the tube.
+        """True where the contour point S(u, v) shows its tube: on its face, visible, unblocked, on the tube.
 
-        In front of the camera (depth > 0 for either projection: orthographic rays start on
+        Inside its face's trim (so a level set is cut where it leaves the face, the cut located
+        by `_cut_points`' bisection like any other); in front of the camera (depth > 0 for either projection: orthographic rays start on
         the eye plane too, DESIGN.md's camera contract); no triangle between the point and the eye; no triangle on
         the reflected ray before it reaches the light plane; for a finite tube, the ray meets
         the plane within the tube's length. Rays start off the surface along the normal
@@ -203,7 +204,7 @@ class UlmetField:
         lights = self.lights
         w = self.camera.basis[0]
         depth = (R - self.camera.spec.eye) @ w
-        good = depth > 0
+        good = (depth > 0) & self.surfaces.on_face(patch, u, v)  # a trimmed face's contour ends at its trim
         t = lights.plane_t(R, s)
         good &= t > 0
         tau = (R + np.where(np.isfinite(t), t, 0.0)[:, None] * s - lights.Q) @ lights.c
@@ -216,15 +217,18 @@ class UlmetField:
         else:
             to_eye = np.linalg.norm(self.camera.spec.eye - origin, axis=1)
         idx = np.flatnonzero(good)
-        good[idx] &= ~self.accelerator.occluded(origin[idx], a[idx], to_eye[idx])
+        good[idx] &= ~occluded(self.accelerator, self.tessellation, self.surfaces, origin[idx], a[idx], to_eye[idx])
         idx = np.flatnonzero(good)
-        good[idx] &= reaches_light_plane(self.accelerator, lights, R[idx], n[idx], patch[idx], s[idx])
+        good[idx] &= reaches_light_plane(self, lights, R[idx], n[idx], patch[idx], s[idx])
         return good
 
 
-def reaches_light_plane(accelerator: Accelerator, lights: TubeLights, R: np.ndarray, n: np.ndarray,
+def reaches_light_plane(scene, lights: TubeLights, R: np.ndarray, n: np.ndarray,
                         patch: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """True where the reflected ray R + t s meets the light plane ahead (t > 0) with no triangle on the way.
+    """True where the reflected ray R + t s meets the light plane ahead (t > 0) with no surface on the way.
+
+    ``scene`` is anything with ``accelerator``, ``tessellation`` and ``surfaces`` (a `Renderer`, an
+    `UlmetField`); the occlusion is `tracing.occluded`, which respects trims.
 
     n is the unit normal at R turned to the side the ray leaves from; the ray starts there,
     off the surface by more than the mesh's chord error (`Accelerator.surface_origins`), as the
@@ -233,8 +237,8 @@ def reaches_light_plane(accelerator: Accelerator, lights: TubeLights, R: np.ndar
     t = lights.plane_t(R, s)
     clear = t > 0
     idx = np.flatnonzero(clear)
-    origin = accelerator.surface_origins(R[idx], n[idx], patch[idx])
-    clear[idx] = ~accelerator.occluded(origin, s[idx], t[idx])
+    origin = scene.accelerator.surface_origins(R[idx], n[idx], patch[idx])
+    clear[idx] = ~occluded(scene.accelerator, scene.tessellation, scene.surfaces, origin, s[idx], t[idx])
     return clear
 
 

@@ -60,6 +60,7 @@ from ..integrator.film import Film
 from ..modes.lights import reflect
 from ..integrator.renderer import Renderer
 from ..exchange.scene import Scene
+from ..trace.tracing import occluded
 
 DEFAULT_TOLERANCE_PX = 0.5
 #: Neighbouring hit points farther apart than this many pixel footprints straddle an edge (or graze).
@@ -294,7 +295,7 @@ def _unblocked(renderer: Renderer, aovs: PixelAOVs, pixels: np.ndarray) -> np.nd
     """True where the pixel's reflected ray reaches the light plane without meeting the surface."""
     P, n, s = aovs.P.reshape(-1, 3)[pixels], aovs.N.reshape(-1, 3)[pixels], aovs.s.reshape(-1, 3)[pixels]
     patch = aovs.patch.ravel()[pixels].astype(int)
-    return reaches_light_plane(renderer.accelerator, renderer.lights, P, n, patch, s)
+    return reaches_light_plane(renderer, renderer.lights, P, n, patch, s)
 
 
 def _crossing(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, jump_next: np.ndarray,
@@ -438,7 +439,7 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
     tubes = renderer.lights.reach(P, s, tube=line_id[ahead].astype(int))
     t = np.where(tubes.candidate, tubes.t_candidate, tubes.t_of)
     start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[ahead].astype(int))
-    blocked[ahead] = renderer.accelerator.occluded(start, s, t)
+    blocked[ahead] = occluded(renderer.accelerator, renderer.tessellation, renderer.surfaces, start, s, t)
     blocked_grid = blocked.reshape(height, width)
     padded = np.pad(blocked_grid, 1, mode="edge")
     uniform = ((padded[1:-1, :-2] == blocked_grid) & (padded[1:-1, 2:] == blocked_grid)

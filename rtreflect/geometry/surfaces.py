@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -28,6 +29,13 @@ CHUNK = 1 << 12
 #: Its rounding error grows with degree: ~1e-13 of the net's size at degree 5, 4e-12 at 7 (tests/test_surfaces.py).
 POWER_FORM_MAX_DEGREE = 5
 POWER_FORM_MAX_BYTES = 64 << 20
+
+#: Most spans per direction of a patch evaluated with others of its degrees in one batch (`SurfaceSet`).
+GROUP_MAX_SPANS = 64
+#: A patch with at least this many points in one call is evaluated alone: per point, the batch's
+#: padded span search and gathers cost ~0.37 µs against its own ~0.22 µs, while the per-call
+#: overhead of ~0.1 ms a patch dominates below ~700 points (300 points on 206 faces: 0.3 vs 10.7 ms).
+GROUP_MAX_POINTS = 768
 
 #: A degenerate point (collapsed edge, pole, parallel partials), where the normal is taken as the limit
 #: from the interior: the sine of the angle between S_u and S_v, |S_u × S_v| / (|S_u| |S_v|), below this.
@@ -121,6 +129,16 @@ def _power_rows(tau: np.ndarray, length: np.ndarray, degree: int, order: int) ->
             rows[m, k] = falling * powers[k - m]
         rows[m, m:] *= inv_len**m
     return rows
+
+
+def _power_combine(table: np.ndarray, column: np.ndarray, tau_u, len_u, tau_v, len_v, p: int, q: int,
+                   order: int) -> list[list[np.ndarray]]:
+    """H[k][l] (N, 4) from power-form coefficients: each point's span column of ``table`` and its local τ."""
+    a = _power_rows(tau_u, len_u, p, order)  # (order+1, p+1, N)
+    b = _power_rows(tau_v, len_v, q, order)
+    C = np.take(table, column, axis=1).reshape(p + 1, q + 1, 4, -1)  # (k, l, c, N)
+    T = [np.einsum("kn,klcn->lcn", a[i], C) for i in range(order + 1)]  # u-derivative i, contracted over k
+    return [[np.einsum("ln,lcn->nc", b[j], T[i]) for j in range(order + 1 - i)] for i in range(order + 1)]
 
 
 def _rational_derivatives(H: list[list[np.ndarray]], order: int) -> tuple[np.ndarray, ...]:
@@ -261,15 +279,17 @@ class NurbsSurface:
 
     def _power_homogeneous(self, u: np.ndarray, v: np.ndarray, order: int) -> list[list[np.ndarray]]:
         """H[k][l] (N, 4) = ∂^(k+l) S_w / ∂u^k ∂v^l, for k + l <= order, from the per-span power form."""
+        column, tau_u, len_u, tau_v, len_v = self._power_locate(u, v)
+        return _power_combine(self._power[4], column, tau_u, len_u, tau_v, len_v, self.degree_u, self.degree_v, order)
+
+    def _power_locate(self, u: np.ndarray, v: np.ndarray):
+        """Per point (already clipped to the domain): its span's column in the power table, local τ and span lengths."""
         p, q = self.degree_u, self.degree_v
-        start_u, len_u, start_v, len_v, coef = self._power
+        start_u, len_u, start_v, len_v, _ = self._power
         su = find_span(self.knots_u, p, self.weights.shape[0], u) - p
         sv = find_span(self.knots_v, q, self.weights.shape[1], v) - q
-        a = _power_rows((u - start_u[su]) / len_u[su], len_u[su], p, order)  # (order+1, p+1, N)
-        b = _power_rows((v - start_v[sv]) / len_v[sv], len_v[sv], q, order)
-        C = np.take(coef, su * len(start_v) + sv, axis=1).reshape(p + 1, q + 1, 4, -1)  # (k, l, c, N)
-        T = [np.einsum("kn,klcn->lcn", a[i], C) for i in range(order + 1)]  # u-derivative i, contracted over k
-        return [[np.einsum("ln,lcn->nc", b[j], T[i]) for j in range(order + 1 - i)] for i in range(order + 1)]
+        return (su * len(start_v) + sv, (u - start_u[su]) / len_u[su], len_u[su], (v - start_v[sv]) / len_v[sv],
+                len_v[sv])
 
     def _basis_homogeneous(self, u: np.ndarray, v: np.ndarray, order: int) -> list[list[np.ndarray]]:
         """H[k][l] as `_power_homogeneous`, from the B-spline basis functions (any degree)."""
@@ -354,20 +374,73 @@ class SurfaceSet:
         return len(self.patches)
 
     def _by_patch(self, patch: np.ndarray):
+        """(k, rows of patch k) for every patch index ≥ 0 present: one stable sort, not a scan per patch."""
         patch = np.asarray(patch).ravel()
-        for k in np.unique(patch):
-            if k < 0:
-                continue
-            yield int(k), np.flatnonzero(patch == k)
+        order = np.argsort(patch, kind="stable")
+        keys, starts = np.unique(patch[order], return_index=True)
+        for k, rows in zip(keys, np.split(order, starts[1:])):
+            if k >= 0:
+                yield int(k), rows
 
     def evaluate(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, order: int = 1) -> SurfaceDerivatives:
-        """S and derivatives for points given by patch index and (u, v); rows with patch < 0 stay NaN."""
-        n = np.asarray(patch).size
+        """S and derivatives for points given by patch index and (u, v); rows with patch < 0 stay NaN.
+
+        Patches in power form with few points each are evaluated together, one group per degree
+        pair (`_evaluate_group`): a part of hundreds of faces then costs about what one patch does,
+        not hundreds of small calls. Values are bit-identical to each patch's own `evaluate`.
+        """
+        patch = np.asarray(patch).ravel()
+        u, v = np.asarray(u, dtype=np.float64).ravel(), np.asarray(v, dtype=np.float64).ravel()
+        n = patch.size
         outs = [np.full((n, 3), np.nan) for _ in range(3 if order == 1 else 6)]
-        for k, idx in self._by_patch(patch):
-            for out, part in zip(outs, self.patches[k].evaluate(u[idx], v[idx], order)):
+        if len(self.patches) == 1 and n and patch.min() >= 0:  # one patch: no grouping to do
+            return self.patches[0].evaluate(u, v, order)
+        groups = self._power_groups
+        batched: dict[int, list[np.ndarray]] = {}
+        for k, rows in self._by_patch(patch):
+            g = int(groups.of[k])
+            if g and len(rows) < GROUP_MAX_POINTS:  # few points: with the group (a patch with many is faster alone)
+                batched.setdefault(g, []).append(rows)
+                continue
+            for out, part in zip(outs, self.patches[k].evaluate(u[rows], v[rows], order)):
+                out[rows] = part
+        for g, parts in batched.items():
+            idx = np.concatenate(parts)
+            for out, part in zip(outs, self._evaluate_group(groups.members[g - 1], groups.offset, patch[idx], u[idx],
+                                                            v[idx], order)):
                 out[idx] = part
         return SurfaceDerivatives(*outs)
+
+    @cached_property
+    def _domain_table(self) -> np.ndarray:
+        return np.array([[*p.domain[0], *p.domain[1]] for p in self.patches])
+
+    @cached_property
+    def _power_groups(self) -> "_PowerGroups":
+        return _PowerGroups.of_patches(self.patches)
+
+    def _evaluate_group(self, members: np.ndarray, offset: np.ndarray, patch, u, v, order: int):
+        """`evaluate` for points on patches of one power-form group (same degrees, one concatenated table).
+
+        The span lookup too is vectorised over the group's patches, with their span starts side by
+        side in a padded table: span = the number of span starts after the first that are ≤ t,
+        which is `find_span`'s answer (the last non-empty span holding t, the upper end included).
+        """
+        first = self.patches[int(members[0])]
+        p, q = first.degree_u, first.degree_v
+        g = self._power_groups
+        table, lookup = g.tables[(p, q)], g.lookups[(p, q)]
+        outs = [np.empty((len(u), 3)) for _ in range(3 if order == 1 else 6)]
+        for lo in range(0, len(u), CHUNK):
+            part = slice(lo, lo + CHUNK)
+            local = g.local[patch[part]]
+            su, tau_u, len_u = lookup.u.locate(local, u[part])
+            sv, tau_v, len_v = lookup.v.locate(local, v[part])
+            column = offset[patch[part]] + su * lookup.v.count[local] + sv
+            H = _power_combine(table, column, tau_u, len_u, tau_v, len_v, p, q, order)
+            for out, value in zip(outs, _rational_derivatives(H, order)):
+                out[part] = value
+        return outs
 
     def normals(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, derivs: SurfaceDerivatives | None = None) -> np.ndarray:
         n = np.asarray(patch).size
@@ -377,8 +450,94 @@ class SurfaceSet:
             out[idx] = self.patches[k].normals(u[idx], v[idx], sub)
         return out
 
+    @property
+    def trimmed(self) -> bool:
+        """Whether any patch is a trimmed face (then hits, occlusions and contours are tested against trims)."""
+        return any(p.trim is not None for p in self.patches)
+
+    def on_face(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """True where (u, v) lies on the face of ``patch``: inside its trim, anywhere on an untrimmed patch."""
+        patch = np.asarray(patch).ravel()
+        inside = np.ones(len(patch), dtype=bool)
+        for k, idx in self._by_patch(patch):
+            trim = self.patches[k].trim
+            if trim is not None:
+                inside[idx] = trim.contains(np.asarray(u)[idx], np.asarray(v)[idx])
+        return inside
+
     def domains(self, patch: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Per-point parameter domain bounds (u0, u1, v0, v1)."""
-        table = np.array([[*p.domain[0], *p.domain[1]] for p in self.patches])
-        rows = table[np.asarray(patch)]
+        rows = self._domain_table[np.asarray(patch)]
         return rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
+
+
+@dataclass(frozen=True)
+class _SpanTable:
+    """One direction's spans of a group's patches, padded side by side: starts, lengths, domain ends."""
+
+    starts: np.ndarray  # (members, most spans): span starts, +inf beyond a patch's own spans
+    lengths: np.ndarray  # (members, most spans)
+    count: np.ndarray  # (members,) spans per patch
+    lo: np.ndarray  # (members,) domain ends
+    hi: np.ndarray
+
+    @classmethod
+    def of(cls, columns: list[tuple[np.ndarray, np.ndarray]], ends: list[tuple[float, float]]) -> "_SpanTable":
+        width = max(len(start) for start, _ in columns)
+        starts, lengths = np.full((len(columns), width), np.inf), np.ones((len(columns), width))
+        for j, (start, length) in enumerate(columns):
+            starts[j, :len(start)], lengths[j, :len(start)] = start, length
+        lo, hi = np.array(ends).T
+        return cls(starts, lengths, np.array([len(start) for start, _ in columns]), lo, hi)
+
+    def locate(self, local: np.ndarray, t: np.ndarray):
+        """Span index, local τ ∈ [0, 1] and span length of each parameter (clipped to its patch's domain)."""
+        t = np.clip(t, self.lo[local], self.hi[local])
+        span = np.count_nonzero(t[:, None] >= self.starts[local, 1:], axis=1)
+        start, length = self.starts[local, span], self.lengths[local, span]
+        return span, (t - start) / length, length
+
+
+@dataclass(frozen=True)
+class _SpanLookup:
+    u: _SpanTable
+    v: _SpanTable
+
+
+@dataclass(frozen=True)
+class _PowerGroups:
+    """Patches in power form grouped by degree pair, each group's span tables side by side.
+
+    ``of[k]`` is patch k's group number from 1 (0: not grouped); ``members[g − 1]`` the group's patches;
+    ``local[k]`` patch k's row in its group's span tables; ``offset[k]`` where its columns start in
+    its group's coefficient table. Patches with more than `GROUP_MAX_SPANS` spans in a direction
+    stay alone (the padded span search compares each point with every span start).
+    """
+
+    of: np.ndarray
+    members: list
+    local: np.ndarray
+    offset: np.ndarray
+    tables: dict
+    lookups: dict
+
+    @classmethod
+    def of_patches(cls, patches) -> "_PowerGroups":
+        n = len(patches)
+        of, local, offset = (np.zeros(n, dtype=np.int64) for _ in range(3))
+        by_degree: dict[tuple[int, int], list[int]] = {}
+        for k, surface in enumerate(patches):
+            power = surface._power
+            if power is not None and max(len(power[0]), len(power[2])) <= GROUP_MAX_SPANS:
+                by_degree.setdefault((surface.degree_u, surface.degree_v), []).append(k)
+        members, tables, lookups = [], {}, {}
+        for g, (degrees, ks) in enumerate(by_degree.items(), start=1):
+            of[ks], local[ks] = g, np.arange(len(ks))
+            widths = [patches[k]._power[4].shape[1] for k in ks]
+            offset[ks] = np.cumsum([0] + widths[:-1])
+            tables[degrees] = np.ascontiguousarray(np.concatenate([patches[k]._power[4] for k in ks], axis=1))
+            lookups[degrees] = _SpanLookup(
+                _SpanTable.of([patches[k]._power[0:2] for k in ks], [patches[k].domain[0] for k in ks]),
+                _SpanTable.of([patches[k]._power[2:4] for k in ks], [patches[k].domain[1] for k in ks]))
+            members.append(np.asarray(ks))
+        return cls(of, members, local, offset, tables, lookups)

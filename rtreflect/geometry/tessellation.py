@@ -3,11 +3,18 @@
 The mesh only *finds* hits (DESIGN.md); the exact point and normal come from the
 NURBS evaluator afterwards. Each knot span gets ``tessellation`` segments per
 direction, so the mesh follows the surface's own pieces.
+
+A trimmed CAD face (``NurbsSurface.trim``, DESIGN.md "CAD input") is meshed from its reader's
+triangulation in (u, v) when it has one (``mesh_uv``: vertices S(nodes) by rtreflect's own
+evaluator), else from the span grid keeping the triangles that touch the face (a triangle
+overlapping the trim polygon in (u, v)). Either way the mesh only finds hits: the tracer
+tests each refined hit against the trim (tracing.py).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import trimesh
@@ -29,20 +36,40 @@ def grid_faces(nu: int, nv: int) -> np.ndarray:
     return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int64)
 
 
-def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int) -> trimesh.Trimesh:
-    """A mesh of one patch; ``vertex_attributes`` hold ``uv`` (V, 2) and ``patch`` (V,)."""
-    breaks_u, breaks_v = surface.span_breaks()
-    us, vs = span_samples(breaks_u, per_span), span_samples(breaks_v, per_span)
-    uu, vv = np.meshgrid(us, vs, indexing="ij")
-    uv = np.stack([uu.ravel(), vv.ravel()], axis=1)
+def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enclose: bool = False) -> trimesh.Trimesh:
+    """A mesh of one patch (of its trimmed face, see the module doc).
+
+    ``vertex_attributes`` hold ``uv`` (V, 2), ``patch`` (V,) and ``rim`` (V,): the vertices on the face's
+    boundary (domain edge, or the trimmed mesh's boundary), where a neighbouring face may join.
+    """
+    if surface.mesh_uv is not None:
+        nodes, triangles = surface.mesh_uv
+        uv, faces = np.asarray(nodes, dtype=np.float64).reshape(-1, 2), np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        rim = np.unique(_boundary_edges(faces))  # on the trim: where a neighbouring face joins
+        uv, faces = _with_skirt(uv, faces, surface.domain)
+    else:
+        breaks_u, breaks_v = surface.span_breaks()
+        us, vs = span_samples(breaks_u, per_span), span_samples(breaks_v, per_span)
+        uu, vv = np.meshgrid(us, vs, indexing="ij")
+        uv = np.stack([uu.ravel(), vv.ravel()], axis=1)
+        faces = grid_faces(len(us), len(vs))
+        if surface.trim is not None:
+            uv, faces = _clip_to_trim(uv, faces, surface.trim)
+        rim = np.unique(_boundary_edges(faces)) if surface.trim is not None else _domain_boundary(uv)
     points = surface.evaluate(uv[:, 0], uv[:, 1]).S
+    if enclose:
+        points = _enclosing(surface, uv, points, faces, rim)
     return trimesh.Trimesh(
         vertices=points,
-        faces=grid_faces(len(us), len(vs)),
-        vertex_attributes={"uv": uv, "patch": np.full(len(uv), patch_index)},
+        faces=faces,
+        vertex_attributes={"uv": uv, "patch": np.full(len(uv), patch_index), "rim": np.isin(np.arange(len(uv)), rim)},
         process=False,  # keep the grid as built: merging would mix vertices of different (u, v)
         validate=False,
     )
+
+
+#: Boundary vertices the seam restart asks the k-d tree for at first (more for points whose nearest all lie on their own face).
+SEAM_NEIGHBOURS = 8
 
 
 @dataclass(frozen=True)
@@ -56,10 +83,10 @@ class Tessellation:
     face_patch: np.ndarray  # (F,)
     chord_error: np.ndarray  # per patch: largest mesh-to-surface distance found at edge midpoints
     meshes: tuple[trimesh.Trimesh, ...]
-    boundary: np.ndarray  # indices of the vertices on a patch's domain boundary (where a neighbour may join)
+    boundary: np.ndarray  # indices of the vertices on a face's mesh boundary (where a neighbour may join)
     edge_length: np.ndarray  # per patch: its longest mesh edge
 
-    @property
+    @cached_property
     def extent(self) -> float:
         """Diagonal of the bounding box of all patches."""
         return float(np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)))
@@ -70,38 +97,70 @@ class Tessellation:
         uv = (1.0 - b1 - b2)[:, None] * corners[:, 0] + b1[:, None] * corners[:, 1] + b2[:, None] * corners[:, 2]
         return self.face_patch[prim], uv[:, 0], uv[:, 1]
 
-    def across_seam(self, points: np.ndarray, patch: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def across_seam(self, points: np.ndarray, patch: np.ndarray, tried: np.ndarray | None = None,
+                    uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For points on the boundary of ``patch``: the nearest boundary vertex of another patch.
 
-        Returns (patch, u, v) of that vertex, where a hit that ran off one patch's edge
+        ``tried`` (N, m) lists patches to pass over as well (neighbours already tried: where
+        several faces meet at a corner, their boundary vertices coincide). With the points' own
+        ``uv`` (N, 2), a boundary vertex of the same patch counts too when its (u, v) lies more
+        than half the patch's domain away: the other side of a closed face's seam (a revolved
+        face's u = 0 and u = 2π), where the ray goes on on the same face.
+
+        Returns (patch, u, v) of that vertex, where a hit that ran off one face's edge
         can restart on its neighbour, and the distance to it (patch −1 and inf where there
-        is no other patch).
-        Brute force over boundary vertices, in row chunks: it serves the few hits at seams.
+        is no other patch). A k-d tree over the boundary vertices: the SEAM_NEIGHBOURS nearest,
+        then more for the points whose nearest all belong to their own patch.
         """
         patch_out = np.full(len(points), -1)
         uv_out = np.full((len(points), 2), np.nan)
         dist_out = np.full(len(points), np.inf)
-        candidates = self.boundary
-        if len(candidates) == 0:
+        if len(self.boundary) == 0 or len(points) == 0:
             return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
-        cand_xyz, cand_patch = self.vertices[candidates], self.vertex_patch[candidates]
-        cand_sq = np.einsum("ij,ij->i", cand_xyz, cand_xyz)
-        rows = max(1, (1 << 20) // len(candidates))  # bounds the (rows, candidates) distance table
-        for lo in range(0, len(points), rows):
-            hi = min(lo + rows, len(points))
-            pts = points[lo:hi]
-            d2 = np.maximum(np.einsum("ij,ij->i", pts, pts)[:, None] - 2.0 * pts @ cand_xyz.T + cand_sq, 0.0)
-            d2[cand_patch[None, :] == patch[lo:hi, None]] = np.inf
-            best = np.argmin(d2, axis=1)
-            dist_out[lo:hi] = np.sqrt(d2[np.arange(hi - lo), best])
-            found = np.isfinite(dist_out[lo:hi])
-            patch_out[lo:hi] = np.where(found, cand_patch[best], -1)
-            uv_out[lo:hi] = self.vertex_uv[candidates[best]]
+        tree, cand_patch = self._boundary_tree
+        todo = np.arange(len(points))
+        k = SEAM_NEIGHBOURS
+        while len(todo):
+            k = min(k, len(self.boundary))
+            dist, nearest = tree.query(points[todo], k=k)
+            dist, nearest = dist.reshape(len(todo), k), nearest.reshape(len(todo), k)
+            other = cand_patch[nearest] != patch[todo, None]
+            if uv is not None:
+                far_side = np.abs(self.vertex_uv[self.boundary[nearest]] - uv[todo, None, :]) > 0.5 * self._domain_span[patch[todo], None, :]
+                other |= np.any(far_side, axis=2)
+            if tried is not None:
+                other &= ~np.any(cand_patch[nearest][:, :, None] == tried[todo, None, :], axis=2)
+            first = np.argmax(other, axis=1)
+            found = other[np.arange(len(todo)), first]
+            rows, best = todo[found], nearest[found, first[found]]
+            patch_out[rows] = cand_patch[best]
+            uv_out[rows] = self.vertex_uv[self.boundary[best]]
+            dist_out[rows] = dist[found, first[found]]
+            if k == len(self.boundary):
+                break
+            todo, k = todo[~found], 8 * k
         return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
+
+    @cached_property
+    def _domain_span(self) -> np.ndarray:
+        """(patches, 2): the extent of each patch's vertices in u and in v."""
+        span = np.zeros((int(self.vertex_patch.max(initial=-1)) + 1, 2))
+        for k in range(len(span)):
+            uv = self.vertex_uv[self.vertex_patch == k]
+            if len(uv):
+                span[k] = np.ptp(uv, axis=0)
+        return span
+
+    @cached_property
+    def _boundary_tree(self):
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.vertices[self.boundary]), self.vertex_patch[self.boundary]
 
 
 def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:
-    """Largest distance between the mesh and the surface, sampled at the midpoints of every triangle edge.
+    """Largest distance between the mesh and the surface, sampled at the midpoints of every triangle edge
+    and at the vertices (which `_enclosing` moves off the surface).
 
     Edge midpoints, not centroids: a chord strays farthest from the surface at its middle.
     """
@@ -109,11 +168,47 @@ def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:
     uv = mesh.vertex_attributes["uv"][edges].mean(axis=1)
     exact = surface.evaluate(uv[:, 0], uv[:, 1]).S
     chord_mid = mesh.vertices[edges].mean(axis=1)
-    return float(np.max(np.linalg.norm(exact - chord_mid, axis=1)))
+    vertex_uv = mesh.vertex_attributes["uv"]
+    at_vertices = np.linalg.norm(surface.evaluate(vertex_uv[:, 0], vertex_uv[:, 1]).S - mesh.vertices, axis=1)
+    return float(max(np.max(np.linalg.norm(exact - chord_mid, axis=1), initial=0.0), np.max(at_vertices, initial=0.0)))
 
 
-def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span: int) -> Tessellation:
-    meshes = tuple(tessellate_patch(s, k, per_span) for k, s in enumerate(surfaces))
+#: `_enclosing` moves vertices by this many times the largest chord deviation of their edges: a
+#: triangle's interior can stray a little farther from its plane than its edges' midpoints do.
+ENCLOSE_MARGIN = 1.25
+
+
+def _enclosing(surface: NurbsSurface, uv: np.ndarray, points: np.ndarray, faces: np.ndarray, rim: np.ndarray) -> np.ndarray:
+    """Vertices moved along the normal to the convex side of the surface, so the mesh encloses it there.
+
+    A mesh with its vertices on the surface lies inside it where the surface is convex: rays near
+    a silhouette pass outside the mesh but meet the surface, and would miss (a chord-approximate
+    silhouette). Each vertex moves to the side its edges' chords fall short on (the sign of the
+    deviation S(mid) − chord midpoint along its normal, the larger side where a saddle has both),
+    by ENCLOSE_MARGIN times the largest such deviation: the mesh then covers the surface there and
+    the refinement moves every hit back onto it. Planes do not move.
+    """
+    if len(faces) == 0:
+        return points
+    edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
+    mid = uv[edges].mean(axis=1)
+    deviation = surface.evaluate(mid[:, 0], mid[:, 1]).S - points[edges].mean(axis=1)
+    normal = surface.normals(uv[:, 0], uv[:, 1])
+    out = np.zeros(len(points))
+    into = np.zeros(len(points))
+    for end in (0, 1):
+        along = np.einsum("ij,ij->i", deviation, normal[edges[:, end]])
+        np.maximum.at(out, edges[:, end], along)
+        np.minimum.at(into, edges[:, end], along)
+    shift = np.where(out >= -into, out, into)
+    shift[rim] = 0.0  # the face's edge stays where it is: moved along the normal it would slide across the view
+    return points + ENCLOSE_MARGIN * shift[:, None] * normal
+
+
+def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span: int,
+               enclose: bool = False) -> Tessellation:
+    """All patches' meshes; ``enclose``: vertices moved so the mesh covers the surface (`_enclosing`), for the exact tracer."""
+    meshes = tuple(tessellate_patch(s, k, per_span, enclose) for k, s in enumerate(surfaces))
     offsets = np.cumsum([0] + [len(m.vertices) for m in meshes])
     return Tessellation(
         vertices=np.concatenate([m.vertices for m in meshes]),
@@ -123,13 +218,79 @@ def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span
         face_patch=np.concatenate([np.full(len(m.faces), k) for k, m in enumerate(meshes)]),
         chord_error=np.array([_chord_error(s, m) for s, m in zip(surfaces, meshes)]),
         meshes=meshes,
-        boundary=np.concatenate([_boundary_vertices(m) + off for m, off in zip(meshes, offsets)]),
-        edge_length=np.array([float(m.edges_unique_length.max()) for m in meshes]),
+        boundary=np.concatenate([np.flatnonzero(m.vertex_attributes["rim"]) + off for m, off in zip(meshes, offsets)]),
+        edge_length=np.array([float(m.edges_unique_length.max(initial=0.0)) for m in meshes]),
     )
 
 
-def _boundary_vertices(mesh: trimesh.Trimesh) -> np.ndarray:
+#: Width of the skirt around a reader's mesh, in lengths of the boundary edge it hangs from.
+#: A boundary chord cuts inside a face bulging beyond it by its sagitta, L²κ/8 ≤ L/2 while the
+#: loop turns by less than 4 rad per edge: a skirt one edge wide covers the face to its trim.
+SKIRT_EDGES = 1.0
+
+
+def _with_skirt(uv: np.ndarray, faces: np.ndarray, domain) -> tuple[np.ndarray, np.ndarray]:
+    """A reader's mesh with a strip of triangles outside every boundary edge, in (u, v) clamped to the domain.
+
+    The reader's boundary nodes lie on the trim, its boundary edges are chords of it: rays between
+    chord and trim would miss the mesh and never reach the exact face. The strip (SKIRT_EDGES wide)
+    lies on the untrimmed surface beyond the face, so rays there are refined and tested against the
+    trim like any other (tracing.py). The skirt's vertices come after the reader's.
+    """
+    if len(faces) == 0:
+        return uv, faces
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    third = np.concatenate([faces[:, 2], faces[:, 0], faces[:, 1]])
+    once = _once(edges)
+    a, b, c = edges[once, 0], edges[once, 1], third[once]
+    along = uv[b] - uv[a]
+    out = np.column_stack([along[:, 1], -along[:, 0]])  # ⊥ the edge, turned away from the triangle's third vertex
+    out *= np.where(np.einsum("ij,ij->i", out, uv[c] - uv[a]) > 0, -1.0, 1.0)[:, None]
+    (u0, u1), (v0, v1) = domain
+    lo, hi = np.array([u0, v0]), np.array([u1, v1])
+    a_out = np.clip(uv[a] + SKIRT_EDGES * out, lo, hi)
+    b_out = np.clip(uv[b] + SKIRT_EDGES * out, lo, hi)
+    k = len(uv) + 2 * np.arange(len(a))
+    skirt = np.concatenate([np.column_stack([a, b, k + 1]), np.column_stack([a, k + 1, k])])
+    return np.concatenate([uv, np.stack([a_out, b_out], axis=1).reshape(-1, 2)]), np.concatenate([faces, skirt])
+
+
+def _clip_to_trim(uv: np.ndarray, faces: np.ndarray, trim) -> tuple[np.ndarray, np.ndarray]:
+    """The grid's triangles that overlap the trimmed face in (u, v), and the vertices they use (renumbered).
+
+    Overlap of each triangle with the trim polygon (GEOS, vectorised), not a vertex test: a
+    triangle crossing a thin part of the face with all three corners outside still carries it.
+    """
+    import shapely
+
+    corners = uv[faces]  # (F, 3, 2)
+    if trim.u_period or trim.v_period:  # a periodic face's loops live in one period: test wrapped corners
+        wu, wv = trim.wrap(corners[..., 0], corners[..., 1])
+        corners = np.stack([wu, wv], axis=-1)
+    triangles = shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
+    keep = shapely.intersects(triangles, trim._polygon)
+    if trim.u_period or trim.v_period:  # a wrapped triangle may straddle the period's cut: keep it too
+        span = np.ptp(corners, axis=1)
+        keep |= (span[:, 0] > 0.5 * (trim.u_period or np.inf)) | (span[:, 1] > 0.5 * (trim.v_period or np.inf))
+    faces = faces[keep]
+    used = np.unique(faces)
+    renumber = np.full(len(uv), -1)
+    renumber[used] = np.arange(len(used))
+    return uv[used], renumber[faces]
+
+
+def _once(edges: np.ndarray) -> np.ndarray:
+    """Rows of an (E, 2) edge list whose edge (either direction) occurs once: the mesh's boundary edges."""
+    return trimesh.grouping.group_rows(np.sort(edges, axis=1), require_count=1)
+
+
+def _boundary_edges(faces: np.ndarray) -> np.ndarray:
+    """(B, 2) vertex pairs of the edges used by one triangle only."""
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    return edges[_once(edges)]
+
+
+def _domain_boundary(uv: np.ndarray) -> np.ndarray:
     """Indices of the grid vertices on the patch's parameter-domain boundary."""
-    uv = mesh.vertex_attributes["uv"]
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     return np.flatnonzero(np.any((uv == lo) | (uv == hi), axis=1))

@@ -30,7 +30,7 @@ from ..trace.meshnormals import trace_mesh, vertex_normals
 from ..exchange.scene import ImageSpec, Scene
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
-from ..trace.tracing import Hits, trace
+from ..trace.tracing import Hits, occluded, trace
 
 #: Most rays per tile (about 1.2 kB each in flight, see `tiling`): larger tiles buy no speed over numpy's overhead.
 RAYS_PER_TILE = 1 << 16
@@ -62,7 +62,7 @@ class RenderStats:
     height: int
     samples: int
     rays: int = 0
-    fallbacks: int = 0  # samples whose Newton refinement failed (mesh hit kept)
+    fallbacks: int = 0  # samples whose nearest exact hit could not be decided (tracing.py)
     fallback_pixels: int = 0  # pixels with at least one such sample
     tiles: int = 0
     seconds: float = 0.0
@@ -125,7 +125,8 @@ class Renderer:
     def __init__(self, scene: Scene):
         self.scene = scene
         self.surfaces = SurfaceSet(list(scene.surfaces))
-        self.tessellation = tessellate(scene.surfaces, scene.render.tessellation)
+        # The exact tracer's mesh encloses the surface (silhouettes exact); the mesh-normals path keeps S(nodes).
+        self.tessellation = tessellate(scene.surfaces, scene.render.tessellation, enclose=scene.render.normals != "mesh")
         self.accelerator = Accelerator(self.tessellation)
         self.camera = Camera(scene.camera, scene.image.width, scene.image.height)
         self.lights = TubeLights.from_spec(scene.lights)
@@ -161,7 +162,7 @@ class Renderer:
         if len(cand):
             start = self.accelerator.surface_origins(R[cand], n[cand], hits.patch[idx[cand]])
             with self.clock.stage("occlusion (Embree)"):
-                blocked = self.accelerator.occluded(start, s[idx[cand]], t_tube[cand])
+                blocked = occluded(self.accelerator, self.tessellation, self.surfaces, start, s[idx[cand]], t_tube[cand])
             lit[idx[cand]] = ~blocked
         return shading
 

@@ -59,13 +59,20 @@ class Accelerator:
         """Ray origins in the BVH's centred float32 coordinates (moved in float64, then converted)."""
         return np.ascontiguousarray(np.asarray(origins, dtype=np.float64) - self.centre, dtype=np.float32)
 
-    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> MeshHits:
-        """Nearest triangle hit of each ray."""
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, max_distance: np.ndarray | None = None) -> MeshHits:
+        """Nearest triangle hit of each ray (within ``max_distance`` along it, when given)."""
+        extra = {}
+        if max_distance is not None:
+            extra["dists"] = np.ascontiguousarray(np.minimum(max_distance, np.finfo(np.float32).max), dtype=np.float32)
+        if len(origins) == 0:
+            empty = np.zeros(0)
+            return MeshHits(np.zeros(0, dtype=np.int64), empty, empty, empty)
         result = self.scene.run(
             self._local(origins),
             np.ascontiguousarray(directions, dtype=np.float32),
             query="INTERSECT",
             output=1,
+            **extra,
         )
         prim = np.where(result["geomID"] >= 0, result["primID"], -1).astype(np.int64)
         return MeshHits(prim, result["u"].astype(np.float64), result["v"].astype(np.float64), result["tfar"].astype(np.float64))

@@ -1,0 +1,234 @@
+"""The exact first hit (issue 11 item 2, issue 12 "How it computes" 3–5): nearest, on the face, or none.
+
+Every expectation comes from something independent of the candidate mechanism under test:
+
+- two surfaces together (intersecting patches, a thin plate): each surface traced **alone**
+  (a single smooth patch, where the first mesh hit carries the exact hit) and the nearer
+  of the two exact hits kept, or a plane's closed form;
+- a trimmed face: the untrimmed patch traced alone, its exact (u, v) tested against the trim
+  loops (`Trim.contains`), the ray missing where (u, v) lies outside;
+- occlusion through a hole: the plane's closed-form intersection with the reflected ray, its
+  (u, v) tested against the trim.
+
+Each two-surface test fails on the tracer that kept the first mesh hit's refinement.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtreflect.exchange.scene import load_scene
+from rtreflect.geometry.surfaces import NurbsSurface
+from rtreflect.geometry.trims import Trim
+from rtreflect.integrator.renderer import Renderer
+from rtreflect.trace.tracing import occluded
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+
+
+def hood_scene(width: int = 320, height: int = 180, tessellation: int = 4, surfaces=None):
+    scene = load_scene(SCENES / "hood.toml").with_image(width, height, 1)
+    scene = replace(scene, render=replace(scene.render, tessellation=tessellation))
+    return scene if surfaces is None else replace(scene, surfaces=tuple(surfaces))
+
+
+def pixel_rays(renderer: Renderer):
+    w, h = renderer.scene.image.width, renderer.scene.image.height
+    rows, cols = np.divmod(np.arange(w * h), w)
+    return renderer.camera.rays(rows, cols)
+
+
+def alone(scene, surface: NurbsSurface, origins, directions):
+    """Hits of the rays on one surface alone (its own mesh and BVH): the single-patch tracer."""
+    return Renderer(replace(scene, surfaces=(surface,))).trace(origins, directions)
+
+
+def plane_patch(corner, du, dv, name="plane") -> NurbsSurface:
+    """The bilinear patch corner + u du + v dv, (u, v) ∈ [0, 1]²: a parallelogram of a plane."""
+    corner, du, dv = (np.asarray(x, dtype=np.float64) for x in (corner, du, dv))
+    points = np.array([[corner, corner + dv], [corner + du, corner + du + dv]])
+    return NurbsSurface.bezier(points, name=name)
+
+
+def plane_hits(surface: NurbsSurface, origins, directions):
+    """Closed form: t and (u, v) where each ray meets the plane of a `plane_patch` (NaN outside [0, 1]²)."""
+    P = surface.points
+    corner, du, dv = P[0, 0], P[1, 0] - P[0, 0], P[0, 1] - P[0, 0]
+    normal = np.cross(du, dv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((corner - origins) @ normal) / (directions @ normal)
+    X = origins + t[:, None] * directions - corner
+    G = np.array([[du @ du, du @ dv], [du @ dv, dv @ dv]])
+    uv = np.linalg.solve(G, np.stack([X @ du, X @ dv])).T
+    inside = (t > 0) & np.all((uv >= 0) & (uv <= 1), axis=1)
+    return np.where(inside, t, np.nan), uv
+
+
+def nearest_of(*candidates):
+    """Per ray, the index of the nearest finite t among the candidates (−1 where none) and that t."""
+    T = np.stack([np.where(np.isfinite(t), t, np.inf) for t in candidates])
+    which = np.argmin(T, axis=0)
+    best = T[which, np.arange(T.shape[1])]
+    return np.where(np.isfinite(best), which, -1), best
+
+
+def assert_same_hits(hits, patch_expected, t_expected, scale):
+    """Every ray: the same patch (−1 for a miss) and the same exact ray distance."""
+    wrong_patch = np.flatnonzero(hits.patch != patch_expected)
+    assert len(wrong_patch) == 0, f"{len(wrong_patch)} rays on the wrong patch, e.g. rows {wrong_patch[:5]}"
+    both = np.flatnonzero(patch_expected >= 0)
+    err = np.abs(hits.t[both] - t_expected[both])
+    assert err.max() <= 1e-9 * scale, err.max()
+    assert not hits.fallback.any(), hits.fallback.sum()
+
+
+# --- Issue 11 item 2: surfaces closer than the chord error ----------------------------------------
+
+
+def test_intersecting_patches_keep_the_nearest_exact_hit():
+    """The hood and a plane cutting through it: near the intersection curve the coarse mesh's first hit
+    lies on the farther surface; every pixel must show the nearer exact surface."""
+    scene = hood_scene()
+    hood = scene.surfaces[0]
+    cut = plane_patch([-1.3, -1.2, 0.05], [2.6, 0.0, 0.55], [0.0, 2.4, 0.0], name="cut")
+    renderer = Renderer(replace(scene, surfaces=(hood, cut)))
+    origins, directions = pixel_rays(renderer)
+    hits = renderer.trace(origins, directions)
+    t_hood = alone(scene, hood, origins, directions).t
+    t_cut, _ = plane_hits(cut, origins, directions)
+    expected, t_expected = nearest_of(t_hood, t_cut)
+    assert (expected == 0).sum() > 1000 and (expected == 1).sum() > 1000  # both surfaces in view
+    assert_same_hits(hits, expected, t_expected, renderer.tessellation.extent)
+
+
+def test_thin_plate_keeps_the_upper_sheet():
+    """Two sheets closer than the chord error (the hood and a copy 0.3 chord errors above it, its net
+    stretched so the meshes differ): every hit belongs to the sheet nearer the eye."""
+    scene = hood_scene()
+    hood = scene.surfaces[0]
+    chord = Renderer(scene).tessellation.chord_error[0]
+    points = hood.points * np.array([1.003, 1.003, 1.0]) + np.array([0.0, 0.0, 0.3 * chord])
+    upper = replace(hood, points=points, name="upper")
+    renderer = Renderer(replace(scene, surfaces=(hood, upper)))
+    origins, directions = pixel_rays(renderer)
+    hits = renderer.trace(origins, directions)
+    expected, t_expected = nearest_of(alone(scene, hood, origins, directions).t,
+                                      alone(scene, upper, origins, directions).t)
+    assert (expected == 1).sum() > 10000
+    assert_same_hits(hits, expected, t_expected, renderer.tessellation.extent)
+
+
+# --- Issue 12: trimmed faces -------------------------------------------------------------------------
+
+
+def wavy_trim(samples: int = 4000) -> Trim:
+    """A wavy outer loop and a circular hole inside the hood's parameter square."""
+    theta = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)
+    r = 0.40 + 0.05 * np.sin(5.0 * theta)
+    outer = np.column_stack([0.5 + r * np.cos(theta), 0.5 + r * np.sin(theta)])
+    hole = np.column_stack([0.56 + 0.12 * np.cos(theta), 0.44 + 0.12 * np.sin(theta)])
+    return Trim(outer, (hole,))
+
+
+@pytest.mark.parametrize("mesh", ["grid", "mesh_uv"])
+def test_trimmed_face_hits_exactly_inside_its_trim(mesh):
+    """Coverage and hit points of a trimmed hood equal those of the whole hood masked by the trim, pixel by pixel."""
+    scene = hood_scene(tessellation=8)
+    hood = scene.surfaces[0]
+    trim = wavy_trim()
+    face = replace(hood, trim=trim)
+    if mesh == "mesh_uv":  # a reader's triangulation in (u, v): here a Delaunay of points on and inside the loops
+        face = replace(face, mesh_uv=reader_like_mesh(trim))
+    renderer = Renderer(replace(scene, surfaces=(face,)))
+    origins, directions = pixel_rays(renderer)
+    hits = renderer.trace(origins, directions)
+    whole = alone(scene, hood, origins, directions)
+    inside = whole.hit.copy()
+    inside[whole.hit] = trim.contains(whole.u[whole.hit], whole.v[whole.hit])
+    assert inside.sum() > 2500 and (whole.hit & ~inside).sum() > 1000  # hole and cut-away margin in view
+    assert_same_hits(hits, np.where(inside, 0, -1), whole.t, renderer.tessellation.extent)
+
+
+def reader_like_mesh(trim: Trim) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes on the loops (every 40th sample) and on a grid inside, triangles of their Delaunay kept inside the face."""
+    import shapely
+
+    loops = np.concatenate([trim.outer[::40], *(h[::40] for h in trim.holes)])
+    g = np.linspace(0.0, 1.0, 13)
+    grid = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    grid = grid[trim.contains(grid[:, 0], grid[:, 1])]
+    nodes = np.concatenate([loops, grid])
+    triangles = shapely.get_parts(shapely.delaunay_triangles(shapely.multipoints(nodes)))
+    corners = shapely.get_coordinates(triangles).reshape(-1, 4, 2)[:, :3]
+    centroid = corners.mean(axis=1)
+    corners = corners[trim.contains(centroid[:, 0], centroid[:, 1])]
+    index = {tuple(p): k for k, p in enumerate(nodes)}
+    faces = np.array([[index[tuple(p)] for p in tri] for tri in corners])
+    return nodes, faces
+
+
+def test_reflected_ray_through_a_hole_is_not_blocked():
+    """A trimmed plane above the hood with a hole: reflected rays through the hole reach the lights,
+    those meeting the plate are blocked (closed form + the trim), whatever the plate's mesh covers."""
+    scene = hood_scene()
+    hood = scene.surfaces[0]
+    plate = plane_patch([-2.0, -2.0, 1.2], [4.0, 0.0, 0.0], [0.0, 4.0, 0.0], name="plate")
+    theta = np.linspace(0.0, 2.0 * np.pi, 3000, endpoint=False)
+    hole = np.column_stack([0.5 + 0.11 * np.cos(theta), 0.55 + 0.11 * np.sin(theta)])
+    plate = replace(plate, trim=Trim(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]), (hole,)))
+    renderer = Renderer(replace(scene, surfaces=(hood, plate)))
+    origins, directions = pixel_rays(renderer)
+    # Points of the hood (traced alone: the plate would hide them from this eye) and their reflected rays.
+    whole = alone(scene, hood, origins, directions)
+    idx = np.flatnonzero(whole.hit)
+    R, n = whole.P[idx], whole.N[idx]
+    s = directions[idx] - 2.0 * np.einsum("ij,ij->i", directions[idx], n)[:, None] * n
+    start = renderer.accelerator.surface_origins(R, n, whole.patch[idx])
+    far = np.full(len(idx), 10.0)
+    blocked = occluded(renderer.accelerator, renderer.tessellation, renderer.surfaces, start, s, far)
+    t_plate, uv = plane_hits(plate, start, s)
+    expected = np.isfinite(t_plate) & (t_plate < far) & plate.trim.contains(uv[:, 0], uv[:, 1])
+    through_hole = np.isfinite(t_plate) & ~expected
+    assert through_hole.sum() > 500 and expected.sum() > 500
+    assert np.array_equal(blocked, expected), np.flatnonzero(blocked != expected)[:10]
+
+
+# --- Contours and validate on a trimmed face ---------------------------------------------------------
+
+
+def test_contours_stop_at_the_trim_and_validate_passes():
+    """On the trimmed hood every analytic contour point lies on the face, each cut lands on the trim
+    loop to a small fraction of a pixel, and `validate` passes with the usual tolerances."""
+    import shapely
+
+    from rtreflect.analysis.contours import UlmetField, analytic_contours
+    from rtreflect.analysis.validate import validate_scene
+
+    trim = wavy_trim()
+    scene = hood_scene(tessellation=8)
+    scene = replace(scene.with_image(320, 180, 2), surfaces=(replace(scene.surfaces[0], trim=trim),))
+    renderer = Renderer(scene)
+    field = UlmetField.of(renderer)
+    lines = analytic_contours(field)
+    boundary = shapely.MultiLineString([np.vstack([loop, loop[:1]]) for loop in (trim.outer, *trim.holes)])
+    ends = []
+    for line in lines.lines:
+        for poly in line.polylines:
+            assert trim.contains(poly.uv[:, 0], poly.uv[:, 1]).all()
+            ends += [poly.uv[0], poly.uv[-1]]
+    ends = np.array(ends)
+    gap_uv = shapely.distance(boundary, shapely.points(ends))
+    cut = ends[gap_uv < 0.02]  # ends near the trim (the others end at the image, an occlusion or the tube's end)
+    assert len(cut) >= 20
+    nearest = shapely.get_coordinates(shapely.shortest_line(shapely.points(cut), boundary)).reshape(-1, 2, 2)[:, 1]
+    px_end, _ = field.project(np.zeros(len(cut), dtype=int), cut[:, 0], cut[:, 1])
+    px_loop, _ = field.project(np.zeros(len(cut), dtype=int), nearest[:, 0], nearest[:, 1])
+    assert np.linalg.norm(px_end - px_loop, axis=1).max() <= 0.01
+
+    report = validate_scene(scene, renderer=renderer)
+    assert report.passed, (report.max_px, report.misses, report.colour_mismatches, report.reasons)
+    assert report.points > 200
