@@ -1,0 +1,227 @@
+"""Shared edges (seams) between patches, found geometrically from their boundary curves.
+
+Inline NURBS and .bpt patches carry no topology: two patches share an edge where their
+boundary curves coincide, within a tolerance, over a common stretch. A boundary curve is
+the image C(t) = S(γ(t)) of a polyline γ in the patch's (u, v) domain: the four sides of
+an untrimmed patch are one straight segment each (u = u0, u = u1, v = v0, v = v1); a trimmed
+face's loop, cut at its vertices, gives one curve per B-rep edge. Along a stretch of
+curve a of patch A the partner curve b of patch B is matched point by point by Newton on
+the distance |C_b(s) − P| (the foot point, Piegl & Tiller, *The NURBS Book*, section 6.1),
+so partial overlaps and T-junctions (a long side against a short one, a side against
+part of another) come out as the stretch of a where b lies within the tolerance, its ends
+exactly at b's end points (projected onto a) or a's own.
+
+Every shared stretch is reported once, parametrised along the curve of the lower
+(patch, side) of the pair.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .surfaces import NurbsSurface
+
+#: Boundary-curve samples per Bézier span of the running parameter, to find candidate pairs.
+SAMPLES_PER_SPAN = 16
+#: Newton steps for a foot point on a boundary curve (quadratic convergence: 8 is plenty from a sample).
+FOOT_NEWTON_STEPS = 12
+#: Points of a candidate stretch that must all lie within the tolerance of the partner curve.
+STRETCH_CHECKS = 9
+#: Default tolerance for "the boundary curves coincide", as a fraction of the part's size (bounding-box
+#: diagonal): well above any gap a CAD exchange leaves (1e-7..1e-4 of a part) yet far below a patch's size, so
+#: seams with a visible gap are still found (and reported "open") while distinct edges are not confused.
+FIND_FRACTION = 1e-3
+
+
+@dataclass(frozen=True)
+class Boundary:
+    """One boundary curve of patch ``patch``: the image of the (u, v) polyline ``uv`` (m ≥ 2 vertices).
+
+    ``inward`` is the (u, v) direction pointing into the face across the curve (the same for all its
+    segments: a side of the domain; for a trim loop the left of each segment of a counter-clockwise loop).
+    The curve parameter t runs from 0 to m − 1: segment i is t ∈ [i, i + 1].
+    """
+
+    patch: int
+    side: str
+    uv: np.ndarray
+    inward: np.ndarray
+
+    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(u, v) points (n, 2) and their derivative d(u, v)/dt (n, 2) at parameters t."""
+        t = np.asarray(t, dtype=np.float64)
+        seg = np.clip(np.floor(t).astype(np.int64), 0, len(self.uv) - 2)
+        d = self.uv[seg + 1] - self.uv[seg]
+        return self.uv[seg] + (t - seg)[:, None] * d, d
+
+    @property
+    def t_max(self) -> float:
+        return float(len(self.uv) - 1)
+
+
+def patch_sides(patch: int, surface: NurbsSurface) -> list[Boundary]:
+    """The four sides of an untrimmed patch's domain, each a straight (u, v) segment."""
+    (u0, u1), (v0, v1) = surface.domain
+    return [
+        Boundary(patch, "u0", np.array([[u0, v0], [u0, v1]]), np.array([1.0, 0.0])),
+        Boundary(patch, "u1", np.array([[u1, v0], [u1, v1]]), np.array([-1.0, 0.0])),
+        Boundary(patch, "v0", np.array([[u0, v0], [u1, v0]]), np.array([0.0, 1.0])),
+        Boundary(patch, "v1", np.array([[u0, v1], [u1, v1]]), np.array([0.0, -1.0])),
+    ]
+
+
+def curve(surface: NurbsSurface, boundary: Boundary, t: np.ndarray, order: int = 1):
+    """C(t) = S(γ(t)), C'(t) and (order 2) C''(t), with the surface's derivatives (chain rule, γ'' = 0 per segment)."""
+    uv, d = boundary.at(t)
+    der = surface.evaluate(uv[:, 0], uv[:, 1], order=order)
+    du, dv = d[:, :1], d[:, 1:]
+    C1 = der.Su * du + der.Sv * dv
+    if order == 1:
+        return der.S, C1, None, uv, der
+    C2 = der.Suu * du * du + 2.0 * der.Suv * du * dv + der.Svv * dv * dv
+    return der.S, C1, C2, uv, der
+
+
+def sample_parameters(surface: NurbsSurface, boundary: Boundary, lo: float = 0.0, hi: float | None = None,
+                      per_span: int = SAMPLES_PER_SPAN) -> np.ndarray:
+    """Parameters in [lo, hi] of ``boundary``: its vertices and knot-span breaks, each span cut in ``per_span``."""
+    hi = boundary.t_max if hi is None else hi
+    breaks_u, breaks_v = surface.span_breaks()
+    ts = [np.arange(len(boundary.uv), dtype=np.float64)]
+    for i in range(len(boundary.uv) - 1):  # where a segment crosses a knot line, a span of C ends
+        a, b = boundary.uv[i], boundary.uv[i + 1]
+        for axis, breaks in ((0, breaks_u), (1, breaks_v)):
+            if b[axis] != a[axis]:
+                f = (breaks - a[axis]) / (b[axis] - a[axis])
+                ts.append(i + f[(f > 0) & (f < 1)])
+    t = np.unique(np.concatenate(ts))
+    t = np.unique(np.concatenate([t, [lo, hi]]))
+    t = t[(t >= lo) & (t <= hi)]
+    fine = (t[:-1, None] + (t[1:] - t[:-1])[:, None] * np.arange(per_span)[None, :] / per_span).ravel()
+    return np.r_[fine, t[-1]]
+
+
+def foot_points(surface: NurbsSurface, boundary: Boundary, P: np.ndarray, t_start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Parameters t of the points of ``boundary`` closest to points P, by Newton from ``t_start``; and the distances.
+
+    Minimises ½|C(t) − P|²: t ← t − C'·(C − P) / (C''·(C − P) + |C'|²) (Piegl & Tiller eq. 6.3), kept
+    within the segment of the start (a polyline's foot may sit on a vertex) and within the curve's ends.
+    """
+    t = np.asarray(t_start, dtype=np.float64).copy()
+    seg = np.clip(np.floor(t), 0, boundary.t_max - 1)
+    for _ in range(FOOT_NEWTON_STEPS):
+        C, C1, C2, _, _ = curve(surface, boundary, t, order=2)
+        r = C - P
+        g = np.einsum("ij,ij->i", C1, r)
+        h = np.einsum("ij,ij->i", C2, r) + np.einsum("ij,ij->i", C1, C1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step = np.where(h > 0, g / h, 0.0)
+        t_new = np.clip(t - np.nan_to_num(step), seg, seg + 1)
+        moved = np.max(np.abs(t_new - t), initial=0.0)
+        t = t_new
+        if moved <= 1e-15 * boundary.t_max:  # converged to rounding everywhere
+            break
+    C = curve(surface, boundary, t)[0]
+    return t, np.linalg.norm(C - P, axis=1)
+
+
+@dataclass(frozen=True)
+class Seam:
+    """A stretch t ∈ [t0, t1] of boundary ``a`` (patch A) along which boundary ``b`` (patch B) coincides."""
+
+    a: Boundary
+    b: Boundary
+    t0: float
+    t1: float
+    length: float  # 3D length of the stretch, model units
+
+    @property
+    def patches(self) -> tuple[int, int]:
+        return self.a.patch, self.b.patch
+
+
+def _nearest_start(Cb: np.ndarray, tb: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """For each point P, the parameter of the nearest of the sampled points Cb (start for Newton)."""
+    d2 = np.sum(P * P, axis=1)[:, None] - 2.0 * P @ Cb.T + np.sum(Cb * Cb, axis=1)[None, :]
+    return tb[np.argmin(d2, axis=1)]
+
+
+def _length(surface: NurbsSurface, boundary: Boundary, t0: float, t1: float) -> float:
+    """Arc length of C over [t0, t1]: Gauss–Legendre on |C'| per sampled piece (exact to rounding for smooth C)."""
+    t = sample_parameters(surface, boundary, t0, t1, per_span=4)
+    x, w = np.polynomial.legendre.leggauss(8)
+    a, b = t[:-1, None], t[1:, None]
+    tt = (0.5 * (a + b) + 0.5 * (b - a) * x).ravel()
+    speed = np.linalg.norm(curve(surface, boundary, tt)[1], axis=1).reshape(len(a), -1)
+    return float(np.sum(0.5 * (b - a)[:, 0] * (speed @ w)))
+
+
+def _stretches(sa: NurbsSurface, a: Boundary, sb: NurbsSurface, b: Boundary, tol: float,
+               samples: dict) -> list[tuple[float, float]]:
+    """The parameter intervals of ``a`` along which ``b`` lies within ``tol``.
+
+    Breakpoints on a: its ends and the foot points of b's ends (where a T-junction or a partial
+    overlap stops); a piece between breakpoints is shared when `STRETCH_CHECKS` points of it all lie
+    within ``tol`` of b. Adjacent shared pieces merge.
+    """
+    ta, Ca = samples[id(a)]
+    tb, Cb = samples[id(b)]
+    ends_b = Cb[[0, -1]]
+    t_ends, d_ends = foot_points(sa, a, ends_b, _nearest_start(Ca, ta, ends_b))
+    cuts = np.unique(np.r_[0.0, a.t_max, t_ends[d_ends <= tol]])
+    pieces = []
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        if hi - lo <= 1e-12 * a.t_max:
+            continue
+        t = lo + (hi - lo) * (np.arange(STRETCH_CHECKS) + 0.5) / STRETCH_CHECKS
+        P = curve(sa, a, t)[0]
+        _, dist = foot_points(sb, b, P, _nearest_start(Cb, tb, P))
+        if np.all(dist <= tol):
+            if pieces and pieces[-1][1] == lo:
+                pieces[-1] = (pieces[-1][0], hi)
+            else:
+                pieces.append((lo, hi))
+    return pieces
+
+
+def part_size(surfaces: list[NurbsSurface]) -> float:
+    """Bounding-box diagonal of all control nets: the part's size, the scale of the default tolerances."""
+    net = np.concatenate([s.points.reshape(-1, 3) for s in surfaces])
+    return float(np.linalg.norm(np.ptp(net, axis=0)))
+
+
+def find_seams(surfaces: list[NurbsSurface], tol: float | None = None,
+               boundaries: list[Boundary] | None = None) -> list[Seam]:
+    """Every stretch where boundary curves of two faces (or two sides of one closed face) coincide within ``tol``.
+
+    ``tol`` defaults to `FIND_FRACTION` of the part's size. ``boundaries`` defaults to the four sides of
+    every patch. Degenerate curves (a side collapsed to a point, a pole) share nothing and are skipped.
+    """
+    if tol is None:
+        tol = FIND_FRACTION * part_size(surfaces)
+    if boundaries is None:
+        boundaries = [side for k, s in enumerate(surfaces) for side in patch_sides(k, s)]
+    samples, boxes, keep = {}, [], []
+    for bd in boundaries:
+        t = sample_parameters(surfaces[bd.patch], bd)
+        C = curve(surfaces[bd.patch], bd, t)[0]
+        samples[id(bd)] = (t, C)
+        if np.sum(np.linalg.norm(np.diff(C, axis=0), axis=1)) > 2.0 * tol:
+            keep.append(bd)
+            boxes.append((C.min(axis=0) - tol, C.max(axis=0) + tol))
+    seams = []
+    for i, a in enumerate(keep):
+        for j in range(i + 1, len(keep)):
+            b = keep[j]
+            if a.patch == b.patch and a.side == b.side:
+                continue
+            if np.any(boxes[i][1] < boxes[j][0]) or np.any(boxes[j][1] < boxes[i][0]):
+                continue
+            sa, sb = surfaces[a.patch], surfaces[b.patch]
+            for t0, t1 in _stretches(sa, a, sb, b, tol, samples):
+                length = _length(sa, a, t0, t1)
+                if length > 2.0 * tol:  # corners touching at a point share no edge
+                    seams.append(Seam(a, b, t0, t1, length))
+    return seams
