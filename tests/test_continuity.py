@@ -1,0 +1,230 @@
+"""Continuity at seams (issue 16) against pairs built with known answers.
+
+The pairs are cylinders over a curve z = g(x), written as bicubic patches whose x and z are
+polynomials in u alone (y in v): then at the seam x = 0 the normal angle is
+atan g_B'(0) − atan g_A'(0) and the normal curvature across it is g''/(1 + g'²)^(3/2) —
+closed forms that do not go through the evaluator. Rational versions weight the control
+points along v only (w_ij = w_j), which leaves x(u) and z(u) polynomial. Every pair is also
+moved by a rigid motion, so nothing rests on axis-aligned luck. A G2 pair is one rational
+patch split in two by de Casteljau (knot insertion to full multiplicity) in homogeneous form.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtreflect.analysis.continuity import Thresholds, continuity, sample_seam
+from rtreflect.exchange.scene import load_scene
+from rtreflect.geometry.seams import find_seams, part_size
+from rtreflect.geometry.surfaces import NurbsSurface
+
+ROOT = Path(__file__).resolve().parents[1]
+REL = 1e-9
+
+
+def _rotation() -> np.ndarray:
+    q, _ = np.linalg.qr(np.random.default_rng(7).normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+MOTION = (_rotation(), np.array([0.7, -1.3, 2.1]))
+
+
+def _bernstein_fit(values: np.ndarray) -> np.ndarray:
+    """Cubic Bézier ordinates of the cubic polynomial with these values at u = 0, 1/3, 2/3, 1."""
+    u = np.linspace(0.0, 1.0, 4)
+    B = np.array([[math.comb(3, i) * t ** i * (1 - t) ** (3 - i) for i in range(4)] for t in u])
+    return np.linalg.solve(B, values)
+
+
+def cylinder_patch(g, x0: float, x1: float, y=(-1.0, 1.0), rational: bool = False, lift: float = 0.0) -> NurbsSurface:
+    """z = g(x) + lift over x ∈ [x0, x1], y ∈ y, as a bicubic Bézier patch (u ↦ x, v ↦ y), moved by MOTION."""
+    u = np.linspace(0.0, 1.0, 4)
+    xs = x0 + (x1 - x0) * u
+    z = _bernstein_fit(g(xs) + lift)
+    ys = np.linspace(*y, 4)
+    P = np.zeros((4, 4, 3))
+    P[..., 0] = xs[:, None]
+    P[..., 1] = ys[None, :]
+    P[..., 2] = z[:, None]
+    R, shift = MOTION
+    P = P @ R.T + shift
+    w = np.tile([1.0, 2.5, 0.6, 1.3] if rational else [1.0] * 4, (4, 1))
+    return NurbsSurface.bezier(P, w)
+
+
+def kappa(d1: float, d2: float) -> float:
+    """Curvature of z = g(x) with g' = d1, g'' = d2."""
+    return d2 / (1.0 + d1 * d1) ** 1.5
+
+
+def _report(patches):
+    size = part_size(patches)
+    seams = find_seams(patches)
+    assert len(seams) == 1
+    return seams[0], continuity(patches, seams, Thresholds(1e-9 * size, 1e-6, 1e-6), size)[0]
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_g1_angle_and_curvatures_match_the_closed_form_at_every_sample(rational):
+    alpha = math.radians(7.5)
+    a1, a2 = 0.3, 0.4  # g_A'(0), g_A''(0)
+    b1 = math.tan(math.atan(a1) + alpha)
+    b2 = 1.0
+    A = cylinder_patch(lambda x: a1 * x + 0.5 * a2 * x * x + 0.1 * x ** 3, -1.0, 0.0, rational=rational)
+    B = cylinder_patch(lambda x: b1 * x + 0.5 * b2 * x * x - 0.2 * x ** 3, 0.0, 1.0, rational=rational)
+    assert A.rational == rational
+    _, edge = _report([A, B])
+    s = edge.samples
+    assert len(s.t) >= 16
+    np.testing.assert_allclose(s.g1, alpha, rtol=REL)
+    np.testing.assert_allclose(np.abs(s.kappa_a), abs(kappa(a1, a2)), rtol=REL)
+    np.testing.assert_allclose(np.abs(s.kappa_b), abs(kappa(b1, b2)), rtol=REL)
+    assert np.all(np.sign(s.kappa_a) == np.sign(s.kappa_b))  # both sides' normals turned the same way
+    assert np.max(s.g0) < 1e-12
+    assert edge.cls == "G0"
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_curvature_jump_matches_the_closed_form(rational):
+    a1, a2, b2 = -0.25, 0.4, 1.4
+    A = cylinder_patch(lambda x: a1 * x + 0.5 * a2 * x * x, -1.0, 0.0, rational=rational)
+    B = cylinder_patch(lambda x: a1 * x + 0.5 * b2 * x * x + 0.3 * x ** 3, 0.0, 1.0, rational=rational)
+    _, edge = _report([A, B])
+    s = edge.samples
+    jump = abs(kappa(a1, a2) - kappa(a1, b2))
+    np.testing.assert_allclose(s.jump, jump, rtol=REL)
+    np.testing.assert_allclose(s.rel, jump / abs(kappa(a1, b2)), rtol=REL)
+    np.testing.assert_allclose(s.rel_mean, jump / (0.5 * (abs(kappa(a1, a2)) + abs(kappa(a1, b2)))), rtol=REL)
+    assert np.max(s.g1) < 1e-12
+    assert edge.cls == "G1"
+    assert edge.g2_max_abs == pytest.approx(jump, rel=REL)
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_gap_matches_the_translation(rational):
+    delta = 1e-3
+    g = lambda x: 0.2 * x + 0.3 * x * x - 0.1 * x ** 3  # noqa: E731
+    A = cylinder_patch(g, -1.0, 0.0, rational=rational)
+    B = cylinder_patch(g, 0.0, 1.0, rational=rational, lift=delta)  # moved by δ along the cylinder's z
+    _, edge = _report([A, B])
+    np.testing.assert_allclose(edge.samples.g0, delta, rtol=REL)
+    assert edge.cls == "open"
+    assert np.max(edge.samples.g1) < 1e-9
+
+
+def _split(P: np.ndarray, w: np.ndarray, tau: float):
+    """A Bézier patch split at u = τ by de Casteljau on homogeneous points (= knot insertion to multiplicity p)."""
+    H = np.concatenate([P * w[..., None], w[..., None]], axis=-1)
+    rows = [H]
+    left, right = [H[0]], [H[-1]]
+    while len(rows[-1]) > 1:
+        r = rows[-1]
+        nxt = (1 - tau) * r[:-1] + tau * r[1:]
+        rows.append(nxt)
+        left.append(nxt[0])
+        right.append(nxt[-1])
+    L, Rt = np.array(left), np.array(right[::-1])
+    return [NurbsSurface.bezier(X[..., :3] / X[..., 3:], X[..., 3]) for X in (L, Rt)]
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_a_surface_split_by_knot_insertion_is_g2_to_rounding(rational):
+    rng = np.random.default_rng(3)
+    u, v = np.meshgrid(np.linspace(0, 1, 4), np.linspace(0, 1, 4), indexing="ij")
+    P = np.stack([2 * u, 2 * v, 0.6 * np.sin(3 * u + 2 * v)], axis=-1) + 0.1 * rng.normal(size=(4, 4, 3))
+    w = rng.uniform(0.5, 2.0, size=(4, 4)) if rational else np.ones((4, 4))
+    A, B = _split(P, w, 0.4)
+    _, edge = _report([A, B])
+    s = edge.samples
+    assert np.max(s.g0) < 1e-14
+    assert np.max(s.g1) < 1e-12
+    big = np.maximum(np.abs(s.kappa_a), np.abs(s.kappa_b))
+    assert np.all(np.abs(s.kappa_a - s.kappa_b) <= 1e-9 * big)  # the raw difference: rounding only
+    assert edge.g2_max_abs == 0.0 and edge.cls == "G2"
+
+
+def test_t_junction_and_partial_overlap_give_the_common_stretch():
+    g = lambda x: 0.1 * x * x  # noqa: E731
+    long_side = cylinder_patch(g, -1.0, 0.0, y=(-1.0, 1.0))
+    short = cylinder_patch(g, 0.0, 1.0, y=(0.0, 1.0))  # T-junction: half of the long side
+    shifted = cylinder_patch(g, 0.0, 1.0, y=(0.5, 1.5))  # partial overlap: [0.5, 1]
+    for other, (lo, hi) in ((short, (0.0, 1.0)), (shifted, (0.5, 1.0))):
+        seams = find_seams([long_side, other])
+        assert len(seams) == 1
+        seam = seams[0]
+        assert seam.length == pytest.approx(hi - lo, rel=1e-9)
+        s = sample_seam([long_side, other], seam, 3.0)
+        ys = (s.P - MOTION[1]) @ MOTION[0]
+        assert ys[:, 1].min() == pytest.approx(lo, abs=1e-9) and ys[:, 1].max() == pytest.approx(hi, abs=1e-9)
+        assert np.max(s.g1) < 1e-12
+
+
+def test_g1_join_is_g1_with_a_curvature_jump():
+    scene = load_scene(ROOT / "scenes" / "g1_join.toml")
+    patches = list(scene.surfaces)
+    size = part_size(patches)
+    seams = find_seams(patches)
+    [edge] = continuity(patches, seams, Thresholds(1e-9 * size, 0.01, 0.01), size)
+    assert edge.cls == "G1"
+    assert edge.g1_max_deg < 1e-9
+    # Left patch z(u) has z'' = 6 (0.1 − 0 + 0) / (1/3 · 3)² ... across x: z_xx = 0.6 / (1/3·3)² = 0.6; right is flat.
+    assert edge.g2_max_abs == pytest.approx(0.6, rel=1e-9)
+    assert edge.g2_max_rel == pytest.approx(1.0, rel=1e-12)
+
+
+def test_teapot_seam_classes():
+    """The Newell teapot's shared edges: around each ring G2, between rings G1 (collinear control points,
+    unequal spacing), none merely G0 (the spout and handle meet the body by intersection, not by a shared edge)."""
+    scene = load_scene(ROOT / "scenes" / "teapot.toml")
+    patches = list(scene.surfaces)
+    size = part_size(patches)
+    reports = continuity(patches, find_seams(patches), Thresholds(1e-9 * size, 0.01, 0.01), size)
+    assert len(reports) == 52
+    classes = {(r.seam.a.patch, r.seam.a.side, r.seam.b.patch, r.seam.b.side): r.cls for r in reports}
+    # u seams join rings (rim/body/bottom, spout, handle, lid): G1 with a curvature jump.
+    g1 = {k for k, c in classes.items() if c == "G1"}
+    assert g1 and all(k[1] == "u1" for k in g1)
+    assert len(g1) == 20
+    assert all(c == "G2" for k, c in classes.items() if k[1] != "u1")
+    assert all(r.g1_max_deg < 1e-8 for r in reports)
+
+
+def _run(*args, cwd=ROOT):
+    return subprocess.run([sys.executable, "-c", "from rtreflect.cli import main; main()", *args], capture_output=True, text=True, cwd=cwd,
+                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+
+
+def test_single_patch_reports_no_shared_edges(tmp_path):
+    result = _run("continuity", "scenes/hood.toml", "--json", str(tmp_path / "r.json"))
+    assert result.returncode == 0, result.stderr
+    assert "no shared edges" in result.stdout
+    assert json.loads((tmp_path / "r.json").read_text())["edges"] == []
+
+
+@pytest.mark.parametrize("args, field", [(["--g0", "-1"], "--g0"), (["--require", "G3"], "--require"),
+                                         (["--g1", "-0.5"], "--g1")])
+def test_bad_options_are_one_line_exit_2(args, field):
+    result = _run("continuity", "scenes/g1_join.toml", *args)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rtreflect: error:") and field in lines[0]
+
+
+def test_require_sets_the_exit_status(tmp_path):
+    ok = _run("continuity", "scenes/g1_join.toml", "--require", "G1", "--json", str(tmp_path / "r.json"))
+    assert ok.returncode == 0, ok.stderr
+    bad = _run("continuity", "scenes/g1_join.toml", "--require", "G2")
+    assert bad.returncode == 1
+    edge = json.loads((tmp_path / "r.json").read_text())["edges"][0]
+    for key in ("patches", "length", "samples", "g0_max", "g1_max_deg", "g2_max_abs", "g2_max_rel", "class", "worst",
+                "line_kink_max_deg"):
+        assert key in edge
+    assert edge["patches"] == [0, 1] and edge["class"] == "G1"
