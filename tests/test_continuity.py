@@ -228,3 +228,35 @@ def test_require_sets_the_exit_status(tmp_path):
                 "line_kink_max_deg"):
         assert key in edge
     assert edge["patches"] == [0, 1] and edge["class"] == "G1"
+
+
+def _rectangle_loop(u0, u1, v0, v1, per_side=40, clockwise=False):
+    t = np.linspace(0.0, 1.0, per_side, endpoint=False)
+    loop = np.concatenate([np.stack([u0 + (u1 - u0) * t, np.full_like(t, v0)], 1),
+                           np.stack([np.full_like(t, u1), v0 + (v1 - v0) * t], 1),
+                           np.stack([u1 - (u1 - u0) * t, np.full_like(t, v1)], 1),
+                           np.stack([np.full_like(t, u0), v1 - (v1 - v0) * t], 1)])
+    return loop[::-1] if clockwise else loop
+
+
+def test_trimmed_faces_share_edges_along_their_loops():
+    """Faces with trim loops (as CAD readers give them) are matched along the loops, either loop orientation,
+    and a face trimmed to half its side meets its neighbour over that half only."""
+    import dataclasses
+
+    from rtreflect.geometry.seams import Boundary, _length
+    from rtreflect.geometry.trims import Trim
+
+    rng = np.random.default_rng(5)
+    u, v = np.meshgrid(np.linspace(0, 1, 4), np.linspace(0, 1, 4), indexing="ij")
+    P = np.stack([2 * u, 2 * v, 0.4 * np.cos(2 * u + v)], axis=-1) + 0.05 * rng.normal(size=(4, 4, 3))
+    A, B = _split(P, rng.uniform(0.5, 2.0, size=(4, 4)), 0.5)
+    A = dataclasses.replace(A, trim=Trim(_rectangle_loop(0, 1, 0, 1)))
+    full = dataclasses.replace(B, trim=Trim(_rectangle_loop(0, 1, 0, 1, clockwise=True)))
+    half = dataclasses.replace(B, trim=Trim(_rectangle_loop(0, 1, 0, 0.5)))
+    _, edge = _report([A, full])
+    assert edge.cls == "G2" and np.max(edge.samples.g1) < 1e-9 and np.max(edge.samples.g0) < 1e-12
+    seam, edge = _report([A, half])
+    assert edge.cls == "G2"
+    expected = _length(B, Boundary(1, "u0", np.array([[0.0, 0.0], [0.0, 0.5]]), np.array([1.0, 0.0])), 0.0, 1.0)
+    assert seam.length == pytest.approx(expected, rel=1e-6)  # ends located to 2^-30 of a sample spacing

@@ -71,10 +71,10 @@ def _unit(a: np.ndarray) -> np.ndarray:
 
 
 def across(der, n: np.ndarray, T: np.ndarray, inward_uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """w: unit tangent of the face perpendicular to the edge tangent T, pointing into the face; and σ = ±1
-    with w = σ (n × T), so σ n is the normal with T × w = σ n ... turned consistently (see the module doc)."""
+    """w: unit tangent of the face perpendicular to the edge tangent T, pointing into the face (``inward_uv``,
+    (n, 2), says which way is in); and σ = ±1 with w = σ (n × T), i.e. T × w = σ n (see the module doc)."""
     w = np.cross(n, T)
-    into = der.Su * inward_uv[0] + der.Sv * inward_uv[1]
+    into = der.Su * inward_uv[:, :1] + der.Sv * inward_uv[:, 1:]
     sigma = np.where(_dot(w, into) >= 0, 1.0, -1.0)
     return _unit(w * sigma[:, None]), sigma
 
@@ -164,8 +164,8 @@ def _measure(surfaces: list[NurbsSurface], seam: Seam, t: np.ndarray, t_b_start:
     Tb *= np.where(_dot(Ta, Tb) >= 0, 1.0, -1.0)[:, None]
     na = sa.normals(uv_a[:, 0], uv_a[:, 1], der_a)
     nb = sb.normals(uv_b[:, 0], uv_b[:, 1], der_b)
-    w_a, sig_a = across(der_a, na, Ta, seam.a.inward)
-    w_b, sig_b = across(der_b, nb, Tb, seam.b.inward)
+    w_a, sig_a = across(der_a, na, Ta, seam.a.inward_at(t))
+    w_b, sig_b = across(der_b, nb, Tb, seam.b.inward_at(t_b))
     na = na * sig_a[:, None]   # T × w_A = n_A
     nb = -nb * sig_b[:, None]  # T × w_B = −n_B
     g1 = np.arctan2(np.linalg.norm(np.cross(na, nb), axis=1), _dot(na, nb))

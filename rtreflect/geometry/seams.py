@@ -29,6 +29,8 @@ SAMPLES_PER_SPAN = 16
 FOOT_NEWTON_STEPS = 12
 #: Points of a candidate stretch that must all lie within the tolerance of the partner curve.
 STRETCH_CHECKS = 9
+#: A trim loop turning by more than this at a vertex (in (u, v)) has a corner there: a B-rep vertex.
+CORNER_DEG = 20.0
 #: Default tolerance for "the boundary curves coincide", as a fraction of the part's size (bounding-box
 #: diagonal): well above any gap a CAD exchange leaves (1e-7..1e-4 of a part) yet far below a patch's size, so
 #: seams with a visible gap are still found (and reported "open") while distinct edges are not confused.
@@ -39,15 +41,23 @@ FIND_FRACTION = 1e-3
 class Boundary:
     """One boundary curve of patch ``patch``: the image of the (u, v) polyline ``uv`` (m ≥ 2 vertices).
 
-    ``inward`` is the (u, v) direction pointing into the face across the curve (the same for all its
-    segments: a side of the domain; for a trim loop the left of each segment of a counter-clockwise loop).
-    The curve parameter t runs from 0 to m − 1: segment i is t ∈ [i, i + 1].
+    ``inward`` is the (u, v) direction pointing into the face across the curve: one (2,) vector for a
+    side of the domain, or one per segment (m − 1, 2) for a trim loop. The curve parameter t runs from
+    0 to m − 1: segment i is t ∈ [i, i + 1]. A ``closed`` curve (a whole trim loop) has no ends, so a
+    stretch shared along it ends where the partner curve leaves the tolerance.
     """
 
     patch: int
     side: str
     uv: np.ndarray
     inward: np.ndarray
+    closed: bool = False
+
+    def inward_at(self, t: np.ndarray) -> np.ndarray:
+        """The inward (u, v) direction at parameters t, (n, 2)."""
+        if self.inward.ndim == 1:
+            return np.broadcast_to(self.inward, (len(t), 2))
+        return self.inward[np.clip(np.floor(t).astype(np.int64), 0, len(self.uv) - 2)]
 
     def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(u, v) points (n, 2) and their derivative d(u, v)/dt (n, 2) at parameters t."""
@@ -70,6 +80,51 @@ def patch_sides(patch: int, surface: NurbsSurface) -> list[Boundary]:
         Boundary(patch, "v0", np.array([[u0, v0], [u1, v0]]), np.array([0.0, 1.0])),
         Boundary(patch, "v1", np.array([[u0, v1], [u1, v1]]), np.array([0.0, -1.0])),
     ]
+
+
+def _signed_area(loop: np.ndarray) -> float:
+    x, y = loop[:, 0], loop[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def loop_boundaries(patch: int, surface: NurbsSurface) -> list[Boundary]:
+    """A trimmed face's loops as closed curves: the outer loop and each hole, the face on their inner side.
+
+    Inward is the left of each segment of the outer loop when it runs counter-clockwise in (u, v)
+    (its signed area > 0), the right otherwise; the other way round for a hole.
+    """
+    trim = surface.trim
+    out = []
+    for k, loop in enumerate([trim.outer, *trim.holes]):
+        loop = np.asarray(loop, dtype=np.float64)
+        if np.all(loop[0] == loop[-1]):
+            loop = loop[:-1]
+        uv = np.vstack([loop, loop[:1]])
+        d = np.diff(uv, axis=0)
+        left = np.stack([-d[:, 1], d[:, 0]], axis=1)
+        ccw = _signed_area(loop) > 0
+        inward = left if (ccw == (k == 0)) else -left
+        name = "outer" if k == 0 else f"hole{k}"
+        # Corners (a B-rep vertex where edges meet at an angle) cut the loop into open curves, whose ends
+        # then bound the shared stretches exactly; a loop without corners stays one closed curve.
+        heading = np.arctan2(d[:, 1], d[:, 0])
+        turn = np.abs(np.angle(np.exp(1j * (heading - np.roll(heading, 1)))))
+        corners = np.flatnonzero(turn > np.radians(CORNER_DEG))
+        if len(corners) == 0:
+            out.append(Boundary(patch, name, uv, inward, closed=True))
+            continue
+        m = len(loop)
+        for i, c in enumerate(corners):
+            end = corners[(i + 1) % len(corners)] + (m if i + 1 == len(corners) else 0)
+            idx = np.arange(c, end + 1) % m
+            seg = np.arange(c, end) % m
+            out.append(Boundary(patch, f"{name}[{i}]", loop[idx], inward[seg]))
+    return out
+
+
+def face_boundaries(patch: int, surface: NurbsSurface) -> list[Boundary]:
+    """The boundary curves of a face: its trim loops when trimmed, else the four sides of its domain."""
+    return loop_boundaries(patch, surface) if surface.trim is not None else patch_sides(patch, surface)
 
 
 def curve(surface: NurbsSurface, boundary: Boundary, t: np.ndarray, order: int = 1):
@@ -168,9 +223,13 @@ def _stretches(sa: NurbsSurface, a: Boundary, sb: NurbsSurface, b: Boundary, tol
     """
     ta, Ca = samples[id(a)]
     tb, Cb = samples[id(b)]
-    ends_b = Cb[[0, -1]]
-    t_ends, d_ends = foot_points(sa, a, ends_b, _nearest_start(Ca, ta, ends_b))
-    cuts = np.unique(np.r_[0.0, a.t_max, t_ends[d_ends <= tol]])
+    if b.closed:
+        cuts = np.r_[0.0, a.t_max, _leave_points(sa, a, sb, b, tol, ta, Ca, Cb, tb)]
+    else:
+        ends_b = Cb[[0, -1]]
+        t_ends, d_ends = foot_points(sa, a, ends_b, _nearest_start(Ca, ta, ends_b))
+        cuts = np.r_[0.0, a.t_max, t_ends[d_ends <= tol]]
+    cuts = np.unique(cuts)
     pieces = []
     for lo, hi in zip(cuts[:-1], cuts[1:]):
         if hi - lo <= 1e-12 * a.t_max:
@@ -186,6 +245,30 @@ def _stretches(sa: NurbsSurface, a: Boundary, sb: NurbsSurface, b: Boundary, tol
     return pieces
 
 
+#: Bisection steps locating where a closed partner curve leaves the tolerance: 2^-30 of a sample spacing.
+LEAVE_STEPS = 30
+
+
+def _distance_to(sa, a, sb, b, t, Cb, tb) -> np.ndarray:
+    P = curve(sa, a, t)[0]
+    return foot_points(sb, b, P, _nearest_start(Cb, tb, P))[1]
+
+
+def _leave_points(sa, a, sb, b, tol, ta, Ca, Cb, tb) -> np.ndarray:
+    """Parameters of a where its distance to the closed curve b crosses ``tol`` (bisection between samples)."""
+    inside = _distance_to(sa, a, sb, b, ta, Cb, tb) <= tol
+    idx = np.flatnonzero(inside[:-1] != inside[1:])
+    lo, hi = ta[idx].copy(), ta[idx + 1].copy()
+    lo_in = inside[idx]
+    for _ in range(LEAVE_STEPS):
+        mid = 0.5 * (lo + hi)
+        mid_in = _distance_to(sa, a, sb, b, mid, Cb, tb) <= tol
+        same = mid_in == lo_in
+        lo, hi = np.where(same, mid, lo), np.where(same, hi, mid)
+    # The inside end of each bracket, so the pieces' checks stay within the tolerance.
+    return np.where(lo_in, lo, hi)
+
+
 def part_size(surfaces: list[NurbsSurface]) -> float:
     """Bounding-box diagonal of all control nets: the part's size, the scale of the default tolerances."""
     net = np.concatenate([s.points.reshape(-1, 3) for s in surfaces])
@@ -196,13 +279,13 @@ def find_seams(surfaces: list[NurbsSurface], tol: float | None = None,
                boundaries: list[Boundary] | None = None) -> list[Seam]:
     """Every stretch where boundary curves of two faces (or two sides of one closed face) coincide within ``tol``.
 
-    ``tol`` defaults to `FIND_FRACTION` of the part's size. ``boundaries`` defaults to the four sides of
-    every patch. Degenerate curves (a side collapsed to a point, a pole) share nothing and are skipped.
+    ``tol`` defaults to `FIND_FRACTION` of the part's size. ``boundaries`` defaults to every face's
+    `face_boundaries` (trim loops, or the four sides of an untrimmed patch). Degenerate curves (a side collapsed to a point, a pole) share nothing and are skipped.
     """
     if tol is None:
         tol = FIND_FRACTION * part_size(surfaces)
     if boundaries is None:
-        boundaries = [side for k, s in enumerate(surfaces) for side in patch_sides(k, s)]
+        boundaries = [bd for k, s in enumerate(surfaces) for bd in face_boundaries(k, s)]
     samples, boxes, keep = {}, [], []
     for bd in boundaries:
         t = sample_parameters(surfaces[bd.patch], bd)
