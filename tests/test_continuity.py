@@ -260,3 +260,39 @@ def test_trimmed_faces_share_edges_along_their_loops():
     assert edge.cls == "G2"
     expected = _length(B, Boundary(1, "u0", np.array([[0.0, 0.0], [0.0, 0.5]]), np.array([1.0, 0.0])), 0.0, 1.0)
     assert seam.length == pytest.approx(expected, rel=1e-6)  # ends located to 2^-30 of a sample spacing
+
+
+def test_paper_statement_measured_kinked_lines_at_g1_none_at_g2():
+    """Paper, section 1: across a G1 seam with a curvature jump the reflection lines are only G0 (kinked);
+    across a G2 seam they are smooth. g1_join against the same view of one patch split by knot insertion."""
+    import dataclasses
+
+    from rtreflect.analysis.seamcheck import check_scene
+
+    scene = load_scene(ROOT / "scenes" / "g1_join.toml")
+    [g1] = check_scene(scene).edges
+    assert g1.cls == "G1" and g1.line_crossings >= 5
+    assert g1.line_kink_max_deg > 10.0 and g1.line_kink_image_max_deg > 10.0
+
+    left = scene.surfaces[0]  # a bicubic whose curvature varies across x: split it at u = 0.5
+    A, B = _split(left.points, left.weights, 0.5)
+    [g2] = check_scene(scene.replace(surfaces=[A, B])).edges
+    assert g2.cls == "G2" and g2.line_crossings >= 5
+    assert g2.line_kink_max_deg < 1e-4 and g2.line_kink_image_max_deg < 1e-4
+
+
+def test_filleted_cad_block_is_g1_with_the_fillet_curvature():
+    """A STEP block with every edge filleted at radius 4 (CAD input, once its readers are installed): every
+    shared edge is G1 with the curvature jump 1/4 between a plane or a cylinder's straight direction and
+    the fillet, and the reflection lines kink where they cross."""
+    pytest.importorskip("rtreflect.exchange.step")
+    part = ROOT / "parts" / "filleted_block.step"
+    if not part.exists():
+        pytest.skip("parts/filleted_block.step comes with the CAD readers")
+    from rtreflect.analysis.seamcheck import check_scene
+
+    result = check_scene(load_scene(part))
+    assert len(result.edges) == 48
+    assert all(e.cls == "G1" for e in result.edges)
+    assert all(e.g2_max_abs == pytest.approx(0.25, rel=1e-5) for e in result.edges)
+    assert any(e.line_kink_max_deg and e.line_kink_max_deg > 10 for e in result.edges)

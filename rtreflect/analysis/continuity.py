@@ -49,6 +49,10 @@ INITIAL_PER_SPAN = 8
 #: fraction of its range on the seam (so the maxima are located to a few percent of their spacing).
 REFINE_FRACTION = 0.05
 REFINE_ROUNDS = 6
+#: Changes below these are rounding, not shape, and drive no refinement: a gap of 1e-12 of the part's size,
+#: an angle of 1e-10 rad (the normals' rounding is ~1e-13..1e-11 rad near poles).
+NOISE_GAP = 1e-12
+NOISE_ANGLE = 1e-10
 #: Most samples per seam: bounds the work on a wild seam; the knot spans are always covered.
 MAX_SEAM_SAMPLES = 4097
 #: A curvature jump below this many 1/size is zero: two flat (or equally curved) sides rounded apart. Double
@@ -197,9 +201,10 @@ def sample_seam(surfaces: list[NurbsSurface], seam: Seam, size: float) -> SeamSa
     samples = measure(surfaces, seam, t, size=size)
     for _ in range(REFINE_ROUNDS):
         refine = np.zeros(len(samples.t) - 1, dtype=bool)
-        for q in (samples.g0, samples.g1, samples.kappa_a, samples.kappa_b):
+        floors = (NOISE_GAP * size, NOISE_ANGLE, FLAT_CURVATURE / size, FLAT_CURVATURE / size)
+        for q, floor in zip((samples.g0, samples.g1, samples.kappa_a, samples.kappa_b), floors):
             span = np.ptp(q)
-            if span > 0 and np.all(np.isfinite(q)):
+            if span > floor and np.all(np.isfinite(q)):
                 refine |= np.abs(np.diff(q)) > REFINE_FRACTION * span
         idx = np.flatnonzero(refine)
         if len(idx) == 0 or len(samples.t) + len(idx) > MAX_SEAM_SAMPLES:
