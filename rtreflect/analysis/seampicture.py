@@ -1,7 +1,8 @@
 """Pictures of the continuity check: the seams drawn over a render, and per-edge charts along each seam.
 
 The seams are drawn with the overlay's anti-aliased line coverage (`overlay.coverage`,
-`overlay.blend`), coloured by the class each reaches, its worst value written beside it;
+`overlay.blend`), coloured by the class each reaches; a seam short of G2 gets its worst value written beside
+its worst visible point (one label where symmetric copies would overlap);
 a legend names the colours. Points of a seam hidden from the eye (Embree occlusion, as
 for the contours) are not drawn. The charts plot G0 (gap), G1 (angle) and the two
 sides' normal curvatures against arc length, one row of three panels per edge. Text is
@@ -24,6 +25,8 @@ from .overlay import blend, coverage
 CLASS_COLOURS = {"open": (0.9, 0.0, 0.0), "G0": (1.0, 0.45, 0.0), "G1": (0.75, 0.75, 0.0), "G2": (0.0, 0.35, 1.0)}
 SEAM_WIDTH_PX = 3.0
 FONT_PX = 14
+#: Width of a character of the built-in font at FONT_PX, for keeping labels apart.
+LABEL_CHAR_PX = 8
 PANEL = (240, 120)  # width, height of one chart panel in pixels
 MARGIN = 28
 
@@ -80,14 +83,20 @@ def write_seam_picture(path: Path, result) -> None:
             px = field.camera.project(s.P)
             px[~seen] = np.nan  # hidden pieces are cut out
             polylines.append(Polyline(e.seam.a.patch, s.uv_a, px))
-            if np.any(seen):
-                mid = np.flatnonzero(seen)[np.count_nonzero(seen) // 2]
-                labels.append((px[mid], _label(e), colour))
+            if np.any(seen) and e.cls != "G2":  # label the seams that fall short of G2, at their worst visible point
+                quantity = {"open": s.g0, "G0": s.g1, "G1": s.jump}[e.cls]
+                at = np.flatnonzero(seen)[np.argmax(quantity[seen])]
+                labels.append((px[at], _label(e), colour))
         if polylines:
             alpha = coverage(ContourLines(W, H, [ContourLine(0, 0.0, polylines)]), W, H, SEAM_WIDTH_PX)
             rgba = blend(rgba, alpha.astype(np.float32), colour)
+    placed: list[tuple[float, float, float, float]] = []
     for (x, y), text, colour in labels:
-        if 0 <= x < W and 0 <= y < H:
+        box = (x + 6, y - 6 - FONT_PX, x + 6 + LABEL_CHAR_PX * len(text), y - 6)
+        clash = any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed)
+        if 0 <= x < W and 0 <= y < H and not clash:  # symmetric copies of a seam carry the same label: once
+            placed.append(box)
+            rgba[int(y) - 2:int(y) + 3, int(x) - 2:int(x) + 3, :3] = 0.0  # the point the label refers to
             rgba = _text(rgba, int(x) + 6, int(y) - 6, text)
     # Legend, top left: a swatch and the class's meaning.
     th = result.thresholds
