@@ -346,11 +346,15 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
 @click.option("--width", type=click.IntRange(1, MAX_SIDE), help="Width of the --png render (overrides [image] width).")
 @click.option("--height", type=click.IntRange(1, MAX_SIDE), help="Height of the --png render (overrides [image] height).")
 @click.option("--samples", type=click.IntRange(1, MAX_SAMPLES), help="s: s×s samples per pixel of the --png render.")
-def continuity_command(scenes, report_path, png_path, g0, g1, g2, require, lines, width, height, samples) -> None:
+@click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
+              help="CAD input: leave out faces that cannot be used (listed) instead of refusing the part.")
+def continuity_command(scenes, report_path, png_path, g0, g1, g2, require, lines, width, height, samples,
+                       skip_bad_faces) -> None:
     """Continuity at every shared edge of each SCENE: G0 gap, G1 angle, G2 curvature jump, exact.
 
-    Shared edges are found geometrically (boundary curves of two patches that coincide over a
-    common stretch, partial overlaps and T-junctions included). Along each edge, sampled
+    SCENE is a scene file or a CAD part (STEP, IGES, .3dm; shown in the default part scene).
+    Shared edges are found geometrically (boundary curves of two faces, trim loops for CAD faces,
+    that coincide over a common stretch, partial overlaps and T-junctions included). Along each edge, sampled
     adaptively, the matching point on the other patch is found by Newton, and the gap, the
     angle between the normals and the normal curvatures across the edge are computed from the
     exact NURBS derivatives. With --lines (default), each analytic reflection line crossing a
@@ -365,13 +369,14 @@ def continuity_command(scenes, report_path, png_path, g0, g1, g2, require, lines
     Examples:
       rtreflect continuity scenes/g1_join.toml --require G2
       rtreflect continuity scenes/teapot.toml --json out/teapot.json --png out/teapot.seams.png
+      rtreflect continuity parts/filleted_block.step --require G1
     """
     from .analysis import seamcheck
 
     require = require.upper()
     try:
         seamcheck.check_tolerances(g0, g1 if g1 is not None else 0.0, g2 if g2 is not None else 0.0)
-        loaded = [load_scene(path).with_image(width, height, samples) for path in unique_scenes(scenes)]
+        loaded = [load_scene(path, skip_bad_faces).with_image(width, height, samples) for path in unique_scenes(scenes)]
     except RtreflectError as exc:
         fail(exc)
     g1 = seamcheck.DEFAULT_G1_DEG if g1 is None else g1

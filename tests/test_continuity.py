@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from rtreflect.analysis.continuity import Thresholds, continuity, sample_seam
-from rtreflect.exchange.scene import load_scene
+from rtreflect.exchange.load import load_scene
 from rtreflect.geometry.seams import find_seams, part_size
 from rtreflect.geometry.surfaces import NurbsSurface
 
@@ -83,7 +83,7 @@ def test_g1_angle_and_curvatures_match_the_closed_form_at_every_sample(rational)
     assert A.rational == rational
     _, edge = _report([A, B])
     s = edge.samples
-    assert len(s.t) >= 16
+    assert len(s.t) >= 9  # 8 per knot span; nothing varies along a cylinder, so no refinement
     np.testing.assert_allclose(s.g1, alpha, rtol=REL)
     np.testing.assert_allclose(np.abs(s.kappa_a), abs(kappa(a1, a2)), rtol=REL)
     np.testing.assert_allclose(np.abs(s.kappa_b), abs(kappa(b1, b2)), rtol=REL)
@@ -296,3 +296,18 @@ def test_filleted_cad_block_is_g1_with_the_fillet_curvature():
     assert all(e.cls == "G1" for e in result.edges)
     assert all(e.g2_max_abs == pytest.approx(0.25, rel=1e-5) for e in result.edges)
     assert any(e.line_kink_max_deg and e.line_kink_max_deg > 10 for e in result.edges)
+
+
+def test_capped_cylinder_from_rhino_meets_its_caps_at_right_angles():
+    """trimmed.3dm's capped cylinder (a periodic face and two trimmed planar caps): the rims are G0 with the
+    normals exactly 90° apart, the cylinder's own seam (the two ends of its period) is G2."""
+    part = ROOT / "parts" / "trimmed.3dm"
+    from rtreflect.analysis.seamcheck import check_scene
+
+    result = check_scene(load_scene(part), lines=False)
+    by_class = sorted((e.cls, e.seam.a.patch, e.seam.b.patch) for e in result.edges)
+    assert by_class == [("G0", 1, 2), ("G0", 1, 3), ("G2", 1, 1)]
+    for e in result.edges:
+        if e.cls == "G0":
+            np.testing.assert_allclose(np.degrees(e.samples.g1), 90.0, rtol=1e-9)
+            assert e.seam.length == pytest.approx(2 * math.pi * 10.0, rel=1e-6)

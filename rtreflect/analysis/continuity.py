@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geometry.seams import Seam, curve, foot_points, sample_parameters
+from ..geometry.seams import Seam, closest_on_surface, curve, match_points, sample_parameters
 from ..geometry.surfaces import NurbsSurface
 
 #: Samples per Bézier span of the seam before refinement.
@@ -134,34 +134,32 @@ class SeamSamples:
             return np.where(self.jump > 0, self.jump / mean, 0.0)
 
 
-def measure(surfaces: list[NurbsSurface], seam: Seam, t: np.ndarray, t_b_start: np.ndarray | None = None,
-            size: float = 1.0) -> SeamSamples:
+def measure(surfaces: list[NurbsSurface], seam: Seam, t: np.ndarray, size: float = 1.0) -> SeamSamples:
     """The exact G0, G1, G2 figures at parameters t of the seam's curve on A.
 
     At a degenerate point (see `POLE_STEP`) the figures are those `POLE_STEP` inside the seam.
     """
-    out = _measure(surfaces, seam, t, t_b_start, size)
+    out = _measure(surfaces, seam, t, size)
     bad = ~(np.isfinite(out.g1) & np.isfinite(out.kappa_a) & np.isfinite(out.kappa_b))
     if np.any(bad):
         step = POLE_STEP * (seam.t1 - seam.t0)
         tb = t[bad]
         inner = np.where(tb - seam.t0 < seam.t1 - tb, tb + step, tb - step)
-        again = _measure(surfaces, seam, inner, out.t_b[bad], size)
+        again = _measure(surfaces, seam, inner, size)
         for name in ("g0", "g1", "kappa_a", "kappa_b", "n_a", "n_b", "w_a", "w_b"):
             getattr(out, name)[bad] = getattr(again, name)
     return out
 
 
-def _measure(surfaces: list[NurbsSurface], seam: Seam, t: np.ndarray, t_b_start: np.ndarray | None,
-             size: float) -> SeamSamples:
+def _measure(surfaces: list[NurbsSurface], seam: Seam, t: np.ndarray, size: float) -> SeamSamples:
     sa, sb = surfaces[seam.a.patch], surfaces[seam.b.patch]
     P, C1a, _, uv_a, der_a = curve(sa, seam.a, t, order=2)
-    if t_b_start is None:  # nearest of a dense sampling of b, then Newton
-        tb = sample_parameters(sb, seam.b)
-        Cb = curve(sb, seam.b, tb)[0]
-        t_b_start = tb[np.argmin(np.linalg.norm(P[:, None, :] - Cb[None], axis=2), axis=1)]
-    t_b, _ = foot_points(sb, seam.b, P, t_b_start)
+    t_b, _ = match_points(sb, seam.b, P)
     Q, C1b, _, uv_b, der_b = curve(sb, seam.b, t_b, order=2)
+    if not seam.b.exact:  # a sampled trim loop: the exact edge lies on B's surface, not on the loop's chords
+        uv_b = closest_on_surface(sb, P, uv_b)
+        der_b = sb.evaluate(uv_b[:, 0], uv_b[:, 1], order=2)
+        Q = der_b.S
     with np.errstate(divide="ignore", invalid="ignore"):  # C' = 0 at a pole: NaN, measured again inside
         Ta = _unit(C1a)
         Tb = _unit(C1b)
@@ -197,6 +195,9 @@ def _merge(a: SeamSamples, b: SeamSamples) -> SeamSamples:
 def sample_seam(surfaces: list[NurbsSurface], seam: Seam, size: float) -> SeamSamples:
     """Adaptive sampling of the seam (knot spans first, then midpoints where the figures change)."""
     sa = surfaces[seam.a.patch]
+    if not seam.a.exact:  # a sampled trim loop is on the edge at its vertices only: measure there
+        inner = np.arange(np.ceil(seam.t0), np.floor(seam.t1) + 1.0)
+        return measure(surfaces, seam, np.unique(np.r_[seam.t0, inner, seam.t1]), size=size)
     t = sample_parameters(sa, seam.a, seam.t0, seam.t1, per_span=INITIAL_PER_SPAN)
     samples = measure(surfaces, seam, t, size=size)
     for _ in range(REFINE_ROUNDS):
@@ -210,8 +211,7 @@ def sample_seam(surfaces: list[NurbsSurface], seam: Seam, size: float) -> SeamSa
         if len(idx) == 0 or len(samples.t) + len(idx) > MAX_SEAM_SAMPLES:
             break
         mid = 0.5 * (samples.t[idx] + samples.t[idx + 1])
-        start = 0.5 * (samples.t_b[idx] + samples.t_b[idx + 1])
-        samples = _merge(samples, measure(surfaces, seam, mid, start, size))
+        samples = _merge(samples, measure(surfaces, seam, mid, size))
     return samples
 
 

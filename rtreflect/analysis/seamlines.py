@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.seams import curve, foot_points
+from ..geometry.seams import curve, match_points
 from .contours import UlmetField
 from .continuity import EdgeReport, angle_between
 
@@ -88,7 +88,7 @@ def seam_crossings(field: UlmetField, edge: EdgeReport, size: float) -> list[Cro
             hi = np.where(left, hi, mid)
         t = 0.5 * (lo + hi)
         P, _, _, uv_a, _ = curve(sa, seam.a, t)
-        t_b, _ = foot_points(sb, seam.b, P, 0.5 * (s.t_b[idx] + s.t_b[idx + 1]))
+        t_b, _ = match_points(sb, seam.b, P)
         uv_b = curve(sb, seam.b, t_b)[3]
         tau_a = _tangent(field, pa, uv_a)
         tau_b = _tangent(field, seam.b.patch, uv_b)

@@ -12,7 +12,11 @@ part of another) come out as the stretch of a where b lies within the tolerance,
 exactly at b's end points (projected onto a) or a's own.
 
 Every shared stretch is reported once, parametrised along the curve of the lower
-(patch, side) of the pair.
+(patch, side) of the pair — or of the other when only that one is exact: a side of a
+domain or an iso-line is the exact edge at every t, a trim loop sampled by the CAD reader
+only at its vertices (the (u, v) chords between them leave the edge by their sagitta). On
+a trim loop the figures are taken at its vertices, and the matched point on the other face
+is the closest point of its surface near its boundary (Newton from the polyline's foot).
 """
 
 from __future__ import annotations
@@ -25,10 +29,14 @@ from .surfaces import NurbsSurface
 
 #: Boundary-curve samples per Bézier span of the running parameter, to find candidate pairs.
 SAMPLES_PER_SPAN = 16
+#: Pieces per span of a trim loop's polyline (its vertices are already close together).
+LOOP_PIECES_PER_SPAN = 2
 #: Newton steps for a foot point on a boundary curve (quadratic convergence: 8 is plenty from a sample).
 FOOT_NEWTON_STEPS = 12
 #: Points of a candidate stretch that must all lie within the tolerance of the partner curve.
 STRETCH_CHECKS = 9
+#: A curve whose end points lie within this fraction of the patch's reach of each other is closed (periodic).
+CLOSED_FRACTION = 1e-12
 #: A trim loop turning by more than this at a vertex (in (u, v)) has a corner there: a B-rep vertex.
 CORNER_DEG = 20.0
 #: Default tolerance for "the boundary curves coincide", as a fraction of the part's size (bounding-box
@@ -69,6 +77,15 @@ class Boundary:
     @property
     def t_max(self) -> float:
         return float(len(self.uv) - 1)
+
+    @property
+    def exact(self) -> bool:
+        """True when the (u, v) polyline is one straight line (a side of the domain, an iso-line): C(t) is then
+        the exact edge everywhere; a sampled trim loop is exact only at its vertices (chords between them)."""
+        d = self.uv - self.uv[0]
+        far = d[np.argmax(np.hypot(d[:, 0], d[:, 1]))]  # not the last vertex: a closed piece ends where it starts
+        span = float(np.hypot(*far))
+        return bool(np.all(np.abs(d[:, 0] * far[1] - d[:, 1] * far[0]) <= 1e-12 * max(span, 1e-300) ** 2))
 
 
 def patch_sides(patch: int, surface: NurbsSurface) -> list[Boundary]:
@@ -141,8 +158,14 @@ def curve(surface: NurbsSurface, boundary: Boundary, t: np.ndarray, order: int =
 
 def sample_parameters(surface: NurbsSurface, boundary: Boundary, lo: float = 0.0, hi: float | None = None,
                       per_span: int = SAMPLES_PER_SPAN) -> np.ndarray:
-    """Parameters in [lo, hi] of ``boundary``: its vertices and knot-span breaks, each span cut in ``per_span``."""
+    """Parameters in [lo, hi] of ``boundary``: its vertices and knot-span breaks, each span cut in ``per_span``.
+
+    A trim loop's polyline is already dense (the reader samples it finely): its pieces are cut in
+    `LOOP_PIECES_PER_SPAN` at most.
+    """
     hi = boundary.t_max if hi is None else hi
+    if not boundary.exact:
+        per_span = min(per_span, LOOP_PIECES_PER_SPAN)
     breaks_u, breaks_v = surface.span_breaks()
     ts = [np.arange(len(boundary.uv), dtype=np.float64)]
     for i in range(len(boundary.uv) - 1):  # where a segment crosses a knot line, a span of C ends
@@ -162,10 +185,13 @@ def foot_points(surface: NurbsSurface, boundary: Boundary, P: np.ndarray, t_star
     """Parameters t of the points of ``boundary`` closest to points P, by Newton from ``t_start``; and the distances.
 
     Minimises ½|C(t) − P|²: t ← t − C'·(C − P) / (C''·(C − P) + |C'|²) (Piegl & Tiller eq. 6.3), kept
-    within the segment of the start (a polyline's foot may sit on a vertex) and within the curve's ends.
+    within the curve's ends; a step may cross a vertex of the (u, v) polyline into the next segment.
     """
     t = np.asarray(t_start, dtype=np.float64).copy()
-    seg = np.clip(np.floor(t), 0, boundary.t_max - 1)
+    # A curve whose ends meet in space (a closed loop, an iso-line of a periodic face) is periodic in t: a foot
+    # just before its end is reached from a start just after its beginning.
+    ends = curve(surface, boundary, np.array([0.0, boundary.t_max]))[0]
+    periodic = boundary.closed or np.linalg.norm(ends[1] - ends[0]) <= CLOSED_FRACTION * surface.reach
     for _ in range(FOOT_NEWTON_STEPS):
         C, C1, C2, _, _ = curve(surface, boundary, t, order=2)
         r = C - P
@@ -173,8 +199,9 @@ def foot_points(surface: NurbsSurface, boundary: Boundary, P: np.ndarray, t_star
         h = np.einsum("ij,ij->i", C2, r) + np.einsum("ij,ij->i", C1, C1)
         with np.errstate(divide="ignore", invalid="ignore"):
             step = np.where(h > 0, g / h, 0.0)
-        t_new = np.clip(t - np.nan_to_num(step), seg, seg + 1)
-        moved = np.max(np.abs(t_new - t), initial=0.0)
+        t_new = t - np.nan_to_num(step)
+        t_new = np.mod(t_new, boundary.t_max) if periodic else np.clip(t_new, 0.0, boundary.t_max)
+        moved = np.max(np.abs(np.nan_to_num(step)), initial=0.0)
         t = t_new
         if moved <= 1e-15 * boundary.t_max:  # converged to rounding everywhere
             break
@@ -195,6 +222,44 @@ class Seam:
     @property
     def patches(self) -> tuple[int, int]:
         return self.a.patch, self.b.patch
+
+
+def match_points(surface: NurbsSurface, boundary: Boundary, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Foot points on ``boundary`` of points P (parameters, distances): Newton from the nearest of its samples.
+
+    Always from the nearest sample, never from a neighbour's foot: a closed curve's parameter jumps where it
+    starts and ends, and a start between two feet there would land on the far side.
+    """
+    tb = sample_parameters(surface, boundary)
+    return foot_points(surface, boundary, P, _nearest_start(curve(surface, boundary, tb)[0], tb, P))
+
+
+#: Newton steps for the closest point on a surface (from a foot point on its boundary polyline, already close).
+SURFACE_NEWTON_STEPS = 8
+
+
+def closest_on_surface(surface: NurbsSurface, P: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(u, v) of the points of ``surface`` closest to P, by Newton from ``uv``, kept within the domain.
+
+    Minimises ½|S − P|²: gradient (S_u·r, S_v·r), Hessian [[S_u·S_u + S_uu·r, S_u·S_v + S_uv·r],
+    [·, S_v·S_v + S_vv·r]] with r = S − P (Piegl & Tiller eq. 6.6–6.7).
+    """
+    (u0, u1), (v0, v1) = surface.domain
+    u, v = uv[:, 0].copy(), uv[:, 1].copy()
+    dot = lambda x, y: np.einsum("ij,ij->i", x, y)  # noqa: E731
+    for _ in range(SURFACE_NEWTON_STEPS):
+        d = surface.evaluate(u, v, order=2)
+        r = d.S - P
+        gu, gv = dot(d.Su, r), dot(d.Sv, r)
+        a, b, c = dot(d.Su, d.Su) + dot(d.Suu, r), dot(d.Su, d.Sv) + dot(d.Suv, r), dot(d.Sv, d.Sv) + dot(d.Svv, r)
+        det = a * c - b * b
+        ok = det > 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            du = np.where(ok, (c * gu - b * gv) / det, 0.0)
+            dv = np.where(ok, (a * gv - b * gu) / det, 0.0)
+        u = np.clip(u - du, u0, u1)
+        v = np.clip(v - dv, v0, v1)
+    return np.stack([u, v], axis=1)
 
 
 def _nearest_start(Cb: np.ndarray, tb: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -257,7 +322,12 @@ def _distance_to(sa, a, sb, b, t, Cb, tb) -> np.ndarray:
 def _leave_points(sa, a, sb, b, tol, ta, Ca, Cb, tb) -> np.ndarray:
     """Parameters of a where its distance to the closed curve b crosses ``tol`` (bisection between samples)."""
     inside = _distance_to(sa, a, sb, b, ta, Cb, tb) <= tol
+    # A lone sample within tol is a curve touching b at a point (a corner on the loop), not a shared stretch.
+    lone = inside & ~np.r_[False, inside[:-1]] & ~np.r_[inside[1:], False]
+    inside &= ~lone
     idx = np.flatnonzero(inside[:-1] != inside[1:])
+    if len(idx) == 0:
+        return np.zeros(0)
     lo, hi = ta[idx].copy(), ta[idx + 1].copy()
     lo_in = inside[idx]
     for _ in range(LEAVE_STEPS):
@@ -295,16 +365,19 @@ def find_seams(surfaces: list[NurbsSurface], tol: float | None = None,
             keep.append(bd)
             boxes.append((C.min(axis=0) - tol, C.max(axis=0) + tol))
     seams = []
-    for i, a in enumerate(keep):
-        for j in range(i + 1, len(keep)):
-            b = keep[j]
-            if a.patch == b.patch and a.side == b.side:
-                continue
-            if np.any(boxes[i][1] < boxes[j][0]) or np.any(boxes[j][1] < boxes[i][0]):
-                continue
-            sa, sb = surfaces[a.patch], surfaces[b.patch]
-            for t0, t1 in _stretches(sa, a, sb, b, tol, samples):
-                length = _length(sa, a, t0, t1)
-                if length > 2.0 * tol:  # corners touching at a point share no edge
-                    seams.append(Seam(a, b, t0, t1, length))
+    lo = np.array([box[0] for box in boxes]).reshape(-1, 3)
+    hi = np.array([box[1] for box in boxes]).reshape(-1, 3)
+    # Candidate pairs: bounding boxes (grown by tol) that overlap, each pair once (i < j).
+    overlap = np.all((lo[:, None, :] <= hi[None, :, :]) & (lo[None, :, :] <= hi[:, None, :]), axis=2)
+    for i, j in zip(*np.nonzero(np.triu(overlap, k=1))):
+        a, b = keep[i], keep[j]
+        if a.patch == b.patch and a.side == b.side:
+            continue
+        if b.exact and not a.exact:  # measure along the exact curve of the two (module doc)
+            a, b = b, a
+        sa, sb = surfaces[a.patch], surfaces[b.patch]
+        for t0, t1 in _stretches(sa, a, sb, b, tol, samples):
+            length = _length(sa, a, t0, t1)
+            if length > 2.0 * tol:  # corners touching at a point share no edge
+                seams.append(Seam(a, b, t0, t1, length))
     return seams
