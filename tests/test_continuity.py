@@ -273,12 +273,14 @@ def test_paper_statement_measured_kinked_lines_at_g1_none_at_g2():
     [g1] = check_scene(scene).edges
     assert g1.cls == "G1" and g1.line_crossings >= 5
     assert g1.line_kink_max_deg > 10.0 and g1.line_kink_image_max_deg > 10.0
+    assert g1.extra["line_geodesic_jump_max"] > 0.1  # and the lines' geodesic curvature jumps (1/unit)
 
     left = scene.surfaces[0]  # a bicubic whose curvature varies across x: split it at u = 0.5
     A, B = _split(left.points, left.weights, 0.5)
     [g2] = check_scene(scene.replace(surfaces=[A, B])).edges
     assert g2.cls == "G2" and g2.line_crossings >= 5
     assert g2.line_kink_max_deg < 1e-4 and g2.line_kink_image_max_deg < 1e-4
+    assert g2.extra["line_geodesic_jump_max"] < 1e-6
 
 
 def test_filleted_cad_block_is_g1_with_the_fillet_curvature():

@@ -270,6 +270,7 @@ class EdgeReport:
             "worst": {k: self.worst(k) for k in ("g0", "g1", "g2")},
             "line_kink_max_deg": self.line_kink_max_deg,
             "line_kink_image_max_deg": self.line_kink_image_max_deg,
+            "line_geodesic_jump_max": None,  # filled (in extra) where lines cross in view
             "line_crossings": self.line_crossings,
             "along": {"s": s.s.tolist(), "g0": s.g0.tolist(), "g1_deg": np.degrees(s.g1).tolist(),
                       "kappa_a": s.kappa_a.tolist(), "kappa_b": s.kappa_b.tolist()},
