@@ -338,8 +338,8 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
 @click.option("--g1", type=float, default=None, metavar="DEG", help="Largest normal angle of a G1 seam [default: 0.1].")
 @click.option("--g2", type=float, default=None, metavar="FRACTION",
               help="Largest relative curvature jump |kA - kB| / max(|kA|, |kB|) of a G2 seam [default: 0.05].")
-@click.option("--require", type=click.Choice(["G0", "G1", "G2"], case_sensitive=False), default="G0",
-              show_default=True, help="Exit 1 unless every shared edge reaches this class.")
+@click.option("--require", default="G0", show_default=True, metavar="G0|G1|G2",
+              help="Exit 1 unless every shared edge reaches this class.")
 @click.option("--lines/--no-lines", default=True, show_default=True,
               help="Measure the kink of each reflection line where it crosses a seam (needs the scene's camera "
                    "and tubes).")
@@ -372,13 +372,18 @@ def continuity_command(scenes, report_path, png_path, g0, g1, g2, require, lines
       rtreflect continuity parts/filleted_block.step --require G1
     """
     from .analysis import seamcheck
+    from .errors import quote
 
     require = require.upper()
+    if require not in seamcheck.REQUIRE_CHOICES:
+        fail(f"--require: unknown class {quote(require)}; choose one of {', '.join(seamcheck.REQUIRE_CHOICES)}")
     try:
         seamcheck.check_tolerances(g0, g1 if g1 is not None else 0.0, g2 if g2 is not None else 0.0)
         loaded = [load_scene(path, skip_bad_faces).with_image(width, height, samples) for path in unique_scenes(scenes)]
     except RtreflectError as exc:
         fail(exc)
+    if png_path is not None and len(loaded) > 1:  # before anything is computed or written
+        fail(f"--png: one picture per run; give one scene (got {len(loaded)})")
     g1 = seamcheck.DEFAULT_G1_DEG if g1 is None else g1
     g2 = seamcheck.DEFAULT_G2 if g2 is None else g2
     results = []
@@ -398,8 +403,6 @@ def continuity_command(scenes, report_path, png_path, g0, g1, g2, require, lines
         if png_path is not None:
             from .analysis.seampicture import write_seam_picture
 
-            if len(results) > 1:
-                fail(f"--png: one picture per run; give one scene (got {len(results)})")
             write_seam_picture(png_path, results[0])
     except RtreflectError as exc:
         fail(exc)
