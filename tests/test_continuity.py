@@ -313,3 +313,27 @@ def test_capped_cylinder_from_rhino_meets_its_caps_at_right_angles():
         if e.cls == "G0":
             np.testing.assert_allclose(np.degrees(e.samples.g1), 90.0, rtol=1e-9)
             assert e.seam.length == pytest.approx(2 * math.pi * 10.0, rel=1e-6)
+
+
+def test_picture_draws_the_seam_in_its_class_colour_and_the_charts_beside_the_json(tmp_path):
+    import OpenImageIO as oiio
+
+    from rtreflect.analysis.seampicture import CLASS_COLOURS
+    from rtreflect.output.imagefiles import encode_srgb
+
+    png, report = tmp_path / "seams.png", tmp_path / "r.json"
+    result = _run("continuity", "scenes/g1_join.toml", "--png", str(png), "--json", str(report), "--width", "192",
+                  "--height", "108", "--samples", "1")
+    assert result.returncode == 0, result.stderr
+    pixels = oiio.ImageBuf(str(png)).get_pixels(oiio.UINT8)[..., :3].astype(int)
+    pixels = pixels[:, 40:].reshape(-1, 3)  # right of the legend's colour swatches
+    yellow = encode_srgb(np.array([[[*CLASS_COLOURS["G1"], 1.0]]], dtype=np.float32))[0, 0, :3].astype(int)
+    assert np.sum(np.all(np.abs(pixels - yellow) <= 2, axis=1)) > 30  # the G1 seam, ~1 px per row it crosses
+    assert (tmp_path / "r.charts.png").is_file()
+
+
+def test_png_with_several_scenes_is_refused_before_anything_is_written(tmp_path):
+    result = _run("continuity", "scenes/g1_join.toml", "scenes/hood.toml", "--png", str(tmp_path / "x.png"),
+                  "--json", str(tmp_path / "r.json"))
+    assert result.returncode == 2 and "--png" in result.stderr
+    assert list(tmp_path.iterdir()) == []
