@@ -325,6 +325,90 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
     sys.exit(0 if all(report.passed for report in reports) else EXIT_CHECK_FAILED)
 
 
+# -- rtreflect continuity (issue 16): logic in rtreflect/analysis/seamcheck.py ---------------------------
+@cli.command("continuity")
+@click.argument("scenes", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--json", "report_path", type=click.Path(path_type=Path), metavar="REPORT",
+              help="Also write the report as JSON (edges, summary); the per-edge charts go to REPORT's stem "
+                   "+ .charts.png beside it.")
+@click.option("--png", "png_path", type=click.Path(path_type=Path), metavar="OUT.png",
+              help="Render the scene and draw each seam over it, coloured by its class, worst value labelled.")
+@click.option("--g0", type=float, default=None, metavar="TOL",
+              help="Largest gap of a G0 seam, model units [default: 1e-6 of the part's size].")
+@click.option("--g1", type=float, default=None, metavar="DEG", help="Largest normal angle of a G1 seam [default: 0.1].")
+@click.option("--g2", type=float, default=None, metavar="FRACTION",
+              help="Largest relative curvature jump |kA - kB| / max(|kA|, |kB|) of a G2 seam [default: 0.05].")
+@click.option("--require", default="G0", show_default=True, metavar="G0|G1|G2",
+              help="Exit 1 unless every shared edge reaches this class.")
+@click.option("--lines/--no-lines", default=True, show_default=True,
+              help="Measure the kink of each reflection line where it crosses a seam (needs the scene's camera "
+                   "and tubes).")
+@click.option("--width", type=click.IntRange(1, MAX_SIDE), help="Width of the --png render (overrides [image] width).")
+@click.option("--height", type=click.IntRange(1, MAX_SIDE), help="Height of the --png render (overrides [image] height).")
+@click.option("--samples", type=click.IntRange(1, MAX_SAMPLES), help="s: s×s samples per pixel of the --png render.")
+@click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
+              help="CAD input: leave out faces that cannot be used (listed) instead of refusing the part.")
+def continuity_command(scenes, report_path, png_path, g0, g1, g2, require, lines, width, height, samples,
+                       skip_bad_faces) -> None:
+    """Continuity at every shared edge of each SCENE: G0 gap, G1 angle, G2 curvature jump, exact.
+
+    SCENE is a scene file or a CAD part (STEP, IGES, .3dm; shown in the default part scene).
+    Shared edges are found geometrically (boundary curves of two faces, trim loops for CAD faces,
+    that coincide over a common stretch, partial overlaps and T-junctions included). Along each edge, sampled
+    adaptively, the matching point on the other patch is found by Newton, and the gap, the
+    angle between the normals and the normal curvatures across the edge are computed from the
+    exact NURBS derivatives. With --lines (default), each analytic reflection line crossing a
+    G1 or G2 edge gets the kink angle between its two sides (the paper: a G1 seam with a
+    curvature jump kinks the lines, a G2 seam does not).
+
+    \b
+    Exit status: 0 every edge reaches --require (default G0: no open seam), 1 otherwise,
+    2 bad input. A scene with no shared edges is not an error.
+
+    \b
+    Examples:
+      rtreflect continuity scenes/g1_join.toml --require G2
+      rtreflect continuity scenes/teapot.toml --json out/teapot.json --png out/teapot.seams.png
+      rtreflect continuity parts/filleted_block.step --require G1
+    """
+    from .analysis import seamcheck
+    from .errors import quote
+
+    require = require.upper()
+    if require not in seamcheck.REQUIRE_CHOICES:
+        fail(f"--require: unknown class {quote(require)}; choose one of {', '.join(seamcheck.REQUIRE_CHOICES)}")
+    try:
+        seamcheck.check_tolerances(g0, g1 if g1 is not None else 0.0, g2 if g2 is not None else 0.0)
+        loaded = [load_scene(path, skip_bad_faces).with_image(width, height, samples) for path in unique_scenes(scenes)]
+    except RtreflectError as exc:
+        fail(exc)
+    if png_path is not None and len(loaded) > 1:  # before anything is computed or written
+        fail(f"--png: one picture per run; give one scene (got {len(loaded)})")
+    g1 = seamcheck.DEFAULT_G1_DEG if g1 is None else g1
+    g2 = seamcheck.DEFAULT_G2 if g2 is None else g2
+    results = []
+    try:
+        for scene in loaded:
+            result = seamcheck.check_scene(scene, g0, g1, g2, lines=lines)
+            results.append(result)
+            for row in seamcheck.table(result):
+                click.echo(row)
+            click.echo(seamcheck.summary_line(result, require))
+        if report_path is not None:
+            from .analysis.seampicture import charts_path, write_charts
+
+            write_json(report_path, seamcheck.document(results, require))
+            if any(r.edges for r in results):
+                write_charts(charts_path(report_path), results)
+        if png_path is not None:
+            from .analysis.seampicture import write_seam_picture
+
+            write_seam_picture(png_path, results[0])
+    except RtreflectError as exc:
+        fail(exc)
+    sys.exit(0 if all(r.meets(require) for r in results) else EXIT_CHECK_FAILED)
+
+
 # -- rtreflect batch ----------------------------------------------------------------------
 #: Stops a batch reports before exiting: Ctrl-C (KeyboardInterrupt where `main`'s handlers are not installed,
 #: e.g. click's test runner) and the stop signals `main` turns into `Interrupted`.

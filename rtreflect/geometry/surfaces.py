@@ -323,11 +323,7 @@ class NurbsSurface:
         d = derivs if derivs is not None else self.evaluate(u, v, order=1)
         cross = np.cross(d.Su, d.Sv)
         norm = np.linalg.norm(cross, axis=1)
-        len_u, len_v = np.linalg.norm(d.Su, axis=1), np.linalg.norm(d.Sv, axis=1)
-        (u0, u1), (v0, v1) = self.domain
-        floor = VANISHING_PARTIAL * math.sqrt(self.size * self.reach)
-        degenerate = ~((norm > DEGENERATE_SINE * len_u * len_v)
-                       & (len_u * (u1 - u0) > floor) & (len_v * (v1 - v0) > floor))
+        degenerate = self.degenerate(d, norm)
         if np.any(degenerate):
             cross[degenerate] = self._limit_cross(u[degenerate], v[degenerate])
             norm[degenerate] = np.linalg.norm(cross[degenerate], axis=1)
@@ -336,6 +332,15 @@ class NurbsSurface:
             cross[still] = self._mean_normal()
             norm[still] = np.linalg.norm(cross[still], axis=1)
         return cross / norm[:, None]
+
+    def degenerate(self, d: SurfaceDerivatives, cross_norm: np.ndarray | None = None) -> np.ndarray:
+        """True where S_u × S_v is too small to define the normal: `DEGENERATE_SINE`, `VANISHING_PARTIAL`."""
+        norm = np.linalg.norm(np.cross(d.Su, d.Sv), axis=1) if cross_norm is None else cross_norm
+        len_u, len_v = np.linalg.norm(d.Su, axis=1), np.linalg.norm(d.Sv, axis=1)
+        (u0, u1), (v0, v1) = self.domain
+        floor = VANISHING_PARTIAL * math.sqrt(self.size * self.reach)
+        return ~((norm > DEGENERATE_SINE * len_u * len_v)
+                 & (len_u * (u1 - u0) > floor) & (len_v * (v1 - v0) > floor))
 
     def _limit_cross(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Leading Taylor term of S_u × S_v at (u + h δu, v + h δv) as h → 0+.

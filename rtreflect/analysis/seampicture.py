@@ -1,0 +1,162 @@
+"""Pictures of the continuity check: the seams drawn over a render, and per-edge charts along each seam.
+
+The seams are drawn with the overlay's anti-aliased line coverage (`overlay.coverage`,
+`overlay.blend`), coloured by the class each reaches; a seam short of G2 gets its worst value written beside
+its worst visible point (one label where symmetric copies would overlap);
+a legend names the colours. Points of a seam hidden from the eye (Embree occlusion, as
+for the contours) are not drawn. The charts plot G0 (gap), G1 (angle) and the two
+sides' normal curvatures against arc length, one row of three panels per edge. Text is
+drawn by OpenImageIO's ``render_text`` (its built-in font), so no plotting library is needed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from ..errors import RtreflectError
+from ..output.imagefiles import atomic_path, write_png
+from .contours import ContourLine, ContourLines, Polyline, UlmetField
+from .overlay import blend, coverage
+
+#: Linear RGB per class: red open, orange G0, yellow-green G1, blue G2 (distinct for the usual colour blindness).
+CLASS_COLOURS = {"open": (0.9, 0.0, 0.0), "G0": (1.0, 0.45, 0.0), "G1": (0.75, 0.75, 0.0), "G2": (0.0, 0.35, 1.0)}
+SEAM_WIDTH_PX = 3.0
+FONT_PX = 14
+#: Width of a character of the built-in font at FONT_PX, for keeping labels apart.
+LABEL_CHAR_PX = 8
+PANEL = (240, 120)  # width, height of one chart panel in pixels
+MARGIN = 28
+
+
+def _text(rgba: np.ndarray, x: int, y: int, text: str, colour=(0.0, 0.0, 0.0), size: int = FONT_PX) -> np.ndarray:
+    """``rgba`` with ``text`` written at (x, y) (baseline), via OpenImageIO's render_text."""
+    buf = oiio.ImageBuf(np.ascontiguousarray(rgba, dtype=np.float32))
+    oiio.ImageBufAlgo.render_text(buf, int(x), int(y), text, size, "", (*colour, 1.0))
+    return buf.get_pixels(oiio.FLOAT).reshape(rgba.shape)
+
+
+def _seen_from_eye(field: UlmetField, patch: int, P: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """True where the seam point P is not hidden from the eye by the part (origin off the surface, as for rays)."""
+    cam = field.camera
+    a = field.eye_vectors(P)
+    n = np.where((np.sum(n * a, axis=1) >= 0)[:, None], n, -n)
+    origin = field.accelerator.surface_origins(P, n, np.full(len(P), patch))
+    to_eye = np.linalg.norm(cam.spec.eye - origin, axis=1) if not cam.orthographic else (origin - cam.spec.eye) @ cam.basis[0]
+    depth = (P - cam.spec.eye) @ cam.basis[0]
+    seen = depth > 0
+    idx = np.flatnonzero(seen)
+    seen[idx] &= ~field.accelerator.occluded(origin[idx], a[idx], np.abs(to_eye[idx]))
+    return seen
+
+
+def _label(e) -> str:
+    if e.cls == "open":
+        return f"open, gap {e.g0_max:.2g}"
+    if e.cls == "G0":
+        return f"G0, {e.g1_max_deg:.2g} deg"
+    if e.cls == "G1":
+        return f"G1, dk {e.g2_max_rel:.0%}"
+    return "G2"
+
+
+def write_seam_picture(path: Path, result) -> None:
+    """Render the scene and write the PNG with the seams, labels and legend drawn over it."""
+    from ..integrator.renderer import Renderer
+
+    scene = result.scene
+    renderer = Renderer(scene)
+    rgba = renderer.render().rgba.copy()
+    field = UlmetField.of(renderer)
+    W, H = scene.image.width, scene.image.height
+    background = rgba[..., 3:4]  # composite over white so the black text and coloured seams read everywhere
+    rgba[..., :3] = rgba[..., :3] * background + (1.0 - background)
+    rgba[..., 3] = 1.0
+    labels = []
+    for cls, colour in CLASS_COLOURS.items():
+        polylines = []
+        for e in (e for e in result.edges if e.cls == cls):
+            s = e.samples
+            seen = _seen_from_eye(field, e.seam.a.patch, s.P, s.n_a)
+            px = field.camera.project(s.P)
+            px[~seen] = np.nan  # hidden pieces are cut out
+            polylines.append(Polyline(e.seam.a.patch, s.uv_a, px))
+            if np.any(seen) and e.cls != "G2":  # label the seams that fall short of G2, at their worst visible point
+                quantity = {"open": s.g0, "G0": s.g1, "G1": s.jump}[e.cls]
+                at = np.flatnonzero(seen)[np.argmax(quantity[seen])]
+                labels.append((px[at], _label(e), colour))
+        if polylines:
+            alpha = coverage(ContourLines(W, H, [ContourLine(0, 0.0, polylines)]), W, H, SEAM_WIDTH_PX)
+            rgba = blend(rgba, alpha.astype(np.float32), colour)
+    placed: list[tuple[float, float, float, float]] = []
+    for (x, y), text, colour in labels:
+        box = (x + 6, y - 6 - FONT_PX, x + 6 + LABEL_CHAR_PX * len(text), y - 6)
+        clash = any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed)
+        if 0 <= x < W and 0 <= y < H and not clash:  # symmetric copies of a seam carry the same label: once
+            placed.append(box)
+            rgba[int(y) - 2:int(y) + 3, int(x) - 2:int(x) + 3, :3] = 0.0  # the point the label refers to
+            rgba = _text(rgba, int(x) + 6, int(y) - 6, text)
+    # Legend, top left: a swatch and the class's meaning.
+    th = result.thresholds
+    meaning = {"open": f"open: gap > {th.g0:.2g}", "G0": f"G0: gap closed, normals > {th.g1_deg:g} deg apart",
+               "G1": f"G1: tangent, curvature jump > {th.g2:.0%}", "G2": f"G2: curvature jump <= {th.g2:.0%}"}
+    for i, (cls, colour) in enumerate(CLASS_COLOURS.items()):
+        y = 10 + i * (FONT_PX + 6)
+        rgba[y:y + FONT_PX, 10:30, :3] = colour
+        rgba = _text(rgba, 36, y + FONT_PX - 2, meaning[cls])
+    _save(path, rgba)
+
+
+def _save(path: Path, rgba: np.ndarray) -> None:
+    """Write the PNG atomically (a complete file or none), its folder created; errors name the file."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            write_png(tmp, rgba, final=path)
+    except OSError as exc:
+        raise RtreflectError(f"{path}: cannot write picture ({exc.strerror or exc})") from None
+
+
+def charts_path(report_path: Path) -> Path:
+    """Where `--json REPORT` puts its companion charts: REPORT's stem + ``.charts.png``, beside it."""
+    report_path = Path(report_path)
+    return report_path.with_name(report_path.stem + ".charts.png")
+
+
+def _panel(values: list[np.ndarray], s: np.ndarray, colours, title: str) -> np.ndarray:
+    """One chart: each series in ``values`` against arc length s, scaled to the panel, with its range written."""
+    w, h = PANEL
+    img = np.ones((h, w, 4), dtype=np.float32)
+    x0, x1, y0, y1 = 8, w - 8, MARGIN, h - 10
+    img[y0:y1 + 1, x0] = img[y1, x0:x1 + 1] = (0.5, 0.5, 0.5, 1.0)
+    finite = np.concatenate([v[np.isfinite(v)] for v in values]) if values else np.zeros(1)
+    lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    if hi - lo <= 1e-300:
+        lo, hi = lo - 1.0, hi + 1.0 if hi == 0 else hi + abs(hi)
+    span = max(s[-1] - s[0], 1e-300)
+    for v, colour in zip(values, colours):
+        px = np.stack([x0 + (s - s[0]) / span * (x1 - x0), y1 - (v - lo) / (hi - lo) * (y1 - y0)], axis=1)
+        alpha = coverage(ContourLines(w, h, [ContourLine(0, 0.0, [Polyline(0, px, px)])]), w, h, 1.5)
+        img = blend(img, alpha.astype(np.float32), colour)
+    img = _text(img, 6, 13, title, size=12)
+    return _text(img, 6, 25, f"{lo:.3g} .. {hi:.3g}", (0.3, 0.3, 0.3), size=11)
+
+
+def write_charts(path: Path, results) -> None:
+    """Per edge a row of three panels along the seam's length: G0 gap, G1 angle, κ_A and κ_B."""
+    rows = []
+    for result in results:
+        for e in result.edges:
+            s = e.samples
+            head = f"{result.name} {e.seam.a.patch}-{e.seam.b.patch} ({e.cls})"
+            rows.append(np.concatenate([
+                _panel([s.g0], s.s, [(0.8, 0, 0)], f"{head}: G0 gap"),
+                _panel([np.degrees(s.g1)], s.s, [(0.9, 0.45, 0)], "G1 angle (deg)"),
+                _panel([s.kappa_a, s.kappa_b], s.s, [(0, 0.3, 1), (0.8, 0, 0.6)], "G2: kA (blue), kB (purple)"),
+            ], axis=1))
+    if not rows:
+        return
+    _save(path, np.concatenate(rows, axis=0))
