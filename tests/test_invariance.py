@@ -165,26 +165,24 @@ def test_translated_scene_renders_the_same_pixels(original):
 
 
 def test_validate_passes_the_translated_scene_and_fails_mesh_hits_kept_there(monkeypatch):
-    """The old render far from the origin: the BVH in world float32 coordinates, and Newton giving up on the hits.
+    """The old render far from the origin: the BVH in world float32 coordinates, and the mesh hits kept.
 
     It kept mesh hits ~0.01 off the surface; validate's on-surface test allowed 1e-5 |P| (1.7 units
-    at 1e5 on a 2.85-unit part) and passed it. Relative to the part's size it sees the mesh hits,
-    and fallbacks inside the surface fail. (The correct render used to fail on misses instead:
-    validate's checks ran on float32 P, 1/128 coarse at 1e5.)
+    at 1e5 on a 2.85-unit part) and passed it. Relative to the part's size it sees them. (The
+    correct render used to fail on misses instead: validate's checks ran on float32 P, 1/128
+    coarse at 1e5.) The tracer no longer keeps an unrefined mesh point, so the old behaviour is
+    simulated by a "Newton" that stops at the mesh hit's interpolated (u, v) and calls it converged.
     """
     far = hood(offset=OFFSET, samples=1)
     assert validate_scene(far, threads=1).passed
-    refine = tracing_module.refine
 
-    def gives_up(*args):
-        u, v, derivs, converged = refine(*args)
-        return u, v, derivs, np.zeros_like(converged)
+    def stops_at_mesh_hit(surfaces, patch, u, v, *args):
+        return u.copy(), v.copy(), surfaces.evaluate(patch, u, v), np.ones(len(u), dtype=bool)
 
-    monkeypatch.setattr(tracing_module, "refine", gives_up)
+    monkeypatch.setattr(tracing_module, "refine", stops_at_mesh_hit)
     monkeypatch.setattr(accelerator_module, "bvh_centre", lambda vertices: np.zeros(3))
     report = validate_scene(far, threads=1)
-    assert not report.passed
-    assert any("Newton fallback" in reason for reason in report.reasons), report.reasons
+    assert not report.passed, report.reasons
 
 
 def test_bvh_works_in_its_own_centred_coordinates():
