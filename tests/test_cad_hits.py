@@ -29,7 +29,7 @@ import pytest
 OCP = pytest.importorskip("OCP")
 pytest.importorskip("shapely")
 
-from rtreflect.exchange.scene import load_scene  # noqa: E402
+from rtreflect.exchange.load import load_scene  # noqa: E402
 from rtreflect.integrator.renderer import Renderer  # noqa: E402
 
 from test_cad_reader import occt_faces  # noqa: E402

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtreflect.exchange.scene import load_scene
+from rtreflect.exchange.load import load_scene
 from rtreflect.geometry.surfaces import NurbsSurface
 from rtreflect.geometry.trims import Trim
 from rtreflect.integrator.renderer import Renderer
