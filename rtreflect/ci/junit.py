@@ -132,7 +132,7 @@ def batch_cases(records: list[dict]) -> list[TestCase]:
     """The batch's scene records (its ``--json`` report): per scene a ``render`` case, then its checks."""
     cases = []
     for record in records:
-        classname = record.get("name") or record["scene"]
+        classname = record.get("name") or Path(record["scene"]).stem  # as the HTML report names the row
         status = record["status"]
         if status == "failed":
             cases.append(TestCase(classname, "render", record["seconds"], failure=record["error"],
