@@ -358,7 +358,8 @@ def stop_status(exc: BaseException) -> int:
 @click.option("--validate", "run_validate", is_flag=True,
               help="Then check each scene against the analytic reflection lines, as `rtreflect validate` does "
                    f"(tolerance {DEFAULT_TOLERANCE_PX:g} px); a failed check exits 1.")
-@click.option("--golden", "golden_dir", type=click.Path(path_type=Path), metavar="DIR", default=None,
+@click.option("--golden", "golden_dir", type=click.Path(path_type=Path, exists=True, file_okay=False), metavar="DIR",
+              default=None,
               help="Then compare each OUTPUT/NAME.exr with DIR/NAME.exr by the golden checks (colour, AOVs); a "
                    "mismatch writes OUTPUT/NAME.CHECK.diff.png and exits 1; a scene without a golden is noted.")
 @click.option("--report", "html_path", type=click.Path(path_type=Path), metavar="FILE.html", default=None,
@@ -524,7 +525,8 @@ def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False
 @click.option("--json", "batch_json", type=click.Path(path_type=Path), default=None, metavar="REPORT",
               help="The batch's --json report: statuses, failure reasons and the --validate/--golden checks "
                    "[default: every NAME.png or NAME.exr in OUTDIR, shown as rendered].")
-@click.option("--golden", "golden_dir", type=click.Path(path_type=Path), metavar="DIR", default=None,
+@click.option("--golden", "golden_dir", type=click.Path(path_type=Path, exists=True, file_okay=False), metavar="DIR",
+              default=None,
               help="Compare each OUTDIR/NAME.exr with DIR/NAME.exr now (as `batch --golden`).")
 @click.option("--junit", "junit_path", type=click.Path(path_type=Path), metavar="FILE.xml", default=None,
               help="Also write the same verdicts as JUnit XML.")

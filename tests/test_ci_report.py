@@ -183,3 +183,11 @@ def test_report_command_rebuilds_the_page_from_the_json_or_the_folder(batch_run,
     assert len(list((tmp_path / "folder_files").glob("*.png"))) == 4
     code, output = run("report", tmp_path / "nowhere")
     assert code == 2 and output.count("\n") == 1 and "no such folder" in output
+
+
+def test_a_golden_folder_that_does_not_exist_is_bad_input_before_rendering(batch_run, tmp_path):
+    """A mistyped --golden would otherwise report every scene as "no golden image" and pass."""
+    result = CliRunner().invoke(cli, ["batch", str(batch_run["root"] / "scenes" / "hood.toml"), "-o",
+                                      str(tmp_path / "out"), "--golden", str(tmp_path / "nowhere")])
+    assert result.exit_code == 2 and "--golden" in result.output and "does not exist" in result.output
+    assert not (tmp_path / "out").exists()
