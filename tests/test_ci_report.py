@@ -109,7 +109,8 @@ def test_report_in_a_browser_shows_every_scene_the_failure_and_loads_every_image
     assert len(images) == 5, images
     broken = [image for image in images if image["width"] == 0]
     assert not broken, broken
-    assert all(image["loading"] == "lazy" and image["width"] == THUMB_WIDTH for image in images), images
+    # thumbnails are at most THUMB_WIDTH wide, never enlarged: these renders are 160 px wide
+    assert all(image["loading"] == "lazy" and image["width"] == min(THUMB_WIDTH, 160) for image in images), images
     assert all(image["src"].startswith("report_files/") for image in images)  # thumbnails, not the full images
 
     shot = page.screenshot(tmp_path / "report.png")
@@ -191,3 +192,31 @@ def test_a_golden_folder_that_does_not_exist_is_bad_input_before_rendering(batch
                                       str(tmp_path / "out"), "--golden", str(tmp_path / "nowhere")])
     assert result.exit_code == 2 and "--golden" in result.output and "does not exist" in result.output
     assert not (tmp_path / "out").exists()
+
+
+def test_thumbnail_of_an_exr_looks_like_the_png(batch_run, tmp_path):
+    """A scene with `png = false` has only its EXR (17 float channels; before, its thumbnail could not be written).
+    Its thumbnail is R,G,B,A scaled in linear light and sRGB-encoded as rtreflect writes PNGs, so it shows what the
+    same render's PNG shows: the same codes where nothing is scaled (a 160 px render), and where it is scaled
+    (the 320 px golden) the same picture up to the lines' edges, where averaging in linear light is brighter."""
+    import numpy as np
+
+    from rtreflect.ci.report import thumbnail
+    from rtreflect.output.imagefiles import read_image
+
+    def visible(path):  # colour as seen over the page: RGB × alpha, in code values
+        rgba = read_image(path)[0].astype(float)
+        return rgba[..., :3] * rgba[..., 3:] * 255
+
+    golden_images = Path(__file__).resolve().parent.parent / "golden_images"
+    for stem, width, limits in ((batch_run["out"] / "hood", 160, (0.01, 1.0)), (golden_images / "hood", THUMB_WIDTH,
+                                                                               (2.0, 24.0))):
+        assert thumbnail(stem.with_suffix(".exr"), tmp_path / "from_exr.png")
+        assert thumbnail(stem.with_suffix(".png"), tmp_path / "from_png.png")
+        from_exr, from_png = visible(tmp_path / "from_exr.png"), visible(tmp_path / "from_png.png")
+        assert from_exr.shape == from_png.shape == (width * 9 // 16, width, 3)
+        difference = np.abs(from_exr - from_png)
+        mean_limit, p99_limit = limits
+        assert difference.mean() <= mean_limit and np.percentile(difference, 99) <= p99_limit, (
+            stem, difference.mean(), np.percentile(difference, 99))
+        assert from_png.std() > 10  # a real picture, not a blank

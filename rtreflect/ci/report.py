@@ -20,7 +20,8 @@ import OpenImageIO as oiio
 
 from .. import __version__
 from ..errors import RtreflectError
-from ..output.imagefiles import atomic_path, muted_stderr
+from ..integrator.film import COLOR_CHANNELS
+from ..output.imagefiles import atomic_path, encode_srgb, muted_stderr
 
 #: Thumbnail width in pixels: a row stays about this tall at 16:9, hundreds of rows stay light (~20 kB each).
 THUMB_WIDTH = 240
@@ -29,16 +30,31 @@ VERDICTS = ("failed", "check failed", "interrupted", "passed", "up to date")
 
 
 def thumbnail(source: Path, target: Path, width: int = THUMB_WIDTH) -> bool:
-    """``source`` (any image OpenImageIO reads) scaled to ``width`` pixels wide as a PNG at ``target``;
-    False when the source cannot be read (the page then says so instead of showing a broken image)."""
+    """``source`` scaled to ``width`` pixels wide (at most) as an 8-bit PNG at ``target``; False when the source cannot be read
+    (the page then says so instead of showing a broken image).
+
+    An 8-bit image (the PNG) is scaled as it is. A float image (an EXR of a scene with ``png = false``) has its
+    R, G, B, A scaled in linear light, then encoded as rtreflect encodes its PNGs (`encode_srgb`); its AOVs are
+    left out, so the thumbnail looks like the PNG would.
+    """
     with muted_stderr():
         image = oiio.ImageBuf(str(source))
-        if image.has_error or image.spec().width <= 0:
+        spec = image.spec()
+        if image.has_error or spec.width <= 0:
             oiio.geterror()
             return False
-        spec = image.spec()
+        linear = spec.format.basetype in (oiio.FLOAT, oiio.HALF, oiio.DOUBLE)
+        if linear:
+            if not all(channel in spec.channelnames for channel in COLOR_CHANNELS):
+                return False
+            image = oiio.ImageBufAlgo.channels(image, COLOR_CHANNELS)
+        width = min(width, spec.width)  # never enlarged: a small render is its own thumbnail
         height = max(1, round(spec.height * width / spec.width))
-        small = oiio.ImageBufAlgo.resize(image, roi=oiio.ROI(0, width, 0, height, 0, 1, 0, spec.nchannels))
+        small = oiio.ImageBufAlgo.resize(image, roi=oiio.ROI(0, width, 0, height, 0, 1, 0, image.nchannels))
+        if linear:
+            encoded = encode_srgb(small.get_pixels(oiio.FLOAT))
+            small = oiio.ImageBuf(oiio.ImageSpec(width, height, len(COLOR_CHANNELS), oiio.UINT8))
+            small.set_pixels(oiio.ROI(0, width, 0, height, 0, 1, 0, len(COLOR_CHANNELS)), encoded)
         target.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(target) as tmp:
             if not small.write(str(tmp), "uint8", "png"):
