@@ -179,6 +179,13 @@ def test_report_command_rebuilds_the_page_from_the_json_or_the_folder(batch_run,
     assert code == 1 and "5 scenes, 1 failed, 1 failed a check" in output, output
     html = (tmp_path / "again.html").read_text()
     assert html.count('<tr data-verdict=') == 5 and "lights.radios: unknown key" in html
+    # The batch ran with relative paths elsewhere: its outputs are found in OUTDIR by name.
+    document = json.loads((out / "batch.json").read_text())
+    for scene in document["scenes"]:
+        scene["outputs"] = [f"elsewhere/{Path(p).name}" for p in scene["outputs"]]
+    (tmp_path / "relative.json").write_text(json.dumps(document))
+    code, output = run("report", out, "--json", tmp_path / "relative.json", "-o", tmp_path / "relative.html")
+    assert code == 1 and len(list((tmp_path / "relative_files").glob("*.png"))) == 5, output  # 4 scenes, 1 diff
     code, output = run("report", out, "-o", tmp_path / "folder.html")  # no JSON: the images in the folder
     assert code == 0 and "4 scenes, 0 failed" in output, output
     assert len(list((tmp_path / "folder_files").glob("*.png"))) == 4

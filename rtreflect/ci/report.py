@@ -106,7 +106,7 @@ def write_report(path: Path, records: list[dict], outdir: Path, title: str | Non
         folder.mkdir(parents=True, exist_ok=True)
         if assets.exists():  # thumbnails of an earlier report: scenes since removed must not linger
             shutil.rmtree(assets)
-        rows = [_row(record, folder, assets) for record in records]
+        rows = [_row(record, folder, assets, Path(outdir)) for record in records]
         environment = jinja2.Environment(loader=jinja2.PackageLoader("rtreflect.ci", "templates"),
                                          autoescape=True, undefined=jinja2.StrictUndefined)
         page = environment.get_template("report.html.j2").render(
@@ -119,10 +119,17 @@ def write_report(path: Path, records: list[dict], outdir: Path, title: str | Non
     return path
 
 
-def _row(record: dict, folder: Path, assets: Path) -> dict:
+def _found(path: str | Path, outdir: Path) -> Path:
+    """A file a report names: as named, or else by its name in ``outdir`` (a batch's paths are relative to the
+    folder it ran in, which need not be where the report is made)."""
+    path = Path(path)
+    return path if path.exists() or not (outdir / path.name).exists() else outdir / path.name
+
+
+def _row(record: dict, folder: Path, assets: Path, outdir: Path) -> dict:
     """What the template shows of one scene: links relative to the page, thumbnails made."""
     name = record.get("name") or Path(record["scene"]).stem
-    outputs = [Path(p) for p in record.get("outputs", [])]
+    outputs = [_found(p, outdir) for p in record.get("outputs", [])]
     png = next((p for p in outputs if p.suffix == ".png"), None)
     exr = next((p for p in outputs if p.suffix == ".exr"), None)
     image = png or exr
@@ -137,10 +144,11 @@ def _row(record: dict, folder: Path, assets: Path) -> dict:
     if golden:
         for check, result in golden["checks"].items():
             diff = None
-            if result.get("diff_image") and Path(result["diff_image"]).is_file():
+            diff_image = _found(result["diff_image"], outdir) if result.get("diff_image") else None
+            if diff_image is not None and diff_image.is_file():
                 target = assets / f"{name}.{check}.diff.png"
-                diff = {"href": _relative(result["diff_image"], folder),
-                        "thumb": _relative(target, folder) if thumbnail(Path(result["diff_image"]), target) else None}
+                diff = {"href": _relative(diff_image, folder),
+                        "thumb": _relative(target, folder) if thumbnail(diff_image, target) else None}
             golden_checks.append({"check": check, **result, "diff": diff})
     return {
         "name": name, "scene": record["scene"], "status": record["status"], "verdict": _verdict(record),
