@@ -377,14 +377,16 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
     complete files. At the end a table lists scene, status, seconds and files.
 
     \b
-    Exit status: 0 all scenes rendered or up to date, 1 some scene failed,
-    2 bad input (no scenes, two scenes writing the same NAME, ...), 130 interrupted.
+    Exit status: 0 all scenes rendered or up to date, 1 some scene failed (or
+    failed a --validate or --golden check), 2 bad input (no scenes, two scenes
+    writing the same NAME, ...), 130 interrupted.
 
     \b
     Examples:
       rtreflect batch scenes/ -o out/
       rtreflect batch parts/ variants/door.toml -o out/ --recursive -j 4 --json out/report.json
       rtreflect batch scenes/ -o out/ --scheduler tcp://10.0.0.5:8786
+      rtreflect batch scenes/ -o out/ --validate --report out/report.html --junit out/junit.xml
     """
     from . import batch as batching
 
