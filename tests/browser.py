@@ -13,6 +13,7 @@ import base64
 import fcntl
 import json
 import os
+import select
 import shutil
 import subprocess
 from pathlib import Path
@@ -58,8 +59,6 @@ class Browser:
         os.write(self._to_browser, json.dumps(message).encode() + b"\0")
         while True:
             while b"\0" not in self._buffer:
-                import select
-
                 ready, _, _ = select.select([self._from_browser], [], [], CALL_TIMEOUT)
                 chunk = os.read(self._from_browser, 1 << 20) if ready else b""
                 if not chunk:
