@@ -18,7 +18,8 @@ from typing import Callable
 
 from .analysis.validate import DEFAULT_TOLERANCE_PX, SceneReport, validate_scene
 from .errors import RtreflectError, SceneError, SceneErrors
-from .exchange.scene import Scene, load_scene
+from .exchange.load import load_scene
+from .exchange.scene import Scene
 from .geometry.surfaces import NurbsSurface
 from .integrator.film import CHANNELS
 from .integrator.renderer import Renderer, RenderResult

@@ -32,10 +32,14 @@ from .errors import RtreflectError, error_lines
 from .output.imagefiles import (OUTPUT_KEY_ATTRIBUTE, VERSION_ATTRIBUTE, check_distinct_outputs, output_paths, read_provenance,
                          write_json)
 from .analysis.overlay import contours_file_name
+from .exchange.cad import CAD_SUFFIXES
 from .output.sharing import remove_dead_temporaries
-from .exchange.scene import Scene, load_scene
+from .exchange.load import load_scene
+from .exchange.scene import Scene
 from .integrator.tiling import default_max_memory
 
+#: What a folder is searched for: scene files, and CAD files (each rendered in the default scene around the part).
+SCENE_SUFFIXES = (".toml", *CAD_SUFFIXES)
 RENDERED, SKIPPED, FAILED, INTERRUPTED = "rendered", "skipped", "failed", "interrupted"
 #: A pool worker's message that it started a scene: (STARTED, pid, scene path).
 STARTED = "started"
@@ -81,8 +85,8 @@ def discover(paths: list[Path], recursive: bool = False) -> list[Path]:
     for path in paths:
         path = Path(path)
         if path.is_dir():
-            pattern = "**/*.toml" if recursive else "*.toml"
-            files = sorted(p for p in path.glob(pattern) if p.is_file())
+            pattern = "**/*" if recursive else "*"
+            files = sorted(p for p in path.glob(pattern) if p.suffix.lower() in SCENE_SUFFIXES and p.is_file())
         elif path.exists():
             files = [path]
         else:
@@ -94,15 +98,16 @@ def discover(paths: list[Path], recursive: bool = False) -> list[Path]:
                 found.append(file)
     if not found:
         where = ", ".join(str(p) for p in paths)
-        raise RtreflectError(f"{where}: no scene files (*.toml) found" + ("" if recursive else "; use --recursive for sub-folders"))
+        raise RtreflectError(f"{where}: no scene or CAD files ({', '.join('*' + s for s in SCENE_SUFFIXES)}) found"
+                             + ("" if recursive else "; use --recursive for sub-folders"))
     return found
 
 
-def load_jobs(files: list[Path]) -> list[Job]:
+def load_jobs(files: list[Path], skip_bad_faces: bool = False) -> list[Job]:
     jobs = []
     for file in files:
         try:
-            jobs.append(Job(file, scene=load_scene(file)))
+            jobs.append(Job(file, scene=load_scene(file, skip_bad_faces)))
         except RtreflectError as exc:
             jobs.append(Job(file, error="; ".join(error_lines(exc))))  # every problem of the file, on one line
     return jobs

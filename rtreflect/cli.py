@@ -20,7 +20,8 @@ from .errors import RtreflectError, error_lines, one_line
 from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, removed_note, write_json
 from .interrupts import Interrupted, signals_as_exceptions
 from .analysis.overlay import contours_file_name
-from .exchange.scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, load_scene
+from .exchange.load import load_scene
+from .exchange.scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES
 from .output.streaming import render_to_files
 from .integrator.tiling import parse_size
 from .analysis.validate import DEFAULT_TOLERANCE_PX, validate_scene
@@ -78,6 +79,13 @@ def cli() -> None:
     """
 
 
+def _print_notes(scenes) -> None:
+    """What each scene's CAD files gave (faces, unit, bounding box, skipped faces), before rendering."""
+    for scene in scenes:
+        for line in getattr(scene, "notes", ()):
+            click.echo(line)
+
+
 @cli.command()
 @click.argument("scenes", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--output", "outdir", type=click.Path(path_type=Path), default=Path("out"), show_default=True,
@@ -96,8 +104,10 @@ def cli() -> None:
 @click.option("--normals", type=click.Choice(NORMALS_MODES), default=None,
               help="exact: the NURBS normal at the exact hit; mesh: the CAD analysis-mesh normal, for comparison "
                    "(overrides [render] normals).")
+@click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
+              help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
 def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory, overlay,
-           normals) -> None:
+           normals, skip_bad_faces) -> None:
     """Render the reflection lines of each SCENE file to OUTPUT/NAME.exr and .png.
 
     The EXR holds linear RGBA plus per-pixel AOVs from the pixel-centre ray
@@ -107,9 +117,14 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     holds them (per line: light index, polylines in pixels and in (u, v)).
 
     \b
+    A STEP, IGES or .3dm file in place of a SCENE renders the part in a default scene
+    (camera fitted to its bounding box, tubes above it); NAME is the file's stem.
+
+    \b
     Example:
       rtreflect render scenes/hood.toml -o out/
       rtreflect render scenes/*.toml -o out/ --width 480 --height 270 --samples 2
+      rtreflect render parts/plate.step -o out/
     """
     budget = memory_option(max_memory)
     for path in scenes:
@@ -117,7 +132,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
             fail(f"{path}: is a folder; `rtreflect render` takes scene files: render every scene in a folder with "
                  f"`rtreflect batch {path} -o {outdir}`")
     try:
-        loaded = [load_scene(path).with_image(width, height, samples).with_render(overlay, normals)
+        loaded = [load_scene(path, skip_bad_faces).with_image(width, height, samples).with_render(overlay, normals)
                   for path in unique_scenes(scenes)]
         check_distinct_outputs(loaded, outdir)
         removed = prepare_output_folder(outdir, [path for scene in loaded for path in output_paths(scene, outdir)])
@@ -125,6 +140,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
         fail(exc)
     if removed:
         click.echo(f"{outdir}: {removed_note(removed)}")
+    _print_notes(loaded)
     for scene in loaded:
         image = scene.image
         try:
@@ -247,10 +263,12 @@ def _fmt(value: float | None) -> str:
 @click.option("--normals", type=click.Choice(NORMALS_MODES), default=None,
               help="Validate the exact renderer or the analysis-mesh one (overrides [render] normals).")
 @click.option("--threads", type=click.IntRange(1, 64), default=None, help="Render threads (default: up to 2).")
+@click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
+              help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
 @click.option("--junit", "junit_path", type=click.Path(path_type=Path), metavar="FILE.xml", default=None,
               help="Also write JUnit XML: a test case per scene, failures with the reason and the numbers.")
 def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: float, width, height, samples, normals,
-             threads, junit_path) -> None:
+             threads, skip_bad_faces, junit_path) -> None:
     """Check each SCENE's render against the analytic reflection lines (Ulmet's theorem).
 
     The reflection line of tube k is the image of the level set f(u, v) = c_k. The
@@ -275,9 +293,11 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
       rtreflect validate scenes/hood.toml --normals mesh
     """
     try:
-        loaded = [load_scene(path).with_image(width, height, samples).with_render(normals=normals) for path in scenes]
+        loaded = [load_scene(path, skip_bad_faces).with_image(width, height, samples).with_render(normals=normals)
+                  for path in scenes]
     except RtreflectError as exc:
         fail(exc)
+    _print_notes(loaded)
     reports, seconds = [], []
     for scene in loaded:
         image = scene.image
@@ -355,6 +375,8 @@ def stop_status(exc: BaseException) -> int:
                    "workers; with --scheduler, per tile task.")
 @click.option("--scheduler", metavar="tcp://HOST:PORT", default=None,
               help="Render on this dask.distributed cluster instead of locally (needs rtreflect[dask]).")
+@click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
+              help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
 @click.option("--validate", "run_validate", is_flag=True,
               help="Then check each scene against the analytic reflection lines, as `rtreflect validate` does "
                    f"(tolerance {DEFAULT_TOLERANCE_PX:g} px); a failed check exits 1.")
@@ -366,9 +388,12 @@ def stop_status(exc: BaseException) -> int:
               help="Also write an HTML report: a row per scene with thumbnail, checks and failure reason.")
 @click.option("--junit", "junit_path", type=click.Path(path_type=Path), metavar="FILE.xml", default=None,
               help="Also write JUnit XML: a test case per scene and check, for CI servers' test views.")
-def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, scheduler, run_validate, golden_dir,
-          html_path, junit_path) -> None:
+def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, scheduler, skip_bad_faces, run_validate,
+          golden_dir, html_path, junit_path) -> None:
     """Render folders of scenes: every *.toml in each PATH (or PATH itself) to OUTPUT/NAME.exr and .png.
+
+    CAD files in the folders (.step .stp .igs .iges .3dm) render too, each in the default
+    scene around its part (as `rtreflect render PART`).
 
     Scenes render in parallel; one that fails is reported and the others go on.
     A scene whose outputs exist and were rendered from the same scene and
@@ -393,7 +418,7 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
     start = time.perf_counter()
     budget = memory_option(max_memory)
     try:
-        loaded = batching.load_jobs(batching.discover(list(paths), recursive))
+        loaded = batching.load_jobs(batching.discover(list(paths), recursive), skip_bad_faces)
         batching.check_collisions(loaded, outdir)
         todo, reports = batching.plan(loaded, outdir, force)
         # As `render`: an unusable folder is one error up front, not one failure per scene.
@@ -405,6 +430,7 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         sys.exit(stop_status(exc))
     if removed:
         click.echo(f"{outdir}: {removed_note(removed)}")
+    _print_notes([job.scene for job in loaded if job.scene is not None])
     for report in reports:
         _print_scene(report)
     order = {str(job.path): i for i, job in enumerate(loaded)}

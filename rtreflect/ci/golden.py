@@ -24,7 +24,8 @@ from ..errors import RtreflectError
 from ..integrator.film import COLOR_CHANNELS
 from ..output.imagefiles import read_image, save_render
 from ..integrator.renderer import Renderer
-from ..exchange.scene import Scene, load_scene
+from ..exchange.load import load_scene
+from ..exchange.scene import Scene
 
 __all__ = ["GOLDEN_WIDTH", "GOLDEN_HEIGHT", "GOLDEN_MAX_SAMPLES", "GOLDEN_CHECKS", "golden_scene", "render_golden",
            "golden_reports", "assert_matches_golden", "assert_images_match"]

@@ -26,8 +26,10 @@ from typing import Any, Iterator
 import numpy as np
 
 from .bpt import read_bpt
+from .cad import CAD_SUFFIXES, is_cad_path, read_part
 from ..errors import SceneError, SceneErrors, quote, read_text
 from ..geometry.knots import knot_vector_problem
+from ..geometry.patches import MAX_MAGNITUDE, ZERO_AREA, has_area, patch_problem
 from ..geometry.surfaces import NurbsSurface
 
 #: Largest image side. The film keeps 17 float32 planes per pixel, and beyond this
@@ -54,10 +56,6 @@ MAX_TESSELLATION = 256
 IN_PLANE_TOLERANCE = 1e-6
 #: `[render] normals`: the exact NURBS normal, or the analysis-mesh normal CAD tools use (for comparison).
 NORMALS_MODES = ("exact", "mesh")
-#: Largest magnitude of any number in a scene. Embree intersects in float32 and forms
-#: products of up to three coordinates (a triangle's plane offset); beyond this they
-#: overflow float32's 3.4e38 and the image turns to noise without any error.
-MAX_MAGNITUDE = 1e12
 
 
 @dataclass(frozen=True)
@@ -162,13 +160,14 @@ class Scene:
     sha256: str  # of the scene file's bytes (in code: of the tables' canonical JSON)
     inputs_sha256: str  # of the scene file and every geometry file it reads (in code: with the geometry files')
 
+    notes: tuple[str, ...] = ()  # what CAD files gave: faces, unit, bounding box, skipped faces (printed by the CLI)
     def __init__(self, path=None, image=None, camera=None, lights=None, surfaces=None, render=None, output=None,
-                 sha256=None, inputs_sha256=None):
+                 sha256=None, inputs_sha256=None, notes=()):
         parsed = (isinstance(image, ImageSpec) and isinstance(camera, CameraSpec) and isinstance(lights, LightSpec)
                   and isinstance(render, RenderSettings) and isinstance(output, OutputSpec)
                   and isinstance(surfaces, tuple) and all(isinstance(s, NurbsSurface) for s in surfaces))
         if parsed and sha256 is not None and inputs_sha256 is not None:
-            values = (Path(path), image, camera, lights, surfaces, render, output, sha256, inputs_sha256)
+            values = (Path(path), image, camera, lights, surfaces, render, output, sha256, inputs_sha256, tuple(notes))
         else:
             if sha256 is not None or inputs_sha256 is not None:
                 raise TypeError("Scene: sha256 and inputs_sha256 are computed for a scene built from tables")
@@ -217,7 +216,8 @@ class Scene:
                     specs[name] = _PARSERS[name](_Table(self.path, name, tables[name]), self.path)
         new_surfaces, geometry_files = self.surfaces, []
         if surfaces is not None:
-            new_surfaces, geometry_files = _parse_surfaces(self.path, _toml_value(list(surfaces)), errors)
+            read = _parse_surfaces(self.path, _toml_value(list(surfaces)), errors)
+            new_surfaces, geometry_files = read.surfaces, read.files
         errors.raise_any()
         changed = replace(self, **specs, surfaces=tuple(new_surfaces))
         if surfaces is not None or "render" in specs:
@@ -516,28 +516,11 @@ def _check_knots(t: _Table, key: str, knots: np.ndarray, degree: int, n_ctrl: in
         raise t.error(key, problem)
 
 
-ZERO_AREA = "the control points lie on a point or a line: the patch has zero area"
-
-
-def _has_area(surface: NurbsSurface) -> bool:
-    """False when the control points all lie on a point or a line: no area to reflect in."""
-    pts = surface.points.reshape(-1, 3)
-    centred = pts - pts.mean(axis=0)
-    sv = np.linalg.svd(centred, compute_uv=False)
-    return bool(sv[1] > 1e-12 * max(sv[0], 1e-300))
-
-
 def _check_geometry_patch(file: Path, index: int, surface: NurbsSurface, where: str | None = None) -> None:
     """What `_parse_inline_surface` checks of its numbers, for a patch read from a geometry file or given in code."""
-    where = where or f"patch {index}"
-    if not np.all(np.isfinite(surface.points)):
-        raise SceneError(file, where, "coordinates must be finite")
-    largest = float(np.max(np.abs(surface.points)))
-    if largest > MAX_MAGNITUDE:
-        raise SceneError(file, where, f"coordinates must be at most {MAX_MAGNITUDE:g} in magnitude "
-                                                 f"(float32 tracing overflows beyond it), got {largest:g}")
-    if not _has_area(surface):
-        raise SceneError(file, where, ZERO_AREA)
+    problem = patch_problem(surface)
+    if problem:
+        raise SceneError(file, where or f"patch {index}", problem)
 
 
 def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
@@ -567,7 +550,7 @@ def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
         weights = np.ones((nu, nv))
     t.finish()
     surface = NurbsSurface(p, q, knots_u, knots_v, points, weights, name)
-    if not _has_area(surface):
+    if not has_area(surface):
         raise t.error("points", ZERO_AREA)
     return surface
 
@@ -641,13 +624,30 @@ class _Errors:
             raise SceneErrors(self.found)
 
 
-def _parse_surfaces(path: Path, entries: Any, errors: _Errors) -> tuple[list[NurbsSurface], list[Path]]:
-    """The ``[[surface]]`` entries (tables, or `NurbsSurface` objects given in code) and the geometry files read."""
-    surfaces: list[NurbsSurface] = []
-    geometry_files: list[Path] = []
+@dataclass
+class _Geometry:
+    """What the ``[[surface]]`` entries gave: the patches, the geometry files read, and CAD files' notes."""
+
+    surfaces: list[NurbsSurface] = field(default_factory=list)
+    files: list[Path] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)  # faces, unit, bounding box, skipped faces (printed by the CLI)
+    faces_skipped: bool = False  # --skip-bad-faces left faces out
+
+    def inputs_sha256(self, inputs: str) -> str:
+        """The inputs' hash, told apart when faces were skipped: those pixels lack faces the files have."""
+        return hashlib.sha256(f"{inputs}\nskip-bad-faces".encode()).hexdigest() if self.faces_skipped else inputs
+
+
+def _parse_surfaces(path: Path, entries: Any, errors: _Errors, skip_bad_faces: bool = False) -> _Geometry:
+    """The ``[[surface]]`` entries (tables, or `NurbsSurface` objects given in code) and the geometry files read.
+
+    ``skip_bad_faces``: faces of CAD files that cannot be read are left out (and listed in the notes).
+    """
+    geometry = _Geometry()
+    surfaces, geometry_files = geometry.surfaces, geometry.files
     if not isinstance(entries, list) or not entries:
         errors.found.append(SceneError(path, "surface", "needs one or more [[surface]] tables"))
-        return surfaces, geometry_files
+        return geometry
     for i, entry in enumerate(entries):
         with errors.collect():
             if isinstance(entry, NurbsSurface) and entry.trim is None and entry.mesh_uv is None:
@@ -663,7 +663,7 @@ def _parse_surfaces(path: Path, entries: Any, errors: _Errors) -> tuple[list[Nur
             t.keys = ("file", "name")
             given = t.string("file")
             if not given.strip() or "\0" in given:
-                raise t.error("file", f"must name a geometry file (.bpt), got {quote(given)}")
+                raise t.error("file", f"must name a geometry file (.bpt{''.join(', ' + s for s in CAD_SUFFIXES)}), got {quote(given)}")
             try:
                 file = (path.parent / given).resolve()
             except (OSError, RuntimeError):  # a symlink loop (RuntimeError before Python 3.13): reading will say so
@@ -671,17 +671,22 @@ def _parse_surfaces(path: Path, entries: Any, errors: _Errors) -> tuple[list[Nur
             name = t.string("name", "")
             t.finish()
             try:
-                patches = read_bpt(file, name)
-                for k, patch in enumerate(patches):
-                    _check_geometry_patch(file, k, patch)
+                if is_cad_path(file):
+                    patches, summary, skipped = read_part(file, name, skip_bad_faces)
+                    geometry.notes.extend(summary)
+                    geometry.faces_skipped = geometry.faces_skipped or skipped
+                else:
+                    patches = read_bpt(file, name)
+                    for k, patch in enumerate(patches):
+                        _check_geometry_patch(file, k, patch)
             except SceneError as exc:
                 raise SceneError(exc.file, exc.field, f"{exc.reason} (from {path}: {t.name('file')})") from None
             surfaces.extend(patches)
             geometry_files.append(file)
-    return surfaces, geometry_files
+    return geometry
 
 
-def _parse_document(path: Path, doc: Any) -> tuple[dict[str, Any], list[NurbsSurface], list[Path]]:
+def _parse_document(path: Path, doc: Any, skip_bad_faces: bool = False) -> tuple[dict[str, Any], _Geometry]:
     """Every table of a scene document (TOML's types) read and checked; all independent errors raised together.
 
     One error per table and per surface (a table's unknown keys all), in the order of the
@@ -694,19 +699,24 @@ def _parse_document(path: Path, doc: Any) -> tuple[dict[str, Any], list[NurbsSur
         with errors.collect():
             table = root.raw(name, required=True) if name == "lights" else root.raw(name, {})
             specs[name] = _PARSERS[name](_Table(path, name, table), path)
-    surfaces, geometry_files = [], []
+    geometry = _Geometry()
     with errors.collect():
-        surfaces, geometry_files = _parse_surfaces(path, root.raw("surface", required=True), errors)
+        geometry = _parse_surfaces(path, root.raw("surface", required=True), errors, skip_bad_faces)
     with errors.collect():
         root.finish()
     errors.drop_consequences()
     errors.raise_any()
-    _check_mesh_size(path, surfaces, specs["render"].tessellation)
-    return specs, surfaces, geometry_files
+    _check_mesh_size(path, geometry.surfaces, specs["render"].tessellation)
+    return specs, geometry
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene file; raises `SceneError` naming the file and field (`SceneErrors`: several)."""
+def load_scene(path: str | Path, skip_bad_faces: bool = False) -> Scene:
+    """Read and validate a TOML scene file; raises `SceneError` naming the file and field (`SceneErrors`: several).
+
+    ``skip_bad_faces``: faces of CAD files the scene names that cannot be read are left out (and
+    listed in `Scene.notes`) instead of failing the scene. (`exchange.load.load_scene` also takes
+    a CAD file in place of the scene file.)
+    """
     path = Path(path)
     if path.is_dir():
         raise SceneError(path, "", "is a folder, not a scene file: render every scene in it with "
@@ -726,10 +736,10 @@ def load_scene(path: str | Path) -> Scene:
         # int() refuses more than 4300 digits (Python's guard against slow conversions); tomllib passes that on.
         raise SceneError(path, _long_number_position(text), "TOML syntax error: a number with more than 4300 digits") from None
 
-    specs, surfaces, geometry_files = _parse_document(path, doc)
-    sha, inputs = _hash_files([path, *geometry_files])
-    return Scene(path, specs["image"], specs["camera"], specs["lights"], tuple(surfaces), specs["render"],
-                 specs["output"], sha, inputs)
+    specs, geometry = _parse_document(path, doc, skip_bad_faces)
+    sha, inputs = _hash_files([path, *geometry.files])
+    return Scene(path, specs["image"], specs["camera"], specs["lights"], tuple(geometry.surfaces), specs["render"],
+                 specs["output"], sha, geometry.inputs_sha256(inputs), tuple(geometry.notes))
 
 
 # -- scenes built in code ---------------------------------------------------------------------
@@ -797,10 +807,10 @@ def _scene_from_code(path: Path, image, camera, lights, surfaces, render, output
            if value is not None}
     if surfaces is not None:
         doc["surface"] = _toml_value(list(surfaces)) if isinstance(surfaces, (list, tuple)) else _toml_value(surfaces)
-    specs, parsed, geometry_files = _parse_document(path, doc)
+    specs, geometry = _parse_document(path, doc)
     sha = hashlib.sha256(_canonical({k: v for k, v in doc.items() if k != "surface"}).encode()
-                         + _surfaces_digest(tuple(parsed), []).encode()).hexdigest()
-    _, inputs = _hash_files(geometry_files) if geometry_files else ("", "")
+                         + _surfaces_digest(tuple(geometry.surfaces), []).encode()).hexdigest()
+    _, inputs = _hash_files(geometry.files) if geometry.files else ("", "")
     inputs = hashlib.sha256(f"{sha}\n{inputs}".encode()).hexdigest()
-    return (path, specs["image"], specs["camera"], specs["lights"], tuple(parsed), specs["render"], specs["output"],
-            sha, inputs)
+    return (path, specs["image"], specs["camera"], specs["lights"], tuple(geometry.surfaces), specs["render"],
+            specs["output"], sha, inputs, tuple(geometry.notes))

@@ -1,0 +1,517 @@
+"""Open CASCADE shape → one trimmed `NurbsSurface` per face (shared by the STEP, IGES and .3dm readers).
+
+Steps (DESIGN.md, "CAD input"; measured facts in the project's OCP notes):
+
+1. ``BRepBuilderAPI_NurbsConvert`` turns every face into a B-spline face **first**: conversion
+   re-parameterises planes, cylinders, cones, spheres, tori and revolved faces and rewrites the
+   pcurves to match, so trims and mesh are taken from the converted shape only.
+2. Per face, the B-spline surface (location applied by ``BRep_Tool.Surface_s``) is cut to the
+   face's (u, v) bounds with ``Geom_BSplineSurface.Segment``: this un-periodises periodic
+   surfaces, clamps unclamped knot vectors, and keeps the geometry and the parameters (knot
+   insertion, Piegl & Tiller A5.3). Knots closer than float64 resolves are merged
+   (`clean_knots`). Weights are read with ``WeightsArray()`` whenever either rational flag is set.
+3. Trims: the outer wire (``BRepTools.OuterWire_s``) and the holes, each edge's pcurve
+   (``BRepAdaptor_Curve2d``, seam edges once per orientation, pole edges included) sampled by
+   bisection until the polyline's midpoints lie within `TRIM_TOLERANCE` × the part's diagonal
+   of the pcurve's **in model space** (measured on the surface with rtreflect's evaluator).
+4. ``mesh_uv``: ``BRepMesh_IncrementalMesh`` on each converted face, the nodes' (u, v) and the
+   triangles (flipped on reversed faces so they wind like the face's normal).
+
+OCP is imported only here and in the per-format readers; without it the user is told which extra
+to install.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneError
+from ..geometry.knots import MIN_KNOT_SPAN, knot_vector_problem
+from ..geometry.patches import patch_problem
+from ..geometry.surfaces import NurbsSurface
+
+#: What to install for CAD input (pyproject.toml's [cad] extra).
+CAD_EXTRA = "pip install 'rtreflect[cad]'"
+#: Mesh chord deflection relative to the part's bounding-box diagonal. The mesh only seeds Newton
+#: (hits are refined onto the exact surface), so it can be coarse: 2e-3 keeps a 200-face part near
+#: 10k nodes and meshing near 0.1 s.
+MESH_DEFLECTION = 2e-3
+#: Mesh angular deflection (radians): bounds the normal turn across a triangle on small, curved features
+#: (OCCT's default; finer multiplies the nodes on small fillets without helping Newton).
+MESH_ANGLE = 0.5
+#: Largest model-space distance between a trim polyline and its pcurve's image, relative to the part's
+#: diagonal: 1e-5 is 0.01 px when the part spans 1000 px, far below what a pixel shows.
+TRIM_TOLERANCE = 1e-5
+#: Segments each pcurve starts with before bisection (a curved edge needs a few to show its bend).
+TRIM_START_SEGMENTS = 8
+#: Bisection rounds at most: 8 · 2^14 points an edge is far beyond any real edge's need.
+TRIM_MAX_ROUNDS = 14
+#: (u, v) closer than this fraction of the domain to one of its sides is put on that side, and consecutive loop
+#: points closer than it are one point: pcurves meet their vertices and the domain's sides only to OCCT's
+#: tolerances (1e-16 on seams, 1e-9 at cut corners), and a loop touching itself there reads as self-intersecting.
+SIDE_SNAP = 1e-9
+#: Faces beyond which a progress bar is shown while a model loads (small parts load in well under a second).
+PROGRESS_FACES = 200
+
+
+class FaceError(Exception):
+    """One face cannot be used; ``reason`` says why (the reader adds the file and face index)."""
+
+
+def import_ocp(path: Path, what: str):
+    """The OCP package, or a `SceneError` naming the extra to install."""
+    try:
+        import OCP  # noqa: F401
+    except ImportError:
+        raise SceneError(path, "", f"reading {what} needs Open CASCADE (OCP): {CAD_EXTRA}") from None
+    silence_messages()
+    return OCP
+
+
+_silenced = False
+
+
+def silence_messages() -> None:
+    """OCCT's messenger prints transfer statistics to stdout: only failures pass from now on."""
+    global _silenced
+    if _silenced:
+        return
+    from OCP.Message import Message, Message_Gravity
+
+    for printer in Message.DefaultMessenger_s().Printers():
+        printer.SetTraceLevel(Message_Gravity.Message_Fail)
+    _silenced = True
+
+
+@contextlib.contextmanager
+def quiet_stdout():
+    """File descriptor 1 to /dev/null around OCCT calls: some readers print with printf, past the messenger."""
+    sys.stdout.flush()
+    try:
+        saved = os.dup(1)
+    except OSError:  # no stdout at all: nothing to protect
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+@dataclass
+class CadModel:
+    """What a CAD reader gives the scene: the faces' surfaces and what the summary reports."""
+
+    surfaces: list[NurbsSurface]
+    unit: str  # the model's length unit after reading, e.g. "mm"
+    unit_note: str  # how the file's unit was handled, e.g. "file in inches, read in mm"; "" if nothing to say
+    bounds: tuple[np.ndarray, np.ndarray]  # bounding box (lo, hi) of the faces read
+    faces: int  # faces in the file (over all instances), read or skipped
+    skipped: list[tuple[int, str]] = field(default_factory=list)  # (face index, reason) left out by --skip-bad-faces
+    #: Per surface: the face is reversed (its outward normal is -S_u × S_v; its mesh triangles are flipped to match).
+    reversed: list[bool] = field(default_factory=list)
+
+    @property
+    def diagonal(self) -> float:
+        return float(np.linalg.norm(self.bounds[1] - self.bounds[0]))
+
+
+def shape_bounds(shape) -> tuple[np.ndarray, np.ndarray]:
+    """Bounding box of a shape from its control points (OCCT's, without gap): a loose box, for scales."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    box = Bnd_Box()
+    box.SetGap(0.0)
+    BRepBndLib.Add_s(shape, box, False)
+    if box.IsVoid():
+        return np.zeros(3), np.zeros(3)
+    lo, hi = box.CornerMin(), box.CornerMax()
+    return np.array([lo.X(), lo.Y(), lo.Z()]), np.array([hi.X(), hi.Y(), hi.Z()])
+
+
+def count_entities(shape) -> dict[str, int]:
+    """Faces, edges and vertices of a shape: tells a file with only curves or points apart from an empty one."""
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_VERTEX
+    from OCP.TopExp import TopExp_Explorer
+
+    counts = {}
+    for name, kind in (("faces", TopAbs_FACE), ("edges", TopAbs_EDGE), ("vertices", TopAbs_VERTEX)):
+        n = 0
+        explorer = TopExp_Explorer(shape, kind)
+        while explorer.More():
+            n += 1
+            explorer.Next()
+        counts[name] = n
+    return counts
+
+
+def no_surfaces_error(path: Path, shape, what: str) -> SceneError:
+    counts = count_entities(shape) if shape is not None and not shape.IsNull() else {"edges": 0, "vertices": 0}
+    if counts.get("edges") or counts.get("vertices"):
+        held = f"only curves or points ({counts['edges']} edges, {counts['vertices']} vertices)"
+    else:
+        held = "no surface Open CASCADE can transfer (the file is corrupt, or its entities are not supported)"
+    return SceneError(path, "", f"no surfaces to render: the {what} holds {held}")
+
+
+def clean_knots(knots: np.ndarray, degree: int, poles: np.ndarray, weights: np.ndarray, axis: int):
+    """Knots valid for `NurbsSurface` (exchange/scene.py `_check_knots`) with the geometry kept.
+
+    Knots closer than `MIN_KNOT_SPAN` are merged (each snapped onto the one before: the surface
+    moves by that knot shift times its derivative, ~1e-12 of the part). A clamped end that then
+    repeats more than degree + 1 times loses its outermost knot and control row: that row only
+    shaped the merged, vanishing span. An inner knot repeated more than degree + 1 times cannot be
+    merged without changing the surface: a `FaceError`.
+    """
+    knots = knots.copy()
+    narrowest = MIN_KNOT_SPAN * max(1.0, float(np.max(np.abs(knots))))
+    for i in range(len(knots) - 1):
+        if 0 < knots[i + 1] - knots[i] < narrowest:
+            knots[i + 1] = knots[i]
+    while np.count_nonzero(knots == knots[0]) > degree + 1:
+        knots = knots[1:]
+        poles, weights = np.delete(poles, 0, axis=axis), np.delete(weights, 0, axis=axis)
+    while np.count_nonzero(knots == knots[-1]) > degree + 1:
+        knots = knots[:-1]
+        poles, weights = np.delete(poles, -1, axis=axis), np.delete(weights, -1, axis=axis)
+    values, counts = np.unique(knots, return_counts=True)
+    if counts.max() > degree + 1:
+        k = int(np.argmax(counts))
+        raise FaceError(f"knot {values[k]:.17g} repeats {counts[k]} times after merging knots closer than float64 "
+                        f"resolves (at most degree + 1 = {degree + 1})")
+    if poles.shape[axis] < degree + 1:
+        raise FaceError("the face's parameter range is narrower than float64 resolves")
+    return knots, poles, weights
+
+
+def _snap_to_knots(value: float, knots: np.ndarray) -> float:
+    """``value`` moved onto a knot closer than `MIN_KNOT_SPAN`, so cutting there adds no near-duplicate knot."""
+    narrowest = MIN_KNOT_SPAN * max(1.0, float(np.max(np.abs(knots))))
+    near = knots[np.abs(knots - value) < narrowest]
+    return float(near[0]) if len(near) else value
+
+
+def bspline_of_face(face) -> NurbsSurface:
+    """The converted face's B-spline surface, cut to the face's (u, v) bounds, as a `NurbsSurface` (no trim yet)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepTools import BRepTools
+    from OCP.Geom import Geom_BSplineSurface
+
+    surface = BRep_Tool.Surface_s(face)
+    if not isinstance(surface, Geom_BSplineSurface):
+        raise FaceError(f"Open CASCADE did not convert its {type(surface).__name__.removeprefix('Geom_')} surface to a B-spline")
+    u_first, u_last, v_first, v_last = surface.Bounds()
+    umin, umax, vmin, vmax = BRepTools.UVBounds_s(face)
+    if not (np.isfinite([umin, umax, vmin, vmax]).all() and umax > umin and vmax > vmin):
+        raise FaceError(f"its (u, v) range is empty or not finite ({umin:g}..{umax:g}, {vmin:g}..{vmax:g})")
+
+    def cut(lo, hi, first, last, periodic, period, knots):
+        if periodic:
+            hi = min(hi, lo + period)
+        else:  # the pcurves' bounds may pass the surface's by their tolerance
+            lo, hi = max(lo, first), min(hi, last)
+        return _snap_to_knots(lo, knots), _snap_to_knots(hi, knots)
+
+    uk = np.fromiter(surface.UKnots(), float)
+    vk = np.fromiter(surface.VKnots(), float)
+    u0, u1 = cut(umin, umax, u_first, u_last, surface.IsUPeriodic(), surface.UPeriod() if surface.IsUPeriodic() else 0, uk)
+    v0, v1 = cut(vmin, vmax, v_first, v_last, surface.IsVPeriodic(), surface.VPeriod() if surface.IsVPeriodic() else 0, vk)
+    whole = (u0, u1, v0, v1) == (u_first, u_last, v_first, v_last)
+    clamped = (surface.UMultiplicity(1) == surface.UDegree() + 1 and surface.UMultiplicity(len(uk)) == surface.UDegree() + 1
+               and surface.VMultiplicity(1) == surface.VDegree() + 1 and surface.VMultiplicity(len(vk)) == surface.VDegree() + 1)
+    if surface.IsUPeriodic() or surface.IsVPeriodic() or not whole or not clamped:
+        surface = surface.Copy()
+        try:
+            surface.Segment(u0, u1, v0, v1)
+        except Exception as exc:  # OCCT's Standard_Failure: a range it cannot cut
+            raise FaceError(f"cannot cut its surface to the face's (u, v) range ({exc})") from None
+        if surface.IsUPeriodic():
+            surface.SetUNotPeriodic()
+        if surface.IsVPeriodic():
+            surface.SetVNotPeriodic()
+
+    p, q = surface.UDegree(), surface.VDegree()
+    nu, nv = surface.NbUPoles(), surface.NbVPoles()
+    poles = np.array([[pt.X(), pt.Y(), pt.Z()] for pt in surface.Poles()], dtype=np.float64)
+    # Array2 iterates row-major: u index first, v index fastest.
+    poles = poles.reshape(nu, nv, 3)
+    if surface.IsURational() or surface.IsVRational():  # either flag: a cylinder reports only one
+        weights = np.fromiter(surface.WeightsArray(), float).reshape(nu, nv)  # never Weights(): it crashes OCP 8.0
+    else:
+        weights = np.ones((nu, nv))
+    knots_u = np.fromiter(surface.UKnotSequence(), float)
+    knots_v = np.fromiter(surface.VKnotSequence(), float)
+    knots_u, poles, weights = clean_knots(knots_u, p, poles, weights, 0)
+    knots_v, poles, weights = clean_knots(knots_v, q, poles, weights, 1)
+    for direction, knots, degree, count in (("u", knots_u, p, poles.shape[0]), ("v", knots_v, q, poles.shape[1])):
+        problem = knot_vector_problem(knots, degree, count)  # the rules every reader applies
+        if problem:
+            raise FaceError(f"knots in {direction}: {problem}")
+    if not (np.isfinite(poles).all() and np.isfinite(weights).all() and (weights > 0).all()):
+        raise FaceError("its surface has control points or weights that are not finite, or weights <= 0")
+    surface = NurbsSurface(p, q, knots_u, knots_v, poles, weights)
+    problem = patch_problem(surface)  # the checks inline and .bpt patches get
+    if problem:
+        raise FaceError(problem)
+    return surface
+
+
+def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge: bool = False) -> np.ndarray:
+    """One edge's pcurve as (u, v) points in the wire's direction, bisected until within ``tolerance`` in 3D.
+
+    ``onto_edge``: each sample is then moved to the foot of the 3D edge's point at the same parameter
+    on the surface (`project_onto_surface`): for pcurves that only approximate the edge (fitted by
+    ShapeFix for .3dm faces, 7.6e-3 mm off a 10 mm circle) the loop follows the exact 3D edge.
+    """
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d
+    from OCP.TopAbs import TopAbs_REVERSED
+
+    curve = BRepAdaptor_Curve2d(edge, face)
+    t0, t1 = curve.FirstParameter(), curve.LastParameter()
+    if not (np.isfinite(t0) and np.isfinite(t1)):
+        raise FaceError("an edge's pcurve has an infinite parameter range")
+
+    def at(ts: np.ndarray) -> np.ndarray:
+        out = np.empty((len(ts), 2))
+        for k, t in enumerate(ts):  # OCP per-point call (~1 µs): edges have tens to hundreds of samples
+            pt = curve.Value(float(t))
+            out[k] = pt.X(), pt.Y()
+        return out
+
+    ts = np.linspace(t0, t1, TRIM_START_SEGMENTS + 1)
+    uv = at(ts)
+    for _ in range(TRIM_MAX_ROUNDS):
+        mids_t = 0.5 * (ts[:-1] + ts[1:])
+        mids = at(mids_t)
+        both = np.concatenate([mids, 0.5 * (uv[:-1] + uv[1:])])  # the pcurve's midpoints, then the chords'
+        image = surface.evaluate(both[:, 0], both[:, 1]).S
+        error = np.linalg.norm(image[:len(mids)] - image[len(mids):], axis=1)
+        bad = error > tolerance
+        if not bad.any():
+            break
+        # Keep every midpoint of a bad segment (the polyline is then exact there to the next round's test).
+        order = np.argsort(np.r_[ts, mids_t[bad]], kind="stable")
+        ts = np.r_[ts, mids_t[bad]][order]
+        uv = np.r_[uv, mids[bad]][order]
+    # A pole edge has no 3D curve to follow; a seam's pcurves are the domain's sides, exact already (and
+    # projecting onto a seam could land on either side).
+    if onto_edge and not BRep_Tool.Degenerated_s(edge) and not BRep_Tool.IsClosed_s(edge, face):
+        curve3d = BRepAdaptor_Curve(edge)
+        target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(t)) for t in ts)])
+        uv = project_onto_surface(surface, target, uv)
+    if edge.Orientation() == TopAbs_REVERSED:
+        uv = uv[::-1]
+    return uv
+
+
+#: Gauss–Newton steps of `project_onto_surface`: from a start within the edge tolerance, 3 reach float64.
+PROJECTION_STEPS = 4
+
+
+def project_onto_surface(surface: NurbsSurface, target: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(u, v) of the surface points nearest ``target`` (N, 3), by Gauss–Newton from ``uv`` (vectorised).
+
+    Each step solves the normal equations [S_u·S_u S_u·S_v; S_u·S_v S_v·S_v] Δ = −[d·S_u, d·S_v] with
+    d = S(u, v) − target (the foot point condition d ⟂ S_u, S_v). Where the system is singular (a pole)
+    the start is kept; the result stays in the domain.
+    """
+    (u0, u1), (v0, v1) = surface.domain
+    start = uv
+    uv = uv.copy()
+    for _ in range(PROJECTION_STEPS):
+        ev = surface.evaluate(uv[:, 0], uv[:, 1])
+        d = ev.S - target
+        a, b, c = (np.einsum("ij,ij->i", x, y) for x, y in ((ev.Su, ev.Su), (ev.Su, ev.Sv), (ev.Sv, ev.Sv)))
+        gu, gv = np.einsum("ij,ij->i", d, ev.Su), np.einsum("ij,ij->i", d, ev.Sv)
+        det = a * c - b * b
+        ok = det > 1e-12 * (a * c + 1e-300)
+        safe = np.where(ok, det, 1.0)
+        du = np.where(ok, -(c * gu - b * gv) / safe, 0.0)
+        dv = np.where(ok, -(a * gv - b * gu) / safe, 0.0)
+        uv[:, 0] = np.clip(uv[:, 0] + du, u0, u1)
+        uv[:, 1] = np.clip(uv[:, 1] + dv, v0, v1)
+    # Keep the start where the steps did not bring the point closer (near a pole the metric degenerates).
+    before = np.linalg.norm(surface.evaluate(start[:, 0], start[:, 1]).S - target, axis=1)
+    after = np.linalg.norm(surface.evaluate(uv[:, 0], uv[:, 1]).S - target, axis=1)
+    return np.where((after <= before)[:, None], uv, start)
+
+
+def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float, onto_edges: bool = False) -> np.ndarray:
+    """A wire's edges' samples joined into one closed (u, v) polyline (last point not repeated)."""
+    from OCP.BRepTools import BRepTools_WireExplorer
+
+    pieces = []
+    explorer = BRepTools_WireExplorer(wire, face)
+    while explorer.More():
+        pieces.append(_edge_samples(explorer.Current(), face, surface, tolerance, onto_edges))
+        explorer.Next()
+    if not pieces:
+        raise FaceError("a wire of the face has no edges")
+    loop = np.concatenate(pieces)
+    close = SIDE_SNAP * np.array([hi - lo for lo, hi in surface.domain])
+    for axis, (lo, hi) in enumerate(surface.domain):
+        loop[np.abs(loop[:, axis] - lo) < close[axis], axis] = lo
+        loop[np.abs(loop[:, axis] - hi) < close[axis], axis] = hi
+    keep = np.r_[True, np.any(np.abs(np.diff(loop, axis=0)) > close, axis=1)]
+    loop = loop[keep]
+    if len(loop) > 1 and np.all(np.abs(loop[0] - loop[-1]) <= close):
+        loop = loop[:-1]
+    if len(loop) < 3:
+        raise FaceError("a trim loop has fewer than 3 distinct (u, v) points")
+    return loop
+
+
+def trim_of_face(face, surface: NurbsSurface, tolerance: float, onto_edges: bool = False):
+    """The face's `Trim`: outer wire and holes as (u, v) polylines of ``surface`` (already un-periodised).
+
+    ``onto_edges``: samples follow the 3D edges rather than the pcurves (see `_edge_samples`).
+    """
+    from OCP.BRepTools import BRepTools
+    from OCP.TopAbs import TopAbs_WIRE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    from ..geometry.trims import Trim
+
+    outer_wire = BRepTools.OuterWire_s(face)
+    if outer_wire.IsNull():
+        raise FaceError("the face has no outer wire")
+    outer = _wire_loop(outer_wire, face, surface, tolerance, onto_edges)
+    holes = []
+    explorer = TopExp_Explorer(face, TopAbs_WIRE)
+    while explorer.More():
+        wire = TopoDS.Wire(explorer.Current())
+        explorer.Next()
+        if not wire.IsSame(outer_wire):
+            holes.append(_wire_loop(wire, face, surface, tolerance, onto_edges))
+    trim = Trim(outer, tuple(holes))
+    if trim._polygon.is_empty or trim._polygon.area <= 0:
+        raise FaceError("its trim loops enclose no area")
+    return trim
+
+
+def mesh_of_face(face, reversed_face: bool) -> tuple[np.ndarray, np.ndarray] | None:
+    """The face's BRepMesh triangulation in (u, v): nodes (m, 2) and 0-based triangles (k, 3), or None."""
+    from OCP.BRep import BRep_Tool
+    from OCP.TopLoc import TopLoc_Location
+
+    triangulation = BRep_Tool.Triangulation_s(face, TopLoc_Location())
+    if triangulation is None or triangulation.NbTriangles() == 0 or not triangulation.HasUVNodes():
+        return None
+    nodes = np.array([(p.X(), p.Y()) for p in triangulation.MapUVNodeArray()], dtype=np.float64)
+    triangles = np.array([t.Get() for t in triangulation.MapTriangleArray()], dtype=np.int64) - 1  # OCCT counts from 1
+    if reversed_face:  # the triangles wind with the face's normal, which is -S_u × S_v here
+        triangles = triangles[:, ::-1]
+    return nodes, np.ascontiguousarray(triangles)
+
+
+def convert_shape(shape, path: Path):
+    """Every face as a B-spline face (``BRepBuilderAPI_NurbsConvert``), or a `SceneError` naming the file."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+
+    try:
+        with quiet_stdout():
+            converter = BRepBuilderAPI_NurbsConvert(shape, True)
+            converted = converter.Shape()
+    except Exception as exc:
+        raise SceneError(path, "", f"Open CASCADE cannot convert the model's faces to NURBS ({exc})") from None
+    return converted
+
+
+def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what: str,
+               skip_bad_faces: bool = False, reversed_faces: list[bool] | None = None,
+               trims_onto_edges: bool = False) -> CadModel:
+    """All faces of ``shape`` (every located instance, in explorer order) as trimmed `NurbsSurface`s.
+
+    ``reversed_faces`` overrides OCCT's face orientation (the .3dm reader knows Rhino's);
+    ``trims_onto_edges`` makes trim samples follow the 3D edges (pcurves fitted by ShapeFix). A face
+    that fails is a `SceneError` naming it, unless ``skip_bad_faces``: then it is listed in
+    ``CadModel.skipped`` and the others are read.
+    """
+    from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.BRepTools import BRepTools
+    from OCP.TopAbs import TopAbs_FACE, TopAbs_REVERSED
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+    from tqdm import tqdm
+
+    if shape is None or shape.IsNull():
+        raise no_surfaces_error(path, shape, what)
+    original_faces = count_entities(shape)["faces"]
+    if original_faces == 0:
+        raise no_surfaces_error(path, shape, what)
+    converted = convert_shape(shape, path)
+    lo, hi = shape_bounds(converted)
+    diagonal = float(np.linalg.norm(hi - lo))
+    if not (np.isfinite(diagonal) and diagonal > 0):
+        raise SceneError(path, "", f"the model's bounding box is empty or not finite ({lo.tolist()} .. {hi.tolist()})")
+
+    faces = []
+    explorer = TopExp_Explorer(converted, TopAbs_FACE)
+    while explorer.More():
+        faces.append(TopoDS.Face(explorer.Current()))
+        explorer.Next()
+    stem = name or path.stem
+    surfaces, skipped, reversed_flags = [], [], []
+    with tqdm(faces, desc=f"reading {path.name}", unit="face", leave=False, file=sys.stderr,
+              disable=None if len(faces) > PROGRESS_FACES else True) as bar:
+        for index, face in enumerate(bar):
+            try:
+                reversed_face = (face.Orientation() == TopAbs_REVERSED) if reversed_faces is None else reversed_faces[index]
+                surface = bspline_of_face(face)
+                trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal, trims_onto_edges)
+                # Meshed face by face, its triangulation dropped once read: memory stays that of one face's
+                # mesh (the whole shape's at once took 560 MB on a 2000-face plate).
+                BRepMesh_IncrementalMesh(face, MESH_DEFLECTION * diagonal, False, MESH_ANGLE, False)
+                mesh = mesh_of_face(face, reversed_face)
+                BRepTools.Clean_s(face)
+            except FaceError as exc:
+                if not skip_bad_faces:
+                    raise SceneError(path, f"face {index}", f"{exc} (--skip-bad-faces renders the other faces)") from None
+                skipped.append((index, str(exc)))
+                continue
+            except Exception as exc:  # an OCCT exception on a broken face: name it, never a traceback
+                reason = f"Open CASCADE failed on it ({type(exc).__name__}: {exc})"
+                if not skip_bad_faces:
+                    raise SceneError(path, f"face {index}", f"{reason} (--skip-bad-faces renders the other faces)") from None
+                skipped.append((index, reason))
+                continue
+            # The surface was built before its trim (sampling the trim needs its evaluator); setting the
+            # remaining fields in place spares rebuilding its per-span power form.
+            for key, value in (("name", f"{stem}[{index}]"), ("trim", trim), ("mesh_uv", mesh)):
+                object.__setattr__(surface, key, value)
+            surfaces.append(surface)
+            reversed_flags.append(reversed_face)
+    if not surfaces:
+        raise SceneError(path, "", f"no face of the {len(faces)} could be read (first: face {skipped[0][0]}: {skipped[0][1]})")
+    return CadModel(surfaces, unit, unit_note, faces_bounds(surfaces), len(faces), skipped, reversed_flags)
+
+
+def faces_bounds(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray]:
+    """Bounding box of the trimmed faces: their mesh nodes and trim loops mapped onto the surfaces.
+
+    Tighter than the control points' box (which the camera fit would otherwise frame loosely).
+    """
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for surface in surfaces:
+        uv = [surface.trim.outer, *surface.trim.holes] if surface.trim is not None else []
+        if surface.mesh_uv is not None:
+            uv.append(surface.mesh_uv[0])
+        if not uv:
+            uv = [np.array(surface.domain).T]
+        uv = np.concatenate(uv)
+        points = surface.evaluate(uv[:, 0], uv[:, 1]).S
+        lo, hi = np.minimum(lo, points.min(axis=0)), np.maximum(hi, points.max(axis=0))
+    return lo, hi
+

@@ -1,0 +1,387 @@
+"""CAD files as input (issue 12): scenes naming them, CAD files given as scenes, batch folders, bad files.
+
+Bad input follows the command-line contract: exit 2, one line naming the file (and the face when
+one face is at fault), no traceback, nothing written. Geometry edge cases real exports contain
+(near-duplicate knots, unclamped knots, periodic surfaces, inches) are written with Open CASCADE
+into tmp_path and read back; the reference is OCCT's own evaluation of the surface it wrote.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+OCP = pytest.importorskip("OCP")
+
+from rtreflect.cli import cli  # noqa: E402
+from rtreflect.exchange import occt  # noqa: E402
+from rtreflect.exchange.cad import read_cad  # noqa: E402
+from rtreflect.exchange.load import load_scene  # noqa: E402
+from rtreflect.exchange.scene import _check_knots, _Table  # noqa: E402
+from rtreflect.trace.camera import Camera  # noqa: E402
+
+PARTS = Path(__file__).resolve().parents[1] / "parts"
+EXIT_BAD_INPUT = 2
+TINY = ["--width", "48", "--height", "27", "--samples", "1"]
+
+
+def run(*args):
+    """Exit code and everything printed (stdout and stderr) by the command line, in-process."""
+    result = CliRunner().invoke(cli, list(map(str, args)))
+    return result.exit_code, result.output, None
+
+
+def assert_bad_input(code: int, output: str, names: str, outdir: Path) -> str:
+    lines = [line for line in output.splitlines() if line.startswith("rtreflect: error:")]
+    assert code == EXIT_BAD_INPUT, output
+    assert len(lines) == 1 and "Traceback" not in output, output
+    assert names in lines[0], lines[0]
+    assert not outdir.exists() or not any(outdir.iterdir())
+    return lines[0]
+
+
+# --- bad files --------------------------------------------------------------------------------
+
+def _truncated(src: str, size: int):
+    return lambda: (PARTS / src).read_bytes()[:size]
+
+
+def _corrupt_step() -> bytes:
+    text = (PARTS / "filleted_block.step").read_text()
+    head = text.split("DATA;", 1)[0]
+    return (head + "DATA;\n#1=FOO_BAR((1,2,3));\n#2=B_SPLINE_SURFACE_WITH_KNOTS('',3,3,(#99),.UNSPECIFIED.);\n"
+            "ENDSEC;\nEND-ISO-10303-21;\n").encode()
+
+
+GARBAGE = bytes(np.random.default_rng(5).integers(0, 256, 5000, dtype=np.uint8))
+
+BAD_FILES = {
+    "truncated.step": (_truncated("filleted_block.step", 30000), "not a readable STEP file"),
+    "truncated.igs": (_truncated("filleted_block.igs", 30000), "no surfaces to render"),
+    "truncated.3dm": (_truncated("trimmed.3dm", 8000), "not a readable .3dm file"),
+    "empty.step": (lambda: b"", "empty file"),
+    "empty.iges": (lambda: b"", "empty file"),
+    "empty.3dm": (lambda: b"", "empty file"),
+    "garbage.stp": (lambda: GARBAGE, "not a STEP file"),
+    "garbage.igs": (lambda: GARBAGE, "not an IGES file"),
+    "garbage.3dm": (lambda: GARBAGE, "not a Rhino .3dm file"),
+    "corrupt.step": (_corrupt_step, "no surfaces to render"),
+    "step_content.igs": (lambda: (PARTS / "filleted_block.step").read_bytes(), "the extension says IGES but the content is STEP"),
+    "iges_content.3dm": (lambda: (PARTS / "filleted_block.igs").read_bytes(), "the content is IGES"),
+    "rhino_content.STEP": (lambda: (PARTS / "trimmed.3dm").read_bytes(), "the content is Rhino .3dm"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_FILES))
+def test_bad_cad_file_is_one_line_exit_2_nothing_written(tmp_path, name):
+    make, reason = BAD_FILES[name]
+    path = tmp_path / name
+    path.write_bytes(make())
+    outdir = tmp_path / "out"
+    code, output, _ = run("render", path, "-o", outdir, *TINY)
+    line = assert_bad_input(code, output, str(path), outdir)
+    assert reason in line
+
+
+def test_bad_cad_file_named_by_a_scene_names_the_file_and_the_scene(tmp_path):
+    (tmp_path / "broken.step").write_bytes(GARBAGE)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SCENE.format(file="broken.step"))
+    code, output, _ = run("render", scene, "-o", tmp_path / "out", *TINY)
+    line = assert_bad_input(code, output, "broken.step", tmp_path / "out")
+    assert "surface[0].file" in line and str(scene) in line
+
+
+def _write_step(shape, path: Path) -> Path:
+    from OCP.STEPControl import STEPControl_AsIs, STEPControl_Writer
+
+    occt.silence_messages()
+    writer = STEPControl_Writer()
+    writer.Transfer(shape, STEPControl_AsIs)
+    writer.Write(str(path))
+    return path
+
+
+def test_step_with_only_curves_says_so(tmp_path):
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.gp import gp_Pnt
+
+    path = _write_step(BRepBuilderAPI_MakeEdge(gp_Pnt(0, 0, 0), gp_Pnt(1, 2, 3)).Edge(), tmp_path / "curve.step")
+    code, output, _ = run("render", path, "-o", tmp_path / "out", *TINY)
+    line = assert_bad_input(code, output, str(path), tmp_path / "out")
+    assert "only curves or points" in line
+
+
+def test_3dm_with_only_curves_points_and_meshes_says_so(tmp_path):
+    rhino3dm = pytest.importorskip("rhino3dm")
+    model = rhino3dm.File3dm()
+    model.Objects.AddCurve(rhino3dm.LineCurve(rhino3dm.Point3d(0, 0, 0), rhino3dm.Point3d(1, 1, 1)))
+    model.Objects.AddPoint(rhino3dm.Point3d(0, 0, 1))
+    mesh = rhino3dm.Mesh()
+    for x, y in ((0, 0), (1, 0), (0, 1)):
+        mesh.Vertices.Add(x, y, 0)
+    mesh.Faces.AddFace(0, 1, 2)
+    model.Objects.AddMesh(mesh)
+    path = tmp_path / "no_surfaces.3dm"
+    model.Write(str(path), 7)
+    code, output, _ = run("render", path, "-o", tmp_path / "out", *TINY)
+    line = assert_bad_input(code, output, str(path), tmp_path / "out")
+    assert "no surfaces to render" in line and "Mesh" in line and "LineCurve" in line
+
+
+def test_missing_open_cascade_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "OCP", None)  # `import OCP` now raises ImportError
+    code, output, _ = run("render", PARTS / "filleted_block.step", "-o", tmp_path / "out", *TINY)
+    line = assert_bad_input(code, output, "filleted_block.step", tmp_path / "out")
+    assert "pip install 'rtreflect[cad]'" in line
+
+
+def test_bad_face_is_an_error_naming_it_unless_skipped(tmp_path, monkeypatch):
+    """A face that fails (here face 3, made to fail) fails the model; --skip-bad-faces renders the others and lists it."""
+    original = occt.bspline_of_face
+    calls = {"n": 0}
+
+    def failing(face):
+        calls["n"] += 1
+        if calls["n"] % 26 == 4:  # the fourth face of each read of the 26-face block
+            raise occt.FaceError("its surface cannot be converted (test)")
+        return original(face)
+
+    monkeypatch.setattr(occt, "bspline_of_face", failing)
+    outdir = tmp_path / "out"
+    code, output, _ = run("render", PARTS / "filleted_block.step", "-o", outdir, *TINY)
+    line = assert_bad_input(code, output, "filleted_block.step: face 3:", outdir)
+    assert "cannot be converted" in line and "--skip-bad-faces" in line
+    calls["n"] = 0
+    code, output, _ = run("render", PARTS / "filleted_block.step", "-o", outdir, *TINY, "--skip-bad-faces")
+    assert code == 0, output
+    assert "skipped 1 of 26 faces" in output and "face 3: its surface cannot be converted" in output
+    assert (outdir / "filleted_block.png").is_file()
+
+
+# --- scenes -----------------------------------------------------------------------------------
+
+SCENE = """
+[image]
+width = 64
+height = 36
+samples = 1
+[camera]
+eye = [120.0, -160.0, 140.0]
+look_at = [20.0, 15.0, 10.0]
+[lights]
+point = [20.0, 15.0, 120.0]
+normal = [0.0, 0.0, 1.0]
+direction = [0.0, 1.0, 0.0]
+spacing = 10.0
+count = 9
+radius = 1.0
+[[surface]]
+file = "{file}"
+"""
+
+
+def test_scene_names_cad_file_any_case_of_extension(tmp_path):
+    shutil.copy(PARTS / "filleted_block.step", tmp_path / "Block.STP")
+    scene_path = tmp_path / "scene.toml"
+    scene_path.write_text(SCENE.format(file="Block.STP"))
+    scene = load_scene(scene_path)
+    assert len(scene.surfaces) == 26 and all(s.trim is not None and s.mesh_uv is not None for s in scene.surfaces)
+    assert any("26 faces, unit mm" in note for note in scene.notes)
+    # The output key follows the CAD file's bytes (resumable batch outputs re-render when the part changes).
+    key = scene.output_key
+    shutil.copy(PARTS / "assembly.step", tmp_path / "Block.STP")
+    assert load_scene(scene_path).output_key != key
+
+
+def test_cad_file_as_scene_fits_the_part_in_view(tmp_path):
+    scene = load_scene(PARTS / "plate.step")
+    assert scene.output.name == "plate" and len(scene.surfaces) == 206
+    lo, hi = np.array([0.0, 0.0, 0.0]), np.array([100.0, 100.0, 4.0])  # the plate, as tools/make_parts.py builds it
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    camera = Camera(scene.camera, scene.image.width, scene.image.height)
+    pixels = camera.project(corners)
+    w, h = scene.image.width, scene.image.height
+    assert np.all((pixels[:, 0] >= 0) & (pixels[:, 0] <= w) & (pixels[:, 1] >= 0) & (pixels[:, 1] <= h)), pixels
+    # Fitted, not lost in the frame: some corner reaches within 15 % of an image edge (the fit leaves 1/1.1).
+    reach = np.abs(pixels - [w / 2, h / 2]) / [w / 2, h / 2]
+    assert reach.max() >= 0.85, reach
+    # The tube bank is above the part and spans at least its width across the tubes.
+    lights = scene.lights
+    assert lights.point[2] > hi[2]
+    assert np.ptp(lights.positions) >= hi[0] - lo[0]
+    # Resumable key: the file's hash changes it.
+    copy = tmp_path / "plate.step"
+    copy.write_bytes((PARTS / "plate.step").read_bytes() + b"\n")
+    assert load_scene(copy).output_key != scene.output_key
+
+
+def test_render_cad_file_writes_stem_named_outputs_and_prints_the_summary(tmp_path):
+    code, output, _ = run("render", PARTS / "revolved.step", "-o", tmp_path, *TINY)
+    assert code == 0, output
+    assert "revolved.step: 1 faces, unit mm, bounding box" in output
+    assert (tmp_path / "revolved.exr").is_file() and (tmp_path / "revolved.png").is_file()
+
+
+def test_batch_finds_cad_files_and_resumes(tmp_path):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    shutil.copy(PARTS / "revolved.step", folder / "vase.STEP")
+    shutil.copy(PARTS / "trimmed.3dm", folder / "rhino.3dm")
+    (folder / "notes.txt").write_text("not a scene")
+    outdir = tmp_path / "out"
+    code, output, _ = run("batch", folder, "-o", outdir)
+    assert code == 0, output
+    assert {"vase.png", "rhino.png", "vase.exr", "rhino.exr"} <= {p.name for p in outdir.iterdir()}
+    code, output, _ = run("batch", folder, "-o", outdir)
+    assert code == 0 and output.count("skipped") >= 2, output
+
+
+# --- geometry edge cases of real exports ------------------------------------------------------
+
+def _array(values, cls):
+    array = cls(1, len(values))
+    for i, value in enumerate(values):
+        array.SetValue(i + 1, value)
+    return array
+
+
+def _surface(u_knots, u_mults, v_knots, v_mults, n_u, n_v, periodic_u=False):
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.collections import Array1_double, Array1_int, Array2_gp_Pnt
+    from OCP.gp import gp_Pnt
+
+    poles = Array2_gp_Pnt(1, n_u, 1, n_v)
+    for i in range(n_u):
+        for j in range(n_v):
+            if periodic_u:  # a closed wavy tube: the poles go round
+                angle = 2 * math.pi * i / n_u
+                r = 10 + 2 * math.sin(3 * j)
+                poles.SetValue(i + 1, j + 1, gp_Pnt(r * math.cos(angle), r * math.sin(angle), 5.0 * j))
+            else:
+                poles.SetValue(i + 1, j + 1, gp_Pnt(10.0 * i, 8.0 * j, 3 * math.sin(i) * math.cos(0.8 * j)))
+    return Geom_BSplineSurface(poles, _array(u_knots, Array1_double), _array(v_knots, Array1_double),
+                               _array(u_mults, Array1_int), _array(v_mults, Array1_int), 3, 3, periodic_u, False)
+
+
+EDGE_CASES = {
+    # Knots 1e-14 apart: far below the scene reader's 1e-12 limit ("merge them"), as real exports have.
+    "near_duplicate_knots": lambda: _surface([0, 0.5, 0.5 + 1e-14, 1], [4, 1, 1, 4], [0, 0.5, 1], [4, 2, 4], 6, 6),
+    # Uniform, unclamped knots: the domain is [knot 3, knot 6].
+    "unclamped_knots": lambda: _surface(list(range(10)), [1] * 10, [0, 0.5, 1], [4, 2, 4], 6, 6),
+    # Periodic in u: a closed tube with a seam.
+    "periodic": lambda: _surface([0, 1, 2, 3, 4, 5, 6, 7], [1] * 8, [0, 0.5, 1], [4, 2, 4], 7, 6, periodic_u=True),
+}
+
+
+@pytest.mark.parametrize("case", sorted(EDGE_CASES))
+def test_real_export_knots_read_and_keep_the_geometry(tmp_path, case):
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+
+    surface = EDGE_CASES[case]()
+    path = _write_step(BRepBuilderAPI_MakeFace(surface, 1e-7).Face(), tmp_path / f"{case}.step")
+    model = read_cad(path)
+    (ours,) = model.surfaces
+    nu, nv = ours.weights.shape
+    table = _Table(path, "surface", {})
+    _check_knots(table, "knots_u", ours.knots_u, ours.degree_u, nu)  # raises if the scene reader would refuse them
+    _check_knots(table, "knots_v", ours.knots_v, ours.degree_v, nv)
+    # The same points as Open CASCADE's surface, over the whole face.
+    u0, u1, v0, v1 = surface.Bounds()
+    rng = np.random.default_rng(1)
+    uv = np.column_stack([rng.uniform(u0, u1, 200), rng.uniform(v0, v1, 200)])
+    assert np.all(ours.trim.contains(uv[:, 0], uv[:, 1]))
+    points = ours.evaluate(uv[:, 0], uv[:, 1]).S
+    reference = np.array([[p.X(), p.Y(), p.Z()] for p in (surface.Value(float(u), float(v)) for u, v in uv)])
+    assert np.max(np.linalg.norm(points - reference, axis=1)) <= 1e-9 * model.diagonal
+
+
+def test_step_in_inches_reads_in_millimetres_and_says_so(tmp_path):
+    from OCP.Interface import Interface_Static
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    occt.silence_messages()
+    Interface_Static.SetCVal_s("write.step.unit", "INCH")
+    try:
+        path = _write_step(BRepPrimAPI_MakeBox(25.4, 50.8, 76.2).Shape(), tmp_path / "inches.step")  # 1 × 2 × 3 in
+    finally:
+        Interface_Static.SetCVal_s("write.step.unit", "MM")
+    assert "INCH" in path.read_text().upper()
+    model = read_cad(path)
+    assert model.unit == "mm" and "inch" in model.unit_note and "read in mm" in model.unit_note
+    np.testing.assert_allclose(model.bounds[1] - model.bounds[0], [25.4, 50.8, 76.2], rtol=1e-9)
+
+
+def test_open_cascade_prints_nothing_to_stdout(tmp_path):
+    """OCCT's readers print transfer statistics straight to file descriptor 1 (past Python): silenced."""
+    import subprocess
+    import sys
+
+    code = "from rtreflect.cli import main; main()"
+    result = subprocess.run([sys.executable, "-c", code, "render", str(PARTS / "assembly.step"), str(PARTS / "filleted_block.igs"),
+                             "-o", str(tmp_path), *TINY], capture_output=True, text=True, timeout=300,
+                            cwd=Path(__file__).resolve().parents[1])
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert len(lines) == 4, result.stdout  # two summaries of the models, two render lines
+    assert lines[0].startswith(f"{PARTS / 'assembly.step'}: 52 faces") and lines[2].startswith("assembly: ")
+
+
+def test_real_degenerate_face_is_named_and_skippable(tmp_path):
+    """A box (faces 0–5) and a face whose control points lie on a line (face 6): an error naming face 6;
+    --skip-bad-faces renders the box and lists face 6."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.collections import Array1_double, Array1_int, Array2_gp_Pnt
+    from OCP.gp import gp_Pnt
+
+    poles = Array2_gp_Pnt(1, 2, 1, 2)
+    for i in range(2):
+        for j in range(2):
+            poles.SetValue(i + 1, j + 1, gp_Pnt(20 + i + j, 0, 0))  # on one line: no area
+    line = Geom_BSplineSurface(poles, _array([0, 1], Array1_double), _array([0, 1], Array1_double),
+                               _array([2, 2], Array1_int), _array([2, 2], Array1_int), 1, 1)
+    compound, builder = TopoDS_Compound(), BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, BRepPrimAPI_MakeBox(10, 10, 10).Shape())
+    builder.Add(compound, BRepBuilderAPI_MakeFace(line, 1e-7).Face())
+    path = _write_step(compound, tmp_path / "degenerate.step")
+    outdir = tmp_path / "out"
+    code, output, _ = run("render", path, "-o", outdir, *TINY)
+    line_text = assert_bad_input(code, output, f"{path}: face 6:", outdir)
+    assert "zero area" in line_text
+    code, output, _ = run("render", path, "-o", outdir, *TINY, "--skip-bad-faces")
+    assert code == 0, output
+    assert "6 faces" in output and "skipped 1 of 7 faces (--skip-bad-faces): face 6:" in output
+    assert (outdir / "degenerate.png").is_file()
+
+
+def test_batch_skip_bad_faces_lists_them(tmp_path, monkeypatch):
+    """batch --skip-bad-faces renders a part with a failing face and lists the face it left out."""
+    original = occt.bspline_of_face
+    calls = {"n": 0}
+
+    def failing(face):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise occt.FaceError("its surface cannot be converted (test)")
+        return original(face)
+
+    monkeypatch.setattr(occt, "bspline_of_face", failing)
+    folder = tmp_path / "in"
+    folder.mkdir()
+    shutil.copy(PARTS / "filleted_block.step", folder / "block.step")
+    code, output, _ = run("batch", folder, "-o", tmp_path / "out", "-j", "1", "--skip-bad-faces")
+    assert code == 0, output
+    assert "skipped 1 of 26 faces (--skip-bad-faces): face 1: its surface cannot be converted" in output
+    assert (tmp_path / "out" / "block.png").is_file()
