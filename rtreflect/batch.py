@@ -67,6 +67,8 @@ class SceneReport:
     pixels: int = 0
     rays: int = 0
     tiles: int = 0
+    validate: dict | None = None  # `--validate`: rtreflect.ci.checks.validate_record
+    golden: dict | None = None  # `--golden DIR`: rtreflect.ci.checks.golden_record
 
 
 # -- discovery and planning -------------------------------------------------------------

@@ -9,6 +9,7 @@ from __future__ import annotations
 import signal
 import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 import click
@@ -197,8 +198,10 @@ def _channel_list(ctx, param, value: str | None) -> tuple[str, ...] | None:
                    "(just above the threshold) to yellow (the largest error).")
 @click.option("--json", "json_path", type=click.Path(path_type=Path), metavar="REPORT",
               help="Also write the report as JSON to REPORT.")
+@click.option("--junit", "junit_path", type=click.Path(path_type=Path), metavar="FILE.xml", default=None,
+              help="Also write the verdict as JUnit XML (one test case), for CI servers' test views.")
 def diff(a: Path, b: Path, fail_threshold, failrelative, failpercent, hardfail, warn, warnrelative, warnpercent, channels,
-         diff_png, json_path) -> None:
+         diff_png, json_path, junit_path) -> None:
     """Compare images A and B (EXR or PNG) for CI, with OpenImageIO's compare.
 
     Prints mean, RMS and max error (with its pixel and channel), PSNR and the
@@ -225,9 +228,14 @@ def diff(a: Path, b: Path, fail_threshold, failrelative, failpercent, hardfail, 
 
     tolerance = Tolerance(fail=fail_threshold, failrelative=failrelative, failpercent=failpercent, hardfail=hardfail, warn=warn,
                           warnrelative=warnrelative, warnpercent=warnpercent)
+    start = time.perf_counter()
     try:
         report = compare_images(a, b, channels, tolerance)
         report.write_files(diff_png, json_path)
+        if junit_path is not None:
+            from .ci.junit import diff_case, write_junit
+
+            write_junit(junit_path, "rtreflect.diff", [diff_case(report, time.perf_counter() - start)])
     except RtreflectError as exc:
         fail(str(exc))
     click.echo("\n".join(report.summary()))
@@ -257,8 +265,10 @@ def _fmt(value: float | None) -> str:
 @click.option("--threads", type=click.IntRange(1, 64), default=None, help="Render threads (default: up to 2).")
 @click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
               help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
+@click.option("--junit", "junit_path", type=click.Path(path_type=Path), metavar="FILE.xml", default=None,
+              help="Also write JUnit XML: a test case per scene, failures with the reason and the numbers.")
 def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: float, width, height, samples, normals,
-             threads, skip_bad_faces) -> None:
+             threads, skip_bad_faces, junit_path) -> None:
     """Check each SCENE's render against the analytic reflection lines (Ulmet's theorem).
 
     The reflection line of tube k is the image of the level set f(u, v) = c_k. The
@@ -288,9 +298,10 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
     except RtreflectError as exc:
         fail(exc)
     _print_notes(loaded)
-    reports = []
+    reports, seconds = [], []
     for scene in loaded:
         image = scene.image
+        start = time.perf_counter()
         try:
             with tqdm(total=image.width * image.height, unit="px", unit_scale=True, desc=scene.output.name,
                       leave=False, disable=None, file=sys.stderr) as bar:
@@ -298,6 +309,7 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
         except RtreflectError as exc:
             fail(str(exc))
         reports.append(report)
+        seconds.append(time.perf_counter() - start)
         click.echo(f"{scene.output.name} ({scene.path}, {image.width}×{image.height}, {scene.render.normals} normals)")
         click.echo(f"  {'light':>5} {'c_k':>9} {'points':>7} {'mean_px':>8} {'p95_px':>8} {'max_px':>8} {'misses':>6}"
                    f" {'colour':>6}")
@@ -320,6 +332,15 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
             document["scenes"][key] = report.to_json()
         try:
             write_json(report_path, document)
+        except RtreflectError as exc:
+            fail(str(exc))
+    if junit_path is not None:
+        from .ci.checks import validate_summary
+        from .ci.junit import validate_case, write_junit
+
+        cases = [validate_case(report.name, validate_summary(report, took)) for report, took in zip(reports, seconds)]
+        try:
+            write_junit(junit_path, "rtreflect.validate", cases)
         except RtreflectError as exc:
             fail(str(exc))
     sys.exit(0 if all(report.passed for report in reports) else EXIT_CHECK_FAILED)
@@ -440,7 +461,19 @@ def stop_status(exc: BaseException) -> int:
               help="Render on this dask.distributed cluster instead of locally (needs rtreflect[dask]).")
 @click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
               help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
-def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, scheduler, skip_bad_faces) -> None:
+@click.option("--validate", "run_validate", is_flag=True,
+              help="Then check each scene against the analytic reflection lines, as `rtreflect validate` does "
+                   f"(tolerance {DEFAULT_TOLERANCE_PX:g} px); a failed check exits 1.")
+@click.option("--golden", "golden_dir", type=click.Path(path_type=Path, exists=True, file_okay=False), metavar="DIR",
+              default=None,
+              help="Then compare each OUTPUT/NAME.exr with DIR/NAME.exr by the golden checks (colour, AOVs); a "
+                   "mismatch writes OUTPUT/NAME.CHECK.diff.png and exits 1; a scene without a golden is noted.")
+@click.option("--report", "html_path", type=click.Path(path_type=Path), metavar="FILE.html", default=None,
+              help="Also write an HTML report: a row per scene with thumbnail, checks and failure reason.")
+@click.option("--junit", "junit_path", type=click.Path(path_type=Path), metavar="FILE.xml", default=None,
+              help="Also write JUnit XML: a test case per scene and check, for CI servers' test views.")
+def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, scheduler, skip_bad_faces, run_validate,
+          golden_dir, html_path, junit_path) -> None:
     """Render folders of scenes: every *.toml in each PATH (or PATH itself) to OUTPUT/NAME.exr and .png.
 
     CAD files in the folders (.step .stp .igs .iges .3dm) render too, each in the default
@@ -453,14 +486,16 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
     complete files. At the end a table lists scene, status, seconds and files.
 
     \b
-    Exit status: 0 all scenes rendered or up to date, 1 some scene failed,
-    2 bad input (no scenes, two scenes writing the same NAME, ...), 130 interrupted.
+    Exit status: 0 all scenes rendered or up to date, 1 some scene failed (or
+    failed a --validate or --golden check), 2 bad input (no scenes, two scenes
+    writing the same NAME, ...), 130 interrupted.
 
     \b
     Examples:
       rtreflect batch scenes/ -o out/
       rtreflect batch parts/ variants/door.toml -o out/ --recursive -j 4 --json out/report.json
       rtreflect batch scenes/ -o out/ --scheduler tcp://10.0.0.5:8786
+      rtreflect batch scenes/ -o out/ --validate --report out/report.html --junit out/junit.xml
     """
     from . import batch as batching
 
@@ -510,14 +545,18 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         done = {r.scene for r in reports}
         reports.extend(batching.SceneReport(str(job.path), job.scene.output.name, batching.INTERRUPTED)
                        for job in todo if str(job.path) not in done)
-        _finish_batch(reports, order, outdir, report_path, start, where, quiet=True)
+        _finish_batch(reports, order, outdir, report_path, start, where, quiet=True, html_path=html_path,
+                      junit_path=junit_path)
         tally = batching.counts(reports)
         click.echo(f"rtreflect: interrupted by {stop_name(exc)}: {tally['rendered']} rendered, "
                    f"{tally['interrupted']} not finished; no partial files left, run again to resume", err=True)
         sys.exit(stop_status(exc))
     except RtreflectError as exc:
         fail(str(exc))
-    failed = _finish_batch(reports, order, outdir, report_path, start, where)
+    if run_validate or golden_dir is not None:
+        _check_batch(reports, loaded, outdir, run_validate, golden_dir)
+    failed = _finish_batch(reports, order, outdir, report_path, start, where, html_path=html_path,
+                           junit_path=junit_path)
     sys.exit(EXIT_CHECK_FAILED if failed else 0)
 
 
@@ -534,25 +573,126 @@ def _print_scene(report) -> None:
     tqdm.write(line, file=sys.stdout)
 
 
-def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False) -> int:
-    """Print the summary table, write the JSON report; the number of failed scenes."""
+def _check_batch(reports, loaded, outdir, run_validate, golden_dir) -> None:
+    """`--validate` and `--golden`: check every scene that rendered or was up to date, one line per check."""
+    from .batch import FAILED, INTERRUPTED
+    from .ci.checks import GOLDEN_MATCH, GOLDEN_MISSING, golden_record, validate_record
+
+    scenes = {str(job.path): job.scene for job in loaded}
+    for report in reports:
+        scene = scenes.get(report.scene)
+        if report.status in (FAILED, INTERRUPTED) or scene is None:
+            continue
+        if run_validate:
+            report.validate = record = validate_record(scene, DEFAULT_TOLERANCE_PX)
+            verdict = "PASS" if record["passed"] else f"FAIL: {'; '.join(record['reasons']) or 'see the report'}"
+            numbers = "" if record.get("error") else f" (max {_fmt(record['max_px'])} px, {record['misses']} misses)"
+            tqdm.write(f"{report.name}: validate {verdict}{numbers}", file=sys.stdout)
+        if golden_dir is not None:
+            report.golden = record = golden_record(report.name, outdir, golden_dir)
+            text = {GOLDEN_MATCH: "matches", GOLDEN_MISSING: "not compared"}.get(record["status"], "FAILS")
+            detail = record["error"] or ", ".join(f"{check} {c['failing_pixels']} failing px"
+                                                  for check, c in record["checks"].items())
+            tqdm.write(f"{report.name}: golden {text} ({detail})", file=sys.stdout)
+
+
+def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False, html_path=None,
+                  junit_path=None) -> int:
+    """Print the summary table, write the JSON, HTML and JUnit reports; the number of failed scenes and checks."""
     from . import batch as batching
 
     reports.sort(key=lambda r: order.get(r.scene, len(order)))
     tally = batching.counts(reports)
     seconds = time.perf_counter() - start
+    records = [asdict(r) for r in reports]
+    checks_failed = sum(1 for r in reports if (r.validate and not r.validate["passed"])
+                        or (r.golden and r.golden["status"] in ("mismatch", "error")))
     if not quiet:
         click.echo("")
         click.echo(batching.summary_table(reports))
-        click.echo(f"{tally['rendered']} rendered, {tally['skipped']} up to date, {tally['failed']} failed "
+        checked = f", {checks_failed} failed a check" if any(r.validate or r.golden for r in reports) else ""
+        click.echo(f"{tally['rendered']} rendered, {tally['skipped']} up to date, {tally['failed']} failed{checked} "
                    f"in {seconds:.1f} s ({where})")
-    if report_path:
-        try:
+    try:
+        if report_path:
             batching.write_report(report_path, reports, outdir, seconds, where)
-        except RtreflectError as exc:
-            click.echo(f"rtreflect: error: {one_line(str(exc))}", err=True)
-            return max(1, tally["failed"])
-    return tally["failed"]
+        if html_path:
+            from .ci.report import write_report
+
+            write_report(html_path, records, outdir)
+        if junit_path:
+            from .ci.junit import batch_cases, write_junit
+
+            write_junit(junit_path, "rtreflect.batch", batch_cases(records), seconds)
+    except RtreflectError as exc:
+        click.echo(f"rtreflect: error: {one_line(str(exc))}", err=True)
+        return max(1, tally["failed"] + checks_failed)
+    return tally["failed"] + checks_failed
+
+
+@cli.command("report")
+@click.argument("outdir", type=click.Path(path_type=Path))
+@click.option("-o", "--output", "html_path", type=click.Path(path_type=Path), default=None, metavar="FILE.html",
+              help="Where to write the page [default: OUTDIR/report.html].")
+@click.option("--json", "batch_json", type=click.Path(path_type=Path), default=None, metavar="REPORT",
+              help="The batch's --json report: statuses, failure reasons and the --validate/--golden checks "
+                   "[default: every NAME.png or NAME.exr in OUTDIR, shown as rendered].")
+@click.option("--golden", "golden_dir", type=click.Path(path_type=Path, exists=True, file_okay=False), metavar="DIR",
+              default=None,
+              help="Compare each OUTDIR/NAME.exr with DIR/NAME.exr now (as `batch --golden`).")
+@click.option("--junit", "junit_path", type=click.Path(path_type=Path), metavar="FILE.xml", default=None,
+              help="Also write the same verdicts as JUnit XML.")
+def report_command(outdir: Path, html_path, batch_json, golden_dir, junit_path) -> None:
+    """Write the HTML report of an output folder rendered earlier (as `batch --report` does).
+
+    One static page, no server needed: a summary line, then a row per scene with a
+    thumbnail linking to the full image, the validation numbers, the golden comparison
+    with its diff image, and a failed scene's reason; sortable by status. Thumbnails go
+    to FILE_files/ beside the page.
+
+    \b
+    Exit status: 0 written (and nothing failed), 1 some scene or check failed, 2 bad input.
+
+    \b
+    Examples:
+      rtreflect batch scenes/ -o out/ --json out/batch.json --validate
+      rtreflect report out/ --json out/batch.json --golden golden_images/
+    """
+    import json
+
+    from .ci.checks import golden_record
+    from .ci.report import records_from_folder, summary, write_report
+
+    if not Path(outdir).is_dir():
+        fail(f"{outdir}: no such folder")
+    html_path = html_path or Path(outdir) / "report.html"
+    if batch_json is not None:
+        try:
+            records = json.loads(Path(batch_json).read_text(encoding="utf-8"))["scenes"]
+            for record in records:
+                record.setdefault("validate", None)
+                record.setdefault("golden", None)
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            fail(f"{batch_json}: not a `rtreflect batch --json` report ({getattr(exc, 'strerror', None) or exc})")
+    else:
+        records = records_from_folder(outdir)
+    try:
+        if golden_dir is not None:
+            for record in records:
+                if record["status"] in ("rendered", "skipped"):
+                    record["golden"] = golden_record(record.get("name") or Path(record["scene"]).stem, outdir,
+                                                     golden_dir)
+        write_report(html_path, records, outdir)
+        if junit_path is not None:
+            from .ci.junit import batch_cases, write_junit
+
+            write_junit(junit_path, "rtreflect.batch", batch_cases(records))
+    except RtreflectError as exc:
+        fail(str(exc))
+    counts = summary(records)
+    click.echo(f"{html_path}: {counts['scenes']} scenes, {counts['failed']} failed, "
+               f"{counts['checks_failed']} failed a check")
+    sys.exit(EXIT_CHECK_FAILED if counts["failed"] or counts["checks_failed"] else 0)
 
 
 def main() -> None:

@@ -473,6 +473,51 @@ def test_scheduler_killed_mid_batch_fails_the_scenes_left_and_writes_the_report(
     assert sorted(p.name for p in out.iterdir()) == ["a.exr", "a.png"]
 
 
+@pytest.fixture(scope="module")
+def real_cluster():
+    """A `dask scheduler` and two `dask worker` processes on 127.0.0.1, as the README tells users to start them
+    (arrays come back over TCP, not through LocalCluster's shortcuts); stopped after the module."""
+    pytest.importorskip("distributed")
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    processes = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                   "--port", str(port), "--no-dashboard"], **quiet)]
+    try:
+        processes += [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+                                        "--no-dashboard", "--host", "127.0.0.1"], **quiet) for _ in range(2)]
+        yield address
+    finally:
+        for process in processes:
+            process.terminate()
+        for process in processes:
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+@pytest.mark.parametrize("tiles", ["one", "many"])
+def test_real_scheduler_and_workers_write_the_bytes_of_a_local_render(real_cluster, tmp_path, tiles):
+    """Issue 17: on real `dask scheduler`/`dask worker` processes a one-tile scene failed ("buffer is wrong size"):
+    a tile arriving over TCP may be unaligned in its frame and OpenImageIO refuses it. One-tile and many-tile
+    scenes must write byte-identical files to a local render."""
+    scene_path = small_scene("hood", tmp_path / "scenes" / f"{tiles}.toml", width=256, height=256, samples=1)
+    expected = reference_files(scene_path, tmp_path / "local")
+    memory = ["--max-memory", "12M"] if tiles == "many" else []
+    code, output, report = run_batch(scene_path, "-o", tmp_path / "out", "--scheduler", real_cluster, *memory,
+                                     "--json", tmp_path / "r.json")
+    assert code == 0, output
+    count = by_name(report)[tiles]["tiles"]
+    assert count == 1 if tiles == "one" else count >= 8, count
+    assert folder_bytes(tmp_path / "out") == expected
+
+
 def test_cluster_client_holds_a_bounded_number_of_tiles_behind_a_slow_one(tmp_path, monkeypatch):
     """The first tile is slow: the tiles after it come back and must wait to be written in order. What waits
     counts against the window, so the client never holds more than the window's tiles (not the whole image)."""
