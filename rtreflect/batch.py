@@ -154,14 +154,18 @@ def failure_reason(exc: BaseException) -> str:
 
 # -- one scene (this process or a pool worker) -------------------------------------------
 def render_job(scene: Scene, outdir: Path, threads: int | None, max_memory: int | None,
-               progress: Callable[[int], None] | None = None) -> SceneReport:
-    """Render one scene to its files (`streaming.render_to_files`); failures become a failed report, not an exception."""
+               progress: Callable[[int], None] | None = None, remove_dead: bool = True) -> SceneReport:
+    """Render one scene to its files (`streaming.render_to_files`); failures become a failed report, not an exception.
+
+    ``remove_dead``: as in `imagefiles.prepare_output_folder`.
+    """
     from .output.streaming import render_to_files
 
     start = time.perf_counter()
     report = SceneReport(str(scene.path), scene.output.name, RENDERED)
     try:
-        done = render_to_files(scene, outdir, threads=threads, max_memory=max_memory, progress=progress)
+        done = render_to_files(scene, outdir, threads=threads, max_memory=max_memory, progress=progress,
+                               remove_dead=remove_dead)
     except Exception as exc:  # failure isolation: one scene's error must not stop the batch
         report.status, report.error = FAILED, failure_reason(exc)
         if not isinstance(exc, RtreflectError) and os.environ.get("RTREFLECT_DEBUG"):
@@ -209,7 +213,10 @@ def _worker_render(scene: Scene, outdir: Path, max_memory: int | None) -> SceneR
     # Which process renders which scene: if this one dies, the parent knows the scene it took along.
     _progress_queue.put((STARTED, os.getpid(), str(scene.path)))
     try:
-        return render_job(scene, outdir, 1, max_memory, progress=_progress_queue.put)
+        # No sweep of dead runs' temporaries here: the parent swept the folder before the pool started, and a
+        # sibling worker killed just now is the parent's to clean up and report (`settle`). A worker that swept
+        # it first (a zombie counts as dead) would leave the parent nothing to remove and the removal unsaid.
+        return render_job(scene, outdir, 1, max_memory, progress=_progress_queue.put, remove_dead=False)
     except _Terminated:
         os._exit(128 + signal.SIGTERM)  # the temporaries were removed while unwinding
     finally:
@@ -272,9 +279,10 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
             # are tried again once in a fresh pool, and a scene in flight at two deaths is reported failed.
             how = died(job)
             attempts[id(job)] = attempts.get(id(job), 0) + 1
+            # Its worker's temporaries, once that worker is dead (workers leave each other's alone: _worker_render).
+            pid = started.get(str(job.path))
+            removed = remove_dead_temporaries(outdir, pid) if pid is not None else []
             if how is not None or attempts[id(job)] >= 2:
-                pid = started.get(str(job.path))
-                removed = remove_dead_temporaries(outdir, pid) if pid is not None else []
                 cleanup = f"; removed its {len(removed)} temporary file{'s' * (len(removed) != 1)}" if removed else ""
                 cause = f" (PID {pid}) was killed by {how}" if how else " died"
                 on_done(SceneReport(str(job.path), job.scene.output.name, FAILED,

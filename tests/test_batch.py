@@ -393,6 +393,29 @@ def test_worker_killed_by_sigkill_fails_its_scene_and_leaves_no_temporaries(tmp_
     assert sorted(p.name for p in out.iterdir()) == ["small.exr", "small.png"]
 
 
+def test_pool_worker_leaves_a_dead_siblings_temporaries_to_the_parent(tmp_path, monkeypatch):
+    """The cause of a CI flake of the SIGKILL test above: on a loaded machine the other `-j` worker, starting
+    its scene just after its sibling was killed (a zombie counts as dead), swept the sibling's temporary
+    before the parent could, so the failure did not say "removed its". A pool worker sweeps nothing; the
+    parent removes (and reports) a dead worker's temporaries."""
+    import queue
+
+    from rtreflect.output import sharing
+
+    scene_path = small_scene("hood", tmp_path / "hood.toml", width=24, height=14)
+    out = tmp_path / "out"
+    out.mkdir()
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    sibling = out / f".big.rtreflect-{sharing._host()}-{dead.pid}.abcd_123.exr"
+    sibling.write_bytes(b"partial")
+    monkeypatch.setattr(batching, "_progress_queue", queue.Queue())  # what _worker_init gives a pool worker
+    report = batching._worker_render(load_scene(scene_path), out, None)
+    assert report.status == "rendered", report.error
+    assert sorted(p.name for p in out.iterdir()) == sorted(["hood.exr", "hood.png", sibling.name])
+    assert sharing.remove_dead_temporaries(out, dead.pid) == [sibling]  # the parent's `settle` still can
+
+
 def test_temporaries_of_dead_runs_are_removed_and_said(tmp_path):
     """Leftovers of a killed run (this host, its PID gone) are removed by the next render; a live process's and
     another host's temporaries are not touched."""

@@ -236,12 +236,13 @@ def check_distinct_outputs(scenes: list["Scene"], outdir: Path) -> None:
                              f"{' and '.join(map(str, files[:-1]))}{more} (give each scene its own [output] name)")
 
 
-def prepare_output_folder(outdir: Path, targets: list[Path] = ()) -> list[Path]:
+def prepare_output_folder(outdir: Path, targets: list[Path] = (), remove_dead: bool = True) -> list[Path]:
     """Create ``outdir`` if missing and prove a file can be made in it: a bad folder fails before the render, not after.
 
     A folder standing where one of ``targets`` goes would stop its rename after the other files were replaced.
     Temporaries left in the folder by dead runs of this host (`sharing.remove_dead_temporaries`) are removed:
-    the paths removed are returned, for the caller to say so.
+    the paths removed are returned, for the caller to say so. ``remove_dead=False`` leaves them to the caller
+    (a batch pool worker: its parent removes and reports a dead sibling's temporaries, see `batch.run_local`).
     """
     outdir = Path(outdir)
     if outdir.exists() and not outdir.is_dir():
@@ -256,7 +257,7 @@ def prepare_output_folder(outdir: Path, targets: list[Path] = ()) -> list[Path]:
         os.unlink(probe)
     except OSError as exc:
         raise RtreflectError(f"{outdir}: -o/--output: output folder is not writable ({exc.strerror or exc})") from None
-    return remove_dead_temporaries(outdir)
+    return remove_dead_temporaries(outdir) if remove_dead else []
 
 
 def removed_note(removed: list[Path]) -> str:
@@ -373,17 +374,18 @@ class ImageWriter:
 
 @contextlib.contextmanager
 def open_outputs(scene: "Scene", outdir: Path, png_filter: PngFilter | None = None,
-                 extra_files: dict[str, str] | None = None) -> Iterator[ImageWriter]:
+                 extra_files: dict[str, str] | None = None, *, remove_dead: bool = True) -> Iterator[ImageWriter]:
     """An `ImageWriter` for the scene's outputs in ``outdir``: all files appear together when the block ends, or none.
 
     Files are written under temporary names beside their final ones and renamed into
     place only if the block completes, so an error or Ctrl-C leaves the old files or none.
     ``png_filter(row0, rgba_rows)`` changes the linear RGBA before the PNG encodes it (the
     overlay); ``extra_files`` are text files written beside the images, by file name.
+    ``remove_dead``: as in `prepare_output_folder`.
     """
     outdir = Path(outdir)
     targets = output_paths(scene, outdir)
-    prepare_output_folder(outdir, output_paths(scene, outdir, extra_files))
+    prepare_output_folder(outdir, output_paths(scene, outdir, extra_files), remove_dead)
     target = outdir
     # The set is renamed into place under a lock on its name (`sharing`): a concurrent run writing
     # the same NAME cannot interleave its renames with ours and leave a mixed pair.

@@ -27,18 +27,19 @@ class SceneOutput:
 
 
 def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, max_memory: int | None = None,
-                    progress: Callable[[int], None] | None = None) -> SceneOutput:
+                    progress: Callable[[int], None] | None = None, remove_dead: bool = True) -> SceneOutput:
     """Render ``scene`` into ``outdir/NAME.exr|.png`` within ``max_memory`` bytes of working memory.
 
     ``progress(pixels)`` is called as tiles are written. Raises `RtreflectError` (before
     building anything) when even one-pixel tiles would not fit the budget, and on
     write errors; on any error or interrupt no output file is left half-written.
+    ``remove_dead``: as in `imagefiles.prepare_output_folder`.
     """
     threads = threads or default_threads()
     tile_rays = rays_per_tile(scene, max_memory or default_max_memory(), threads)
     renderer = Renderer(scene)
     png_filter, extra_files = overlay_for(scene, renderer)
-    with open_outputs(scene, outdir, png_filter, extra_files) as writer:
+    with open_outputs(scene, outdir, png_filter, extra_files, remove_dead=remove_dead) as writer:
         stats = renderer.run(lambda tile: writer.write(tile.start, tile.pixels), threads, tile_rays, progress)
     return SceneOutput(output_paths(scene, outdir, extra_files), stats)
 
