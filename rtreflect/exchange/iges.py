@@ -9,8 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import SceneError
-from .occt import CadModel, import_ocp, quiet_stdout, read_faces
+from .occt import CadModel, import_ocp, read_faces, read_xstep, transferred_shape
 
 #: What Open CASCADE converts every IGES length to.
 READ_UNIT = "mm"
@@ -19,15 +18,10 @@ READ_UNIT = "mm"
 def read_iges(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadModel:
     """Every face of an IGES file as a trimmed NURBS surface (see `occt.read_faces`)."""
     import_ocp(path, "IGES files")
-    from OCP.IFSelect import IFSelect_ReturnStatus
     from OCP.IGESControl import IGESControl_Reader
 
     reader = IGESControl_Reader()
-    with quiet_stdout():
-        status = reader.ReadFile(str(path))
-    if status != IFSelect_ReturnStatus.IFSelect_RetDone:
-        raise SceneError(path, "", f"not a readable IGES file (Open CASCADE: {status.name.removeprefix('IFSelect_')}): "
-                                   "truncated, corrupt or not IGES")
+    read_xstep(reader, path, "IGES")
     note = ""
     try:
         unit = str(reader.IGESModel().GlobalSection().UnitName().ToCString()).strip().lower()
@@ -35,8 +29,6 @@ def read_iges(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMo
         unit = ""
     if unit and unit not in ("mm", "millimeter", "millimetre"):
         note = f"file in {unit}, read in {READ_UNIT}"
-    with quiet_stdout():
-        reader.TransferRoots()
-        shape = reader.OneShape()
+    shape = transferred_shape(reader)
     reader = None  # its model of the file's entities (hundreds of MB for a large file) is not needed any more
     return read_faces(path, shape, name, unit=READ_UNIT, unit_note=note, what="IGES file", skip_bad_faces=skip_bad_faces)

@@ -429,6 +429,24 @@ def convert_shape(shape, path: Path):
     return converted
 
 
+def read_xstep(reader, path: Path, kind: str) -> None:
+    """``reader`` (Open CASCADE's STEP or IGES control reader) reads ``path``; one line naming it when it cannot."""
+    from OCP.IFSelect import IFSelect_ReturnStatus
+
+    with quiet_stdout():
+        status = reader.ReadFile(str(path))
+    if status != IFSelect_ReturnStatus.IFSelect_RetDone:
+        raise SceneError(path, "", f"not a readable {kind} file (Open CASCADE: {status.name.removeprefix('IFSelect_')}): "
+                                   f"truncated, corrupt or not {kind}")
+
+
+def transferred_shape(reader):
+    """The read file's shape (assemblies: a compound of every located instance), transferred quietly."""
+    with quiet_stdout():
+        reader.TransferRoots()
+        return reader.OneShape()
+
+
 def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what: str,
                skip_bad_faces: bool = False, reversed_faces: list[bool] | None = None,
                trims_onto_edges: bool = False) -> CadModel:

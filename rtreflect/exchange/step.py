@@ -10,8 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import SceneError
-from .occt import CadModel, import_ocp, quiet_stdout, read_faces
+from .occt import CadModel, import_ocp, read_faces, read_xstep, transferred_shape
 
 #: What Open CASCADE converts every STEP length to.
 READ_UNIT = "mm"
@@ -20,22 +19,15 @@ READ_UNIT = "mm"
 def read_step(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadModel:
     """Every face of a STEP file as a trimmed NURBS surface (see `occt.read_faces`)."""
     import_ocp(path, "STEP files")
-    from OCP.IFSelect import IFSelect_ReturnStatus
     from OCP.STEPControl import STEPControl_Reader
     from OCP.collections import Sequence_TCollection_AsciiString as Names
 
     reader = STEPControl_Reader()
-    with quiet_stdout():
-        status = reader.ReadFile(str(path))
-    if status != IFSelect_ReturnStatus.IFSelect_RetDone:
-        raise SceneError(path, "", f"not a readable STEP file (Open CASCADE: {status.name.removeprefix('IFSelect_')}): "
-                                   "truncated, corrupt or not STEP")
+    read_xstep(reader, path, "STEP")
     lengths, angles, solid_angles = Names(), Names(), Names()
     reader.FileUnits(lengths, angles, solid_angles)
     file_units = sorted({str(n.ToCString()).lower() for n in lengths})
-    with quiet_stdout():
-        reader.TransferRoots()
-        shape = reader.OneShape()
+    shape = transferred_shape(reader)
     reader = None  # its model of the file's entities (hundreds of MB for a large file) is not needed any more
     note = ""
     if file_units and file_units != ["millimetre"]:
