@@ -67,6 +67,7 @@ class SceneReport:
     pixels: int = 0
     rays: int = 0
     tiles: int = 0
+    warnings: list[str] = field(default_factory=list)  # `checks.ImageTally` warnings of the rendered picture
 
 
 # -- discovery and planning -------------------------------------------------------------
@@ -168,6 +169,7 @@ def render_job(scene: Scene, outdir: Path, threads: int | None, max_memory: int 
         report.outputs = [str(p) for p in done.files]
         report.pixels = scene.image.width * scene.image.height
         report.rays, report.tiles = done.stats.rays, done.stats.tiles
+        report.warnings = list(done.warnings)
     report.seconds = time.perf_counter() - start
     return report
 

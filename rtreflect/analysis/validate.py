@@ -58,6 +58,7 @@ import numpy as np
 from .contours import ContourLines, UlmetField, analytic_contours, reaches_light_plane
 from ..integrator.film import Film
 from ..modes.lights import reflect
+from ..integrator.autorig import resolve
 from ..integrator.renderer import Renderer
 from ..exchange.scene import Scene
 
@@ -725,7 +726,7 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
 def validate_scene(scene: Scene, tolerance: float = DEFAULT_TOLERANCE_PX, progress: Callable[[int], None] | None = None,
                    threads: int | None = None, renderer: Renderer | None = None) -> SceneReport:
     """Render the scene (colour at its samples, pixel-centre AOVs) in memory and check it against the analytic contours."""
-    renderer = renderer or Renderer(scene)
+    renderer = renderer or Renderer(resolve(scene))
     film = renderer.render(progress, threads).film
     contours = analytic_contours(UlmetField.of(renderer))
     return compare(renderer, film_aovs(renderer, film), contours, tolerance)

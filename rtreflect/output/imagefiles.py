@@ -35,6 +35,9 @@ if TYPE_CHECKING:
 SCENE_HASH_ATTRIBUTE = "rtreflect:scene_sha256"
 INPUTS_HASH_ATTRIBUTE = "rtreflect:inputs_sha256"
 VERSION_ATTRIBUTE = "rtreflect:version"
+#: The camera and tubes rendered (TOML inline tables, ready to paste into a scene file): the automatic rig kept.
+CAMERA_ATTRIBUTE = "rtreflect:camera"
+LIGHTS_ATTRIBUTE = "rtreflect:lights"
 #: `Scene.output_key`: the inputs' hash plus size, samples, normals and overlay (which the command line may override).
 OUTPUT_KEY_ATTRIBUTE = "rtreflect:output_key"
 
@@ -268,9 +271,15 @@ def removed_note(removed: list[Path]) -> str:
 def provenance_attributes(scene: "Scene") -> dict[str, str]:
     """What each output records of its origin: the scene file's hash, all inputs' hash, the rtreflect version."""
     from .. import __version__
+    from ..exchange.scene import _spec_table
+    from ..exchange.scenewriter import inline_table
 
-    return {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
-            OUTPUT_KEY_ATTRIBUTE: scene.output_key, VERSION_ATTRIBUTE: __version__}
+    attributes = {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
+                  OUTPUT_KEY_ATTRIBUTE: scene.output_key, VERSION_ATTRIBUTE: __version__}
+    if not scene.automatic:  # what was rendered; a scene still automatic is resolved before any pixel is written
+        attributes[CAMERA_ATTRIBUTE] = inline_table(_spec_table(scene.camera))
+        attributes[LIGHTS_ATTRIBUTE] = inline_table(_spec_table(scene.lights))
+    return attributes
 
 
 def read_provenance(path: Path) -> dict[str, str]:
