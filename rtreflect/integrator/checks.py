@@ -34,8 +34,8 @@ class ImageTally:
         self.scene = scene
         positions = np.asarray(scene.lights.positions, dtype=np.float64)
         gaps = np.diff(np.unique(positions))
-        reach = float(gaps.min()) if len(gaps) else 0.0
-        # The bank covers f in [c_min − spacing, c_max + spacing] (a tube's stripe reaches half a spacing out).
+        reach = float(gaps.min()) if len(gaps) else float(scene.lights.radius)
+        # The bank covers f in [c_min − spacing, c_max + spacing] (a single tube: its radius either side).
         self.bank = (float(positions.min()) - reach, float(positions.max()) + reach)
         self.radius = float(scene.lights.radius)
         self.surface = 0  # pixels some sample of which hits the surface
