@@ -68,6 +68,7 @@ class SceneReport:
     rays: int = 0
     tiles: int = 0
     warnings: list[str] = field(default_factory=list)  # `checks.ImageTally` warnings of the rendered picture
+    rig: list[str] = field(default_factory=list)  # the automatic camera and tubes chosen (`Scene.rig`)
 
 
 # -- discovery and planning -------------------------------------------------------------
@@ -170,6 +171,7 @@ def render_job(scene: Scene, outdir: Path, threads: int | None, max_memory: int 
         report.pixels = scene.image.width * scene.image.height
         report.rays, report.tiles = done.stats.rays, done.stats.tiles
         report.warnings = list(done.warnings)
+        report.rig = list(done.scene.rig)
     report.seconds = time.perf_counter() - start
     return report
 

@@ -176,7 +176,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
             f"{scene.output.name}: {image.width}×{image.height}, {samples_text(image.samples)}, "
             f"{st.seconds:.2f} s, {st.mrays_per_second:.2f} Mrays/s, "
             f"{st.fallbacks} Newton fallbacks in {st.fallback_pixels} pixels"
-            f" → {', '.join(str(p) for p in written)}"
+            f" → {', '.join(str(p) for p in written)}" + "".join(f"; {choice}" for choice in scene.rig)
         )
         for message in done.warnings:
             warn(scene.path, message)
@@ -474,6 +474,7 @@ def _print_scene(report) -> None:
     else:
         tiles = f"{report.tiles} tile{'' if report.tiles == 1 else 's'}"
         line = f"{name}: rendered in {report.seconds:.2f} s ({tiles}) → {', '.join(report.outputs)}"
+        line += "".join(f"; {choice}" for choice in getattr(report, "rig", None) or ())
     tqdm.write(line, file=sys.stdout)
     for message in getattr(report, "warnings", None) or ():
         tqdm.write(f"rtreflect: warning: {report.scene}: {one_line(message)}", file=sys.stderr)

@@ -166,7 +166,7 @@ def test_validate_fails_lights_below_and_an_empty_view_with_distinct_reasons(tmp
     away_dir.mkdir()
     away = hood_variant(away_dir, *WARNING_CASES["camera looks away"][:2])
     result = CliRunner().invoke(cli, ["validate", str(away), *options])
-    assert result.exit_code == 1 and "FAIL: the camera sees no surface" in result.output, result.output
+    assert result.exit_code == 1 and "FAIL: no traced line centre was compared (the camera sees no surface)" in result.output, result.output
     assert "no tube is reflected" not in result.output
 
 
@@ -209,7 +209,8 @@ def test_the_exr_header_records_the_rig_rendered(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["render", str(source), "-o", str(tmp_path / "out"), "--width", "96",
                                       "--height", "54", "--samples", "1"])
     assert result.exit_code == 0, result.output
-    assert "hood: automatic camera: iso view" in result.output and "hood: automatic lights: 12 tubes" in result.output
+    summary = next(line for line in result.output.splitlines() if line.startswith("hood: 96×54"))
+    assert "; automatic camera: iso view" in summary and "; automatic lights: 12 tubes" in summary, summary
     header = read_provenance(tmp_path / "out" / "hood.exr")
     rig = tomllib.loads(f"camera = {header[CAMERA_ATTRIBUTE]}\nlights = {header[LIGHTS_ATTRIBUTE]}")
     rendered = resolve(load_scene(source).with_image(96, 54, 1))

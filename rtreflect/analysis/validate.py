@@ -717,7 +717,7 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
     seen = int(np.count_nonzero(aovs.coverage > 0))
     drawn = int(np.count_nonzero((aovs.coverage > 0) & (aovs.line_id >= 0) & (aovs.line_dist <= renderer.lights.radius)))
     if seen == 0:
-        reasons.insert(0, "the camera sees no surface: nothing to compare")
+        reasons.insert(0, "no traced line centre was compared (the camera sees no surface)")
     elif len(deviations) == 0:
         why = ("every line's neighbour lies closer than the pixels resolve" if notes and len(notes) == sum(counted)
                else "no tube is reflected where the camera sees the surface")

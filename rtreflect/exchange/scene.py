@@ -180,13 +180,15 @@ class Scene:
     inputs_sha256: str  # of the scene file and every geometry file it reads (in code: with the geometry files')
 
     notes: tuple[str, ...] = ()  # what CAD files gave: faces, unit, bounding box, skipped faces (printed by the CLI)
+    rig: tuple[str, ...] = ()  # the automatic camera and tubes chosen (`integrator.autorig`), for the summary line
     def __init__(self, path=None, image=None, camera=None, lights=None, surfaces=None, render=None, output=None,
-                 sha256=None, inputs_sha256=None, notes=()):
+                 sha256=None, inputs_sha256=None, notes=(), rig=()):
         parsed = (isinstance(image, ImageSpec) and isinstance(camera, CameraSpec) and isinstance(lights, LightSpec)
                   and isinstance(render, RenderSettings) and isinstance(output, OutputSpec)
                   and isinstance(surfaces, tuple) and all(isinstance(s, NurbsSurface) for s in surfaces))
         if parsed and sha256 is not None and inputs_sha256 is not None:
-            values = (Path(path), image, camera, lights, surfaces, render, output, sha256, inputs_sha256, tuple(notes))
+            values = (Path(path), image, camera, lights, surfaces, render, output, sha256, inputs_sha256, tuple(notes),
+                      tuple(rig))
         else:
             if sha256 is not None or inputs_sha256 is not None:
                 raise TypeError("Scene: sha256 and inputs_sha256 are computed for a scene built from tables")
@@ -878,4 +880,4 @@ def _scene_from_code(path: Path, image, camera, lights, surfaces, render, output
     _, inputs = _hash_files(geometry.files) if geometry.files else ("", "")
     inputs = hashlib.sha256(f"{sha}\n{inputs}".encode()).hexdigest()
     return (path, specs["image"], specs["camera"], specs["lights"], tuple(geometry.surfaces), specs["render"],
-            specs["output"], sha, inputs, tuple(geometry.notes))
+            specs["output"], sha, inputs, tuple(geometry.notes), ())

@@ -56,9 +56,9 @@ def preview_size(image: ImageSpec) -> tuple[int, int]:
 def resolve(scene: Scene) -> Scene:
     """``scene`` with its automatic camera and tubes chosen (itself if nothing is automatic).
 
-    The choices are added to ``scene.notes`` (printed before rendering, and written into the
-    EXR header by `imagefiles.provenance_attributes`); they depend only on the scene's inputs
-    and image size, so ``inputs_sha256`` is kept.
+    The choices are described in ``scene.rig`` (the command line's summary line) and written
+    into the EXR header by `imagefiles.provenance_attributes`; they depend only on the scene's
+    inputs and image size, so ``inputs_sha256`` is kept.
     """
     if not scene.automatic:
         return scene
@@ -68,7 +68,7 @@ def resolve(scene: Scene) -> Scene:
     preview = Renderer(replace(scene, image=ImageSpec(width, height, 1), camera=placeholder_camera,
                                lights=placeholder_lights))
     vertices = preview.tessellation.vertices
-    notes = list(scene.notes)
+    notes = []
     camera = scene.camera
     if camera.automatic:
         aspect = scene.image.width / scene.image.height
@@ -80,14 +80,14 @@ def resolve(scene: Scene) -> Scene:
             camera = fit_camera(camera, vertices, aspect)
         lens = (f"fov {camera.fov:g}°" if camera.projection == "perspective"
                 else f"orthographic, view_height {camera.view_height:.6g}")
-        notes.append(f"{scene.output.name}: automatic camera: {how}, eye {_vec(camera.eye)}, "
+        notes.append(f"automatic camera: {how}, eye {_vec(camera.eye)}, "
                      f"look_at {_vec(camera.look_at)}, up {_vec(camera.up)}, {lens}")
     lights = scene.lights
     if lights.auto:
         preview.camera = Camera(camera, width, height)
         lights, note = light_rig(preview, scene.camera.up, lights)
-        notes.append(f"{scene.output.name}: automatic lights: {note}")
-    return replace(scene, camera=camera, lights=lights, notes=tuple(notes))
+        notes.append(f"automatic lights: {note}")
+    return replace(scene, camera=camera, lights=lights, rig=tuple(notes))
 
 
 #: Part of the preview's surface pixels by which another 3/4 view must beat the front-right one to be chosen.
