@@ -167,11 +167,16 @@ def _png_spec(width: int, height: int, attributes: dict[str, str]) -> oiio.Image
 
 
 def encode_srgb(rgba: np.ndarray) -> np.ndarray:
-    """Linear RGBA → 8-bit sRGB RGBA (colour-science's sRGB transfer function; alpha stays linear)."""
+    """Linear RGBA → 8-bit sRGB RGBA, opaque (colour-science's sRGB transfer function; alpha 255).
+
+    The film's RGB is already composited over ``background``, so the PNG is the picture as
+    rendered: an opaque background, whatever a viewer does with alpha (one that honours it
+    showed the white page behind the part's edge, and white lines vanished into it; issue 13).
+    The coverage A stays in the EXR.
+    """
     rgb = np.clip(np.nan_to_num(rgba[..., :3], nan=0.0), 0.0, 1.0)
-    encoded = colour.cctf_encoding(rgb, function="sRGB")
-    alpha = np.clip(np.nan_to_num(rgba[..., 3:4], nan=0.0), 0.0, 1.0)
-    return np.round(np.concatenate([encoded, alpha], axis=-1) * 255.0).astype(np.uint8)
+    encoded = np.round(colour.cctf_encoding(rgb, function="sRGB") * 255.0).astype(np.uint8)
+    return np.concatenate([encoded, np.full(encoded.shape[:-1] + (1,), 255, dtype=np.uint8)], axis=-1)
 
 
 def write_json(path: Path, document: object, what: str = "report") -> None:
