@@ -21,6 +21,7 @@ from .errors import RtreflectError, SceneError, SceneErrors
 from .exchange.load import load_scene
 from .exchange.scene import Scene
 from .geometry.surfaces import NurbsSurface
+from .integrator.autorig import resolve
 from .integrator.film import CHANNELS
 from .integrator.renderer import Renderer, RenderResult
 from .output.imagefiles import save_render
@@ -38,7 +39,7 @@ def _overridden(scene: Scene, width: int | None, height: int | None, samples: in
     if not isinstance(scene, Scene):
         raise TypeError(f"expected an rtreflect.Scene (from rtreflect.load_scene or rtreflect.Scene(...)) or the "
                         f"path of a scene file, got {type(scene).__name__}")
-    return scene.with_image(width, height, samples).with_render(overlay, normals)
+    return resolve(scene.with_image(width, height, samples).with_render(overlay, normals))
 
 
 def render(scene: Scene | str | Path, width: int | None = None, height: int | None = None, samples: int | None = None, *,

@@ -69,6 +69,8 @@ class SceneReport:
     tiles: int = 0
     validate: dict | None = None  # `--validate`: rtreflect.ci.checks.validate_record
     golden: dict | None = None  # `--golden DIR`: rtreflect.ci.checks.golden_record
+    warnings: list[str] = field(default_factory=list)  # `checks.ImageTally` warnings of the rendered picture
+    rig: list[str] = field(default_factory=list)  # the automatic camera and tubes chosen (`Scene.rig`)
 
 
 # -- discovery and planning -------------------------------------------------------------
@@ -174,6 +176,8 @@ def render_job(scene: Scene, outdir: Path, threads: int | None, max_memory: int 
         report.outputs = [str(p) for p in done.files]
         report.pixels = scene.image.width * scene.image.height
         report.rays, report.tiles = done.stats.rays, done.stats.tiles
+        report.warnings = list(done.warnings)
+        report.rig = list(done.scene.rig)
     report.seconds = time.perf_counter() - start
     return report
 

@@ -21,6 +21,7 @@ from .output.imagefiles import check_distinct_outputs, output_paths, prepare_out
 from .interrupts import Interrupted, signals_as_exceptions
 from .analysis.overlay import contours_file_name
 from .exchange.load import load_scene
+from .integrator.autorig import resolve
 from .exchange.scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES
 from .output.streaming import render_to_files
 from .integrator.tiling import parse_size
@@ -28,6 +29,8 @@ from .analysis.validate import DEFAULT_TOLERANCE_PX, validate_scene
 
 EXIT_BAD_INPUT = 2
 EXIT_CHECK_FAILED = 1
+#: --strict: a render that printed a warning (empty picture, no lines, ...) exits with this status.
+EXIT_WARNED = 1
 #: Raised by click (8.2+) for a group called without a command; older click prints the help itself.
 NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
 
@@ -79,6 +82,14 @@ def cli() -> None:
     """
 
 
+def warn(scene_path, message: str) -> None:
+    """``rtreflect: warning: SCENE: message`` on stderr: the render succeeded but shows little (issue 13)."""
+    click.echo(f"rtreflect: warning: {scene_path}: {one_line(message)}", err=True)
+
+
+STRICT_HELP = "Exit 1 when a render prints a warning (empty image, no lines reflected, lines missing most of the part)."
+
+
 def _print_notes(scenes) -> None:
     """What each scene's CAD files gave (faces, unit, bounding box, skipped faces), before rendering."""
     for scene in scenes:
@@ -106,8 +117,9 @@ def _print_notes(scenes) -> None:
                    "(overrides [render] normals).")
 @click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
               help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
 def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory, overlay,
-           normals, skip_bad_faces) -> None:
+           normals, skip_bad_faces, strict) -> None:
     """Render the reflection lines of each SCENE file to OUTPUT/NAME.exr and .png.
 
     The EXR holds linear RGBA plus per-pixel AOVs from the pixel-centre ray
@@ -117,8 +129,15 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     holds them (per line: light index, polylines in pixels and in (u, v)).
 
     \b
-    A STEP, IGES or .3dm file in place of a SCENE renders the part in a default scene
-    (camera fitted to its bounding box, tubes above it); NAME is the file's stem.
+    A STEP, IGES or .3dm file in place of a SCENE renders the part in the automatic scene
+    (camera framing the part, tubes placed where its reflections land); NAME is the file's stem.
+    A scene without [camera] or [lights] gets the same automatic choices; they are printed
+    and recorded in the EXR header (rtreflect:camera, rtreflect:lights).
+
+    \b
+    Warnings (stderr, exit 0; --strict: exit 1): no pixel sees the surface, no reflected
+    ray reaches the light plane, fewer than two lines visible, most of the surface
+    reflecting past the tube bank.
 
     \b
     Example:
@@ -132,7 +151,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
             fail(f"{path}: is a folder; `rtreflect render` takes scene files: render every scene in a folder with "
                  f"`rtreflect batch {path} -o {outdir}`")
     try:
-        loaded = [load_scene(path, skip_bad_faces).with_image(width, height, samples).with_render(overlay, normals)
+        loaded = [resolve(load_scene(path, skip_bad_faces).with_image(width, height, samples).with_render(overlay, normals))
                   for path in unique_scenes(scenes)]
         check_distinct_outputs(loaded, outdir)
         removed = prepare_output_folder(outdir, [path for scene in loaded for path in output_paths(scene, outdir)])
@@ -141,6 +160,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     if removed:
         click.echo(f"{outdir}: {removed_note(removed)}")
     _print_notes(loaded)
+    warned = False
     for scene in loaded:
         image = scene.image
         try:
@@ -157,8 +177,13 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
             f"{scene.output.name}: {image.width}×{image.height}, {samples_text(image.samples)}, "
             f"{st.seconds:.2f} s, {st.mrays_per_second:.2f} Mrays/s, "
             f"{st.fallbacks} Newton fallbacks in {st.fallback_pixels} pixels"
-            f" → {', '.join(str(p) for p in written)}"
+            f" → {', '.join(str(p) for p in written)}" + "".join(f"; {choice}" for choice in scene.rig)
         )
+        for message in done.warnings:
+            warn(scene.path, message)
+            warned = True
+    if strict and warned:
+        sys.exit(EXIT_WARNED)
 
 
 # -- rtreflect diff (issue 4): logic in rtreflect/diff.py ---------------------------------------
@@ -293,7 +318,7 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
       rtreflect validate scenes/hood.toml --normals mesh
     """
     try:
-        loaded = [load_scene(path, skip_bad_faces).with_image(width, height, samples).with_render(normals=normals)
+        loaded = [resolve(load_scene(path, skip_bad_faces).with_image(width, height, samples).with_render(normals=normals))
                   for path in scenes]
     except RtreflectError as exc:
         fail(exc)
@@ -472,8 +497,9 @@ def stop_status(exc: BaseException) -> int:
               help="Also write an HTML report: a row per scene with thumbnail, checks and failure reason.")
 @click.option("--junit", "junit_path", type=click.Path(path_type=Path), metavar="FILE.xml", default=None,
               help="Also write JUnit XML: a test case per scene and check, for CI servers' test views.")
+@click.option("--strict", is_flag=True, help=STRICT_HELP)
 def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, scheduler, skip_bad_faces, run_validate,
-          golden_dir, html_path, junit_path) -> None:
+          golden_dir, html_path, junit_path, strict) -> None:
     """Render folders of scenes: every *.toml in each PATH (or PATH itself) to OUTPUT/NAME.exr and .png.
 
     CAD files in the folders (.step .stp .igs .iges .3dm) render too, each in the default
@@ -557,7 +583,8 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         _check_batch(reports, loaded, outdir, run_validate, golden_dir)
     failed = _finish_batch(reports, order, outdir, report_path, start, where, html_path=html_path,
                            junit_path=junit_path)
-    sys.exit(EXIT_CHECK_FAILED if failed else 0)
+    warned = any(getattr(report, "warnings", None) for report in reports)
+    sys.exit(EXIT_CHECK_FAILED if failed or (strict and warned) else 0)
 
 
 def _print_scene(report) -> None:
@@ -570,7 +597,10 @@ def _print_scene(report) -> None:
     else:
         tiles = f"{report.tiles} tile{'' if report.tiles == 1 else 's'}"
         line = f"{name}: rendered in {report.seconds:.2f} s ({tiles}) → {', '.join(report.outputs)}"
+        line += "".join(f"; {choice}" for choice in getattr(report, "rig", None) or ())
     tqdm.write(line, file=sys.stdout)
+    for message in getattr(report, "warnings", None) or ():
+        tqdm.write(f"rtreflect: warning: {report.scene}: {one_line(message)}", file=sys.stderr)
 
 
 def _check_batch(reports, loaded, outdir, run_validate, golden_dir) -> None:
@@ -693,6 +723,37 @@ def report_command(outdir: Path, html_path, batch_json, golden_dir, junit_path) 
     click.echo(f"{html_path}: {counts['scenes']} scenes, {counts['failed']} failed, "
                f"{counts['checks_failed']} failed a check")
     sys.exit(EXIT_CHECK_FAILED if counts["failed"] or counts["checks_failed"] else 0)
+
+
+# -- rtreflect init ----------------------------------------------------------------------------
+@cli.command()
+@click.argument("source", type=click.Path(path_type=Path))
+@click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
+              help="CAD input: leave out the faces that do not read (default: a bad face is an error).")
+def init(source: Path, skip_bad_faces: bool) -> None:
+    """Print the full scene file of SOURCE (a CAD part or a scene file) with the automatic choices made explicit.
+
+    Every key is present and commented: the camera that frames the part and the tubes placed
+    where its reflections land (as `render` would choose them), ready to edit and to keep
+    fixed across versions of the part. Geometry paths are written relative to the working
+    folder: redirect the output into a file there.
+
+    \b
+    Example:
+      rtreflect init parts/plate.step > plate.toml
+      rtreflect init scenes/hood.toml > hood_full.toml
+    """
+    from .exchange.scenewriter import scene_text, source_surfaces
+
+    try:
+        scene = resolve(load_scene(source, skip_bad_faces))
+        surfaces = source_surfaces(Path(source))
+    except RtreflectError as exc:
+        fail(exc)
+    header = (f"Scene written by `rtreflect init {source}` (rtreflect {__version__}).\n"
+              "Every key is present; the automatic camera and tubes are written out, so the lines stay put\n"
+              "when the part changes: keep [camera] and [lights] fixed to compare versions of a part.")
+    click.echo(scene_text(scene, Path(source), surfaces, Path.cwd(), header), nl=False)
 
 
 def main() -> None:

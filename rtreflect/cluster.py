@@ -33,6 +33,7 @@ from . import __version__
 from .batch import FAILED, RENDERED, Job, SceneReport, failure_reason
 from .errors import RtreflectError
 from .output.imagefiles import ImageWriter, open_outputs, output_paths
+from .integrator.autorig import resolve
 from .integrator.renderer import Renderer, pixel_spans
 from .exchange.scene import Scene
 from .output.streaming import overlay_for
@@ -246,6 +247,7 @@ class _ClusterBatch:
             job = self.queue.pop(0)
             run = _SceneRun(job, [], started=time.perf_counter())
             try:
+                job.scene = resolve(job.scene)  # the automatic rig chosen once, here, for every worker's tiles
                 run.spans = pixel_spans(job.scene.image, rays_per_tile(job.scene, self.max_memory, 1))
                 run.outputs = contextlib.ExitStack()
                 png_filter, run.extra_files = overlay_for(job.scene)  # drawn by the client, as locally

@@ -13,6 +13,8 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+
+from rtreflect.integrator.autorig import resolve
 import pytest
 from click.testing import CliRunner
 
@@ -202,7 +204,7 @@ def test_scene_names_cad_file_any_case_of_extension(tmp_path):
 
 
 def test_cad_file_as_scene_fits_the_part_in_view(tmp_path):
-    scene = load_scene(PARTS / "plate.step")
+    scene = resolve(load_scene(PARTS / "plate.step"))  # the automatic camera and tubes chosen (issue 13)
     assert scene.output.name == "plate" and len(scene.surfaces) == 206
     lo, hi = np.array([0.0, 0.0, 0.0]), np.array([100.0, 100.0, 4.0])  # the plate, as tools/make_parts.py builds it
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])

@@ -401,7 +401,9 @@ def test_struggling_geometry_renders_finite_and_counts_fallbacks(name: str, tmp_
     result = CliRunner().invoke(cli, ["render", str(scene_path), "-o", str(tmp_path / "out"), "--width", str(width),
                                       "--height", str(height), "--samples", "2"])
     assert result.exit_code == 0, result.stderr or repr(result.exception)
-    assert result.stderr == ""  # no numpy warnings: nothing overflowed or went NaN silently
+    # No numpy warnings: nothing overflowed or went NaN silently. (Issue 13's one-line warnings about what the
+    # picture shows, e.g. an edge-on square seeing no line, are no such thing.)
+    assert [line for line in result.stderr.splitlines() if not line.startswith("rtreflect: warning: ")] == []
     counts = SUMMARY.search(result.stdout)
     assert counts, result.stdout
     fallback_samples, fallback_pixels = map(int, counts.groups())

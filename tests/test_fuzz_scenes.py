@@ -258,7 +258,8 @@ def test_any_scene_renders_or_is_refused_in_one_line(files: tuple[str, str | Non
             assert str(scene_path) in lines[0], lines[0]
             assert not outdir.exists() or not any(outdir.iterdir()), lines[0]
         else:
-            assert result.stderr == ""
+            # Only issue 13's one-line warnings about what the picture shows (no line visible, ...), each complete.
+            assert all(line.startswith("rtreflect: warning: ") for line in result.stderr.splitlines()), result.stderr
             written = sorted(outdir.iterdir())  # NAME.exr and/or NAME.png; NAME may have been mangled
             assert written and len({p.stem for p in written}) == 1 and not written[0].name.startswith(".")
             for image in written:

@@ -229,7 +229,6 @@ CASES = [
     Case("surface entry not a table", put("surface", [1]), f"{S}"),
     Case("lights nested under camera", move("lights", "camera.lights"), "camera.lights"),
     Case("image keys nested one level down", move("image", "render.image"), "render.image"),
-    Case("missing lights table", drop("lights"), "lights"),
     Case("missing surface", drop("surface"), "surface"),
     # unknown keys, at the top and in every table
     Case("unknown top-level key", put("colour", "red"), "colour"),

@@ -288,7 +288,7 @@ def _load(path: Path) -> _Image:
 
 def _same_encoding(a: _Image, b: _Image) -> tuple[_Image, _Image, str | None]:
     """A float image (EXR: linear) compared with an 8-bit one (PNG: sRGB-encoded) is first turned into the PNG
-    rtreflect would write of it (`encode_srgb`: colour-science's sRGB curve, 8-bit codes, alpha linear), so like
+    rtreflect would write of it (`encode_srgb`: colour-science's sRGB curve, 8-bit codes, opaque), so like
     values are compared; its AOVs, which no PNG has, are left out. Returns both images and a note saying so."""
     a_float, b_float = a.quantum == FLOAT_FAIL, b.quantum == FLOAT_FAIL
     if a_float == b_float:

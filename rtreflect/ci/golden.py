@@ -23,6 +23,7 @@ from .diff import DiffReport, Tolerance, compare_images
 from ..errors import RtreflectError
 from ..integrator.film import COLOR_CHANNELS
 from ..output.imagefiles import read_image, save_render
+from ..integrator.autorig import resolve
 from ..integrator.renderer import Renderer
 from ..exchange.load import load_scene
 from ..exchange.scene import Scene
@@ -40,7 +41,7 @@ def golden_scene(path: str | Path) -> Scene:
     """The scene file at golden size, writing ``STEM.exr`` and ``STEM.png`` (STEM: the scene file's stem)."""
     scene = load_scene(path)
     scene = scene.with_image(GOLDEN_WIDTH, GOLDEN_HEIGHT, min(scene.image.samples, GOLDEN_MAX_SAMPLES))
-    return replace(scene, output=replace(scene.output, name=Path(path).stem, exr=True, png=True))
+    return resolve(replace(scene, output=replace(scene.output, name=Path(path).stem, exr=True, png=True)))
 
 
 def render_golden(path: str | Path, outdir: str | Path, threads: int | None = None) -> Path:

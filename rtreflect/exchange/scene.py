@@ -54,6 +54,10 @@ MAX_SAMPLES = 16
 MAX_TESSELLATION = 256
 #: |c·m| above this means the tube direction is not in the light plane.
 IN_PLANE_TOLERANCE = 1e-6
+#: `[camera] view` names: where an automatic eye looks from, relative to the model's up axis (`camera.up`).
+VIEWS = ("iso", "top", "bottom", "front", "back", "left", "right")
+#: Orthographic view height of a camera with an explicit eye and no view_height (the reader's old default).
+VIEW_HEIGHT = 3.0
 #: `[render] normals`: the exact NURBS normal, or the analysis-mesh normal CAD tools use (for comparison).
 NORMALS_MODES = ("exact", "mesh")
 
@@ -67,24 +71,39 @@ class ImageSpec:
 
 @dataclass(frozen=True)
 class CameraSpec:
+    """A camera; None marks a value chosen automatically to frame the part (`integrator.autorig`)."""
+
     projection: str = "perspective"
-    eye: np.ndarray = field(default_factory=lambda: np.array([0.0, -3.2, 2.4]))
-    look_at: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    eye: np.ndarray | None = None  # None: on `view`, at the distance that frames the part
+    look_at: np.ndarray | None = None  # None: the centre of the part's bounding box
     up: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
     fov: float = 40.0
-    view_height: float = 3.0
+    view_height: float | None = None  # orthographic; None: fitted to the part (3.0 with an explicit eye)
+    view: str | np.ndarray = "iso"  # where an automatic eye looks from: one of VIEWS, or a direction (eye − look_at)
+
+    @property
+    def automatic(self) -> bool:
+        return self.eye is None or self.look_at is None or (self.projection == "orthographic" and self.view_height is None)
 
 
 @dataclass(frozen=True)
 class LightSpec:
-    """Parallel tubes in one plane: through Q with unit normal m, along unit c, at c_k along e = c × m."""
+    """Parallel tubes in one plane: through Q with unit normal m, along unit c, at c_k along e = c × m.
 
-    point: np.ndarray  # Q
-    normal: np.ndarray  # m (unit)
-    direction: np.ndarray  # c (unit)
-    positions: np.ndarray  # c_k
-    radius: float
+    With ``auto`` (no ``[lights]``, or ``auto = true``) the None fields are chosen by the automatic
+    light rig (`integrator.autorig`) from where the reflections land; ``count`` and ``spacing``
+    are then what the rig keeps of the user's wishes. A resolved spec has ``auto`` false.
+    """
+
+    point: np.ndarray | None  # Q
+    normal: np.ndarray | None  # m (unit)
+    direction: np.ndarray | None  # c (unit)
+    positions: np.ndarray | None  # c_k
+    radius: float | None
     length: float = math.inf
+    auto: bool = False
+    count: int | None = None  # auto: tubes across the visible range of f (default `AUTO_TUBES`)
+    spacing: float | None = None  # auto: fixed spacing of the tubes (default: the range of f over count)
 
 
 @dataclass(frozen=True)
@@ -114,8 +133,8 @@ SCHEMA_DOC = "docs/scene-format.md"
 TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "": ("image", "camera", "lights", "surface", "render", "output"),
     "image": ("width", "height", "samples"),
-    "camera": ("projection", "eye", "look_at", "up", "fov", "view_height"),
-    "lights": ("point", "normal", "direction", "positions", "spacing", "count", "radius", "length"),
+    "camera": ("projection", "eye", "look_at", "up", "fov", "view_height", "view"),
+    "lights": ("auto", "point", "normal", "direction", "positions", "spacing", "count", "radius", "length"),
     "surface": ("name", "degree", "points", "knots_u", "knots_v", "weights", "file"),
     "render": ("tessellation", "surface_color", "line_color", "background", "overlay", "overlay_color", "normals"),
     "output": ("name", "exr", "png"),
@@ -161,13 +180,15 @@ class Scene:
     inputs_sha256: str  # of the scene file and every geometry file it reads (in code: with the geometry files')
 
     notes: tuple[str, ...] = ()  # what CAD files gave: faces, unit, bounding box, skipped faces (printed by the CLI)
+    rig: tuple[str, ...] = ()  # the automatic camera and tubes chosen (`integrator.autorig`), for the summary line
     def __init__(self, path=None, image=None, camera=None, lights=None, surfaces=None, render=None, output=None,
-                 sha256=None, inputs_sha256=None, notes=()):
+                 sha256=None, inputs_sha256=None, notes=(), rig=()):
         parsed = (isinstance(image, ImageSpec) and isinstance(camera, CameraSpec) and isinstance(lights, LightSpec)
                   and isinstance(render, RenderSettings) and isinstance(output, OutputSpec)
                   and isinstance(surfaces, tuple) and all(isinstance(s, NurbsSurface) for s in surfaces))
         if parsed and sha256 is not None and inputs_sha256 is not None:
-            values = (Path(path), image, camera, lights, surfaces, render, output, sha256, inputs_sha256, tuple(notes))
+            values = (Path(path), image, camera, lights, surfaces, render, output, sha256, inputs_sha256, tuple(notes),
+                      tuple(rig))
         else:
             if sha256 is not None or inputs_sha256 is not None:
                 raise TypeError("Scene: sha256 and inputs_sha256 are computed for a scene built from tables")
@@ -175,6 +196,11 @@ class Scene:
                                       surfaces, render, output)
         for f, value in zip(fields(Scene), values):
             object.__setattr__(self, f.name, value)
+
+    @property
+    def automatic(self) -> bool:
+        """Whether the camera or the tubes still wait for the automatic choices (`integrator.autorig.resolve`)."""
+        return self.camera.automatic or self.lights.auto
 
     @property
     def output_key(self) -> str:
@@ -198,7 +224,7 @@ class Scene:
             if isinstance(change, dict):
                 table = _spec_table(getattr(self, name))
                 change = _toml_value(change)
-                if name == "lights" and ("spacing" in change or "count" in change):
+                if name == "lights" and ("spacing" in change or "count" in change) and "positions" in table:
                     # Tubes given by spacing and count: the one not given is that of the current row of tubes.
                     positions = table.pop("positions")
                     change = {"count": len(positions), **change}
@@ -435,21 +461,35 @@ def _parse_image(t: _Table) -> ImageSpec:
 
 def _parse_camera(t: _Table) -> CameraSpec:
     projection = t.string("projection", "perspective", ("perspective", "orthographic"))
-    eye = t.vector("eye", CameraSpec().eye)
-    look_at = t.vector("look_at", CameraSpec().look_at)
+    eye = t.vector("eye") if t.has("eye") else None
+    look_at = t.vector("look_at") if t.has("look_at") else None
     up = _unit(t.vector("up", CameraSpec().up, nonzero=True))
     fov = t.number("fov", 40.0, low=0, high=180, open_low=True, open_high=True)
-    view_height = t.number("view_height", 3.0, low=0, open_low=True)
+    view_height = t.number("view_height", None, low=0, open_low=True)
+    if view_height is None and eye is not None:
+        view_height = VIEW_HEIGHT
+    view: str | np.ndarray = "iso"
+    if t.has("view"):
+        if isinstance(t.raw("view"), str):
+            view = t.string("view", choices=VIEWS)
+        else:
+            view = _unit(t.vector("view", nonzero=True))
+            if np.linalg.norm(np.cross(view, up)) < 1e-9:
+                raise t.error("view", "a view along camera.up needs another camera.up: use view = \"top\" or \"bottom\"")
     t.finish()
-    forward = look_at - eye
-    if not np.linalg.norm(forward) > 0:
-        raise t.error("look_at", "must differ from camera.eye")
-    if np.linalg.norm(np.cross(_unit(forward), up)) < 1e-9:
-        raise t.error("up", "must not be parallel to the view direction (look_at - eye)")
-    return CameraSpec(projection, eye, look_at, up, fov, view_height)
+    if eye is not None and look_at is not None:
+        forward = look_at - eye
+        if not np.linalg.norm(forward) > 0:
+            raise t.error("look_at", "must differ from camera.eye")
+        if np.linalg.norm(np.cross(_unit(forward), up)) < 1e-9:
+            raise t.error("up", "must not be parallel to the view direction (look_at - eye)")
+    return CameraSpec(projection, eye, look_at, up, fov, view_height, view)
 
 
 def _parse_lights(t: _Table) -> LightSpec:
+    # No [lights] (or an empty one) is the automatic rig; `auto = true` keeps the keys given and chooses the rest.
+    if t.boolean("auto", not t.data):
+        return _parse_auto_lights(t)
     point = t.vector("point", required_default())
     normal = t.vector("normal", required_default(), nonzero=True)
     direction = t.vector("direction", required_default(), nonzero=True)
@@ -474,6 +514,30 @@ def _parse_lights(t: _Table) -> LightSpec:
     length = t.number("length", math.inf, low=0, open_low=True, infinite_ok=True)
     t.finish()
     return LightSpec(point, m, c, positions, radius, length)
+
+
+def _parse_auto_lights(t: _Table) -> LightSpec:
+    """``[lights]`` for the automatic rig: every key optional, each given one kept (`integrator.autorig`)."""
+    point = t.vector("point") if t.has("point") else None
+    normal = _unit(t.vector("normal", nonzero=True)) if t.has("normal") else None
+    direction = _unit(t.vector("direction", nonzero=True)) if t.has("direction") else None
+    if normal is not None and direction is not None and abs(float(direction @ normal)) > IN_PLANE_TOLERANCE:
+        raise t.error("direction", f"must lie in the light plane (perpendicular to lights.normal); "
+                                   f"c·m = {float(direction @ normal):.3g}")
+    positions = count = spacing = None
+    if t.has("positions"):
+        for key in ("spacing", "count"):
+            if t.has(key):
+                raise t.error(key, "give either lights.positions or lights.spacing with lights.count, not both")
+        positions = t.array("positions", (None,))
+        if len(positions) > MAX_TUBES:
+            raise t.error("positions", f"at most {MAX_TUBES} tubes (every ray is tested against every tube), got {len(positions)}")
+    count = t.number("count", None, low=1, high=MAX_TUBES, integer=True)
+    spacing = t.number("spacing", None, low=0, open_low=True)
+    radius = t.number("radius", None, low=0, open_low=True)
+    length = t.number("length", math.inf, low=0, open_low=True, infinite_ok=True)
+    t.finish()
+    return LightSpec(point, normal, direction, positions, radius, length, True, count, spacing)
 
 
 def required_default() -> Any:
@@ -697,7 +761,7 @@ def _parse_document(path: Path, doc: Any, skip_bad_faces: bool = False) -> tuple
     specs: dict[str, Any] = {}
     for name in SCENE_TABLES:
         with errors.collect():
-            table = root.raw(name, required=True) if name == "lights" else root.raw(name, {})
+            table = root.raw(name, {})
             specs[name] = _PARSERS[name](_Table(path, name, table), path)
     geometry = _Geometry()
     with errors.collect():
@@ -765,7 +829,10 @@ def _toml_value(value: Any) -> Any:
 
 def _spec_table(spec: Any) -> dict[str, Any]:
     """A parsed table back in TOML's types (what the scene file would say): reading it again gives ``spec``."""
-    return {f.name: _toml_value(getattr(spec, f.name)) for f in fields(spec)}
+    table = {f.name: _toml_value(getattr(spec, f.name)) for f in fields(spec) if getattr(spec, f.name) is not None}
+    if isinstance(spec, LightSpec) and not spec.auto:
+        del table["auto"]  # an explicit row of tubes: the keys of a plain [lights] table
+    return table
 
 
 def _surface_table(surface: NurbsSurface) -> dict[str, Any]:
@@ -813,4 +880,4 @@ def _scene_from_code(path: Path, image, camera, lights, surfaces, render, output
     _, inputs = _hash_files(geometry.files) if geometry.files else ("", "")
     inputs = hashlib.sha256(f"{sha}\n{inputs}".encode()).hexdigest()
     return (path, specs["image"], specs["camera"], specs["lights"], tuple(geometry.surfaces), specs["render"],
-            specs["output"], sha, inputs, tuple(geometry.notes))
+            specs["output"], sha, inputs, tuple(geometry.notes), ())

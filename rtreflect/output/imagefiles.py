@@ -35,6 +35,9 @@ if TYPE_CHECKING:
 SCENE_HASH_ATTRIBUTE = "rtreflect:scene_sha256"
 INPUTS_HASH_ATTRIBUTE = "rtreflect:inputs_sha256"
 VERSION_ATTRIBUTE = "rtreflect:version"
+#: The camera and tubes rendered (TOML inline tables, ready to paste into a scene file): the automatic rig kept.
+CAMERA_ATTRIBUTE = "rtreflect:camera"
+LIGHTS_ATTRIBUTE = "rtreflect:lights"
 #: `Scene.output_key`: the inputs' hash plus size, samples, normals and overlay (which the command line may override).
 OUTPUT_KEY_ATTRIBUTE = "rtreflect:output_key"
 
@@ -164,11 +167,16 @@ def _png_spec(width: int, height: int, attributes: dict[str, str]) -> oiio.Image
 
 
 def encode_srgb(rgba: np.ndarray) -> np.ndarray:
-    """Linear RGBA → 8-bit sRGB RGBA (colour-science's sRGB transfer function; alpha stays linear)."""
+    """Linear RGBA → 8-bit sRGB RGBA, opaque (colour-science's sRGB transfer function; alpha 255).
+
+    The film's RGB is already composited over ``background``, so the PNG is the picture as
+    rendered: an opaque background, whatever a viewer does with alpha (one that honours it
+    showed the white page behind the part's edge, and white lines vanished into it; issue 13).
+    The coverage A stays in the EXR.
+    """
     rgb = np.clip(np.nan_to_num(rgba[..., :3], nan=0.0), 0.0, 1.0)
-    encoded = colour.cctf_encoding(rgb, function="sRGB")
-    alpha = np.clip(np.nan_to_num(rgba[..., 3:4], nan=0.0), 0.0, 1.0)
-    return np.round(np.concatenate([encoded, alpha], axis=-1) * 255.0).astype(np.uint8)
+    encoded = np.round(colour.cctf_encoding(rgb, function="sRGB") * 255.0).astype(np.uint8)
+    return np.concatenate([encoded, np.full(encoded.shape[:-1] + (1,), 255, dtype=np.uint8)], axis=-1)
 
 
 def write_json(path: Path, document: object, what: str = "report") -> None:
@@ -269,9 +277,15 @@ def removed_note(removed: list[Path]) -> str:
 def provenance_attributes(scene: "Scene") -> dict[str, str]:
     """What each output records of its origin: the scene file's hash, all inputs' hash, the rtreflect version."""
     from .. import __version__
+    from ..exchange.scene import _spec_table
+    from ..exchange.scenewriter import inline_table
 
-    return {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
-            OUTPUT_KEY_ATTRIBUTE: scene.output_key, VERSION_ATTRIBUTE: __version__}
+    attributes = {SCENE_HASH_ATTRIBUTE: scene.sha256, INPUTS_HASH_ATTRIBUTE: scene.inputs_sha256,
+                  OUTPUT_KEY_ATTRIBUTE: scene.output_key, VERSION_ATTRIBUTE: __version__}
+    if not scene.automatic:  # what was rendered; a scene still automatic is resolved before any pixel is written
+        attributes[CAMERA_ATTRIBUTE] = inline_table(_spec_table(scene.camera))
+        attributes[LIGHTS_ATTRIBUTE] = inline_table(_spec_table(scene.lights))
+    return attributes
 
 
 def read_provenance(path: Path) -> dict[str, str]:

@@ -15,6 +15,8 @@ from typing import Callable
 
 from .imagefiles import PngFilter, open_outputs, output_paths
 from ..analysis.overlay import overlay_outputs
+from ..integrator.autorig import resolve
+from ..integrator.checks import ImageTally
 from ..integrator.renderer import Renderer, RenderStats, default_threads
 from ..exchange.scene import Scene
 from ..integrator.tiling import default_max_memory, rays_per_tile
@@ -24,6 +26,8 @@ from ..integrator.tiling import default_max_memory, rays_per_tile
 class SceneOutput:
     files: list[Path]
     stats: RenderStats
+    scene: Scene  # as rendered: automatic camera and tubes chosen (`autorig.resolve`)
+    warnings: list[str]  # what `checks.ImageTally` found wrong with the picture (empty, renders, ...)
 
 
 def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, max_memory: int | None = None,
@@ -36,12 +40,19 @@ def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, m
     ``remove_dead``: as in `imagefiles.prepare_output_folder`.
     """
     threads = threads or default_threads()
+    scene = resolve(scene)
     tile_rays = rays_per_tile(scene, max_memory or default_max_memory(), threads)
     renderer = Renderer(scene)
     png_filter, extra_files = overlay_for(scene, renderer)
+    tally = ImageTally(scene)
+
+    def sink(tile) -> None:
+        writer.write(tile.start, tile.pixels)
+        tally.add(tile.pixels)
+
     with open_outputs(scene, outdir, png_filter, extra_files, remove_dead=remove_dead) as writer:
-        stats = renderer.run(lambda tile: writer.write(tile.start, tile.pixels), threads, tile_rays, progress)
-    return SceneOutput(output_paths(scene, outdir, extra_files), stats)
+        stats = renderer.run(sink, threads, tile_rays, progress)
+    return SceneOutput(output_paths(scene, outdir, extra_files), stats, scene, tally.warnings())
 
 
 def overlay_for(scene: Scene, renderer: Renderer | None = None) -> tuple[PngFilter | None, dict[str, str] | None]:

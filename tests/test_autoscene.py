@@ -1,0 +1,231 @@
+"""Issue 13: from a part to a useful picture without trial and error.
+
+- Each shipped scene with [camera] and [lights] removed, and each shipped CAD part given as
+  the scene, frames the whole part (no surface pixel on the image border, the surface on at
+  least a quarter of the frame) and shows at least 8 distinct lines (pixel centres within a
+  tube's radius, eq. 4) spread over the surface that reflects into the light plane.
+- The four silent cases each print their one-line warning (exit 0; --strict exits 1), and a
+  picture with lines prints none.
+- `validate` fails lights below the surface and a camera that sees nothing, with reasons
+  that tell the two apart.
+- `rtreflect init` writes every key and parses back into the same scene; the EXR header
+  records the rig the render used.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from rtreflect.cli import cli
+from rtreflect.exchange.load import load_scene
+from rtreflect.exchange.scene import TABLE_KEYS, _spec_table
+from rtreflect.integrator.autorig import resolve
+from rtreflect.integrator.renderer import Renderer
+from rtreflect.output.imagefiles import CAMERA_ATTRIBUTE, LIGHTS_ATTRIBUTE, read_provenance
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = sorted((ROOT / "scenes").glob("*.toml"))
+PARTS = sorted(p for p in (ROOT / "parts").iterdir() if p.suffix.lower() in (".step", ".stp", ".igs", ".iges", ".3dm"))
+#: Tests render at a sixth of the default size (160×90 for the scenes' 960×540), 2×2 samples.
+SHRINK = 6
+
+
+def without_rig(scene_file: Path, folder: Path, keep: str = "") -> Path:
+    """A copy of a scene file without its [camera] and [lights] tables (geometry paths made absolute)."""
+    lines, skip = [], False
+    for line in scene_file.read_text().splitlines():
+        if line.startswith("["):
+            skip = line.strip() in ("[camera]", "[lights]")
+        if not skip:
+            lines.append(line.replace('file = "', f'file = "{scene_file.parent}/'))
+    out = folder / scene_file.name
+    out.write_text("\n".join(lines) + "\n" + keep)
+    return out
+
+
+def small(scene):
+    return scene.with_image(scene.image.width // SHRINK, scene.image.height // SHRINK, 2)
+
+
+def picture_facts(scene) -> dict:
+    """Border hits, covered share, distinct drawn lines and their spread over the reflecting surface."""
+    result = Renderer(scene).render(threads=1)
+    alpha, f = result.rgba[..., 3], result.aov("f")
+    ids, dist = result.aov("line.id"), result.aov("line.dist")
+    border = np.concatenate([alpha[0], alpha[-1], alpha[:, 0], alpha[:, -1]])
+    seen = alpha > 0
+    drawn = seen & (ids >= 0) & (dist <= scene.lights.radius)
+    lines = np.unique(ids[drawn]).astype(int)
+    # Spread: each line's median rank of f among the pixels reflecting into the plane; the largest gap
+    # between neighbouring lines (and the ends) is the largest share of that surface without a line.
+    reflecting = seen & np.isfinite(f)
+    order = np.argsort(f[reflecting], kind="stable")
+    rank = np.full(f.shape, np.nan)
+    ranks = np.empty(len(order))
+    ranks[order] = (np.arange(len(order)) + 0.5) / len(order)
+    rank[reflecting] = ranks
+    medians = sorted(float(np.nanmedian(rank[drawn & reflecting & (ids == k)])) for k in lines
+                     if np.any(drawn & reflecting & (ids == k)))
+    gaps = np.diff([0.0, *medians, 1.0])
+    return {"border": int(np.count_nonzero(border > 0)), "covered": float(seen.mean()), "lines": len(lines),
+            "largest_gap": float(gaps.max())}
+
+
+@pytest.mark.parametrize("source", SCENES + PARTS, ids=[p.name for p in SCENES + PARTS])
+def test_automatic_scene_frames_the_part_with_lines_spread_over_it(source: Path, tmp_path: Path) -> None:
+    scene_file = without_rig(source, tmp_path) if source.suffix == ".toml" else source
+    scene = resolve(small(load_scene(scene_file)))
+    assert not scene.automatic
+    facts = picture_facts(scene)
+    assert facts["border"] == 0, facts  # the whole part in the frame
+    assert facts["covered"] >= 0.25, facts  # and filling it
+    assert facts["lines"] >= 8, facts
+    assert facts["largest_gap"] <= 0.35, facts  # no third of the reflecting surface without a line
+
+
+def test_explicit_keys_win(tmp_path: Path) -> None:
+    keep = "[camera]\nview = \"top\"\nfov = 30.0\n\n[lights]\nauto = true\ncount = 9\nradius = 0.02\ndirection = [1.0, 0.0, 0.0]\n"
+    scene = resolve(small(load_scene(without_rig(ROOT / "scenes" / "hood.toml", tmp_path, keep))))
+    camera, lights = scene.camera, scene.lights
+    assert camera.fov == 30.0 and np.allclose(np.cross(camera.look_at - camera.eye, [0, 0, 1]), 0)  # from above
+    assert len(lights.positions) == 9 and lights.radius == 0.02 and np.allclose(lights.direction, [1, 0, 0])
+    assert np.allclose(lights.normal, [0, 0, 1])
+    # The camera given in full stays where it was.
+    explicit = load_scene(ROOT / "scenes" / "hood.toml")
+    assert resolve(explicit) is explicit
+
+
+# -- warnings ------------------------------------------------------------------------------------
+HOOD = ROOT / "scenes" / "hood.toml"
+WARNING_CASES = {
+    "camera looks away": ("[camera]", "[camera]\nlook_at = [0.0, -20.0, 2.0]\n", "the camera sees no surface"),
+    "lights below": ("point = [0.0, 0.0, 3.0]", "point = [0.0, 0.0, -3.0]", "no reflected ray reaches the light plane"),
+    "one tube": ("positions = [-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0]", "positions = [0.0]",
+                 "distinct reflected line"),
+    "narrow bank": ("positions = [-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0]",
+                    "positions = [-0.1, -0.05, 0.0, 0.05, 0.1]",
+                    "of the visible surface reflects past the tube bank"),
+}
+
+
+def hood_variant(tmp_path: Path, old: str, new: str) -> Path:
+    text = HOOD.read_text()
+    if old == "[camera]":  # replace the look_at line of the camera
+        text = re.sub(r"look_at = \[.*\]", "look_at = [0.0, -20.0, 2.0]", text, count=1)
+    else:
+        assert old in text, old
+        text = text.replace(old, new, 1)
+    path = tmp_path / "hood.toml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("case", WARNING_CASES, ids=list(WARNING_CASES))
+def test_silent_cases_warn_and_strict_fails(case: str, tmp_path: Path) -> None:
+    old, new, expected = WARNING_CASES[case]
+    scene = hood_variant(tmp_path, old, new)
+    options = ["-o", str(tmp_path / "out"), "--width", "96", "--height", "54", "--samples", "1"]
+    result = CliRunner().invoke(cli, ["render", str(scene), *options])
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("rtreflect: warning:")]
+    assert warnings and all(line.startswith(f"rtreflect: warning: {scene}: ") for line in warnings), result.stderr
+    assert any(expected in line for line in warnings), warnings
+    strict = CliRunner().invoke(cli, ["render", str(scene), *options, "--strict"])
+    assert strict.exit_code == 1 and expected in strict.stderr
+
+
+def test_a_picture_with_lines_warns_nothing(tmp_path: Path) -> None:
+    result = CliRunner().invoke(cli, ["render", str(HOOD), "-o", str(tmp_path), "--width", "96", "--height", "54",
+                                      "--samples", "1", "--strict"])
+    assert result.exit_code == 0 and "warning" not in result.stderr, result.stderr
+
+
+def test_batch_reports_warnings(tmp_path: Path) -> None:
+    old, new, expected = WARNING_CASES["lights below"]
+    scene = hood_variant(tmp_path, old, new)
+    options = ["-o", str(tmp_path / "out"), "-j", "1", "--json", str(tmp_path / "report.json")]
+    variant = scene.read_text().replace("width = 960", "width = 96").replace("height = 540", "height = 54")
+    scene.write_text(variant)
+    result = CliRunner().invoke(cli, ["batch", str(scene), *options, "--strict"])
+    assert result.exit_code == 1 and expected in result.stderr, result.output
+
+
+def test_validate_fails_lights_below_and_an_empty_view_with_distinct_reasons(tmp_path: Path) -> None:
+    options = ["--width", "160", "--height", "90", "--samples", "1"]
+    below = hood_variant(tmp_path, *WARNING_CASES["lights below"][:2])
+    result = CliRunner().invoke(cli, ["validate", str(below), *options])
+    assert result.exit_code == 1, result.output
+    assert "no tube is reflected where the camera sees the surface" in result.output
+    away_dir = tmp_path / "away"
+    away_dir.mkdir()
+    away = hood_variant(away_dir, *WARNING_CASES["camera looks away"][:2])
+    result = CliRunner().invoke(cli, ["validate", str(away), *options])
+    assert result.exit_code == 1 and "FAIL: no traced line centre was compared (the camera sees no surface)" in result.output, result.output
+    assert "no tube is reflected" not in result.output
+
+
+# -- init and the header ------------------------------------------------------------------------
+@pytest.mark.parametrize("source", [HOOD, ROOT / "parts" / "filleted_block.step", "hood-without-rig"],
+                         ids=["hood", "filleted_block.step", "hood-without-rig"])
+def test_init_writes_every_key_and_parses_back_into_the_same_scene(source, tmp_path: Path, monkeypatch) -> None:
+    if source == "hood-without-rig":
+        source = without_rig(HOOD, tmp_path)
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    result = CliRunner().invoke(cli, ["init", str(source)])
+    assert result.exit_code == 0, result.output + result.stderr
+    text = result.stdout
+    (work / "scene.toml").write_text(text)
+    for table, keys in TABLE_KEYS.items():
+        if table in ("", "surface"):
+            continue
+        for key in keys:  # every key present (spacing and count as comments: positions stand for them)
+            assert re.search(rf"^(# )?{key} = .*", text, re.M), f"{table}.{key} missing"
+    settings = text.split("[[surface]]")[0]  # every key of the tables commented (the patches are numbers)
+    assert all("#" in line for line in settings.splitlines() if " = " in line)
+    original = resolve(load_scene(source))
+    again = load_scene(work / "scene.toml")
+    assert not again.automatic
+    for table in ("image", "camera", "lights", "render", "output"):
+        assert _tables_equal(_spec_table(getattr(again, table)), _spec_table(getattr(original, table))), table
+    assert len(again.surfaces) == len(original.surfaces)
+    for a, b in zip(again.surfaces, original.surfaces):
+        assert np.array_equal(a.points, b.points) and np.array_equal(a.weights, b.weights)
+
+
+def _tables_equal(a: dict, b: dict) -> bool:
+    return a.keys() == b.keys() and all(np.array_equal(np.asarray(a[k]), np.asarray(b[k])) for k in a)
+
+
+def test_the_exr_header_records_the_rig_rendered(tmp_path: Path) -> None:
+    source = without_rig(HOOD, tmp_path)
+    result = CliRunner().invoke(cli, ["render", str(source), "-o", str(tmp_path / "out"), "--width", "96",
+                                      "--height", "54", "--samples", "1"])
+    assert result.exit_code == 0, result.output
+    summary = next(line for line in result.output.splitlines() if line.startswith("hood: 96×54"))
+    assert "; automatic camera: iso view" in summary and "; automatic lights: 12 tubes" in summary, summary
+    header = read_provenance(tmp_path / "out" / "hood.exr")
+    rig = tomllib.loads(f"camera = {header[CAMERA_ATTRIBUTE]}\nlights = {header[LIGHTS_ATTRIBUTE]}")
+    rendered = resolve(load_scene(source).with_image(96, 54, 1))
+    assert np.array_equal(rig["camera"]["eye"], rendered.camera.eye)
+    assert np.array_equal(rig["lights"]["positions"], rendered.lights.positions)
+    # Pasted into the scene, it renders the same picture.
+    fixed = source.read_text() + "\n[camera]\n" + "\n".join(f"{k} = {v}" for k, v in _toml_items(header[CAMERA_ATTRIBUTE])) \
+        + "\n\n[lights]\n" + "\n".join(f"{k} = {v}" for k, v in _toml_items(header[LIGHTS_ATTRIBUTE])) + "\n"
+    (tmp_path / "fixed.toml").write_text(fixed)
+    again = load_scene(tmp_path / "fixed.toml").with_image(96, 54, 1)
+    assert np.array_equal(Renderer(again).render(threads=1).rgba, Renderer(rendered).render(threads=1).rgba)
+
+
+def _toml_items(inline: str):
+    """``key = value`` texts of a one-line TOML inline table, in order."""
+    from rtreflect.exchange.scenewriter import toml_value
+
+    return [(key, toml_value(value)) for key, value in tomllib.loads(f"t = {inline}")["t"].items()]
