@@ -288,16 +288,18 @@ def nearer_surface(renderer: Renderer, patch: np.ndarray, Z: np.ndarray, origins
     decides nothing (the fine mesh lies within 1/16 of the renderer's chord error of the surface,
     where Newton converges). Work and memory are bounded by chunks of `NEARER_CHUNK` rays.
     """
+    nearer = np.zeros(len(Z), dtype=bool)
+    if len(Z) == 0:
+        return nearer
     scene_surfaces = [replace(s, mesh_uv=None) if s.mesh_uv is not None else s for s in renderer.scene.surfaces]
     fine = tessellate(scene_surfaces, fine_tessellation_factor(renderer) * renderer.scene.render.tessellation,
                       enclose=True)
     accelerator = Accelerator(fine)
     surfaces = renderer.surfaces
-    extent = fine.extent
+    extent = renderer.tessellation.extent  # the part's size, as for the on-surface test
     tol = ON_SURFACE * extent + 2.0 * FLOAT32_ROUNDOFF * np.abs(Z)
     band = FINE_BAND_CHORDS * float(fine.chord_error.max(initial=0.0)) + FINE_SLACK * extent
     skip = FINE_SLACK * (extent + float(np.abs(fine.vertices).max(initial=0.0)))
-    nearer = np.zeros(len(Z), dtype=bool)
     for lo in range(0, len(Z), NEARER_CHUNK):
         rays = np.arange(lo, min(lo + NEARER_CHUNK, len(Z)))
         start, limit = np.zeros(len(rays)), Z[rays] - tol[rays] + band
