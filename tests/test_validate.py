@@ -310,3 +310,48 @@ def test_resolution_is_decided_per_line(offset, tmp_path):
         assert "note: light 5 (c_k = 0.5)" in result.output and "note: light 9 (c_k = 0.6)" in result.output
         lines = json.loads((tmp_path / "r.json").read_text())["scenes"]["crowded"]["lines"]
         assert lines[9]["unresolved_points"] > 0 and lines[0]["unresolved_points"] == 0
+
+
+# --- Issue 11 item 2: a stored hit that is not the nearest exact surface point on its ray -------------------
+
+
+def test_validate_fails_a_hit_behind_a_nearer_surface(monkeypatch):
+    """The hood and a plane cutting through it (tests/test_exact_hits.py), rendered as the old tracer did (the first
+    mesh hit's refinement kept, no candidate behind it examined): near the intersection curve some pixels store the
+    farther surface. `validate` flags exactly the pixels whose stored Z lies beyond the correct render's (the
+    reference: the tracer that keeps the nearest candidate, itself tested against each surface alone and the
+    plane's closed form), fails that render and passes the correct one."""
+    from dataclasses import replace
+
+    from test_exact_hits import hood_scene, plane_patch
+
+    from rtreflect.analysis import validate as V
+    from rtreflect.integrator.renderer import Renderer
+    from rtreflect.trace import tracing
+
+    scene = hood_scene(tessellation=8)  # at 4 the analytic check itself misses lines near the cut: keep this apart
+    cut = plane_patch([-1.3, -1.2, 0.05], [2.6, 0.0, 0.55], [0.0, 2.4, 0.0], name="cut")
+    scene = replace(scene, surfaces=(scene.surfaces[0], cut))
+    right = Renderer(scene)
+    good = V.film_aovs(right, right.render().film)
+    with monkeypatch.context() as m:  # the old tracer: no band behind the first hit, so no later candidate
+        m.setattr(tracing, "_band", lambda tessellation, cos: np.full(len(cos), -np.inf))
+        wrong = Renderer(scene)
+        bad = V.film_aovs(wrong, wrong.render().film)
+    tol = V.ON_SURFACE * right.tessellation.extent + 2.0 * V.FLOAT32_ROUNDOFF * np.abs(good.Z)
+    stored = 4.0 * V.FLOAT32_ROUNDOFF * np.abs(good.Z)  # the reference's own float32 Z: either way within this
+    with np.errstate(invalid="ignore"):
+        both = (bad.patch >= 0) & (good.patch >= 0)
+        behind = both & (bad.Z > good.Z + tol + stored)
+        maybe = both & (bad.Z > good.Z + tol - stored)
+    assert behind.sum() >= 10 and not bad.fallback.any()  # wrong pixels that no fallback reports
+    assert not (behind & ~bad.nearer).any() and not (bad.nearer & ~maybe).any(), \
+        (np.argwhere(bad.nearer != behind), behind.sum())
+    assert not good.nearer.any()
+    contours = V.analytic_contours(V.UlmetField.of(right))
+    report_bad = V.compare(wrong, bad, contours, V.DEFAULT_TOLERANCE_PX)
+    report_good = V.compare(right, good, contours, V.DEFAULT_TOLERANCE_PX)
+    assert not report_bad.passed
+    assert any(f"{int(bad.nearer.sum())} pixels store an exact hit behind a nearer" in r for r in report_bad.reasons)
+    assert report_good.passed, (report_good.max_px, report_good.misses, report_good.colour_mismatches,
+                                report_good.reasons)

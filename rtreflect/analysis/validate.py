@@ -50,7 +50,7 @@ notes: unchecked, not failed, and not silently dropped.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -60,8 +60,10 @@ from ..integrator.film import Film
 from ..modes.lights import reflect
 from ..integrator.autorig import resolve
 from ..integrator.renderer import Renderer
-from ..exchange.scene import Scene
-from ..trace.tracing import occluded
+from ..exchange.scene import MAX_MESH_VERTICES, Scene
+from ..geometry.tessellation import tessellate
+from ..trace.accelerator import Accelerator
+from ..trace.tracing import occluded, refine
 
 DEFAULT_TOLERANCE_PX = 0.5
 #: Neighbouring hit points farther apart than this many pixel footprints straddle an edge (or graze).
@@ -102,6 +104,18 @@ TANGENT_FLOOR = 1e-6
 #: A line whose neighbour is too close for more than this share of its clean-view points gets a note: a few
 #: points where lines crowd (near a silhouette, at grazing angles) are normal; most of a line is worth saying.
 NOTE_UNRESOLVED_SHARE = 0.5
+#: The nearer-hit check's own mesh has this many times the scene's segments per knot span (chord error ~1/16 of
+#: the renderer's), fewer where that exceeds the vertex limit: sheets the renderer's mesh merges come apart.
+FINE_TESSELLATION = 4
+#: How far beyond an exact point the fine mesh's hit may lie, in fine chord errors: 2 chords (the mesh-to-surface
+#: gap across the surface) grown 10× for incidence down to cos θ = 0.1.
+FINE_BAND_CHORDS = 20.0
+#: Fine-mesh hits examined per ray before the stored point: bounds the work on a ray through a stack of sheets.
+FINE_MAX_HITS = 16
+#: Rays per chunk of the nearer-hit check: bounds its memory (a few dozen float64 per ray and step).
+NEARER_CHUNK = 1 << 16
+#: Relative float32 rounding of Embree's coordinates, with margin: where the next query starts beyond a mesh hit.
+FINE_SLACK = 1e-6
 
 
 def neighbour_gaps(c_k: np.ndarray) -> np.ndarray:
@@ -127,7 +141,8 @@ class PixelAOVs:
     RGB (see `line_coverage`); ``fallback`` marks hits off the surface (Newton failed, the
     mesh hit kept: P ≠ S(u, v), or the ray at distance Z ≠ S(u, v)); ``incidence`` is |N·D|
     for the pixel-centre ray D; ``normal_error`` the angle between N and S_u × S_v at (u, v)
-    on exact hits where that reference is trustworthy (NaN elsewhere).
+    on exact hits where that reference is trustworthy (NaN elsewhere); ``nearer`` marks exact
+    hits with an exact surface point before them on the pixel-centre ray (`nearer_surface`).
     """
 
     f: np.ndarray
@@ -143,6 +158,7 @@ class PixelAOVs:
     line_coverage: np.ndarray  # fraction of samples that see a tube (NaN where colours cannot tell)
     incidence: np.ndarray | None = None
     normal_error: np.ndarray | None = None
+    nearer: np.ndarray | None = None  # exact hits with an exact surface point before them on the ray (`nearer_surface`)
 
 
 def line_coverage(rgba: np.ndarray, surface_color, line_color, background) -> np.ndarray:
@@ -180,6 +196,7 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
     incidence = np.full(height * width, np.nan)
     incidence[hit] = np.abs(np.einsum("ij,ij->i", N.reshape(-1, 3)[hit], directions))
     normal_error = np.full(height * width, np.nan)
+    nearer = np.zeros(height * width, dtype=bool)
     if renderer.vertex_normals is None:  # exact mode; mesh mode never falls back (and is never on S)
         fallback[hit], normal_error[hit], S = _stored_hit_errors(
             renderer, patch.ravel()[hit].astype(int), channel("u").ravel()[hit], channel("v").ravel()[hit],
@@ -188,6 +205,10 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
         # checks below (occlusion rays, neighbour distances) need the point as the renderer had it.
         exact = hit[~fallback[hit]]
         P.reshape(-1, 3)[exact] = S[~fallback[hit]]
+        # Fallbacks are reported as such; an exact hit must also be the nearest exact point on its ray.
+        on = ~fallback[hit]
+        nearer[exact] = nearer_surface(renderer, patch.ravel()[exact].astype(int), channel("Z").ravel()[exact],
+                                       origins[on], directions[on])
     render = renderer.scene.render
     return PixelAOVs(
         f=channel("f"), patch=patch, P=P, N=N, s=s.reshape(height, width, 3), Z=channel("Z"),
@@ -195,6 +216,7 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
         coverage=channel("A"),
         line_coverage=line_coverage(film.pixels[..., :4], render.surface_color, render.line_color, render.background),
         incidence=incidence.reshape(height, width), normal_error=normal_error.reshape(height, width),
+        nearer=nearer.reshape(height, width),
     )
 
 
@@ -227,8 +249,90 @@ def _stored_hit_errors(renderer: Renderer, patch: np.ndarray, u: np.ndarray, v: 
     return fallback, np.where(trusted, angle, np.nan), S
 
 
+def fine_tessellation_factor(renderer: Renderer) -> int:
+    """`FINE_TESSELLATION`, or the largest factor below it whose mesh fits `MAX_MESH_VERTICES` (at least 1)."""
+    per_span = renderer.scene.render.tessellation
+    spans = [tuple(len(b) - 1 for b in surface.span_breaks()) for surface in renderer.scene.surfaces]
+    for factor in range(FINE_TESSELLATION, 1, -1):
+        n = factor * per_span
+        if sum((su * n + 1) * (sv * n + 1) for su, sv in spans) <= MAX_MESH_VERTICES:
+            return factor
+    return 1
+
+
+def _well_inside(surfaces, patch, u, v, Su, Sv, margin: float) -> np.ndarray:
+    """True where (u, v) lies on its face (domain and trim) with the points ``margin`` away along S_u and S_v too.
+
+    (u ± δu, v ± δv) with δ = margin / |S_·|: the parameter steps that move S by about ``margin``
+    (infinite at a degenerate point, which is then not inside).
+    """
+    with np.errstate(divide="ignore"):
+        du, dv = margin / np.linalg.norm(Su, axis=1), margin / np.linalg.norm(Sv, axis=1)
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    inside = (u - du >= u0) & (u + du <= u1) & (v - dv >= v0) & (v + dv <= v1)
+    for su, sv in ((-1, -1), (-1, 1), (1, -1), (1, 1)):
+        inside &= surfaces.on_face(patch, u + su * du, v + sv * dv)
+    return inside
+
+
+def nearer_surface(renderer: Renderer, patch: np.ndarray, Z: np.ndarray, origins: np.ndarray,
+                   directions: np.ndarray) -> np.ndarray:
+    """True where an exact surface point lies on the ray (O, D) before the stored hit at distance Z.
+
+    Independent of the renderer's candidate search (tracing.py): a mesh of its own,
+    `fine_tessellation_factor` × the scene's segments per knot span (the span grid on every face,
+    also where a reader gave its own triangulation), enclosing the surface, in its own BVH.
+    Along each ray, every fine-mesh hit up to Z − tol + `FINE_BAND_CHORDS` fine chord errors is
+    taken in turn (at most `FINE_MAX_HITS`) and refined by Newton on its own face (`refine`, the
+    shared solver). One that converges (S(u, v) on the ray to Newton's tolerance), inside its
+    face by more than `ON_SURFACE` of the part's size (`_well_inside`: a ray that meets the face closer
+    to its edge than that may pass it, as far as the renderer can tell), at 0 < t < Z − tol is an exact
+    surface point nearer than the stored one: a fault,
+    wherever Newton went (a point on the ray is one, whichever mesh hit led there). tol is
+    `ON_SURFACE` of the part's size plus float32 rounding of the stored Z. A hit whose Newton fails
+    decides nothing (the fine mesh lies within 1/16 of the renderer's chord error of the surface,
+    where Newton converges). Work and memory are bounded by chunks of `NEARER_CHUNK` rays.
+    """
+    nearer = np.zeros(len(Z), dtype=bool)
+    if len(Z) == 0:
+        return nearer
+    scene_surfaces = [replace(s, mesh_uv=None) if s.mesh_uv is not None else s for s in renderer.scene.surfaces]
+    fine = tessellate(scene_surfaces, fine_tessellation_factor(renderer) * renderer.scene.render.tessellation,
+                      enclose=True)
+    accelerator = Accelerator(fine)
+    surfaces = renderer.surfaces
+    extent = renderer.tessellation.extent  # the part's size, as for the on-surface test
+    tol = ON_SURFACE * extent + 2.0 * FLOAT32_ROUNDOFF * np.abs(Z)
+    band = FINE_BAND_CHORDS * float(fine.chord_error.max(initial=0.0)) + FINE_SLACK * extent
+    skip = FINE_SLACK * (extent + float(np.abs(fine.vertices).max(initial=0.0)))
+    for lo in range(0, len(Z), NEARER_CHUNK):
+        rays = np.arange(lo, min(lo + NEARER_CHUNK, len(Z)))
+        start, limit = np.zeros(len(rays)), Z[rays] - tol[rays] + band
+        for _ in range(FINE_MAX_HITS):
+            O, D = origins[rays], directions[rays]
+            mesh = accelerator.intersect(O + start[:, None] * D, D, limit - start)
+            found = mesh.prim >= 0
+            rays, O, D, limit = rays[found], O[found], D[found], limit[found]
+            if len(rays) == 0:
+                break
+            t_mesh = mesh.t[found] + start[found]
+            pk, us, vs = fine.start_parameters(mesh.prim[found], mesh.b1[found], mesh.b2[found])
+            u, v, derivs, converged = refine(surfaces, pk, us, vs, O, D, t_mesh, extent)
+            t = np.einsum("ij,ij->i", derivs.S - O, D)
+            fault = converged & (t > 0) & (t < Z[rays] - tol[rays])
+            maybe = np.flatnonzero(fault)  # few: the boundary test only for them
+            fault[maybe] = _well_inside(surfaces, pk[maybe], u[maybe], v[maybe], derivs.Su[maybe], derivs.Sv[maybe],
+                                        ON_SURFACE * extent)
+            nearer[rays[fault]] = True
+            start = t_mesh + skip
+            go = ~fault & (start < limit)
+            rays, start, limit = rays[go], start[go], limit[go]
+    return nearer
+
+
 def hit_faults(aovs: PixelAOVs) -> list[str]:
-    """Reasons to fail found in the stored hits alone: normals off the surface, and fallbacks where none belong.
+    """Reasons to fail found in the stored hits alone: normals off the surface, fallbacks where none belong,
+    and exact hits that are not the nearest exact surface point on their ray (`PixelAOVs.nearer`).
 
     A fallback (Newton failed, the mesh hit kept) is expected where the ray grazes the surface
     or at a silhouette or seam; one on a ray at cos θ ≥ `GRAZING_COS` whose four neighbouring
@@ -251,6 +355,9 @@ def hit_faults(aovs: PixelAOVs) -> list[str]:
         if stray.any():
             reasons.append(f"{int(stray.sum())} pixels inside the surface, not grazing it, keep a mesh hit off the "
                            f"surface (Newton fallback)")
+    if aovs.nearer is not None and aovs.nearer.any():
+        reasons.append(f"{int(aovs.nearer.sum())} pixels store an exact hit behind a nearer exact surface point on "
+                       f"the pixel-centre ray (not the first hit)")
     return reasons
 
 
