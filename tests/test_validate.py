@@ -31,6 +31,19 @@ from rtreflect.analysis.validate import (TracedCentres, _filter_unblocked, film_
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 SCENE_FILES = sorted(SCENES.glob("*.toml"))
 WIDTH, HEIGHT = 320, 180
+#: Shipped scenes whose render still stores some hits behind a nearer exact surface point (issue 11 item 2, open):
+#: the teapot's grazing rays near where the spout meets the body, whose coarse mesh (tessellation 12) has no
+#: triangle near the nearer point, so the tracer never sees it. validate must say so, and only that.
+NOT_FIRST_HIT = "behind a nearer exact surface point"
+KNOWN_NOT_FIRST = {"teapot"}
+
+
+def assert_passes_but_for_known_first_hits(report, name: str) -> None:
+    if name in KNOWN_NOT_FIRST:  # fails on the known wrong pixels alone; fixing the tracer must update this test
+        assert not report.passed and report.reasons, report.reasons
+        assert all(NOT_FIRST_HIT in reason for reason in report.reasons), report.reasons
+    else:
+        assert report.passed and not report.reasons, report.reasons
 
 
 @pytest.mark.parametrize("path", SCENE_FILES, ids=lambda p: p.stem)
@@ -41,14 +54,14 @@ def test_shipped_scene_validates(path: Path):
     assert report.max_px <= 0.5
     assert report.p95_px <= 0.1
     assert report.colour_checked >= 500 and report.colour_mismatches == 0
-    assert report.passed and not report.reasons
+    assert_passes_but_for_known_first_hits(report, path.stem)
 
 
 def test_colour_check_holds_with_supersampling():
     """s = 2: the colour comes from 4 samples per pixel, the AOVs from a separate pixel-centre ray."""
     report = validate_scene(load_scene(SCENES / "teapot.toml").with_image(WIDTH, HEIGHT, 2))
     assert report.colour_checked >= 500 and report.colour_mismatches == 0
-    assert report.passed
+    assert_passes_but_for_known_first_hits(report, "teapot")
 
 
 def test_orthographic_camera_tilted_light_plane_and_short_tubes_validate():
