@@ -498,12 +498,7 @@ def _parse_lights(t: _Table) -> LightSpec:
     if abs(float(c @ m)) > IN_PLANE_TOLERANCE:
         raise t.error("direction", f"must lie in the light plane (perpendicular to lights.normal); c·m = {float(c @ m):.3g}")
     if t.has("positions"):
-        for key in ("spacing", "count"):
-            if t.has(key):
-                raise t.error(key, "give either lights.positions or lights.spacing with lights.count, not both")
-        positions = t.array("positions", (None,))
-        if len(positions) > MAX_TUBES:
-            raise t.error("positions", f"at most {MAX_TUBES} tubes (every ray is tested against every tube), got {len(positions)}")
+        positions = _given_positions(t)
     elif t.has("spacing") or t.has("count"):
         spacing = t.number("spacing", required_default(), low=0, open_low=True)
         count = t.number("count", required_default(), low=1, high=MAX_TUBES, integer=True)
@@ -516,6 +511,17 @@ def _parse_lights(t: _Table) -> LightSpec:
     return LightSpec(point, m, c, positions, radius, length)
 
 
+def _given_positions(t: _Table) -> np.ndarray:
+    """``lights.positions`` (then neither ``spacing`` nor ``count``), at most `MAX_TUBES`."""
+    for key in ("spacing", "count"):
+        if t.has(key):
+            raise t.error(key, "give either lights.positions or lights.spacing with lights.count, not both")
+    positions = t.array("positions", (None,))
+    if len(positions) > MAX_TUBES:
+        raise t.error("positions", f"at most {MAX_TUBES} tubes (every ray is tested against every tube), got {len(positions)}")
+    return positions
+
+
 def _parse_auto_lights(t: _Table) -> LightSpec:
     """``[lights]`` for the automatic rig: every key optional, each given one kept (`integrator.autorig`)."""
     point = t.vector("point") if t.has("point") else None
@@ -524,14 +530,7 @@ def _parse_auto_lights(t: _Table) -> LightSpec:
     if normal is not None and direction is not None and abs(float(direction @ normal)) > IN_PLANE_TOLERANCE:
         raise t.error("direction", f"must lie in the light plane (perpendicular to lights.normal); "
                                    f"c·m = {float(direction @ normal):.3g}")
-    positions = count = spacing = None
-    if t.has("positions"):
-        for key in ("spacing", "count"):
-            if t.has(key):
-                raise t.error(key, "give either lights.positions or lights.spacing with lights.count, not both")
-        positions = t.array("positions", (None,))
-        if len(positions) > MAX_TUBES:
-            raise t.error("positions", f"at most {MAX_TUBES} tubes (every ray is tested against every tube), got {len(positions)}")
+    positions = _given_positions(t) if t.has("positions") else None
     count = t.number("count", None, low=1, high=MAX_TUBES, integer=True)
     spacing = t.number("spacing", None, low=0, open_low=True)
     radius = t.number("radius", None, low=0, open_low=True)
