@@ -101,12 +101,15 @@ def _print_notes(scenes) -> None:
 @click.option("--overlay/--no-overlay", default=None,
               help="Draw the analytic reflection lines (f = c_k) over the PNG and write NAME.contours.json "
                    "(overrides [render] overlay).")
+@click.option("--seams", is_flag=True,
+              help="Run the continuity check and draw each seam over the PNG, coloured by its class, worst value "
+                   "labelled, with a legend (as `rtreflect continuity --png`; the EXR is unchanged).")
 @click.option("--normals", type=click.Choice(NORMALS_MODES), default=None,
               help="exact: the NURBS normal at the exact hit; mesh: the CAD analysis-mesh normal, for comparison "
                    "(overrides [render] normals).")
 @click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
               help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
-def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory, overlay,
+def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory, overlay, seams,
            normals, skip_bad_faces) -> None:
     """Render the reflection lines of each SCENE file to OUTPUT/NAME.exr and .png.
 
@@ -114,7 +117,9 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     (P.X P.Y P.Z N.X N.Y N.Z u v patch Z f line.id line.dist); the PNG is 8-bit sRGB.
     NAME is [output] name, by default the scene file's stem. With --overlay the PNG also
     shows the analytic reflection lines in [render] overlay_color, and NAME.contours.json
-    holds them (per line: light index, polylines in pixels and in (u, v)).
+    holds them (per line: light index, polylines in pixels and in (u, v)). With --seams
+    the PNG also shows every shared edge coloured by its continuity class (open, G0, G1,
+    G2 at `rtreflect continuity`'s default tolerances), its worst value labelled, and a legend.
 
     \b
     A STEP, IGES or .3dm file in place of a SCENE renders the part in a default scene
@@ -146,10 +151,13 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
         try:
             with tqdm(total=image.width * image.height, unit="px", unit_scale=True, desc=scene.output.name,
                       leave=False, disable=None, file=sys.stderr) as bar:
-                done = render_to_files(scene, outdir, threads=threads, max_memory=budget, progress=bar.update)
+                done = render_to_files(scene, outdir, threads=threads, max_memory=budget, progress=bar.update,
+                                       seams=_seams_of(scene) if seams and scene.output.png else None)
             if scene.render.overlay and not scene.output.png:
                 click.echo(f"{scene.output.name}: overlay not drawn ([output] png = false; the EXR never shows it), "
                            f"contours in {contours_file_name(scene)}")
+            if seams and not scene.output.png:
+                click.echo(f"{scene.output.name}: seams not drawn ([output] png = false; the EXR never shows them)")
         except RtreflectError as exc:
             fail(str(exc))
         st, written = done.stats, done.files
@@ -159,6 +167,13 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
             f"{st.fallbacks} Newton fallbacks in {st.fallback_pixels} pixels"
             f" → {', '.join(str(p) for p in written)}"
         )
+
+
+def _seams_of(scene):
+    """`render --seams`: the scene's continuity at the default tolerances (no line kinks: only the classes are drawn)."""
+    from .analysis.seamcheck import check_scene
+
+    return check_scene(scene, lines=False)
 
 
 # -- rtreflect diff (issue 4): logic in rtreflect/diff.py ---------------------------------------
