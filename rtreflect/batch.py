@@ -69,6 +69,7 @@ class SceneReport:
     tiles: int = 0
     validate: dict | None = None  # `--validate`: rtreflect.ci.checks.validate_record
     golden: dict | None = None  # `--golden DIR`: rtreflect.ci.checks.golden_record
+    continuity: dict | None = None  # `--continuity`: rtreflect.ci.checks.continuity_record
 
 
 # -- discovery and planning -------------------------------------------------------------

@@ -483,12 +483,18 @@ def stop_status(exc: BaseException) -> int:
               default=None,
               help="Then compare each OUTPUT/NAME.exr with DIR/NAME.exr by the golden checks (colour, AOVs); a "
                    "mismatch writes OUTPUT/NAME.CHECK.diff.png and exits 1; a scene without a golden is noted.")
+@click.option("--continuity", "run_continuity", is_flag=True,
+              help="Check every scene's seams (as `rtreflect continuity`): counts per class in --json, --report, "
+                   "--junit; OUTPUT/NAME.continuity.json and .continuity.charts.png; an edge short of --require "
+                   "fails the scene.")
+@click.option("--require", default="G0", show_default=True, metavar="G0|G1|G2",
+              help="With --continuity: the class every shared edge must reach (G0: no open seam).")
 @click.option("--report", "html_path", type=click.Path(path_type=Path), metavar="FILE.html", default=None,
               help="Also write an HTML report: a row per scene with thumbnail, checks and failure reason.")
 @click.option("--junit", "junit_path", type=click.Path(path_type=Path), metavar="FILE.xml", default=None,
               help="Also write JUnit XML: a test case per scene and check, for CI servers' test views.")
 def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, scheduler, skip_bad_faces, run_validate,
-          golden_dir, html_path, junit_path) -> None:
+          golden_dir, run_continuity, require, html_path, junit_path) -> None:
     """Render folders of scenes: every *.toml in each PATH (or PATH itself) to OUTPUT/NAME.exr and .png.
 
     CAD files in the folders (.step .stp .igs .iges .3dm) render too, each in the default
@@ -511,11 +517,17 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
       rtreflect batch parts/ variants/door.toml -o out/ --recursive -j 4 --json out/report.json
       rtreflect batch scenes/ -o out/ --scheduler tcp://10.0.0.5:8786
       rtreflect batch scenes/ -o out/ --validate --report out/report.html --junit out/junit.xml
+      rtreflect batch scenes/ -o out/ --continuity --require G1 --report out/report.html
     """
     from . import batch as batching
+    from .analysis.seamcheck import REQUIRE_CHOICES
+    from .errors import quote
 
     start = time.perf_counter()
     budget = memory_option(max_memory)
+    if require.upper() not in REQUIRE_CHOICES:
+        fail(f"--require: unknown class {quote(require)}; choose one of {', '.join(REQUIRE_CHOICES)}")
+    require = require.upper()
     try:
         loaded = batching.load_jobs(batching.discover(list(paths), recursive), skip_bad_faces)
         batching.check_collisions(loaded, outdir)
@@ -568,8 +580,8 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         sys.exit(stop_status(exc))
     except RtreflectError as exc:
         fail(str(exc))
-    if run_validate or golden_dir is not None:
-        _check_batch(reports, loaded, outdir, run_validate, golden_dir)
+    if run_validate or golden_dir is not None or run_continuity:
+        _check_batch(reports, loaded, outdir, run_validate, golden_dir, require if run_continuity else None)
     failed = _finish_batch(reports, order, outdir, report_path, start, where, html_path=html_path,
                            junit_path=junit_path)
     sys.exit(EXIT_CHECK_FAILED if failed else 0)
@@ -588,8 +600,9 @@ def _print_scene(report) -> None:
     tqdm.write(line, file=sys.stdout)
 
 
-def _check_batch(reports, loaded, outdir, run_validate, golden_dir) -> None:
-    """`--validate` and `--golden`: check every scene that rendered or was up to date, one line per check."""
+def _check_batch(reports, loaded, outdir, run_validate, golden_dir, continuity_require=None) -> None:
+    """`--validate`, `--golden` and `--continuity` (``continuity_require`` the class asked): check every scene that
+    rendered or was up to date, one line per check."""
     from .batch import FAILED, INTERRUPTED
     from .ci.checks import GOLDEN_MATCH, GOLDEN_MISSING, golden_record, validate_record
 
@@ -609,6 +622,13 @@ def _check_batch(reports, loaded, outdir, run_validate, golden_dir) -> None:
             detail = record["error"] or ", ".join(f"{check} {c['failing_pixels']} failing px"
                                                   for check, c in record["checks"].items())
             tqdm.write(f"{report.name}: golden {text} ({detail})", file=sys.stdout)
+        if continuity_require is not None:
+            from .ci.checks import continuity_record
+
+            report.continuity = record = continuity_record(scene, continuity_require, outdir)
+            counts = ", ".join(f"{n} {c}" for c, n in record["counts"].items() if n) or "no shared edges"
+            verdict = record["error"] or ("PASS" if record["passed"] else f"FAIL (require {continuity_require})")
+            tqdm.write(f"{report.name}: continuity {verdict}: {counts}", file=sys.stdout)
 
 
 def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False, html_path=None,
@@ -621,11 +641,13 @@ def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False
     seconds = time.perf_counter() - start
     records = [asdict(r) for r in reports]
     checks_failed = sum(1 for r in reports if (r.validate and not r.validate["passed"])
-                        or (r.golden and r.golden["status"] in ("mismatch", "error")))
+                        or (r.golden and r.golden["status"] in ("mismatch", "error"))
+                        or (r.continuity and not r.continuity["passed"]))
     if not quiet:
         click.echo("")
         click.echo(batching.summary_table(reports))
-        checked = f", {checks_failed} failed a check" if any(r.validate or r.golden for r in reports) else ""
+        checked = f", {checks_failed} failed a check" if any(r.validate or r.golden or r.continuity
+                                                              for r in reports) else ""
         click.echo(f"{tally['rendered']} rendered, {tally['skipped']} up to date, {tally['failed']} failed{checked} "
                    f"in {seconds:.1f} s ({where})")
     try:
