@@ -71,6 +71,7 @@ class SceneReport:
     golden: dict | None = None  # `--golden DIR`: rtreflect.ci.checks.golden_record
     warnings: list[str] = field(default_factory=list)  # `checks.ImageTally` warnings of the rendered picture
     rig: list[str] = field(default_factory=list)  # the automatic camera and tubes chosen (`Scene.rig`)
+    continuity: dict | None = None  # `--continuity`: rtreflect.ci.checks.continuity_record
 
 
 # -- discovery and planning -------------------------------------------------------------

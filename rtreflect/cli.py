@@ -112,13 +112,16 @@ def _print_notes(scenes) -> None:
 @click.option("--overlay/--no-overlay", default=None,
               help="Draw the analytic reflection lines (f = c_k) over the PNG and write NAME.contours.json "
                    "(overrides [render] overlay).")
+@click.option("--seams", is_flag=True,
+              help="Run the continuity check and draw each seam over the PNG, coloured by its class, worst value "
+                   "labelled, with a legend (as `rtreflect continuity --png`; the EXR is unchanged).")
 @click.option("--normals", type=click.Choice(NORMALS_MODES), default=None,
               help="exact: the NURBS normal at the exact hit; mesh: the CAD analysis-mesh normal, for comparison "
                    "(overrides [render] normals).")
 @click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
               help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
-def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory, overlay,
+def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory, overlay, seams,
            normals, skip_bad_faces, strict) -> None:
     """Render the reflection lines of each SCENE file to OUTPUT/NAME.exr and .png.
 
@@ -126,7 +129,9 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     (P.X P.Y P.Z N.X N.Y N.Z u v patch Z f line.id line.dist); the PNG is 8-bit sRGB.
     NAME is [output] name, by default the scene file's stem. With --overlay the PNG also
     shows the analytic reflection lines in [render] overlay_color, and NAME.contours.json
-    holds them (per line: light index, polylines in pixels and in (u, v)).
+    holds them (per line: light index, polylines in pixels and in (u, v)). With --seams
+    the PNG also shows every shared edge coloured by its continuity class (open, G0, G1,
+    G2 at `rtreflect continuity`'s default tolerances), its worst value labelled, and a legend.
 
     \b
     A STEP, IGES or .3dm file in place of a SCENE renders the part in the automatic scene
@@ -166,10 +171,13 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
         try:
             with tqdm(total=image.width * image.height, unit="px", unit_scale=True, desc=scene.output.name,
                       leave=False, disable=None, file=sys.stderr) as bar:
-                done = render_to_files(scene, outdir, threads=threads, max_memory=budget, progress=bar.update)
+                done = render_to_files(scene, outdir, threads=threads, max_memory=budget, progress=bar.update,
+                                       seams=_seams_of(scene) if seams and scene.output.png else None)
             if scene.render.overlay and not scene.output.png:
                 click.echo(f"{scene.output.name}: overlay not drawn ([output] png = false; the EXR never shows it), "
                            f"contours in {contours_file_name(scene)}")
+            if seams and not scene.output.png:
+                click.echo(f"{scene.output.name}: seams not drawn ([output] png = false; the EXR never shows them)")
         except RtreflectError as exc:
             fail(str(exc))
         st, written = done.stats, done.files
@@ -184,6 +192,13 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
             warned = True
     if strict and warned:
         sys.exit(EXIT_WARNED)
+
+
+def _seams_of(scene):
+    """`render --seams`: the scene's continuity at the default tolerances (no line kinks: only the classes are drawn)."""
+    from .analysis.seamcheck import check_scene
+
+    return check_scene(scene, lines=False)
 
 
 # -- rtreflect diff (issue 4): logic in rtreflect/diff.py ---------------------------------------
@@ -493,13 +508,19 @@ def stop_status(exc: BaseException) -> int:
               default=None,
               help="Then compare each OUTPUT/NAME.exr with DIR/NAME.exr by the golden checks (colour, AOVs); a "
                    "mismatch writes OUTPUT/NAME.CHECK.diff.png and exits 1; a scene without a golden is noted.")
+@click.option("--continuity", "run_continuity", is_flag=True,
+              help="Check every scene's seams (as `rtreflect continuity`): counts per class in --json, --report, "
+                   "--junit; OUTPUT/NAME.continuity.json and .continuity.charts.png; an edge short of --require "
+                   "fails the scene.")
+@click.option("--require", default="G0", show_default=True, metavar="G0|G1|G2",
+              help="With --continuity: the class every shared edge must reach (G0: no open seam).")
 @click.option("--report", "html_path", type=click.Path(path_type=Path), metavar="FILE.html", default=None,
               help="Also write an HTML report: a row per scene with thumbnail, checks and failure reason.")
 @click.option("--junit", "junit_path", type=click.Path(path_type=Path), metavar="FILE.xml", default=None,
               help="Also write JUnit XML: a test case per scene and check, for CI servers' test views.")
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
 def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, scheduler, skip_bad_faces, run_validate,
-          golden_dir, html_path, junit_path, strict) -> None:
+          golden_dir, run_continuity, require, html_path, junit_path, strict) -> None:
     """Render folders of scenes: every *.toml in each PATH (or PATH itself) to OUTPUT/NAME.exr and .png.
 
     CAD files in the folders (.step .stp .igs .iges .3dm) render too, each in the default
@@ -522,11 +543,17 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
       rtreflect batch parts/ variants/door.toml -o out/ --recursive -j 4 --json out/report.json
       rtreflect batch scenes/ -o out/ --scheduler tcp://10.0.0.5:8786
       rtreflect batch scenes/ -o out/ --validate --report out/report.html --junit out/junit.xml
+      rtreflect batch scenes/ -o out/ --continuity --require G1 --report out/report.html
     """
     from . import batch as batching
+    from .analysis.seamcheck import REQUIRE_CHOICES
+    from .errors import quote
 
     start = time.perf_counter()
     budget = memory_option(max_memory)
+    if require.upper() not in REQUIRE_CHOICES:
+        fail(f"--require: unknown class {quote(require)}; choose one of {', '.join(REQUIRE_CHOICES)}")
+    require = require.upper()
     try:
         loaded = batching.load_jobs(batching.discover(list(paths), recursive), skip_bad_faces)
         batching.check_collisions(loaded, outdir)
@@ -579,8 +606,8 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         sys.exit(stop_status(exc))
     except RtreflectError as exc:
         fail(str(exc))
-    if run_validate or golden_dir is not None:
-        _check_batch(reports, loaded, outdir, run_validate, golden_dir)
+    if run_validate or golden_dir is not None or run_continuity:
+        _check_batch(reports, loaded, outdir, run_validate, golden_dir, require if run_continuity else None)
     failed = _finish_batch(reports, order, outdir, report_path, start, where, html_path=html_path,
                            junit_path=junit_path)
     warned = any(getattr(report, "warnings", None) for report in reports)
@@ -603,8 +630,9 @@ def _print_scene(report) -> None:
         tqdm.write(f"rtreflect: warning: {report.scene}: {one_line(message)}", file=sys.stderr)
 
 
-def _check_batch(reports, loaded, outdir, run_validate, golden_dir) -> None:
-    """`--validate` and `--golden`: check every scene that rendered or was up to date, one line per check."""
+def _check_batch(reports, loaded, outdir, run_validate, golden_dir, continuity_require=None) -> None:
+    """`--validate`, `--golden` and `--continuity` (``continuity_require`` the class asked): check every scene that
+    rendered or was up to date, one line per check."""
     from .batch import FAILED, INTERRUPTED
     from .ci.checks import GOLDEN_MATCH, GOLDEN_MISSING, golden_record, validate_record
 
@@ -624,6 +652,13 @@ def _check_batch(reports, loaded, outdir, run_validate, golden_dir) -> None:
             detail = record["error"] or ", ".join(f"{check} {c['failing_pixels']} failing px"
                                                   for check, c in record["checks"].items())
             tqdm.write(f"{report.name}: golden {text} ({detail})", file=sys.stdout)
+        if continuity_require is not None:
+            from .ci.checks import continuity_record
+
+            report.continuity = record = continuity_record(scene, continuity_require, outdir)
+            counts = ", ".join(f"{n} {c}" for c, n in record["counts"].items() if n) or "no shared edges"
+            verdict = record["error"] or ("PASS" if record["passed"] else f"FAIL (require {continuity_require})")
+            tqdm.write(f"{report.name}: continuity {verdict}: {counts}", file=sys.stdout)
 
 
 def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False, html_path=None,
@@ -636,11 +671,13 @@ def _finish_batch(reports, order, outdir, report_path, start, where, quiet=False
     seconds = time.perf_counter() - start
     records = [asdict(r) for r in reports]
     checks_failed = sum(1 for r in reports if (r.validate and not r.validate["passed"])
-                        or (r.golden and r.golden["status"] in ("mismatch", "error")))
+                        or (r.golden and r.golden["status"] in ("mismatch", "error"))
+                        or (r.continuity and not r.continuity["passed"]))
     if not quiet:
         click.echo("")
         click.echo(batching.summary_table(reports))
-        checked = f", {checks_failed} failed a check" if any(r.validate or r.golden for r in reports) else ""
+        checked = f", {checks_failed} failed a check" if any(r.validate or r.golden or r.continuity
+                                                              for r in reports) else ""
         click.echo(f"{tally['rendered']} rendered, {tally['skipped']} up to date, {tally['failed']} failed{checked} "
                    f"in {seconds:.1f} s ({where})")
     try:

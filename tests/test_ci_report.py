@@ -48,7 +48,7 @@ def junit_verdicts(path: Path) -> dict[tuple[str, str], str]:
 
 @pytest.fixture(scope="module")
 def batch_run(tmp_path_factory) -> dict:
-    """The shipped scenes (small) and a broken one, batched with --validate, --golden, --report and --junit.
+    """The shipped scenes (small) and a broken one, batched with --validate, --golden, --continuity, --report and --junit.
     Goldens: cylinder's rendered at other samples (a mismatch), hood's missing, the others the same render."""
     root = tmp_path_factory.mktemp("ci_report")
     scenes, golden, out = root / "scenes", root / "golden", root / "out"
@@ -60,7 +60,7 @@ def batch_run(tmp_path_factory) -> dict:
         path.unlink()
     small_scene("cylinder", scenes / "cylinder.toml", samples=1)
     (scenes / "broken.toml").write_text((scenes / "hood.toml").read_text().replace("radius", "radios", 1))
-    code, output = run("batch", scenes, "-o", out, "-j", "1", "--validate", "--golden", golden,
+    code, output = run("batch", scenes, "-o", out, "-j", "1", "--validate", "--golden", golden, "--continuity",
                        "--report", out / "report.html", "--junit", out / "junit.xml", "--json", out / "batch.json")
     assert code == 1, output  # a scene failed, and cylinder failed its golden check
     return {"root": root, "out": out, "output": output, "report": json.loads((out / "batch.json").read_text())}
@@ -118,6 +118,50 @@ def test_report_in_a_browser_shows_every_scene_the_failure_and_loads_every_image
     assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+#: The seam-classes cell of each row: its text, and the links it holds.
+CONTINUITY = """[...document.querySelectorAll('#scenes tbody tr')].map(tr => {
+    const cell = tr.querySelector('td.continuity');
+    return {name: tr.dataset.name, text: cell.innerText,
+            links: Object.fromEntries([...cell.querySelectorAll('a')].map(a => [a.textContent, a.href]))}; })"""
+
+
+def test_report_shows_the_seam_classes_of_batch_continuity(batch_run, page):
+    """Issue 17's row shows issue 16's seam classes: g1_join one G1 edge (its known class), the teapot's seams G1
+    and G2 as `rtreflect continuity` finds them, no seams on the single-patch scenes, nothing for the broken one."""
+    cells = {cell["name"]: cell for cell in page.evaluate(CONTINUITY)}
+    records = {Path(s["scene"]).stem: s["continuity"] for s in batch_run["report"]["scenes"]}
+    assert records["broken"] is None and "not run" in cells["broken"]["text"]
+    assert records["g1_join"]["counts"] == {"open": 0, "G0": 0, "G1": 1, "G2": 0}
+    assert "PASS" in cells["g1_join"]["text"] and "1 G1" in cells["g1_join"]["text"]
+    teapot = records["teapot"]["counts"]
+    assert teapot["open"] == 0 and teapot["G1"] > 0 and teapot["G2"] > 0
+    assert f"{teapot['G1']} G1, {teapot['G2']} G2" in cells["teapot"]["text"]
+    jump = records["g1_join"]["worst"]["g2_max_rel"]
+    assert jump > 0.05 and f"curvature jump {100 * jump:.0f}%" in cells["g1_join"]["text"]
+    for name in ("hood", "cylinder"):
+        assert "no shared edges" in cells[name]["text"] and records[name]["edges"] == []
+    for name in ("g1_join", "teapot"):  # the links lead to the files written beside the renders
+        links = cells[name]["links"]
+        assert set(links) == {"continuity JSON", "charts"}, links
+        for href in links.values():
+            assert Path(href.removeprefix("file://")).is_file(), href
+        document = json.loads((batch_run["out"] / f"{name}.continuity.json").read_text())
+        assert len(document["edges"]) == len(records[name]["edges"])
+
+
+def test_batch_continuity_fails_below_require_in_exit_status_and_junit(batch_run, tmp_path):
+    scenes = batch_run["root"] / "scenes"
+    code, output = run("batch", scenes / "g1_join.toml", "-o", tmp_path, "--continuity", "--require", "G2",
+                       "--junit", tmp_path / "j.xml")
+    assert code == 1 and "g1_join: continuity FAIL (require G2): 1 G1" in output, output
+    junit_schema().validate(str(tmp_path / "j.xml"))
+    assert junit_verdicts(tmp_path / "j.xml") == {("g1_join", "render"): "pass", ("g1_join", "continuity"): "fail"}
+    failure = ET.parse(tmp_path / "j.xml").getroot().find(".//testcase[@name='continuity']/failure")
+    assert failure.get("message") == "1 edge short of G2: 0-1 G1"
+    code, output = run("batch", scenes / "g1_join.toml", "-o", tmp_path, "--continuity", "--require", "G3")
+    assert code == 2 and "--require: unknown class" in output
+
+
 def test_sorting_by_status_puts_failures_first(page):
     page.evaluate("document.querySelector('th[data-key=name]').click()")
     assert [row["name"] for row in page.evaluate(ROWS)] == ["broken", "cylinder", "g1_join", "hood", "teapot"]
@@ -136,6 +180,7 @@ def test_batch_junit_is_valid_and_lists_the_batch_verdicts(batch_run):
     assert verdicts[("hood", "golden")] == "skipped"
     for name in ("cylinder", "g1_join", "hood", "teapot"):
         assert verdicts[(name, "render")] == verdicts[(name, "validate")] == "pass"
+        assert verdicts[(name, "continuity")] == "pass"  # no open seam (--require G0)
     failing = {scene for (scene, _), kind in verdicts.items() if kind == "fail"}
     report = batch_run["report"]["scenes"]
     assert failing == {Path(s["scene"]).stem for s in report

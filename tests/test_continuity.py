@@ -337,3 +337,41 @@ def test_png_with_several_scenes_is_refused_before_anything_is_written(tmp_path)
                   "--json", str(tmp_path / "r.json"))
     assert result.returncode == 2 and "--png" in result.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_render_seams_draws_the_g1_seam_in_the_png_and_leaves_the_exr_alone(tmp_path):
+    """`render --seams` (issue 16): g1_join's seam gets the G1 colour in the PNG; the EXR equals a plain render's."""
+    import OpenImageIO as oiio
+
+    from rtreflect.analysis.seampicture import CLASS_COLOURS
+    from rtreflect.output.imagefiles import encode_srgb
+
+    size = ["--width", "192", "--height", "108", "--samples", "1"]
+    plain = _run("render", "scenes/g1_join.toml", "-o", str(tmp_path / "plain"), *size)
+    drawn = _run("render", "scenes/g1_join.toml", "-o", str(tmp_path / "seams"), "--seams", *size)
+    assert plain.returncode == 0 and drawn.returncode == 0, plain.stderr + drawn.stderr
+    exr = [oiio.ImageBuf(str(tmp_path / d / "g1_join.exr")).get_pixels(oiio.FLOAT) for d in ("plain", "seams")]
+    np.testing.assert_array_equal(exr[0], exr[1])
+    png = [oiio.ImageBuf(str(tmp_path / d / "g1_join.png")).get_pixels(oiio.UINT8).astype(int) for d in ("plain", "seams")]
+    yellow = encode_srgb(np.array([[[*CLASS_COLOURS["G1"], 1.0]]], dtype=np.float32))[0, 0, :3].astype(int)
+    is_yellow = [np.all(np.abs(p[:, 40:, :3] - yellow) <= 2, axis=-1) & (p[:, 40:, 3] == 255) for p in png]
+    assert not is_yellow[0].any() and is_yellow[1].sum() > 30  # the G1 seam, ~1 px per row it crosses
+
+
+def test_streamed_seam_filter_equals_drawing_over_the_whole_image():
+    """`seam_filter` draws rows as v·M + C; over any colours (alpha 0 or 1) that must equal `draw_seams` on the whole image."""
+    from rtreflect.analysis.contours import UlmetField
+    from rtreflect.analysis.seamcheck import check_scene
+    from rtreflect.analysis.seampicture import draw_seams, seam_filter
+    from rtreflect.integrator.renderer import Renderer
+
+    scene = load_scene(ROOT / "scenes" / "g1_join.toml").with_image(96, 54, 1)
+    result, renderer = check_scene(scene, lines=False), Renderer(scene)
+    rng = np.random.default_rng(16)
+    background = rng.random((54, 96, 4), dtype=np.float32)
+    background[..., 3] = rng.random((54, 96)) < 0.5  # a render's alpha: surface (1) or nothing (0)
+    whole = draw_seams(background.copy(), UlmetField.of(renderer), result)
+    draw = seam_filter(renderer, result)
+    streamed = np.concatenate([draw(r, background[r:r + 7]) for r in range(0, 54, 7)])
+    assert np.abs(whole - background).max() > 0.5  # something was drawn
+    np.testing.assert_allclose(streamed, whole, atol=1e-5)

@@ -66,14 +66,43 @@ def write_seam_picture(path: Path, result) -> None:
     """Render the scene and write the PNG with the seams, labels and legend drawn over it."""
     from ..integrator.renderer import Renderer
 
-    scene = result.scene
-    renderer = Renderer(scene)
+    renderer = Renderer(result.scene)
     rgba = renderer.render().rgba.copy()
-    field = UlmetField.of(renderer)
-    W, H = scene.image.width, scene.image.height
     background = rgba[..., 3:4]  # composite over white so the black text and coloured seams read everywhere
     rgba[..., :3] = rgba[..., :3] * background + (1.0 - background)
     rgba[..., 3] = 1.0
+    _save(path, draw_seams(rgba, UlmetField.of(renderer), result))
+
+
+def seam_filter(renderer, result):
+    """The PNG filter (`imagefiles.PngFilter`) of `render --seams`: `draw_seams` applied to rows as they stream out.
+
+    Every drawing step of `draw_seams` (coverage blends, the font's blends, the legend's
+    swatches) maps a pixel's value v to v·M + C, per channel, with M and C set by the seams
+    alone; so drawing once over 0 (gives C) and once over 1 (gives M + C) captures the
+    whole picture, and rows are drawn before the render exists, as the overlay's are.
+    Alpha is the exception (`overlay.blend` keeps the larger of pixel and line coverage):
+    it is the larger of the render's and the drawing's own, exact wherever the render is
+    opaque or empty, i.e. everywhere but the silhouette's anti-aliased edge.
+    """
+    scene = renderer.scene
+    W, H = scene.image.width, scene.image.height
+    field = UlmetField.of(renderer)
+    C = draw_seams(np.zeros((H, W, 4), np.float32), field, result)
+    M = draw_seams(np.ones((H, W, 4), np.float32), field, result) - C
+
+    def draw(row0: int, rgba_rows: np.ndarray) -> np.ndarray:
+        rows = slice(row0, row0 + len(rgba_rows))
+        out = (rgba_rows * M[rows] + C[rows]).astype(np.float32)
+        out[..., 3] = np.maximum(rgba_rows[..., 3], C[rows, :, 3])
+        return out
+
+    return draw
+
+
+def draw_seams(rgba: np.ndarray, field: UlmetField, result) -> np.ndarray:
+    """``rgba`` (H, W, 4 linear) with the seams of ``result`` drawn by class, their labels and the legend."""
+    W, H = rgba.shape[1], rgba.shape[0]
     labels = []
     for cls, colour in CLASS_COLOURS.items():
         polylines = []
@@ -96,7 +125,7 @@ def write_seam_picture(path: Path, result) -> None:
         clash = any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed)
         if 0 <= x < W and 0 <= y < H and not clash:  # symmetric copies of a seam carry the same label: once
             placed.append(box)
-            rgba[int(y) - 2:int(y) + 3, int(x) - 2:int(x) + 3, :3] = 0.0  # the point the label refers to
+            rgba[int(y) - 2:int(y) + 3, int(x) - 2:int(x) + 3] = (0.0, 0.0, 0.0, 1.0)  # the point the label refers to
             rgba = _text(rgba, int(x) + 6, int(y) - 6, text)
     # Legend, top left: a swatch and the class's meaning.
     th = result.thresholds
@@ -104,9 +133,9 @@ def write_seam_picture(path: Path, result) -> None:
                "G1": f"G1: tangent, curvature jump > {th.g2:.0%}", "G2": f"G2: curvature jump <= {th.g2:.0%}"}
     for i, (cls, colour) in enumerate(CLASS_COLOURS.items()):
         y = 10 + i * (FONT_PX + 6)
-        rgba[y:y + FONT_PX, 10:30, :3] = colour
+        rgba[y:y + FONT_PX, 10:30] = (*colour, 1.0)  # opaque, also over a render's transparent background
         rgba = _text(rgba, 36, y + FONT_PX - 2, meaning[cls])
-    _save(path, rgba)
+    return rgba
 
 
 def _save(path: Path, rgba: np.ndarray) -> None:

@@ -10,7 +10,11 @@ Each check turns into a JSON-ready record stored with the scene's batch record (
 - ``golden``: `golden_reports`, the checks of `GOLDEN_CHECKS` (colour, AOVs) of
   ``OUTDIR/NAME.exr`` against ``DIR/NAME.exr``; a failed check writes its diff image
   ``OUTDIR/NAME.CHECK.diff.png`` (as `assert_matches_golden` does). A scene without a
-  golden image is not compared (``status: "missing"``): not a failure, and not silent.
+  golden image is not compared (``status: "missing"``): not a failure, and not silent;
+- ``continuity``: `analysis.seamcheck.check_scene` (exact G0/G1/G2 at every shared edge; the
+  reflection lines' kinks are left to `rtreflect continuity`) with the counts per class, the worst values, one short row per
+  edge, and its full report and charts written as ``OUTDIR/NAME.continuity.json`` and
+  ``.continuity.charts.png``; it fails when an edge falls short of the required class.
 """
 
 from __future__ import annotations
@@ -69,4 +73,46 @@ def golden_record(name: str, outdir: Path, golden_dir: Path) -> dict:
                                        "pixels": report.pixels, "failpercent": report.failpercent,
                                        "diff_image": None if diff_image is None else str(diff_image)}
     record["seconds"] = time.perf_counter() - start
+    return record
+
+
+def continuity_file(name: str, outdir: Path) -> Path:
+    """``OUTDIR/NAME.continuity.json``: the full `rtreflect continuity --json` report of a batch's scene."""
+    return Path(outdir) / f"{name}.continuity.json"
+
+
+def continuity_record(scene: Scene, require: str, outdir: Path) -> dict:
+    """The continuity check of one scene at the default tolerances: passed when every edge reaches ``require``."""
+    from ..analysis.continuity import class_rank
+    from ..analysis.seamcheck import check_scene, document
+    from ..analysis.seampicture import charts_path, write_charts
+    from ..output.imagefiles import write_json
+
+    start = time.perf_counter()
+    report = continuity_file(scene.output.name, outdir)
+    record = {"require": require, "passed": False, "edges": [], "counts": {}, "worst_class": None, "worst": {},
+              "json": None, "charts": None, "error": None}
+    try:
+        # Classes only: the reflection lines' kinks (`rtreflect continuity`'s default) cost ~7x more on the teapot.
+        result = check_scene(scene, lines=False)
+        write_json(report, document([result], require))
+        charts = charts_path(report) if result.edges else None
+        if charts is not None:
+            write_charts(charts, [result])
+    except RtreflectError as exc:
+        record.update(error=str(exc), seconds=time.perf_counter() - start)
+        return record
+    edges = result.edges
+    peak = lambda values: max((v for v in values if v is not None), default=None)  # noqa: E731
+    record.update(
+        passed=result.meets(require), counts=result.counts(), json=str(report),
+        charts=None if charts is None else str(charts),
+        worst_class=min((e.cls for e in edges), key=class_rank, default=None),
+        worst={"g0_max": peak(e.g0_max for e in edges), "g1_max_deg": peak(e.g1_max_deg for e in edges),
+               "g2_max_rel": peak(e.g2_max_rel for e in edges),
+               "line_kink_max_deg": peak(e.line_kink_max_deg for e in edges)},
+        edges=[{"patches": [e.seam.a.patch, e.seam.b.patch], "class": e.cls, "g0_max": e.g0_max,
+                "g1_max_deg": e.g1_max_deg, "g2_max_rel": e.g2_max_rel, "line_kink_max_deg": e.line_kink_max_deg}
+               for e in edges],
+        seconds=time.perf_counter() - start)
     return record

@@ -149,7 +149,35 @@ def batch_cases(records: list[dict]) -> list[TestCase]:
             cases.append(validate_case(classname, record["validate"]))
         if record.get("golden"):
             cases.extend(golden_cases(classname, record["golden"]))
+        if record.get("continuity"):
+            cases.append(continuity_case(classname, record["continuity"]))
     return cases
+
+
+def continuity_case(classname: str, record: dict) -> TestCase:
+    """A continuity record (`checks.continuity_record`) as the case ``continuity``: fails on an edge short of
+    the required class (open, by default)."""
+    if record.get("error"):
+        return TestCase(classname, "continuity", record["seconds"], failure=record["error"], failure_type=BAD_INPUT)
+    counts = ", ".join(f"{n} {cls}" for cls, n in record["counts"].items() if n) or "no shared edges"
+    worst = record["worst"]
+    n = len(record["edges"])
+    details = (f"{n} edge{'' if n == 1 else 's'} ({counts}); worst g0 {_g(worst.get('g0_max'))}, "
+               f"g1 {_g(worst.get('g1_max_deg'))} deg, g2 {_g(worst.get('g2_max_rel'))} relative; "
+               f"require {record['require']}")
+    failure = None
+    if not record["passed"]:
+        from ..analysis.continuity import class_rank
+
+        short = [f"{e['patches'][0]}-{e['patches'][1]} {e['class']}" for e in record["edges"]
+                 if class_rank(e["class"]) < class_rank(record["require"])]
+        failure = (f"{len(short)} edge{'' if len(short) == 1 else 's'} short of {record['require']}: "
+                   f"{', '.join(short[:5])}{' ...' if len(short) > 5 else ''}")
+    return TestCase(classname, "continuity", record["seconds"], failure=failure, details=details)
+
+
+def _g(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3g}"
 
 
 def diff_case(report, seconds: float) -> TestCase:

@@ -4,7 +4,8 @@
 scene records (``rtreflect batch --json``, with the ``validate`` and ``golden`` records of
 `rtreflect.ci.checks`): a summary line, then a row per scene with a thumbnail linking to
 the full image, the overlay, the validation numbers, the golden comparison with its diff
-image, and a failed scene's one-line reason. The page needs no server and no network:
+image, the seam classes of the continuity check (counts per class, worst values, links to
+its JSON and charts), and a failed scene's one-line reason. The page needs no server and no network:
 thumbnails are small PNGs in ``STEM_files/`` beside the page (lazy-loaded, so hundreds of
 rows open fast), full images are linked by relative path, and the few lines of script
 (sorting by a column) are inline.
@@ -65,7 +66,7 @@ def thumbnail(source: Path, target: Path, width: int = THUMB_WIDTH) -> bool:
 def _verdict(record: dict) -> str:
     if record["status"] in ("failed", "interrupted"):
         return record["status"]
-    checks = [record.get("validate"), record.get("golden")]
+    checks = [record.get("validate"), record.get("golden"), record.get("continuity")]
     if any(c is not None and (c.get("passed") is False or c.get("status") in ("mismatch", "error")) for c in checks):
         return "check failed"
     return "up to date" if record["status"] == "skipped" else "passed"
@@ -84,6 +85,8 @@ def summary(records: list[dict]) -> dict:
         "golden": count(lambda r: r.get("golden") is not None),
         "golden_failed": count(lambda r: (r.get("golden") or {}).get("status") in ("mismatch", "error")),
         "golden_missing": count(lambda r: (r.get("golden") or {}).get("status") == "missing"),
+        "continuity": count(lambda r: r.get("continuity") is not None),
+        "continuity_failed": count(lambda r: r.get("continuity") is not None and not r["continuity"]["passed"]),
         "checks_failed": count(lambda r: _verdict(r) == "check failed"),
     }
 
@@ -158,7 +161,19 @@ def _row(record: dict, folder: Path, assets: Path, outdir: Path) -> dict:
         "exr": _relative(exr, folder) if exr is not None else None,
         "contours": _relative(contours, folder) if contours is not None else None,
         "validate": record.get("validate"), "golden": golden, "golden_checks": golden_checks,
+        "continuity": _continuity(record.get("continuity"), folder, outdir),
     }
+
+
+def _continuity(record: dict | None, folder: Path, outdir: Path) -> dict | None:
+    """The continuity cell: the record with its JSON and charts linked relative to the page (when they exist)."""
+    if record is None:
+        return None
+    links = {}
+    for key in ("json", "charts"):
+        found = _found(record[key], outdir) if record.get(key) else None
+        links[key] = _relative(found, folder) if found is not None and found.is_file() else None
+    return {**record, "links": links}
 
 
 def records_from_folder(outdir: Path) -> list[dict]:
@@ -166,7 +181,9 @@ def records_from_folder(outdir: Path) -> list[dict]:
     or NAME.exr in it (not diff images), as rendered; the images do not record their scene file, so NAME stands in."""
     names: dict[str, list[str]] = {}
     for image in sorted(Path(outdir).iterdir()):
-        if image.suffix in (".png", ".exr") and ".diff" not in image.suffixes and not image.name.startswith("."):
+        # Not diff images, nor the charts of a batch's --continuity (NAME.continuity.charts.png).
+        if (image.suffix in (".png", ".exr") and not {".diff", ".continuity"} & set(image.suffixes)
+                and not image.name.startswith(".")):
             names.setdefault(image.stem, []).append(str(image))
     contours = {p.name.removesuffix(".contours.json") for p in Path(outdir).glob("*.contours.json")}
     records = []
@@ -174,5 +191,5 @@ def records_from_folder(outdir: Path) -> list[dict]:
         if name in contours:
             outputs.append(str(Path(outdir) / f"{name}.contours.json"))
         records.append({"scene": name, "name": name, "status": "rendered", "seconds": 0.0, "outputs": outputs,
-                        "error": None, "validate": None, "golden": None})
+                        "error": None, "validate": None, "golden": None, "continuity": None})
     return records

@@ -31,19 +31,26 @@ class SceneOutput:
 
 
 def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, max_memory: int | None = None,
-                    progress: Callable[[int], None] | None = None, remove_dead: bool = True) -> SceneOutput:
+                    progress: Callable[[int], None] | None = None, remove_dead: bool = True,
+                    seams=None) -> SceneOutput:
     """Render ``scene`` into ``outdir/NAME.exr|.png`` within ``max_memory`` bytes of working memory.
 
     ``progress(pixels)`` is called as tiles are written. Raises `RtreflectError` (before
     building anything) when even one-pixel tiles would not fit the budget, and on
     write errors; on any error or interrupt no output file is left half-written.
-    ``remove_dead``: as in `imagefiles.prepare_output_folder`.
+    ``remove_dead``: as in `imagefiles.prepare_output_folder`. ``seams``: a continuity result
+    (`analysis.seamcheck.check_scene`) whose seams are drawn into the PNG after the overlay
+    (`render --seams`; the EXR is unchanged).
     """
     threads = threads or default_threads()
     scene = resolve(scene)
     tile_rays = rays_per_tile(scene, max_memory or default_max_memory(), threads)
     renderer = Renderer(scene)
     png_filter, extra_files = overlay_for(scene, renderer)
+    if seams is not None and scene.output.png:
+        from ..analysis.seampicture import seam_filter
+
+        png_filter = then(png_filter, seam_filter(renderer, seams))
     tally = ImageTally(scene)
 
     def sink(tile) -> None:
@@ -60,3 +67,10 @@ def overlay_for(scene: Scene, renderer: Renderer | None = None) -> tuple[PngFilt
     if not scene.render.overlay:
         return None, None
     return overlay_outputs(renderer or Renderer(scene))
+
+
+def then(first: PngFilter | None, second: PngFilter) -> PngFilter:
+    """``second`` applied to the rows ``first`` (if any) has drawn."""
+    if first is None:
+        return second
+    return lambda row0, rows: second(row0, first(row0, rows))
