@@ -58,6 +58,9 @@ class SceneContinuity:
 def check_scene(scene, g0: float | None = None, g1: float = DEFAULT_G1_DEG, g2: float = DEFAULT_G2,
                 lines: bool = True) -> SceneContinuity:
     """Find the scene's seams, measure them, and (``lines``) the reflection lines' kinks where they cross them."""
+    from ..integrator.autorig import resolve
+
+    scene = resolve(scene)  # the automatic camera and tubes (a CAD part, a scene without [lights]) made concrete
     patches = list(scene.surfaces)
     size = part_size(patches)
     th = Thresholds(DEFAULT_G0_FRACTION * size if g0 is None else g0, g1, g2)
