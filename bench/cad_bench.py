@@ -54,10 +54,10 @@ print(json.dumps({{"peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 """
 
 
-def big_plate(faces: int) -> Path:
-    """A plate of about ``faces`` faces (2 per filleted hole), cached in the temporary folder."""
-    side = max(1, round(math.sqrt(faces / 2)))
-    path = Path(tempfile.gettempdir()) / "rtreflect-bench" / f"plate_{side}x{side}.step"
+def cached_step(name: str, what: str, build) -> Path:
+    """A generated STEP model, built once by ``build()`` (an OCP shape, via tools/make_parts.py) and cached
+    in the temporary folder."""
+    path = Path(tempfile.gettempdir()) / "rtreflect-bench" / name
     if not path.is_file():
         path.parent.mkdir(parents=True, exist_ok=True)
         sys.path.insert(0, str(ROOT / "tools"))
@@ -66,29 +66,29 @@ def big_plate(faces: int) -> Path:
         from rtreflect.exchange.occt import silence_messages
 
         silence_messages()
-        print(f"building {path} ({side}×{side} filleted holes; once)...", flush=True)
-        make_parts.write_step(make_parts.plate(side, side), path)
+        print(f"building {path} ({what}; once)...", flush=True)
+        make_parts.write_step(build(make_parts), path)
     return path
+
+
+def big_plate(faces: int) -> Path:
+    """A plate of about ``faces`` faces (2 per filleted hole), cached in the temporary folder."""
+    side = max(1, round(math.sqrt(faces / 2)))
+    return cached_step(f"plate_{side}x{side}.step", f"{side}×{side} filleted holes",
+                       lambda make_parts: make_parts.plate(side, side))
 
 
 def many_blocks(faces: int) -> Path:
     """About ``faces`` faces as a grid of filleted blocks (26 faces each, separate solids): many ordinary
     faces, none with hundreds of holes (the plate's top face has one per hole). Cached like `big_plate`."""
     count = max(1, round(faces / 26))
-    path = Path(tempfile.gettempdir()) / "rtreflect-bench" / f"blocks_{count}.step"
-    if not path.is_file():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        sys.path.insert(0, str(ROOT / "tools"))
-        sys.path.insert(0, str(ROOT))
-        import make_parts
+
+    def build(make_parts):
         from OCP.BRep import BRep_Builder
         from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
         from OCP.TopoDS import TopoDS_Compound
         from OCP.gp import gp_Trsf, gp_Vec
-        from rtreflect.exchange.occt import silence_messages
 
-        silence_messages()
-        print(f"building {path} ({count} filleted blocks; once)...", flush=True)
         block = make_parts.filleted_block()
         compound, builder = TopoDS_Compound(), BRep_Builder()
         builder.MakeCompound(compound)
@@ -97,8 +97,9 @@ def many_blocks(faces: int) -> Path:
             move = gp_Trsf()
             move.SetTranslation(gp_Vec(50.0 * (k % side), 40.0 * (k // side), 0))
             builder.Add(compound, BRepBuilderAPI_Transform(block, move, True).Shape())  # copies: distinct faces
-        make_parts.write_step(compound, path)
-    return path
+        return compound
+
+    return cached_step(f"blocks_{count}.step", f"{count} filleted blocks", build)
 
 
 def measure(code: str, repeat: int) -> dict:

@@ -99,9 +99,9 @@ def test_output_folder_under_a_file(tmp_path: Path) -> None:
     assert_one_line_error(render_in_process(scene_path, outdir), str(outdir), "not writable")
 
 
-def test_output_folder_not_writable(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Tests run as root, whom chmod does not stop: refuse file creation in the folder instead."""
-    scene_path = write_scene(tmp_path)
+def unwritable_outdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[Path, list]:
+    """An output folder that refuses file creation (tests run as root, whom chmod does not stop), and the list
+    of scenes a renderer was built for (none may be, when the folder is found unwritable up front)."""
     outdir = tmp_path / "out"
     outdir.mkdir()
     real_mkstemp = tempfile.mkstemp
@@ -112,8 +112,15 @@ def test_output_folder_not_writable(tmp_path: Path, monkeypatch: pytest.MonkeyPa
         return real_mkstemp(*args, dir=dir, **kwargs)
 
     monkeypatch.setattr(tempfile, "mkstemp", refuse)
-    rendered = []
+    rendered: list = []
     monkeypatch.setattr("rtreflect.output.streaming.Renderer", lambda scene: rendered.append(scene))
+    return outdir, rendered
+
+
+def test_output_folder_not_writable(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Tests run as root, whom chmod does not stop: refuse file creation in the folder instead."""
+    scene_path = write_scene(tmp_path)
+    outdir, rendered = unwritable_outdir(tmp_path, monkeypatch)
     line = assert_one_line_error(render_in_process(scene_path, outdir), str(outdir), "Permission denied")
     assert rendered == [], f"rendered before finding the folder unwritable: {line}"
     assert snapshot(outdir) == {}
@@ -123,18 +130,7 @@ def test_batch_into_an_unwritable_folder_fails_up_front(tmp_path: Path, monkeypa
     """`batch` as `render`: exit 2 with one line before building any scene, not one failure per scene (issue 11)."""
     write_scene(tmp_path, name="a.toml")
     write_scene(tmp_path, scene={**valid_scene(), "output": {"name": "other"}}, name="b.toml")
-    outdir = tmp_path / "out"
-    outdir.mkdir()
-    real_mkstemp = tempfile.mkstemp
-
-    def refuse(*args, dir=None, **kwargs):
-        if dir is not None and Path(dir) == outdir:
-            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(outdir))
-        return real_mkstemp(*args, dir=dir, **kwargs)
-
-    monkeypatch.setattr(tempfile, "mkstemp", refuse)
-    rendered = []
-    monkeypatch.setattr("rtreflect.output.streaming.Renderer", lambda scene: rendered.append(scene))
+    outdir, rendered = unwritable_outdir(tmp_path, monkeypatch)
     result = CliRunner().invoke(cli, ["batch", str(tmp_path), "-o", str(outdir), "-j", "1"])
     line = assert_one_line_error(result, str(outdir), "Permission denied")
     assert rendered == [] and result.stdout == "", line
