@@ -60,6 +60,15 @@ VIEWS = ("iso", "top", "bottom", "front", "back", "left", "right")
 VIEW_HEIGHT = 3.0
 #: `[render] normals`: the exact NURBS normal, or the analysis-mesh normal CAD tools use (for comparison).
 NORMALS_MODES = ("exact", "mesh")
+#: `[render] shading`: the surface under the stripes lit from the eye (`modes.shading`), or one flat colour.
+SHADING_MODES = ("lambert", "flat")
+#: `[render] blur` at most 1: the stripe's soft edge runs over [r(1 − blur), r(1 + blur)] (`modes.profile`), whose
+#: inner end must stay at or beyond the tube's axis.
+MAX_BLUR = 1.0
+#: `[render] overlay` besides true and false: NAME.png plain, the overlay drawn in NAME.side.png beside a copy of it.
+OVERLAY_SIDE = "side"
+#: Widest `[render] overlay_width` in pixels: wider lines hide the stripes they are there to check.
+MAX_OVERLAY_WIDTH = 16.0
 
 
 @dataclass(frozen=True)
@@ -111,10 +120,15 @@ class RenderSettings:
     tessellation: int = 16
     surface_color: np.ndarray = field(default_factory=lambda: np.array([0.18, 0.18, 0.2]))
     line_color: np.ndarray = field(default_factory=lambda: np.array([1.0, 1.0, 1.0]))
-    background: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    overlay: bool = False  # draw the analytic contours over the PNG, write NAME.contours.json
+    #: A dark neutral grey (sRGB 64, about 25 %): opaque PNGs on light slides and dark screens alike show the part's
+    #: outline against it, and white lines stay visible where they leave the part (issue 13).
+    background: np.ndarray = field(default_factory=lambda: np.full(3, 0.05))
+    overlay: bool | str = False  # draw the analytic contours over the PNG (or OVERLAY_SIDE), write NAME.contours.json
     overlay_color: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.2, 0.1]))
     normals: str = "exact"  # "exact": NURBS normal at the exact hit; "mesh": interpolated vertex normals on the mesh
+    shading: str = "lambert"  # one of SHADING_MODES: the surface colour lit from the eye, or flat
+    blur: float = 0.0  # soft stripe edge, a fraction of the radius (`modes.profile`); 0: the hard tube of eq. 4
+    overlay_width: float = 2.0  # pixels: the overlay's line width, anti-aliased
 
 
 @dataclass(frozen=True)
@@ -136,7 +150,8 @@ TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "camera": ("projection", "eye", "look_at", "up", "fov", "view_height", "view"),
     "lights": ("auto", "point", "normal", "direction", "positions", "spacing", "count", "radius", "length"),
     "surface": ("name", "degree", "points", "knots_u", "knots_v", "weights", "file"),
-    "render": ("tessellation", "surface_color", "line_color", "background", "overlay", "overlay_color", "normals"),
+    "render": ("tessellation", "surface_color", "line_color", "background", "shading", "blur", "overlay",
+               "overlay_color", "overlay_width", "normals"),
     "output": ("name", "exr", "png"),
 }
 #: The tables `Scene.replace` re-reads, in the order a scene file is read (so the first error is the file's first).
@@ -207,7 +222,7 @@ class Scene:
         """What the rendered files depend on: every input file, and the settings the command line can override."""
         image, render = self.image, self.render
         return (f"{self.inputs_sha256}-{image.width}x{image.height}x{image.samples}-{render.normals}"
-                f"{'-overlay' if render.overlay else ''}")
+                f"{'-overlay' if render.overlay else ''}{'-side' if render.overlay == OVERLAY_SIDE else ''}")
 
     def replace(self, *, image=None, camera=None, lights=None, surfaces=None, render=None, output=None) -> "Scene":
         """A copy with some tables changed, validated as a scene file is (one-line `SceneError`s naming the field).
@@ -264,7 +279,7 @@ class Scene:
         values = {"width": width, "height": height, "samples": samples}
         return self.replace(image={k: v for k, v in values.items() if v is not None})
 
-    def with_render(self, overlay: bool | None = None, normals: str | None = None) -> "Scene":
+    def with_render(self, overlay: bool | str | None = None, normals: str | None = None) -> "Scene":
         """The same scene with `[render] overlay` and/or `normals` overridden (command-line options), validated alike."""
         values = {"overlay": overlay, "normals": normals}
         return self.replace(render={k: v for k, v in values.items() if v is not None})
@@ -552,10 +567,18 @@ def _parse_render(t: _Table) -> RenderSettings:
         colors[key] = t.array(key, (3,), getattr(defaults, key))
         if np.any(colors[key] < 0):
             raise t.error(key, f"colour components must be >= 0, got {colors[key].tolist()}")
-    overlay = t.boolean("overlay", defaults.overlay)
+    overlay = t.raw("overlay", defaults.overlay)
+    if not isinstance(overlay, bool) and overlay != OVERLAY_SIDE:
+        raise t.error("overlay", f"must be true, false or {OVERLAY_SIDE!r}, got "
+                                 f"{quote(overlay) if isinstance(overlay, str) else _kind(overlay)}")
     normals = t.string("normals", defaults.normals, NORMALS_MODES)
+    shading = t.string("shading", defaults.shading, SHADING_MODES)
+    blur = float(t.number("blur", defaults.blur, low=0, high=MAX_BLUR))
+    overlay_width = float(t.number("overlay_width", defaults.overlay_width, low=0, high=MAX_OVERLAY_WIDTH,
+                                   open_low=True))
     t.finish()
-    return RenderSettings(tess, **colors, overlay=overlay, normals=normals)
+    return RenderSettings(tess, **colors, overlay=overlay, normals=normals, shading=shading, blur=blur,
+                          overlay_width=overlay_width)
 
 
 def _parse_output(t: _Table, path: Path) -> OutputSpec:

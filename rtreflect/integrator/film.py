@@ -1,9 +1,11 @@
 """Film: the supersampled colour image and the per-pixel AOVs (DESIGN.md, "EXR channels").
 
-``R G B A`` come from the s×s samples of each pixel: the colour is line coverage
-blending ``line_color`` over ``surface_color``, with ``background`` where a sample
-hits nothing (so with a black background RGB is premultiplied by A). The AOVs
-come from the ray through the pixel centre.
+``R G B A`` come from the s×s samples of each pixel: a sample that hits shows
+``line_color`` with its stripe weight w (1 or 0 for the hard tube, `modes.profile`)
+over the surface colour scaled by its shading factor k (`modes.shading`), i.e.
+w·line_color + (1 − w)·k·surface_color; a sample that hits nothing shows ``background``.
+The pixel is their mean (so with a black background RGB is premultiplied by A). The
+AOVs come from the ray through the pixel centre.
 """
 
 from __future__ import annotations
@@ -21,12 +23,19 @@ def aov_planes(aovs: dict[str, np.ndarray]) -> np.ndarray:
                             aovs["line.id"], aovs["line.dist"]])
 
 
-def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, background) -> np.ndarray:
-    """(P, 4) linear RGBA from per-sample (P, s²) hit and lit flags."""
+def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, background,
+                   shade: np.ndarray | None = None) -> np.ndarray:
+    """(P, 4) linear RGBA from per-sample (P, s²) hit flags and line weights ``lit`` (flags, or weights in [0, 1]).
+
+    ``shade``: per-sample (P, s²) factors k of the surface colour (None: flat, k = 1).
+    With flags and no shade the sums are whole sample counts, as they always were.
+    """
     samples = hit.shape[1]
     n_hit = hit.sum(axis=1)
-    n_lit = (hit & lit).sum(axis=1)
-    rgb = (n_lit[:, None] * np.asarray(line_color) + (n_hit - n_lit)[:, None] * np.asarray(surface_color)
+    weight = np.where(hit, lit, 0)
+    n_lit = weight.sum(axis=1)
+    unlit = np.where(hit, 1 - weight, 0) if shade is None else np.where(hit, (1 - weight) * shade, 0.0)
+    rgb = (n_lit[:, None] * np.asarray(line_color) + unlit.sum(axis=1)[:, None] * np.asarray(surface_color)
            + (samples - n_hit)[:, None] * np.asarray(background)) / samples
     return np.column_stack([rgb, n_hit / samples])
 

@@ -16,7 +16,7 @@ import os
 import time
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Iterator
 
 import numpy as np
@@ -26,6 +26,8 @@ from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color
 from ..modes.lights import TubeLights, reflect
+from ..modes.profile import stripe_reach, stripe_weight
+from ..modes.shading import shade_factor
 from ..trace.meshnormals import trace_mesh, vertex_normals
 from ..exchange.scene import ImageSpec, Scene
 from ..geometry.surfaces import SurfaceSet
@@ -130,6 +132,10 @@ class Renderer:
         self.accelerator = Accelerator(self.tessellation)
         self.camera = Camera(scene.camera, scene.image.width, scene.image.height)
         self.lights = TubeLights.from_spec(scene.lights)
+        # The tubes as the stripes see them: out to where the soft edge's weight ends (`[render] blur`), so the
+        # occlusion test serves every sample the profile lights; without blur, the tubes of eq. (4) themselves.
+        reach = stripe_reach(self.lights.radius, scene.render.blur)
+        self.stripe_lights = self.lights if reach == self.lights.radius else replace(self.lights, radius=reach)
         self.clock = StageClock()
         # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
         self.vertex_normals = vertex_normals(self.tessellation, self.surfaces) if scene.render.normals == "mesh" else None
@@ -141,7 +147,11 @@ class Renderer:
 
     # -- one batch of rays ---------------------------------------------------------------
     def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
-        """Exact hits, reflected directions s, tube distances and 'lit' flags (a tube within its radius, unoccluded)."""
+        """Exact hits, reflected directions s, tube distances and 'lit' flags (a tube within its radius, unoccluded).
+
+        With ``[render] blur`` the radius is the stripe profile's reach (`stripe_lights`): 'lit' then means
+        the sample may show some of the line, by its weight `stripe_weight` of the nearest tube's distance.
+        """
         hits = self.trace(origins, directions)
         n_rays = len(origins)
         s = np.full_like(directions, np.nan)
@@ -155,7 +165,7 @@ class Renderer:
         with self.clock.stage("tubes (eq. 3, 4)"):
             # a, the unit vector towards the eye, is the reversed ray direction for either camera.
             s[idx] = reflect(-directions[idx], n)
-            tubes = self.lights.reach(R, s[idx])
+            tubes = self.stripe_lights.reach(R, s[idx])
             line_id[idx], line_dist[idx] = tubes.line_id, tubes.line_dist
             t_tube = tubes.t_candidate
             cand = np.flatnonzero(tubes.candidate)
@@ -165,6 +175,25 @@ class Renderer:
                 blocked = occluded(self.accelerator, self.tessellation, self.surfaces, start, s[idx[cand]], t_tube[cand])
             lit[idx[cand]] = ~blocked
         return shading
+
+    def line_weight(self, shading: Shading) -> np.ndarray:
+        """Per sample the weight of ``line_color`` (film.py): 'lit' times the stripe profile of the nearest tube's d.
+
+        Without blur the profile is the hard tube that 'lit' already decided (d ≤ r): the flags themselves.
+        """
+        blur = self.scene.render.blur
+        if blur == 0:
+            return shading.lit
+        return np.where(shading.lit, stripe_weight(shading.line_dist, self.lights.radius, blur), 0.0)
+
+    def surface_shade(self, shading: Shading) -> np.ndarray | None:
+        """Per sample the factor k of ``surface_color`` (`modes.shading`; 1 where no hit), or None when flat."""
+        if self.scene.render.shading == "flat":
+            return None
+        k = np.ones(len(shading.directions))
+        idx = np.flatnonzero(shading.hits.hit)
+        k[idx] = shade_factor(shading.hits.N[idx], shading.directions[idx], self.scene.render.shading)
+        return k
 
     def pixel_aovs(self, rows: np.ndarray, cols: np.ndarray) -> dict[str, np.ndarray]:
         """Float64 AOVs of the pixel-centre rays (DESIGN.md channel list), plus the shading behind them."""
@@ -188,14 +217,17 @@ class Renderer:
         spans gives the same bytes.
         """
         width, s = self.scene.image.width, self.scene.image.samples
+        settings = self.scene.render
         rows, cols = np.divmod(np.arange(start, stop), width)
         offsets = sample_offsets(s)
         ns = len(offsets)
         with self.clock.stage("camera rays"):
             origins, directions = self.camera.rays(np.repeat(rows, ns), np.repeat(cols, ns), np.tile(offsets, (len(rows), 1)))
         shading = self.shade(origins, directions)
-        rgba = coverage_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
-                              self.scene.render.surface_color, self.scene.render.line_color, self.scene.render.background)
+        shade = self.surface_shade(shading)
+        rgba = coverage_color(shading.hits.hit.reshape(-1, ns), self.line_weight(shading).reshape(-1, ns),
+                              settings.surface_color, settings.line_color, settings.background,
+                              None if shade is None else shade.reshape(-1, ns))
         fallbacks = int(shading.hits.fallback.sum())
         fell_back = shading.hits.fallback.reshape(-1, ns).any(axis=1)
         rays = len(origins)
