@@ -368,3 +368,68 @@ def test_validate_fails_a_hit_behind_a_nearer_surface(monkeypatch):
     assert any(f"{int(bad.nearer.sum())} pixels store an exact hit behind a nearer" in r for r in report_bad.reasons)
     assert report_good.passed, (report_good.max_px, report_good.misses, report_good.colour_mismatches,
                                 report_good.reasons)
+
+
+# -- the colour check under shading and soft stripe edges (issue 13) ---------------------------
+
+BLURRED = {"shading": "lambert", "blur": 0.5}
+
+
+def blurred_hood(samples: int = 2):
+    """The hood with tubes 3× as wide (radius 0.15 of the 0.5 spacing): soft edges several pixels across."""
+    return load_scene(SCENES / "hood.toml").with_image(WIDTH, HEIGHT, samples).replace(render=BLURRED,
+                                                                                      lights={"radius": 0.15})
+
+
+def test_shaded_blurred_render_validates():
+    """The correct render with Lambert shading and soft edges passes, with the ramps' pixels checked too."""
+    report = validate_scene(blurred_hood())
+    assert report.passed, (report.reasons, report.colour_mismatches)
+    assert report.colour_checked >= 500 and report.colour_mismatches == 0
+
+
+@pytest.fixture
+def shifted_blurred_lines(monkeypatch):
+    """Lines drawn 30% of a spacing off with soft edges: the colour's 'lit' and d from shifted tubes, AOVs untouched."""
+    original_shade, original_aovs = Renderer.shade, Renderer.aovs
+
+    def shade(self, origins, directions):
+        shading = original_shade(self, origins, directions)
+        shifted = replace(self.stripe_lights, c_k=self.lights.c_k + 0.3 * self.lights.spacing)
+        idx = np.flatnonzero(shading.hits.hit)
+        if len(idx):
+            tubes = shifted.reach(shading.hits.P[idx], shading.s[idx])
+            shading.lit[idx], shading.line_dist[idx] = tubes.candidate, tubes.line_dist
+        return shading
+
+    def aovs(self, shading):  # the AOVs as the correct renderer stores them
+        out = original_aovs(self, shading)
+        idx = np.flatnonzero(shading.hits.hit)
+        if len(idx):
+            tubes = self.stripe_lights.reach(shading.hits.P[idx], shading.s[idx])
+            out["line.id"], out["line.dist"] = out["line.id"].copy(), out["line.dist"].copy()
+            out["line.id"][idx], out["line.dist"][idx] = tubes.line_id, tubes.line_dist
+        return out
+
+    monkeypatch.setattr(Renderer, "shade", shade)
+    monkeypatch.setattr(Renderer, "aovs", aovs)
+
+
+def test_shifted_lines_fail_validation_under_shading_and_blur(shifted_blurred_lines):
+    report = validate_scene(blurred_hood())
+    assert report.max_px <= 0.5 and report.misses == 0  # f is untouched: only the colour check sees the error
+    assert report.colour_mismatches >= 100 and not report.passed
+    assert sum(line.colour_mismatches > 0 for line in report.lines) >= 5
+
+
+def test_line_coverage_inverts_shaded_weighted_blends():
+    from rtreflect.integrator.film import coverage_color
+
+    rng = np.random.default_rng(7)
+    hit = rng.random((200, 9)) < 0.8
+    weight = np.where(rng.random((200, 9)) < 0.5, rng.random((200, 9)), 0.0)
+    k = rng.uniform(0.5, 1.0, 200)  # one shade per pixel: the pixel-centre's, as validate reads it
+    surface, line, background = np.array([0.18, 0.18, 0.2]), [1.0, 0.9, 0.3], [0.05, 0.05, 0.05]
+    rgba = coverage_color(hit, weight, surface, line, background, np.repeat(k[:, None], 9, axis=1))
+    expected = np.where(hit, weight, 0).sum(axis=1) / 9
+    np.testing.assert_allclose(line_coverage(rgba, k[:, None] * surface, line, background), expected, atol=1e-12)

@@ -30,10 +30,13 @@ boundaries and the image border (the pixel is `CLEAN_MARGIN_PX` from any such pi
 the point is `END_MARGIN_PX` along the contour from a polyline end); plus traced centres
 with no analytic contour of their tube within `SEARCH_RADIUS_PX`.
 
-**Colour.** The lines that are drawn (the `lit` flags of eq. 4 with occlusion, blended
-into RGB) are checked against the pixel-centre `line.dist` d and its gradient: a pixel
-all of whose samples lie within the radius of an unblocked tube must be fully lit, one
-all of whose samples lie outside must show no line (`colour_mismatches`).
+**Colour.** The lines that are drawn (the `lit` flags of eq. 4 with occlusion, weighted by
+the stripe profile and blended into RGB over the shaded surface) are checked against the
+pixel-centre `line.dist` d and its gradient: the share of the line colour in a pixel must lie
+between the profile's weights at its farthest and nearest samples, so a pixel all of whose
+samples lie within the radius of an unblocked tube must be fully lit and one all of whose
+samples lie outside must show no line (`colour_mismatches`). The surface colour each pixel is
+read against is shaded as the renderer shades it (`modes.shading`, from the pixel-centre N and ray).
 
 A scene passes when the maximum deviation is within the tolerance, there are no misses
 and no colour mismatches, and something was compared: at least one traced centre, and
@@ -58,6 +61,8 @@ import numpy as np
 from .contours import ContourLines, UlmetField, analytic_contours, reaches_light_plane
 from ..integrator.film import Film
 from ..modes.lights import reflect
+from ..modes.profile import stripe_weight
+from ..modes.shading import shade_factor
 from ..integrator.autorig import resolve
 from ..integrator.renderer import Renderer
 from ..exchange.scene import MAX_MESH_VERTICES, Scene
@@ -66,6 +71,10 @@ from ..trace.accelerator import Accelerator
 from ..trace.tracing import occluded, refine
 
 DEFAULT_TOLERANCE_PX = 0.5
+#: A pixel's colour is checked where the stripe profile pins the line's share to an interval this narrow: half the
+#: contrast between line and surface, so the check at least tells a pixel nearer the line colour from one nearer
+#: the surface; across a hard stripe edge (0 to 1) nothing is pinned and the pixel is left out.
+COLOUR_CHECK_SPAN = 0.5
 #: Neighbouring hit points farther apart than this many pixel footprints straddle an edge (or graze).
 JUMP_FOOTPRINTS = 8.0
 #: Share of the surface pixels that must see a tube (pixel centre within the radius, eq. 4) for the picture to
@@ -137,8 +146,8 @@ class PixelAOVs:
 
     From the film (`Renderer.render`): the AOVs of the pixel-centre ray (f, patch, P, N, Z,
     line.id, line.dist) and A, with P of exact hits replaced by S(u, v) in float64; ``s`` is
-    recomputed from N and the camera's pixel-centre ray (paper eq. 3); ``line_coverage`` is the fraction of samples showing a tube, read back from
-    RGB (see `line_coverage`); ``fallback`` marks hits off the surface (Newton failed, the
+    recomputed from N and the camera's pixel-centre ray (paper eq. 3); ``line_coverage`` is the share of the line
+    colour (the samples' mean stripe weight), read back from RGB against the shaded surface colour (see `line_coverage`); ``fallback`` marks hits off the surface (Newton failed, the
     mesh hit kept: P ≠ S(u, v), or the ray at distance Z ≠ S(u, v)); ``incidence`` is |N·D|
     for the pixel-centre ray D; ``normal_error`` the angle between N and S_u × S_v at (u, v)
     on exact hits where that reference is trustworthy (NaN elsewhere); ``nearer`` marks exact
@@ -162,21 +171,21 @@ class PixelAOVs:
 
 
 def line_coverage(rgba: np.ndarray, surface_color, line_color, background) -> np.ndarray:
-    """Fraction L of a pixel's samples that see a tube, from its linear RGBA (film.coverage_color inverted).
+    """Share L of the line colour in a pixel (the mean stripe weight of its samples), from its linear RGBA.
 
-    RGB = L·line_color + (A − L)·surface_color + (1 − A)·background, so
-    RGB − A·surface_color − (1 − A)·background = L·(line_color − surface_color): L by least
-    squares over the three channels. NaN when line and surface colours are equal.
+    film.coverage_color inverted: RGB = L·line_color + (A − L)·surface_color + (1 − A)·background,
+    so RGB − A·surface_color − (1 − A)·background = L·(line_color − surface_color): L by least
+    squares over the three channels. ``surface_color`` may be one colour or one per pixel (..., 3):
+    the shaded surface colour (`modes.shading`). NaN where line and surface colours are equal.
     """
     line_color, surface_color, background = (np.asarray(c, dtype=np.float64) for c in
                                              (line_color, surface_color, background))
     contrast = line_color - surface_color
-    denom = float(contrast @ contrast)
-    if denom == 0.0:
-        return np.full(rgba.shape[:-1], np.nan)
+    denom = np.sum(contrast * contrast, axis=-1)
     A = rgba[..., 3:4].astype(np.float64)
     rest = rgba[..., :3].astype(np.float64) - A * surface_color - (1.0 - A) * background
-    return (rest @ contrast) / denom
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(denom > 0.0, np.sum(rest * contrast, axis=-1) / np.where(denom > 0.0, denom, 1.0), np.nan)
 
 
 def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
@@ -210,11 +219,15 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
         nearer[exact] = nearer_surface(renderer, patch.ravel()[exact].astype(int), channel("Z").ravel()[exact],
                                        origins[on], directions[on])
     render = renderer.scene.render
+    # The surface colour as the renderer shaded it at the pixel centre (its samples' shade differs to second order).
+    surface = np.broadcast_to(render.surface_color, (height * width, 3)).copy()
+    surface[hit] *= shade_factor(N.reshape(-1, 3)[hit], directions, render.shading)[:, None]
     return PixelAOVs(
         f=channel("f"), patch=patch, P=P, N=N, s=s.reshape(height, width, 3), Z=channel("Z"),
         line_id=channel("line.id"), line_dist=channel("line.dist"), fallback=fallback.reshape(height, width),
         coverage=channel("A"),
-        line_coverage=line_coverage(film.pixels[..., :4], render.surface_color, render.line_color, render.background),
+        line_coverage=line_coverage(film.pixels[..., :4], surface.reshape(height, width, 3), render.line_color,
+                                    render.background),
         incidence=incidence.reshape(height, width), normal_error=normal_error.reshape(height, width),
         nearer=nearer.reshape(height, width),
     )
@@ -511,11 +524,16 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
     (`_smooth_pairs`), all with the same nearest tube ahead (line.id), every sample hits
     (A = 1), and the colours tell lines from surface. With d the pixel-centre line.dist and
     g = |∇d| from one-sided differences to those neighbours (the larger per axis), d moves by at
-    most 0.71·g (= g·√2/2) to a sample inside the pixel, to first order. So: d + 0.71·g < r
-    (every sample within the tube's radius, paper eq. 4) with the reflected ray unblocked, for
-    the pixel and its neighbours, must be fully lit; d − 0.71·g > r, or no tube ahead, or
-    within the radius but blocked (pixel and neighbours), must show no line at all. Lit or not
-    is read from the colour (`line_coverage`), within half a sample.
+    most 0.71·g (= g·√2/2) to a sample inside the pixel, to first order. The stripe profile
+    w(d) (`modes.profile`, falling in d) then bounds the line's share L of the pixel's colour:
+    w(d + 0.71·g) ≤ L ≤ w(d − 0.71·g) where the reflected rays of the pixel and its neighbours
+    are unblocked, or where every sample is out of the profile's reach; L = 0 where they are all
+    blocked with every sample within reach. L is read from the colour (`line_coverage`, against
+    the shaded surface colour) and must keep within those bounds to half a sample. A pixel is
+    checked only where the bounds are at most `COLOUR_CHECK_SPAN` apart. Without blur (the hard
+    tube of eq. 4) this is: d + 0.71·g < r with the rays unblocked, fully lit; d − 0.71·g > r,
+    or no tube ahead, or blocked within the radius, no line at all; pixels across a stripe's
+    edge unchecked.
     """
     height, width = aovs.f.shape
     size = height * width
@@ -539,16 +557,19 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
         has_prev[b] = True
         checked &= has_next & has_prev
     g = np.hypot(slope[0], slope[1])
-    radius = renderer.lights.radius
+    radius, blur = renderer.lights.radius, renderer.scene.render.blur
+    # The line's share each sample may show, by the stripe profile (monotone in d): at least its weight at the
+    # farthest sample, d + 0.71·g, at most at the nearest, d − 0.71·g (NaN d, no tube ahead: 0).
+    low = stripe_weight(d + 0.71 * g, radius, blur)
+    high = stripe_weight(d - 0.71 * g, radius, blur)
     with np.errstate(invalid="ignore"):
-        inside = (line_id >= 0) & (d + 0.71 * g < radius)
-        outside = (line_id < 0) | (d - 0.71 * g > radius)
+        within = (line_id >= 0) & (d + 0.71 * g < renderer.stripe_lights.radius)  # every sample may see the tube
     # Occlusion of the reflected ray, for every pixel with a tube ahead: up to the nearest tube within the
-    # radius along the ray (as the renderer does), else up to the nearest tube ahead.
+    # profile's reach along the ray (as the renderer does), else up to the nearest tube ahead.
     ahead = np.flatnonzero(line_id >= 0)
     blocked = np.zeros(size, dtype=bool)
     P, n, s = aovs.P.reshape(-1, 3)[ahead], aovs.N.reshape(-1, 3)[ahead], aovs.s.reshape(-1, 3)[ahead]
-    tubes = renderer.lights.reach(P, s, tube=line_id[ahead].astype(int))
+    tubes = renderer.stripe_lights.reach(P, s, tube=line_id[ahead].astype(int))
     t = np.where(tubes.candidate, tubes.t_candidate, tubes.t_of)
     start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[ahead].astype(int))
     blocked[ahead] = occluded(renderer.accelerator, renderer.tessellation, renderer.surfaces, start, s, t)
@@ -556,13 +577,16 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
     padded = np.pad(blocked_grid, 1, mode="edge")
     uniform = ((padded[1:-1, :-2] == blocked_grid) & (padded[1:-1, 2:] == blocked_grid)
                & (padded[:-2, 1:-1] == blocked_grid) & (padded[2:, 1:-1] == blocked_grid)).ravel()
-    lit_expected = checked & inside & uniform & ~blocked
-    dark_expected = checked & (outside | (inside & uniform & blocked))
+    # Blocked (the pixel and its neighbours) with every sample in reach: no line at all.
+    dark = uniform & blocked & within
+    low, high = np.where(dark, 0.0, low), np.where(dark, 0.0, high)
+    known = (high == 0.0) | (uniform & ~blocked) | dark
+    checked &= known & (high - low <= COLOUR_CHECK_SPAN)
     samples = renderer.scene.image.samples
     tolerance = 0.5 / samples**2
     L = aovs.line_coverage.ravel()
-    wrong = (lit_expected & ~(np.abs(L - 1.0) <= tolerance)) | (dark_expected & ~(np.abs(L) <= tolerance))
-    return (lit_expected | dark_expected).reshape(height, width), wrong.reshape(height, width)
+    wrong = checked & ~((L >= low - tolerance) & (L <= high + tolerance))
+    return checked.reshape(height, width), wrong.reshape(height, width)
 
 
 # -- nearest distances ------------------------------------------------------------------------
