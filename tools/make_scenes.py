@@ -60,8 +60,7 @@ def hood() -> str:
                    {"point": [0.0, 0.0, 3.0], "normal": [0.0, 0.0, 1.0], "direction": [0.0, 1.0, 0.0],
                     "positions": [-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0], "radius": 0.05})
             + surface("hood", (3, 3), knots, knots, np.stack([X, Y, Z], -1))
-            + footer({"tessellation": 16, "surface_color": [0.18, 0.18, 0.2], "line_color": [1.0, 1.0, 1.0],
-                      "background": [0.0, 0.0, 0.0]}))
+            + footer({"tessellation": 16, "surface_color": [0.18, 0.18, 0.2], "line_color": [1.0, 1.0, 1.0]}))
 
 
 def g1_join() -> str:
