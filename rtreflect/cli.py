@@ -22,7 +22,7 @@ from .interrupts import Interrupted, signals_as_exceptions
 from .analysis.overlay import contours_file_name
 from .exchange.load import load_scene
 from .integrator.autorig import resolve
-from .exchange.scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES
+from .exchange.scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, OVERLAY_SIDE
 from .output.streaming import render_to_files
 from .integrator.tiling import parse_size
 from .analysis.validate import DEFAULT_TOLERANCE_PX, validate_scene
@@ -97,7 +97,22 @@ def _print_notes(scenes) -> None:
             click.echo(line)
 
 
-@cli.command()
+class OverlayValueCommand(click.Command):
+    """A command whose flag ``--overlay`` may also be spelled ``--overlay=side``.
+
+    Click's flags take no value, and an option whose value may be left out would swallow the next
+    word (``render --overlay scene.toml`` would read the scene as the value): so the one spelling
+    with ``=`` is handed to the hidden option ``--overlay-layout``.
+    """
+
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        end = args.index("--") if "--" in args else len(args)
+        args = [f"--overlay-layout={arg.partition('=')[2]}" if i < end and arg.startswith("--overlay=") else arg
+                for i, arg in enumerate(args)]
+        return super().parse_args(ctx, args)
+
+
+@cli.command(cls=OverlayValueCommand)
 @click.argument("scenes", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--output", "outdir", type=click.Path(path_type=Path), default=Path("out"), show_default=True,
               help="Folder for NAME.exr and NAME.png (created if missing).")
@@ -111,7 +126,9 @@ def _print_notes(scenes) -> None:
                    "Images are rendered and written in tiles, so any size fits.")
 @click.option("--overlay/--no-overlay", default=None,
               help="Draw the analytic reflection lines (f = c_k) over the PNG and write NAME.contours.json "
-                   "(overrides [render] overlay).")
+                   "(overrides [render] overlay). --overlay=side: NAME.png stays plain and NAME.side.png shows "
+                   "it and the overlaid picture side by side.")
+@click.option("--overlay-layout", "overlay_layout", hidden=True, default=None)
 @click.option("--seams", is_flag=True,
               help="Run the continuity check and draw each seam over the PNG, coloured by its class, worst value "
                    "labelled, with a legend (as `rtreflect continuity --png`; the EXR is unchanged).")
@@ -121,15 +138,16 @@ def _print_notes(scenes) -> None:
 @click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
               help="CAD input: render the faces that read and list those that do not (default: a bad face is an error).")
 @click.option("--strict", is_flag=True, help=STRICT_HELP)
-def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory, overlay, seams,
-           normals, skip_bad_faces, strict) -> None:
+def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threads, max_memory, overlay,
+           overlay_layout, seams, normals, skip_bad_faces, strict) -> None:
     """Render the reflection lines of each SCENE file to OUTPUT/NAME.exr and .png.
 
     The EXR holds linear RGBA plus per-pixel AOVs from the pixel-centre ray
     (P.X P.Y P.Z N.X N.Y N.Z u v patch Z f line.id line.dist); the PNG is 8-bit sRGB.
     NAME is [output] name, by default the scene file's stem. With --overlay the PNG also
     shows the analytic reflection lines in [render] overlay_color, and NAME.contours.json
-    holds them (per line: light index, polylines in pixels and in (u, v)). With --seams
+    holds them (per line: light index, polylines in pixels and in (u, v)); with
+    --overlay=side NAME.png stays plain and NAME.side.png shows it beside the overlaid one. With --seams
     the PNG also shows every shared edge coloured by its continuity class (open, G0, G1,
     G2 at `rtreflect continuity`'s default tolerances), its worst value labelled, and a legend.
 
@@ -151,6 +169,10 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
       rtreflect render parts/plate.step -o out/
     """
     budget = memory_option(max_memory)
+    if overlay_layout is not None:
+        if overlay_layout != OVERLAY_SIDE:
+            fail(f"--overlay: takes no value but {OVERLAY_SIDE!r} (--overlay={OVERLAY_SIDE}), got {overlay_layout!r}")
+        overlay = OVERLAY_SIDE
     for path in scenes:
         if Path(path).is_dir():
             fail(f"{path}: is a folder; `rtreflect render` takes scene files: render every scene in a folder with "

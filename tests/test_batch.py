@@ -293,6 +293,27 @@ def test_overlay_through_the_cluster_equals_a_local_render(cluster, tmp_path):
     assert report["counts"]["rendered"] == 1  # a missing contours file is not up to date
 
 
+def test_side_overlay_through_the_cluster_and_locally_equals_render(cluster, tmp_path):
+    """`overlay = "side"`: NAME.png plain and NAME.side.png, the same bytes from `render`, a local and a Dask batch."""
+    scene_path = small_scene("g1_join", tmp_path / "scenes" / "g.toml")
+    scene_path.write_text(scene_path.read_text().replace("[render]\n", '[render]\noverlay = "side"\n', 1))
+    local = subprocess.run([str(RTREFLECT), "render", str(scene_path), "-o", str(tmp_path / "local")],
+                           capture_output=True, text=True)
+    assert local.returncode == 0, local.stderr
+    names = ["g.contours.json", "g.exr", "g.png", "g.side.png"]
+    for where in ([], ["--scheduler", cluster]):
+        out = tmp_path / ("cluster" if where else "pool")
+        code, output, _ = run_batch(scene_path, "-o", out, *where)
+        assert code == 0, output
+        assert sorted(p.name for p in out.iterdir()) == names
+        assert all((out / n).read_bytes() == (tmp_path / "local" / n).read_bytes() for n in names)
+    code, output, report = run_batch(scene_path, "-o", tmp_path / "pool", "--json", tmp_path / "r.json")
+    assert report["counts"]["skipped"] == 1  # up to date: both PNGs there
+    (tmp_path / "pool" / "g.side.png").unlink()
+    code, output, report = run_batch(scene_path, "-o", tmp_path / "pool", "--json", tmp_path / "r.json")
+    assert report["counts"]["rendered"] == 1  # a missing side picture is not up to date
+
+
 def test_unreachable_scheduler_is_bad_input(tmp_path, monkeypatch):
     pytest.importorskip("distributed")
     from rtreflect import cluster as clustering

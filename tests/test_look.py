@@ -91,3 +91,61 @@ def test_flat_shading_is_the_surface_colour_and_shading_leaves_the_aovs():
     assert unlit.sum() >= 1000
     np.testing.assert_array_equal(flat.film.pixels[..., 3:], lambert.film.pixels[..., 3:])  # A and every AOV
     assert not np.array_equal(flat.rgba[..., :3], lambert.rgba[..., :3])
+
+
+# -- the overlay at 100 %: its width, and NAME.side.png -------------------------------------------
+
+
+@pytest.mark.parametrize("width", [1.0, 2.0, 3.0, 4.5])
+def test_overlay_line_covers_its_width(width):
+    """A straight line's coverage summed across it is its width (the box filter's area per unit length)."""
+    from rtreflect.analysis.contours import ContourLine, ContourLines, Polyline
+    from rtreflect.analysis.overlay import coverage
+
+    for a, b, axis in (([2.0, 20.3], [38.0, 20.3], 0), ([20.7, 2.0], [20.7, 38.0], 1)):
+        px = np.array([a, b])
+        lines = ContourLines(40, 40, [ContourLine(0, 0.0, [Polyline(0, np.zeros((2, 2)), px)])])
+        across = coverage(lines, 40, 40, width).sum(axis=axis)
+        np.testing.assert_allclose(across[8:32], width, atol=1e-9)
+
+
+def render_cli(tmp_path: Path, name: str, *options: str, scene: Path = SCENES / "hood.toml") -> Path:
+    from click.testing import CliRunner
+
+    from rtreflect.cli import cli
+
+    result = CliRunner().invoke(cli, ["render", *options, str(scene), "-o", str(tmp_path / name), "--width", "160",
+                                      "--height", "90", "--samples", "1"])
+    assert result.exit_code == 0, result.output
+    return tmp_path / name
+
+
+def test_side_overlay_keeps_the_png_plain_and_puts_both_pictures_side_by_side(tmp_path):
+    from rtreflect.output.imagefiles import read_image
+
+    plain = render_cli(tmp_path, "plain")
+    drawn = render_cli(tmp_path, "drawn", "--overlay")  # the flag still comes before the scene
+    side = render_cli(tmp_path, "side", "--overlay=side")
+    assert sorted(p.name for p in side.iterdir()) == ["hood.contours.json", "hood.exr", "hood.png", "hood.side.png"]
+    picture = read_image(plain / "hood.png")[0]
+    overlaid = read_image(drawn / "hood.png")[0]
+    both = read_image(side / "hood.side.png")[0]
+    np.testing.assert_array_equal(read_image(side / "hood.png")[0], picture)
+    assert both.shape == (90, 320, 4)
+    np.testing.assert_array_equal(both[:, :160], picture)
+    np.testing.assert_array_equal(both[:, 160:], overlaid)
+    assert np.any(overlaid != picture)
+
+
+def test_overlay_width_is_the_scenes(tmp_path):
+    from rtreflect.output.imagefiles import read_image
+
+    plain = read_image(render_cli(tmp_path, "plain") / "hood.png")[0]
+    changed = {}
+    for width in (2.0, 4.0):
+        scene = tmp_path / f"hood{width:g}.toml"
+        scene.write_text((SCENES / "hood.toml").read_text().replace("[render]\n", f"[render]\noverlay_width = {width}\n"))
+        png = read_image(render_cli(tmp_path, f"w{width:g}", "--overlay", scene=scene) / f"hood{width:g}.png")[0]
+        changed[width] = int(np.count_nonzero(np.any(png != plain, axis=2)))
+    # A line of width w touches about w + 1 pixels across: 5/3 as many at 4 px as at 2, less where lines crowd.
+    assert 1.25 * changed[2.0] < changed[4.0] < 2.0 * changed[2.0], changed

@@ -1,10 +1,12 @@
 """Overlay: the analytic contours drawn over the rendered image, anti-aliased.
 
 Each polyline is cut into pieces of at most half a pixel; every pixel near a piece gets
-the coverage of a line of width `LINE_WIDTH_PX` (1 − distance beyond the half-width,
-clipped to [0, 1], a box filter of the pixel), and the overlay colour is blended over
-the linear image with the largest coverage of any piece. On a correct render the
-overlay runs down the middle of every traced line.
+the coverage of a line of width w (`[render] overlay_width`, 2 px by default so the
+lines read at 100 %: 1 − distance beyond the half-width, clipped to [0, 1], a box filter
+of the pixel), and the overlay colour is blended over the linear image with the largest
+coverage of any piece. On a correct render the overlay runs down the middle of every
+traced line. With ``overlay = "side"`` the same drawing goes to ``NAME.side.png``, beside
+the plain picture (`imagefiles.ImageWriter`), and NAME.png stays plain.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import numpy as np
 
 from .contours import ContourLines, UlmetField, analytic_contours
 
+#: `coverage`'s default line width, in pixels (the seam picture's thin guides); the overlay's is the scene's.
 LINE_WIDTH_PX = 1.0
 #: Longest straight piece drawn at once, in pixels; the pixel block around each piece covers it.
 PIECE_PX = 0.5
@@ -40,10 +43,10 @@ def clip_segments(a: np.ndarray, b: np.ndarray, low: np.ndarray, high: np.ndarra
     return a[keep] + t0[keep, None] * d[keep], a[keep] + t1[keep, None] * d[keep]
 
 
-def _pieces(contours: ContourLines) -> tuple[np.ndarray, np.ndarray]:
-    """Segments (a, b) in pixels, clipped to just beyond the image, each at most PIECE_PX long."""
+def _pieces(contours: ContourLines, line_width: float = LINE_WIDTH_PX) -> tuple[np.ndarray, np.ndarray]:
+    """Segments (a, b) in pixels, clipped to just beyond the image (by the line's width), each at most PIECE_PX long."""
     starts, ends = [], []
-    margin = 2.0 + LINE_WIDTH_PX
+    margin = 2.0 + line_width
     low = np.array([-margin, -margin])
     high = np.array([contours.width + margin, contours.height + margin])
     for line in contours.lines:
@@ -67,7 +70,7 @@ def _pieces(contours: ContourLines) -> tuple[np.ndarray, np.ndarray]:
 def coverage(contours: ContourLines, width: int, height: int, line_width: float = LINE_WIDTH_PX) -> np.ndarray:
     """(H, W) anti-aliased coverage in [0, 1] of the contour polylines."""
     cover = np.zeros(height * width)
-    a, b = _pieces(contours)
+    a, b = _pieces(contours, line_width)
     reach = int(np.ceil(0.5 * line_width + 0.5 + PIECE_PX)) + 1
     offs = np.arange(-reach, reach + 1)
     dy, dx = (g.ravel() for g in np.meshgrid(offs, offs, indexing="ij"))
@@ -116,7 +119,7 @@ def overlay_outputs(renderer) -> tuple[Callable[[int, np.ndarray], np.ndarray] |
     files = {contours_file_name(scene): json.dumps(document, separators=(",", ":")) + "\n"}
     if not scene.output.png:
         return None, files
-    alpha = coverage(contours, scene.image.width, scene.image.height).astype(np.float32)
+    alpha = coverage(contours, scene.image.width, scene.image.height, scene.render.overlay_width).astype(np.float32)
     color = scene.render.overlay_color
 
     def draw(row0: int, rgba_rows: np.ndarray) -> np.ndarray:

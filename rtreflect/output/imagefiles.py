@@ -24,6 +24,7 @@ with warnings.catch_warnings():
     import colour
 
 from ..errors import RtreflectError
+from ..exchange.scene import OVERLAY_SIDE
 from ..integrator.film import CHANNELS, Film
 from .sharing import NameLock, remove_dead_temporaries, temporary_prefix
 
@@ -217,14 +218,25 @@ def write_png_rows(path: Path, width: int, height: int, blocks: Iterable[np.ndar
         raise _png_failure(shown, out, muted)
 
 
+#: The second PNG of `[render] overlay = "side"`: the plain picture and the overlaid one side by side.
+SIDE_SUFFIX = ".side.png"
+
+
+def side_by_side(scene: "Scene") -> bool:
+    """Whether the scene writes ``NAME.side.png`` (`[render] overlay = "side"` with a PNG): NAME.png then stays plain."""
+    return scene.output.png and scene.render.overlay == OVERLAY_SIDE
+
+
 def output_paths(scene: "Scene", outdir: Path, extra_files: dict[str, str] | None = None) -> list[Path]:
-    """``outdir/NAME.exr`` and/or ``outdir/NAME.png``, as the scene's `[output]` table asks, then ``extra_files``'."""
+    """``outdir/NAME.exr`` and/or ``outdir/NAME.png`` (and ``NAME.side.png``) as the scene asks, then ``extra_files``'."""
     outdir = Path(outdir)
     targets = []
     if scene.output.exr:
         targets.append(outdir / f"{scene.output.name}.exr")
     if scene.output.png:
         targets.append(outdir / f"{scene.output.name}.png")
+    if side_by_side(scene):
+        targets.append(outdir / f"{scene.output.name}{SIDE_SUFFIX}")
     return targets + [outdir / name for name in extra_files or {}]
 
 
@@ -310,22 +322,27 @@ class ImageWriter:
     Pixels come as row-major spans (a span may start or end mid-row); complete rows
     are encoded and handed to OpenImageIO at once, so memory holds one span plus at
     most one partial row, whatever the image size. The bytes equal those of writing
-    the whole image in one call.
+    the whole image in one call. ``png_filter`` draws on NAME.png's rows; with
+    ``NAME.side.png`` among the paths (`side_by_side`) NAME.png stays plain and each row of
+    the side PNG is the plain row and the filtered one side by side (twice the width).
     """
 
     def __init__(self, scene: "Scene", paths: list[tuple[Path, Path]], png_filter: PngFilter | None = None):
         self.width, self.height = scene.image.width, scene.image.height
         self.png_filter = png_filter
+        self.side = side_by_side(scene)
         self.next_pixel = 0
         self._partial = np.empty((0, len(CHANNELS)), dtype=np.float32)
         self._outputs: list[tuple[oiio.ImageOutput, Path, bool]] = []
+        self._side_paths = {final for _, final in paths if final.name.endswith(SIDE_SUFFIX)}
         self._temporaries = {final: Path(tmp) for tmp, final in paths}
         # libpng prints its errors to stderr itself: muted around every call into a PNG (`muted_stderr`).
         self._has_png = any(final.suffix != ".exr" for _, final in paths)
         attributes = provenance_attributes(scene)
         for tmp, final in paths:
             is_exr = final.suffix == ".exr"
-            spec = (_exr_spec if is_exr else _png_spec)(self.width, self.height, attributes)
+            side = 2 if final in self._side_paths else 1  # the plain and the overlaid picture side by side
+            spec = (_exr_spec if is_exr else _png_spec)(side * self.width, self.height, attributes)
             with muted_stderr(not is_exr):
                 out = oiio.ImageOutput.create(str(tmp))
                 opened = out is not None and out.open(str(tmp), spec)
@@ -350,12 +367,18 @@ class ImageWriter:
     def _write_rows(self, row0: int, rows: np.ndarray) -> None:
         rows = np.ascontiguousarray(rows, dtype=np.float32)
         row1 = row0 + len(rows)
+        drawn = None  # the filtered rows, computed once for NAME.png or NAME.side.png
         for out, final, is_exr in self._outputs:
             if is_exr:
                 data = rows
             else:
-                rgba = rows[..., :4] if self.png_filter is None else self.png_filter(row0, rows[..., :4])
-                data = encode_srgb(rgba)
+                plain = rows[..., :4]
+                if drawn is None:
+                    drawn = plain if self.png_filter is None else self.png_filter(row0, plain)
+                if final in self._side_paths:
+                    data = encode_srgb(np.concatenate([plain, drawn], axis=1))
+                else:
+                    data = encode_srgb(plain if self.side else drawn)
             with muted_stderr(not is_exr) as muted:
                 ok = out.write_scanlines(row0, row1, 0, data)
             if not ok:
