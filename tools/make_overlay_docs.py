@@ -1,8 +1,12 @@
-"""Regenerate the README's overlay images in docs/ (run from the project root).
+"""Regenerate the README's images in docs/ (run from the project root).
 
+docs/hood.png: `rtreflect render scenes/hood.toml` at the scene's settings (the default look).
+docs/looks.png: parts/filleted_block.step in its automatic scene (`rtreflect init`) at 480×270, three
+ways side by side: `shading = "flat"`, the default `"lambert"`, and `"lambert"` with `blur = 0.5`.
 docs/g1_join_overlay.png: `rtreflect render scenes/g1_join.toml --overlay` at the scene's settings.
 docs/hood_t4_exact_vs_mesh.png: the hood with tessellation = 4, a crop enlarged 6× (nearest),
-exact normals on the left, mesh normals on the right, the analytic contours drawn over both.
+exact normals on the left, mesh normals on the right, the analytic contours drawn over both
+1 px wide (`overlay_width = 1`: at 6× a thin line shows the mesh's drift off the centre best).
 Each picture is written atomically; on failure the script prints one line and exits 1.
 """
 
@@ -25,14 +29,42 @@ DOCS = ROOT / "docs"
 RTREFLECT = [str(Path(sys.executable).parent / "rtreflect")]
 
 
-def render(scene: Path, outdir: Path, *options: str) -> Path:
-    """Render with the overlay; the PNG's path follows the scene's `[output] name`."""
-    result = subprocess.run([*RTREFLECT, "render", str(scene), "-o", str(outdir), "--overlay", *options],
-                            capture_output=True, text=True)
+def run(*args: str, cwd: Path | None = None) -> str:
+    """``rtreflect ARGS``' standard output; a failure raises with its last line of stderr."""
+    result = subprocess.run([*RTREFLECT, *args], capture_output=True, text=True, cwd=cwd)
     if result.returncode != 0:
         last = (result.stderr.strip().splitlines() or [f"exit status {result.returncode}"])[-1]
-        raise RuntimeError(f"rtreflect render {scene.name} failed: {last}")
+        raise RuntimeError(f"rtreflect {' '.join(args[:2])} failed: {last}")
+    return result.stdout
+
+
+def render(scene: Path, outdir: Path, *options: str, overlay: bool = True) -> Path:
+    """Render (with the overlay unless told not to); the PNG's path follows the scene's `[output] name`."""
+    run("render", str(scene), "-o", str(outdir), *(["--overlay"] if overlay else []), *options)
     return outdir / f"{load_scene(scene).output.name}.png"
+
+
+def copy_to_docs(png: Path, name: str) -> None:
+    with atomic_path(DOCS / name) as target:
+        target.write_bytes(png.read_bytes())
+
+
+def looks(folder: Path) -> None:
+    """docs/looks.png: the filleted block flat, shaded (the default), shaded with soft stripe edges."""
+    text = run("init", str(ROOT / "parts/filleted_block.step"), cwd=folder)
+    for line in ('shading = "lambert"', "blur = 0.0"):
+        if text.count(line) != 1:
+            raise RuntimeError(f"rtreflect init: expected one line starting {line!r} to vary")
+    panels = []
+    for name, change in (("flat", ('shading = "lambert"', 'shading = "flat"')), ("lambert", ("", "")),
+                         ("blur", ("blur = 0.0", "blur = 0.5"))):
+        scene = folder / f"{name}.toml"
+        scene.write_text(text.replace(*change) if change[0] else text)
+        panels.append(linear(render(scene, folder / name, "--width", "480", "--height", "270", "--samples", "4",
+                                    overlay=False)))
+    final = DOCS / "looks.png"
+    with atomic_path(final) as target:
+        write_png(target, np.concatenate(panels, axis=1), final=final)
 
 
 def linear(png: Path) -> np.ndarray:
@@ -43,21 +75,21 @@ def linear(png: Path) -> np.ndarray:
 
 
 def coarse_hood(folder: Path) -> Path:
-    """scenes/hood.toml with `tessellation = 4`; fails loudly if the scene no longer says `tessellation = 16`."""
+    """scenes/hood.toml with `tessellation = 4` and a 1 px overlay; fails loudly if it no longer says `tessellation = 16`."""
     text = (ROOT / "scenes/hood.toml").read_text()
     if text.count("tessellation = 16") != 1:
         raise RuntimeError("scenes/hood.toml: expected one line 'tessellation = 16' to replace with 4")
     path = folder / "hood.toml"
-    path.write_text(text.replace("tessellation = 16", "tessellation = 4"))
+    path.write_text(text.replace("tessellation = 16", "tessellation = 4\noverlay_width = 1.0"))
     return path
 
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        overlay = render(ROOT / "scenes/g1_join.toml", tmp / "g1")
-        with atomic_path(DOCS / "g1_join_overlay.png") as target:
-            target.write_bytes(overlay.read_bytes())
+        copy_to_docs(render(ROOT / "scenes/hood.toml", tmp / "hood", overlay=False), "hood.png")
+        looks(tmp)
+        copy_to_docs(render(ROOT / "scenes/g1_join.toml", tmp / "g1"), "g1_join_overlay.png")
         coarse = coarse_hood(tmp)
         exact = linear(render(coarse, tmp / "exact", "--normals", "exact"))
         mesh = linear(render(coarse, tmp / "mesh", "--normals", "mesh"))
