@@ -32,7 +32,7 @@ __all__ = ["Scene", "load_scene", "render", "save", "validate", "RenderResult", 
 
 
 def _overridden(scene: Scene, width: int | None, height: int | None, samples: int | None,
-                normals: str | None, overlay: bool | None = None) -> Scene:
+                normals: str | None, overlay: bool | str | None = None) -> Scene:
     """The scene (a `Scene`, or the path of a scene file) with the command line's overrides, checked alike."""
     if isinstance(scene, (str, Path)):
         scene = load_scene(scene)
@@ -43,12 +43,12 @@ def _overridden(scene: Scene, width: int | None, height: int | None, samples: in
 
 
 def render(scene: Scene | str | Path, width: int | None = None, height: int | None = None, samples: int | None = None, *,
-           normals: str | None = None, overlay: bool | None = None, threads: int | None = None,
+           normals: str | None = None, overlay: bool | str | None = None, threads: int | None = None,
            progress: Callable[[int], None] | None = None) -> RenderResult:
     """Render ``scene`` (or the scene file at that path) into an in-memory film, as `rtreflect render` would.
 
     ``width``, ``height``, ``samples`` (s: s×s samples per pixel), ``normals`` and ``overlay``
-    override the scene's values (None keeps them). The result has ``rgba`` (H, W, 4 linear
+    override the scene's values (None keeps them; ``overlay="side"`` as ``--overlay=side``). The result has ``rgba`` (H, W, 4 linear
     float32), ``aov(name)`` (an EXR channel such as ``"f"``, or ``"P"``/``"N"`` as (H, W, 3)),
     ``stats`` (rays, seconds, Newton fallbacks) and the ``scene`` rendered. The film holds
     17 float32 channels per pixel (a 1920×1080 film is 141 MB); `rtreflect render` streams
@@ -59,8 +59,8 @@ def render(scene: Scene | str | Path, width: int | None = None, height: int | No
 
 
 def save(result: RenderResult, outdir: str | Path = "out") -> list[Path]:
-    """Write ``outdir/NAME.exr`` and ``.png`` (and ``NAME.contours.json`` with the overlay) as `rtreflect render`
-    writes them, byte for byte; all files appear together or none. Returns the paths written."""
+    """Write ``outdir/NAME.exr`` and ``.png`` (and ``NAME.contours.json`` with the overlay, ``NAME.side.png`` with
+    ``overlay="side"``) as `rtreflect render` writes them, byte for byte; all files appear together or none. Returns the paths written."""
     png_filter, extra_files = overlay_for(result.scene)
     return save_render(result, Path(outdir), png_filter, extra_files)
 
