@@ -107,7 +107,11 @@ class OverlayValueCommand(click.Command):
 
     def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
         end = args.index("--") if "--" in args else len(args)
-        args = [f"--overlay-layout={arg.partition('=')[2]}" if i < end and arg.startswith("--overlay=") else arg
+        for arg in args[:end]:
+            if arg.startswith("--overlay=") and arg.partition("=")[2] != OVERLAY_SIDE:
+                raise click.BadOptionUsage("--overlay", f"--overlay takes no value but {OVERLAY_SIDE!r} "
+                                                        f"(--overlay={OVERLAY_SIDE}), got {arg.partition('=')[2]!r}", ctx)
+        args = [f"--overlay-layout={OVERLAY_SIDE}" if i < end and arg.startswith("--overlay=") else arg
                 for i, arg in enumerate(args)]
         return super().parse_args(ctx, args)
 
@@ -128,7 +132,7 @@ class OverlayValueCommand(click.Command):
               help="Draw the analytic reflection lines (f = c_k) over the PNG and write NAME.contours.json "
                    "(overrides [render] overlay). --overlay=side: NAME.png stays plain and NAME.side.png shows "
                    "it and the overlaid picture side by side.")
-@click.option("--overlay-layout", "overlay_layout", hidden=True, default=None)
+@click.option("--overlay-layout", "overlay_layout", type=click.Choice([OVERLAY_SIDE]), hidden=True, default=None)
 @click.option("--seams", is_flag=True,
               help="Run the continuity check and draw each seam over the PNG, coloured by its class, worst value "
                    "labelled, with a legend (as `rtreflect continuity --png`; the EXR is unchanged).")
@@ -169,9 +173,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
       rtreflect render parts/plate.step -o out/
     """
     budget = memory_option(max_memory)
-    if overlay_layout is not None:
-        if overlay_layout != OVERLAY_SIDE:
-            fail(f"--overlay: takes no value but {OVERLAY_SIDE!r} (--overlay={OVERLAY_SIDE}), got {overlay_layout!r}")
+    if overlay_layout is not None:  # --overlay=side (`OverlayValueCommand`)
         overlay = OVERLAY_SIDE
     for path in scenes:
         if Path(path).is_dir():

@@ -520,6 +520,7 @@ BAD_COMMAND_LINES = [
     (["render"], "SCENES"),
     (["rendr", "{scene}"], "rendr"),
     (["render", "{scene}", "--colour", "red"], "--colour"),
+    (["render", "{scene}", "--overlay=top"], "--overlay takes no value but 'side'"),
 ]
 
 
