@@ -154,7 +154,8 @@ def measure(surfaces: list[NurbsSurface], seam: Seam, t: np.ndarray, size: float
 def _measure(surfaces: list[NurbsSurface], seam: Seam, t: np.ndarray, size: float) -> SeamSamples:
     sa, sb = surfaces[seam.a.patch], surfaces[seam.b.patch]
     P, C1a, _, uv_a, der_a = curve(sa, seam.a, t, order=2)
-    t_b, _ = match_points(sb, seam.b, P)
+    # A B-rep edge pairs its two pcurves by parameter; boundaries found geometrically are matched by foot points.
+    t_b = t if seam.paired else match_points(sb, seam.b, P)[0]
     Q, C1b, _, uv_b, der_b = curve(sb, seam.b, t_b, order=2)
     if not seam.b.exact:  # a sampled trim loop: the exact edge lies on B's surface, not on the loop's chords
         uv_b = closest_on_surface(sb, P, uv_b)
