@@ -519,11 +519,12 @@ def transferred_shape(reader):
 
 def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what: str,
                skip_bad_faces: bool = False, reversed_faces: list[bool] | None = None,
-               trims_onto_edges: bool = False) -> CadModel:
+               trims_onto_edges: bool = False, topology: bool = True) -> CadModel:
     """All faces of ``shape`` (every located instance, in explorer order) as trimmed `NurbsSurface`s.
 
     ``reversed_faces`` overrides OCCT's face orientation (the .3dm reader knows Rhino's);
-    ``trims_onto_edges`` makes trim samples follow the 3D edges (pcurves fitted by ShapeFix). A face
+    ``trims_onto_edges`` makes trim samples follow the 3D edges (pcurves fitted by ShapeFix); ``topology``
+    records each face's B-rep edges on its trim (`face_edges`) for the seam finder. A face
     that fails is a `SceneError` naming it, unless ``skip_bad_faces``: then it is listed in
     ``CadModel.skipped`` and the others are read.
     """
@@ -559,7 +560,7 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
             try:
                 reversed_face = (face.Orientation() == TopAbs_REVERSED) if reversed_faces is None else reversed_faces[index]
                 surface = bspline_of_face(face)
-                edges = face_edges(face, surface, key_of, trims_onto_edges)
+                edges = face_edges(face, surface, key_of, trims_onto_edges) if topology else ()
                 trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal, trims_onto_edges, edges)
                 # Meshed face by face, its triangulation dropped once read: memory stays that of one face's
                 # mesh (the whole shape's at once took 560 MB on a 2000-face plate).

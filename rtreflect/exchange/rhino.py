@@ -136,7 +136,12 @@ def rebuild_face(brep, face, edges: dict, tolerance: float):
 
 
 def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadModel:
-    """Every Brep face (and bare surface) of a .3dm file as a trimmed NURBS surface."""
+    """Every Brep face (and bare surface) of a .3dm file as a trimmed NURBS surface.
+
+    No B-rep topology is recorded: ``ShapeFix_Face`` gives each rebuilt face edges of its own (the capped
+    cylinder of parts/trimmed.3dm comes out with no edge shared between its faces), so the seam finder
+    matches .3dm faces geometrically, as inline patches.
+    """
     rhino3dm = _import_rhino3dm(path)
     import_ocp(path, ".3dm files")
     from OCP.BRep import BRep_Builder
@@ -179,7 +184,7 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
         raise SceneError(path, f"face {face}", f"{reason} (--skip-bad-faces renders the other faces)")
     # Face numbers in the model are the file's; the faces rebuilt are numbered apart from the failed ones.
     model_read = read_faces(path, compound, name, unit=unit, unit_note="", what=".3dm file",
-                            skip_bad_faces=skip_bad_faces, trims_onto_edges=True)
+                            skip_bad_faces=skip_bad_faces, trims_onto_edges=True, topology=False)
     if failed:
         model_read.skipped = sorted(failed + _renumber(model_read.skipped, [f for f, _ in failed]))
         model_read.faces = index
