@@ -134,3 +134,35 @@ def test_toml_patches_keep_the_geometric_finder():
     seams = scene_seams(list(scene.surfaces))
     assert [s.paired for s in seams] == [False]
     assert [tuple(sorted(s.patches)) for s in seams] == [(0, 1)]
+
+
+def rhino_pairs(path: Path) -> Counter:
+    """Face pairs sharing an edge by rhino3dm's own Brep topology (the trims' edge indices), faces numbered over the
+    file's Breps in order."""
+    rhino3dm = pytest.importorskip("rhino3dm")
+    pairs, base = Counter(), 0
+    for obj in rhino3dm.File3dm.Read(str(path)).Objects:
+        brep = obj.Geometry
+        users: dict[int, set] = {}
+        for k, face in enumerate(brep.Faces):
+            for loop in face.Loops:
+                for trim in loop.Trims:
+                    if trim.EdgeIndex >= 0:
+                        users.setdefault(trim.EdgeIndex, set()).add(base + k)
+        for faces in users.values():
+            if len(faces) == 2:
+                pairs[tuple(sorted(faces))] += 1
+        base += len(brep.Faces)
+    return pairs
+
+
+def test_rhino_seams_are_the_breps_shared_edges():
+    """trimmed.3dm: the seams are the Brep edges two faces share (the capped cylinder's two rims), by rhino3dm's
+    topology; the cylinder's own seam edge (used twice by one face) is none. The geometric finder paired the
+    cylinder with itself there."""
+    path = PARTS / "trimmed.3dm"
+    surfaces = read_cad(path).surfaces
+    expected = rhino_pairs(path)
+    assert expected == Counter({(1, 2): 1, (1, 3): 1})
+    assert Counter(tuple(sorted(s.patches)) for s in scene_seams(surfaces)) == expected
+    assert (1, 1) in Counter(tuple(sorted(s.patches)) for s in find_seams(surfaces))
