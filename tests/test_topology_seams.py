@@ -166,3 +166,22 @@ def test_rhino_seams_are_the_breps_shared_edges():
     assert expected == Counter({(1, 2): 1, (1, 3): 1})
     assert Counter(tuple(sorted(s.patches)) for s in scene_seams(surfaces)) == expected
     assert (1, 1) in Counter(tuple(sorted(s.patches)) for s in find_seams(surfaces))
+
+
+def test_seam_picture_sees_the_whole_rim_of_a_cap_seen_from_above():
+    """trimmed.3dm's top cap (z = 25, a disc bounded by its rim) seen from an eye above its plane: the disc is convex
+    and faces the eye, so every point of its rim is visible. The seam picture drew only bits of it: its visibility
+    rays left the rim along the cylinder's normal, on the cap's plane, and the cap's triangles (which overhang the
+    trim) hid them."""
+    from rtreflect.analysis.contours import UlmetField
+    from rtreflect.analysis.seamcheck import check_scene
+    from rtreflect.analysis.seampicture import _seen_from_eye
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.renderer import Renderer
+
+    result = check_scene(load_scene(PARTS / "trimmed.3dm"), lines=False)
+    field = UlmetField.of(Renderer(result.scene))
+    top = next(e for e in result.edges if np.allclose(e.samples.P[:, 2], 25.0))
+    assert field.camera.spec.eye[2] > 25.0
+    s = top.samples
+    assert np.all(_seen_from_eye(field, top.seam.patches, s.P, s.n_a, s.n_b))
