@@ -185,3 +185,18 @@ def test_seam_picture_sees_the_whole_rim_of_a_cap_seen_from_above():
     assert field.camera.spec.eye[2] > 25.0
     s = top.samples
     assert np.all(_seen_from_eye(field, top.seam.patches, s.P, s.n_a, s.n_b))
+
+
+def test_a_part_read_twice_joins_no_face_of_one_copy_to_the_other(tmp_path):
+    """A scene naming one STEP file twice holds two copies of each edge: each copy's faces pair among themselves only
+    (edge keys are unique per read), 48 seams each, as the part alone."""
+    import shutil
+
+    from rtreflect.exchange.load import load_scene
+
+    shutil.copy(PARTS / "filleted_block.step", tmp_path)
+    (tmp_path / "twice.toml").write_text('[[surface]]\nfile = "filleted_block.step"\n' * 2)
+    surfaces = list(load_scene(tmp_path / "twice.toml").surfaces)
+    assert len(surfaces) == 52
+    pairs = [tuple(sorted(s.patches)) for s in scene_seams(surfaces)]
+    assert len(pairs) == 96 and all((a < 26) == (b < 26) for a, b in pairs)

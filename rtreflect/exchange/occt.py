@@ -24,6 +24,7 @@ to install.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import sys
 from dataclasses import dataclass, field
@@ -408,6 +409,10 @@ def trim_of_face(face, surface: NurbsSurface, tolerance: float, onto_edges: bool
 EDGE_SEGMENTS = 64
 
 
+#: Reads so far in this process: part of every edge key (`read_faces`).
+_READS = itertools.count()
+
+
 def edge_keys(shape, prefix: str) -> tuple:
     """The shape's edges indexed (``TopExp.MapShapes_s``: an edge is the same on every face using it, whatever its
     orientation; each located instance of an assembly has its own) and the key maker ``prefix#index``."""
@@ -552,7 +557,8 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
         faces.append(TopoDS.Face(explorer.Current()))
         explorer.Next()
     stem = name or path.stem
-    _, key_of = edge_keys(converted, f"{path}|{stem}")
+    # Keys unique per read: a scene that reads one file twice must not join the two copies' faces.
+    _, key_of = edge_keys(converted, f"{path}|{stem}|{next(_READS)}")
     surfaces, skipped, reversed_flags = [], [], []
     with tqdm(faces, desc=f"reading {path.name}", unit="face", leave=False, file=sys.stderr,
               disable=None if len(faces) > PROGRESS_FACES else True) as bar:
