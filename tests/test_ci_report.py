@@ -151,6 +151,17 @@ def test_report_shows_the_seam_classes_of_batch_continuity(batch_run, page):
         assert len(document["edges"]) == len(records[name]["edges"])
 
 
+def test_batch_continuity_measures_the_line_kinks_as_rtreflect_continuity(batch_run):
+    """`batch --continuity` includes the reflection lines' kinks: g1_join's G1 seam kinks its lines by tens of degrees
+    (the paper's statement, as `rtreflect continuity` prints it); the teapot's G2 seams do not kink them."""
+    records = {Path(s["scene"]).stem: s["continuity"] for s in batch_run["report"]["scenes"]}
+    assert records["g1_join"]["worst"]["line_kink_max_deg"] > 10.0
+    document = json.loads((batch_run["out"] / "g1_join.continuity.json").read_text())
+    assert document["edges"][0]["line_kink_max_deg"] == records["g1_join"]["worst"]["line_kink_max_deg"]
+    teapot = [e for e in records["teapot"]["edges"] if e["class"] == "G2" and e["line_kink_max_deg"] is not None]
+    assert teapot and max(e["line_kink_max_deg"] for e in teapot) < 1e-3
+
+
 def test_batch_continuity_fails_below_require_in_exit_status_and_junit(batch_run, tmp_path):
     scenes = batch_run["root"] / "scenes"
     code, output = run("batch", scenes / "g1_join.toml", "-o", tmp_path, "--continuity", "--require", "G2",

@@ -19,13 +19,15 @@ import numpy as np
 import pytest
 
 from rtreflect.output.imagefiles import read_image
+from rtreflect.exchange.cad import is_cad_path
 from rtreflect.testing import (GOLDEN_CHECKS, GOLDEN_HEIGHT, GOLDEN_WIDTH, assert_images_match, assert_matches_golden,
-                               golden_reports, golden_scene, render_golden)
+                               golden_name, golden_reports, golden_scene, render_golden)
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
 GOLDENS = ROOT / "golden_images"
-SCENE_FILES = sorted(SCENES.glob("*.toml"))
+#: The shipped scenes and the shipped CAD parts (each in its default scene), as tools/make_goldens.py renders them.
+SCENE_FILES = sorted(SCENES.glob("*.toml")) + sorted(p for p in (ROOT / "parts").iterdir() if is_cad_path(p))
 HOOD = SCENES / "hood.toml"
 REGENERATE = "regenerate with: python tools/make_goldens.py (README, 'Golden images')"
 
@@ -73,13 +75,13 @@ def failing_checks(actual: Path, golden: Path) -> dict[str, int]:
 @pytest.fixture(scope="module")
 def golden_renders(tmp_path_factory) -> dict[str, Path]:
     outdir = tmp_path_factory.mktemp("golden_renders")
-    return {path.stem: render_golden(path, outdir) for path in SCENE_FILES}
+    return {golden_name(path): render_golden(path, outdir) for path in SCENE_FILES}
 
 
-@pytest.mark.parametrize("stem", [p.stem for p in SCENE_FILES])
+@pytest.mark.parametrize("stem", [golden_name(p) for p in SCENE_FILES])
 def test_scene_matches_golden(golden_renders, stem):
     golden = GOLDENS / f"{stem}.exr"
-    assert golden.exists(), f"no golden image for scenes/{stem}.toml: {REGENERATE}"
+    assert golden.exists(), f"no golden image for {stem}: {REGENERATE}"
     reports = assert_matches_golden(golden_renders[stem], golden)
     assert set(reports) == set(GOLDEN_CHECKS)
     # The people's PNG is the same picture, to the 8-bit code value.
@@ -89,7 +91,7 @@ def test_scene_matches_golden(golden_renders, stem):
 def test_goldens_are_golden_size_and_complete():
     for path in SCENE_FILES:
         for suffix in (".exr", ".png"):
-            golden = GOLDENS / f"{path.stem}{suffix}"
+            golden = GOLDENS / f"{golden_name(path)}{suffix}"
             assert golden.exists(), f"missing {golden.relative_to(ROOT)}: {REGENERATE}"
             assert read_image(golden)[0].shape[:2] == (GOLDEN_HEIGHT, GOLDEN_WIDTH)
     size = sum(p.stat().st_size for p in GOLDENS.iterdir())

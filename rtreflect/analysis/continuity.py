@@ -2,7 +2,8 @@
 
 For a seam (`rtreflect.geometry.seams.Seam`) the boundary curve C_A(t) of face A is sampled;
 each sample P = C_A(t) is matched on face B by Newton (the foot point on B's boundary curve,
-Piegl & Tiller section 6.1), and at both points the exact derivatives S, S_u, S_v, S_uu, S_uv,
+Piegl & Tiller section 6.1) — or, for a B-rep edge of a CAD part, by the edge's parameter:
+B's pcurve at the same t (both pcurves are exact there) — and at both points the exact derivatives S, S_u, S_v, S_uu, S_uv,
 S_vv come from `NurbsSurface.evaluate`. Then (do Carmo, *Differential Geometry of Curves and
 Surfaces*, sections 3-2 and 3-3; Piegl & Tiller eq. 4.20 for the rational derivatives):
 
@@ -154,9 +155,12 @@ def measure(surfaces: list[NurbsSurface], seam: Seam, t: np.ndarray, size: float
 def _measure(surfaces: list[NurbsSurface], seam: Seam, t: np.ndarray, size: float) -> SeamSamples:
     sa, sb = surfaces[seam.a.patch], surfaces[seam.b.patch]
     P, C1a, _, uv_a, der_a = curve(sa, seam.a, t, order=2)
-    t_b, _ = match_points(sb, seam.b, P)
+    # A B-rep edge pairs its two pcurves by parameter; boundaries found geometrically are matched by foot points.
+    t_b = t if seam.paired else match_points(sb, seam.b, P)[0]
     Q, C1b, _, uv_b, der_b = curve(sb, seam.b, t_b, order=2)
-    if not seam.b.exact:  # a sampled trim loop: the exact edge lies on B's surface, not on the loop's chords
+    # A sampled trim loop: the exact edge lies on B's surface, not on the loop's chords. A B-rep edge's point on B is
+    # B's pcurve at the same parameter (SameParameter): G0 is then the gap the edge's tolerance bounds.
+    if not seam.b.exact and not seam.paired:
         uv_b = closest_on_surface(sb, P, uv_b)
         der_b = sb.evaluate(uv_b[:, 0], uv_b[:, 1], order=2)
         Q = der_b.S

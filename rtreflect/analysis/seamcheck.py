@@ -1,6 +1,6 @@
 """`rtreflect continuity`: the per-scene check behind the command — seams, their figures, the table, the JSON.
 
-Seams come from `geometry.seams` (found geometrically), the exact G0/G1/G2 figures from
+Seams come from `geometry.seams` (B-rep topology for CAD faces, found geometrically otherwise), the exact G0/G1/G2 figures from
 `analysis.continuity`, the reflection lines' kinks from `analysis.seamlines`. Nothing here
 imports the command line.
 """
@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import RtreflectError
-from ..geometry.seams import FIND_FRACTION, find_seams, part_size
+from ..geometry.seams import FIND_FRACTION, part_size, scene_seams
 from .continuity import CLASSES, EdgeReport, Thresholds, class_rank, continuity
 
 #: Default G0 tolerance as a fraction of the part's size (model units then follow the part): 1e-6 of a 1 m part
@@ -65,7 +65,7 @@ def check_scene(scene, g0: float | None = None, g1: float = DEFAULT_G1_DEG, g2: 
     size = part_size(patches)
     th = Thresholds(DEFAULT_G0_FRACTION * size if g0 is None else g0, g1, g2)
     # Find seams with a tolerance above the G0 one, so a seam with a gap is still found (and reported open).
-    seams = find_seams(patches, max(FIND_FRACTION * size, 10.0 * th.g0))
+    seams = scene_seams(patches, max(FIND_FRACTION * size, 10.0 * th.g0))
     edges = continuity(patches, seams, th, size)
     if lines and edges:
         from ..integrator.renderer import Renderer

@@ -53,8 +53,8 @@ class Crossing:
 
 
 def _geodesic_curvature(field: UlmetField, patch: int, uv: np.ndarray, tau: np.ndarray, n: np.ndarray,
-                        c: float, h: float) -> np.ndarray:
-    """κg of the level line f = c through each (u, v), at it, for the line oriented along ``tau`` (unit, 3D).
+                        c: float | np.ndarray, h: float) -> np.ndarray:
+    """κg of the level line f = c through each (u, v) (c one per point, or one for all), for the line oriented along ``tau``.
 
     Two more points of the line are traced into the face (steps h and 2h in arc length along the line's
     (u, v) direction, each put back onto f = c by `UlmetField.polish`); with chord lengths h1, h2 the
@@ -118,51 +118,52 @@ def seam_crossings(field: UlmetField, edge: EdgeReport, size: float) -> list[Cro
     sa, sb = surfaces[seam.a.patch], surfaces[seam.b.patch]
     pa = seam.a.patch
     fA = field.f(np.full(len(s.t), pa), s.uv_a[:, 0], s.uv_a[:, 1])
-    out: list[Crossing] = []
-    for k, c in enumerate(np.asarray(field.lights.c_k, dtype=np.float64)):
-        r = fA - c
-        idx = np.flatnonzero(np.isfinite(r[:-1]) & np.isfinite(r[1:]) & (np.sign(r[:-1]) * np.sign(r[1:]) < 0))
-        if len(idx) == 0:
-            continue
-        lo, hi, r_lo = s.t[idx].copy(), s.t[idx + 1].copy(), r[idx].copy()
-        for _ in range(CROSSING_STEPS):
-            mid = 0.5 * (lo + hi)
-            uv = curve(sa, seam.a, mid)[3]
-            r_mid = field.f(np.full(len(mid), pa), uv[:, 0], uv[:, 1]) - c
-            left = np.sign(r_mid) == np.sign(r_lo)
-            lo, r_lo = np.where(left, mid, lo), np.where(left, r_mid, r_lo)
-            hi = np.where(left, hi, mid)
-        t = 0.5 * (lo + hi)
-        P, _, _, uv_a, _ = curve(sa, seam.a, t)
-        t_b, _ = match_points(sb, seam.b, P)
-        uv_b = curve(sb, seam.b, t_b)[3]
-        tau_a = _tangent(field, pa, uv_a)
-        tau_b = _tangent(field, seam.b.patch, uv_b)
-        # Across the seam from A to B: out of A (against w_A), into B (along w_B).
-        w_a = np.interp(t, s.t, np.arange(len(s.t)))
-        j = np.clip(np.round(w_a).astype(int), 0, len(s.t) - 1)
-        tau_a *= np.where(np.einsum("ij,ij->i", tau_a, s.w_a[j]) > 0, -1.0, 1.0)[:, None]
-        tau_b *= np.where(np.einsum("ij,ij->i", tau_b, s.w_b[j]) < 0, -1.0, 1.0)[:, None]
-        kink = np.degrees(angle_between(tau_a, tau_b))
-        cam = field.camera
-        h = IMAGE_STEP * size
-        x0 = cam.project(P)
-        da = cam.project(P + h * tau_a / np.linalg.norm(tau_a, axis=1, keepdims=True)) - x0
-        db = cam.project(P + h * tau_b / np.linalg.norm(tau_b, axis=1, keepdims=True)) - x0
-        image = np.degrees(np.abs(np.arctan2(da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0], np.sum(da * db, axis=1))))
-        seen = field.seen(np.full(len(t), pa), uv_a[:, 0], uv_a[:, 1]) | field.seen(
-            np.full(len(t), seam.b.patch), uv_b[:, 0], uv_b[:, 1])
-        unit_a = tau_a / np.linalg.norm(tau_a, axis=1, keepdims=True)
-        unit_b = tau_b / np.linalg.norm(tau_b, axis=1, keepdims=True)
-        step = GEODESIC_STEP * size
-        # Richardson: the one-sided estimate's O(h) error cancels in 2 κg(h/2) − κg(h).
-        kg_a, kg_b = ((2.0 * _geodesic_curvature(field, p, uv, unit, n, c, 0.5 * step)
-                       - _geodesic_curvature(field, p, uv, unit, n, c, step))
-                      for p, uv, unit, n in ((pa, uv_a, unit_a, s.n_a[j]), (seam.b.patch, uv_b, unit_b, s.n_b[j])))
-        jump = np.abs(kg_a - kg_b)
-        out.extend(Crossing(k, P[i], float(kink[i]), float(image[i]), bool(seen[i]), float(jump[i]))
-                   for i in range(len(t)))
-    return out
+    # Every light at once: one bracket per (light k, sample interval) where f − c_k changes sign, all bisected
+    # together (one call per step for the whole seam, not one per light: the per-call cost dominated).
+    c_all = np.asarray(field.lights.c_k, dtype=np.float64)
+    r = fA[None, :] - c_all[:, None]
+    kk, idx = np.nonzero(np.isfinite(r[:, :-1]) & np.isfinite(r[:, 1:]) & (np.sign(r[:, :-1]) * np.sign(r[:, 1:]) < 0))
+    if len(idx) == 0:
+        return []
+    c = c_all[kk]
+    lo, hi, r_lo = s.t[idx].copy(), s.t[idx + 1].copy(), r[kk, idx]
+    for _ in range(CROSSING_STEPS):
+        mid = 0.5 * (lo + hi)
+        uv = curve(sa, seam.a, mid)[3]
+        r_mid = field.f(np.full(len(mid), pa), uv[:, 0], uv[:, 1]) - c
+        left = np.sign(r_mid) == np.sign(r_lo)
+        lo, r_lo = np.where(left, mid, lo), np.where(left, r_mid, r_lo)
+        hi = np.where(left, hi, mid)
+    t = 0.5 * (lo + hi)
+    P, _, _, uv_a, _ = curve(sa, seam.a, t)
+    t_b, _ = match_points(sb, seam.b, P)
+    uv_b = curve(sb, seam.b, t_b)[3]
+    tau_a = _tangent(field, pa, uv_a)
+    tau_b = _tangent(field, seam.b.patch, uv_b)
+    # Across the seam from A to B: out of A (against w_A), into B (along w_B).
+    w_a = np.interp(t, s.t, np.arange(len(s.t)))
+    j = np.clip(np.round(w_a).astype(int), 0, len(s.t) - 1)
+    tau_a *= np.where(np.einsum("ij,ij->i", tau_a, s.w_a[j]) > 0, -1.0, 1.0)[:, None]
+    tau_b *= np.where(np.einsum("ij,ij->i", tau_b, s.w_b[j]) < 0, -1.0, 1.0)[:, None]
+    kink = np.degrees(angle_between(tau_a, tau_b))
+    cam = field.camera
+    h = IMAGE_STEP * size
+    x0 = cam.project(P)
+    da = cam.project(P + h * tau_a / np.linalg.norm(tau_a, axis=1, keepdims=True)) - x0
+    db = cam.project(P + h * tau_b / np.linalg.norm(tau_b, axis=1, keepdims=True)) - x0
+    image = np.degrees(np.abs(np.arctan2(da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0], np.sum(da * db, axis=1))))
+    seen = field.seen(np.full(len(t), pa), uv_a[:, 0], uv_a[:, 1]) | field.seen(
+        np.full(len(t), seam.b.patch), uv_b[:, 0], uv_b[:, 1])
+    unit_a = tau_a / np.linalg.norm(tau_a, axis=1, keepdims=True)
+    unit_b = tau_b / np.linalg.norm(tau_b, axis=1, keepdims=True)
+    step = GEODESIC_STEP * size
+    # Richardson: the one-sided estimate's O(h) error cancels in 2 κg(h/2) − κg(h).
+    kg_a, kg_b = ((2.0 * _geodesic_curvature(field, p, uv, unit, n, c, 0.5 * step)
+                   - _geodesic_curvature(field, p, uv, unit, n, c, step))
+                  for p, uv, unit, n in ((pa, uv_a, unit_a, s.n_a[j]), (seam.b.patch, uv_b, unit_b, s.n_b[j])))
+    jump = np.abs(kg_a - kg_b)
+    return [Crossing(int(kk[i]), P[i], float(kink[i]), float(image[i]), bool(seen[i]), float(jump[i]))
+            for i in range(len(t))]
 
 
 def attach_line_kinks(field: UlmetField, edges: list[EdgeReport], size: float) -> None:

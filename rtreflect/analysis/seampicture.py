@@ -20,6 +20,7 @@ from ..errors import RtreflectError
 from ..output.imagefiles import atomic_path, write_png
 from .contours import ContourLine, ContourLines, Polyline, UlmetField
 from .overlay import blend, coverage
+from ..trace.tracing import occluded
 
 #: Linear RGB per class: red open, orange G0, yellow-green G1, blue G2 (distinct for the usual colour blindness).
 CLASS_COLOURS = {"open": (0.9, 0.0, 0.0), "G0": (1.0, 0.45, 0.0), "G1": (0.75, 0.75, 0.0), "G2": (0.0, 0.35, 1.0)}
@@ -38,17 +39,29 @@ def _text(rgba: np.ndarray, x: int, y: int, text: str, colour=(0.0, 0.0, 0.0), s
     return buf.get_pixels(oiio.FLOAT).reshape(rgba.shape)
 
 
-def _seen_from_eye(field: UlmetField, patch: int, P: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """True where the seam point P is not hidden from the eye by the part (origin off the surface, as for rays)."""
+def _seen_from_eye(field: UlmetField, patches: tuple[int, int], P: np.ndarray, n_a: np.ndarray,
+                   n_b: np.ndarray) -> np.ndarray:
+    """True where the seam point P is not hidden from the eye by the part (origin off the surface, as for rays).
+
+    The origin leaves the edge along the bisector of both faces' normals (each turned to the eye), by the larger
+    of their offsets: off one face alone it may still lie on the other (a cap's rim on a cylinder), whose
+    triangles then hide it. The occlusion is trim-aware, as the contours' visibility (`tracing.occluded`).
+    """
     cam = field.camera
     a = field.eye_vectors(P)
-    n = np.where((np.sum(n * a, axis=1) >= 0)[:, None], n, -n)
-    origin = field.accelerator.surface_origins(P, n, np.full(len(P), patch))
+    turned = [np.where((np.sum(n * a, axis=1) >= 0)[:, None], n, -n) for n in (n_a, n_b)]
+    bisector = turned[0] + turned[1]
+    length = np.linalg.norm(bisector, axis=1, keepdims=True)
+    n = np.where(length > 0, bisector / np.where(length > 0, length, 1.0), turned[0])
+    origins = [field.accelerator.surface_origins(P, n, np.full(len(P), patch)) for patch in patches]
+    farther = np.linalg.norm(origins[1] - P, axis=1) > np.linalg.norm(origins[0] - P, axis=1)
+    origin = np.where(farther[:, None], origins[1], origins[0])
     to_eye = np.linalg.norm(cam.spec.eye - origin, axis=1) if not cam.orthographic else (origin - cam.spec.eye) @ cam.basis[0]
     depth = (P - cam.spec.eye) @ cam.basis[0]
     seen = depth > 0
     idx = np.flatnonzero(seen)
-    seen[idx] &= ~field.accelerator.occluded(origin[idx], a[idx], np.abs(to_eye[idx]))
+    seen[idx] &= ~occluded(field.accelerator, field.tessellation, field.surfaces, origin[idx], a[idx],
+                           np.abs(to_eye[idx]))
     return seen
 
 
@@ -108,7 +121,7 @@ def draw_seams(rgba: np.ndarray, field: UlmetField, result) -> np.ndarray:
         polylines = []
         for e in (e for e in result.edges if e.cls == cls):
             s = e.samples
-            seen = _seen_from_eye(field, e.seam.a.patch, s.P, s.n_a)
+            seen = _seen_from_eye(field, e.seam.patches, s.P, s.n_a, s.n_b)
             px = field.camera.project(s.P)
             px[~seen] = np.nan  # hidden pieces are cut out
             polylines.append(Polyline(e.seam.a.patch, s.uv_a, px))

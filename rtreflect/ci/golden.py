@@ -28,7 +28,8 @@ from ..integrator.renderer import Renderer
 from ..exchange.load import load_scene
 from ..exchange.scene import Scene
 
-__all__ = ["GOLDEN_WIDTH", "GOLDEN_HEIGHT", "GOLDEN_MAX_SAMPLES", "GOLDEN_CHECKS", "golden_scene", "render_golden",
+__all__ = ["GOLDEN_WIDTH", "GOLDEN_HEIGHT", "GOLDEN_MAX_SAMPLES", "GOLDEN_CHECKS", "golden_name", "golden_scene",
+           "render_golden",
            "golden_reports", "assert_matches_golden", "assert_images_match"]
 
 #: Golden images are rendered at this size (small: the folder stays a few MB, a render takes a second).
@@ -37,11 +38,20 @@ GOLDEN_WIDTH, GOLDEN_HEIGHT = 320, 180
 GOLDEN_MAX_SAMPLES = 4
 
 
+def golden_name(path: str | Path) -> str:
+    """The golden image's name for a scene file: its stem (``hood``); for a CAD part rendered in its default scene,
+    stem and format (``filleted_block_step``, ``filleted_block_igs``), as one part may ship in several formats."""
+    path = Path(path)
+    if path.suffix.lower() == ".toml":
+        return path.stem
+    return f"{path.stem}_{path.suffix.lower().lstrip('.')}"
+
+
 def golden_scene(path: str | Path) -> Scene:
-    """The scene file at golden size, writing ``STEM.exr`` and ``STEM.png`` (STEM: the scene file's stem)."""
+    """The scene file (or CAD part) at golden size, writing ``NAME.exr`` and ``NAME.png`` (NAME: `golden_name`)."""
     scene = load_scene(path)
     scene = scene.with_image(GOLDEN_WIDTH, GOLDEN_HEIGHT, min(scene.image.samples, GOLDEN_MAX_SAMPLES))
-    return resolve(replace(scene, output=replace(scene.output, name=Path(path).stem, exr=True, png=True)))
+    return resolve(replace(scene, output=replace(scene.output, name=golden_name(path), exr=True, png=True)))
 
 
 def render_golden(path: str | Path, outdir: str | Path, threads: int | None = None) -> Path:

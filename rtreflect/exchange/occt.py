@@ -24,6 +24,7 @@ to install.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import sys
 from dataclasses import dataclass, field
@@ -372,10 +373,11 @@ def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float, onto_edges: 
     return loop
 
 
-def trim_of_face(face, surface: NurbsSurface, tolerance: float, onto_edges: bool = False):
+def trim_of_face(face, surface: NurbsSurface, tolerance: float, onto_edges: bool = False, edges: tuple = ()):
     """The face's `Trim`: outer wire and holes as (u, v) polylines of ``surface`` (already un-periodised).
 
     ``onto_edges``: samples follow the 3D edges rather than the pcurves (see `_edge_samples`).
+    ``edges``: the face's B-rep edges (`face_edges`), carried on the trim to the seam finder.
     """
     from OCP.BRepTools import BRepTools
     from OCP.TopAbs import TopAbs_WIRE
@@ -395,10 +397,83 @@ def trim_of_face(face, surface: NurbsSurface, tolerance: float, onto_edges: bool
         explorer.Next()
         if not wire.IsSame(outer_wire):
             holes.append(_wire_loop(wire, face, surface, tolerance, onto_edges))
-    trim = Trim(outer, tuple(holes))
+    trim = Trim(outer, tuple(holes), edges=edges)
     if trim._polygon.is_empty or trim._polygon.area <= 0:
         raise FaceError("its trim loops enclose no area")
     return trim
+
+
+#: Segments each shared edge is sampled in for the seam finder (the same edge parameters on both of its faces):
+#: the continuity figures are measured at these points, so 64 locates a maximum to 1/64 of the edge while
+#: costing ~0.2 ms per edge and face to read (65 pcurve evaluations through OCP).
+EDGE_SEGMENTS = 64
+
+
+#: Reads so far in this process: part of every edge key (`read_faces`).
+_READS = itertools.count()
+
+
+def edge_keys(shape, prefix: str) -> tuple:
+    """The shape's edges indexed (``TopExp.MapShapes_s``: an edge is the same on every face using it, whatever its
+    orientation; each located instance of an assembly has its own) and the key maker ``prefix#index``."""
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp
+    from OCP.collections import IndexedMap_TopoDS_Shape_TopTools_ShapeMapHasher as IndexedMap
+
+    index = IndexedMap()
+    TopExp.MapShapes_s(shape, TopAbs_EDGE, index)
+    return index, lambda edge: f"{prefix}#{index.FindIndex(edge)}"
+
+
+def face_edges(face, surface: NurbsSurface, key_of, onto_edges: bool = False) -> tuple:
+    """The face's B-rep edges as `FaceEdge`s (geometry/topology.py): each pcurve γ(t) and γ'(t) at `EDGE_SEGMENTS` + 1
+    parameters spread evenly over the edge's range (SameParameter: the same t on every face of the edge).
+
+    A seam edge of this face (``BRep_Tool.IsClosed_s``: both sides of a periodic surface's seam line) and a
+    degenerate edge (a pole) are recorded by their flags only: they join the face to no other face.
+    ``onto_edges``: the points are projected from the 3D edge onto the surface (pcurves fitted by ShapeFix
+    only approximate it, see `_edge_samples`).
+    """
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d
+    from OCP.gp import gp_Pnt2d, gp_Vec2d
+    from OCP.GCPnts import GCPnts_AbscissaPoint
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    from ..geometry.topology import FaceEdge
+
+    out, seen = [], set()
+    explorer = TopExp_Explorer(face, TopAbs_EDGE)
+    none = np.zeros((0, 2))
+    while explorer.More():
+        edge = TopoDS.Edge(explorer.Current())
+        explorer.Next()
+        key = key_of(edge)
+        if key in seen:  # a seam edge, met again with the other orientation
+            continue
+        seen.add(key)
+        closed, degenerated = BRep_Tool.IsClosed_s(edge, face), BRep_Tool.Degenerated_s(edge)
+        if closed or degenerated:
+            out.append(FaceEdge(key, np.zeros(0), none, none, 0.0, closed, degenerated))
+            continue
+        curve = BRepAdaptor_Curve2d(edge, face)
+        t = np.linspace(curve.FirstParameter(), curve.LastParameter(), EDGE_SEGMENTS + 1)
+        uv, duv = np.empty((len(t), 2)), np.empty((len(t), 2))
+        point, tangent = gp_Pnt2d(), gp_Vec2d()
+        for k, tk in enumerate(t):  # OCP per-point calls: 65 an edge
+            curve.D1(float(tk), point, tangent)
+            uv[k] = point.X(), point.Y()
+            duv[k] = tangent.X(), tangent.Y()
+        (u0, u1), (v0, v1) = surface.domain
+        uv[:, 0], uv[:, 1] = np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)
+        curve3d = BRepAdaptor_Curve(edge)
+        if onto_edges:
+            target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(tk)) for tk in t)])
+            uv = project_onto_surface(surface, target, uv)
+        out.append(FaceEdge(key, t, uv, duv, float(GCPnts_AbscissaPoint.Length_s(curve3d))))
+    return tuple(out)
 
 
 def mesh_of_face(face, reversed_face: bool) -> tuple[np.ndarray, np.ndarray] | None:
@@ -449,11 +524,12 @@ def transferred_shape(reader):
 
 def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what: str,
                skip_bad_faces: bool = False, reversed_faces: list[bool] | None = None,
-               trims_onto_edges: bool = False) -> CadModel:
+               trims_onto_edges: bool = False, topology: bool = True) -> CadModel:
     """All faces of ``shape`` (every located instance, in explorer order) as trimmed `NurbsSurface`s.
 
     ``reversed_faces`` overrides OCCT's face orientation (the .3dm reader knows Rhino's);
-    ``trims_onto_edges`` makes trim samples follow the 3D edges (pcurves fitted by ShapeFix). A face
+    ``trims_onto_edges`` makes trim samples follow the 3D edges (pcurves fitted by ShapeFix); ``topology``
+    records each face's B-rep edges on its trim (`face_edges`) for the seam finder. A face
     that fails is a `SceneError` naming it, unless ``skip_bad_faces``: then it is listed in
     ``CadModel.skipped`` and the others are read.
     """
@@ -481,6 +557,8 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
         faces.append(TopoDS.Face(explorer.Current()))
         explorer.Next()
     stem = name or path.stem
+    # Keys unique per read: a scene that reads one file twice must not join the two copies' faces.
+    _, key_of = edge_keys(converted, f"{path}|{stem}|{next(_READS)}")
     surfaces, skipped, reversed_flags = [], [], []
     with tqdm(faces, desc=f"reading {path.name}", unit="face", leave=False, file=sys.stderr,
               disable=None if len(faces) > PROGRESS_FACES else True) as bar:
@@ -488,7 +566,8 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
             try:
                 reversed_face = (face.Orientation() == TopAbs_REVERSED) if reversed_faces is None else reversed_faces[index]
                 surface = bspline_of_face(face)
-                trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal, trims_onto_edges)
+                edges = face_edges(face, surface, key_of, trims_onto_edges) if topology else ()
+                trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal, trims_onto_edges, edges)
                 # Meshed face by face, its triangulation dropped once read: memory stays that of one face's
                 # mesh (the whole shape's at once took 560 MB on a 2000-face plate).
                 BRepMesh_IncrementalMesh(face, MESH_DEFLECTION * diagonal, False, MESH_ANGLE, False)

@@ -88,8 +88,11 @@ def occt_curve(curve):
     return Geom_BSplineCurve(poles, weights, knots, mults, curve.Order - 1, False)
 
 
-def rebuild_face(brep, face, edges: dict, tolerance: float):
-    """One Rhino Brep face as an OCCT face: its surface, its loops' 3D edges as wires, pcurves by ShapeFix_Face."""
+def rebuild_face(brep, face, edges: dict, tolerance: float, context=None):
+    """One Rhino Brep face as an OCCT face: its surface, its loops' 3D edges as wires, pcurves by ShapeFix_Face.
+
+    ``context`` (a ``ShapeBuild_ReShape`` shared by the Brep's faces) records the edges ShapeFix replaces, so that
+    applied to all the Brep's rebuilt faces it keeps one edge per Rhino edge (the Brep's topology)."""
     from OCP.BRep import BRep_Builder
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace
     from OCP.ShapeFix import ShapeFix_Face
@@ -126,6 +129,8 @@ def rebuild_face(brep, face, edges: dict, tolerance: float):
         if not is_outer:
             made.Add(wire)
     fix = ShapeFix_Face(made.Face())
+    if context is not None:
+        fix.SetContext(context)
     fix.SetPrecision(tolerance)
     fix.SetMaxTolerance(10 * tolerance)
     fix.Perform()
@@ -136,10 +141,16 @@ def rebuild_face(brep, face, edges: dict, tolerance: float):
 
 
 def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadModel:
-    """Every Brep face (and bare surface) of a .3dm file as a trimmed NURBS surface."""
+    """Every Brep face (and bare surface) of a .3dm file as a trimmed NURBS surface.
+
+    The Brep's topology is kept: one OCCT edge per Rhino edge, shared by the faces that use it, through one
+    ``ShapeBuild_ReShape`` context per Brep (``ShapeFix_Face`` alone gives each face edges of its own), so the seam
+    finder pairs .3dm faces by their shared edges as STEP faces.
+    """
     rhino3dm = _import_rhino3dm(path)
     import_ocp(path, ".3dm files")
     from OCP.BRep import BRep_Builder
+    from OCP.ShapeBuild import ShapeBuild_ReShape
     from OCP.TopoDS import TopoDS_Compound
 
     model = rhino3dm.File3dm.Read(str(path))
@@ -163,14 +174,19 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
             others[kind] = others.get(kind, 0) + 1
             continue
         edges: dict = {}
+        context = ShapeBuild_ReShape()
+        brep_faces = TopoDS_Compound()
+        builder.MakeCompound(brep_faces)
         for face in geometry.Faces:
             try:
-                builder.Add(compound, rebuild_face(geometry, face, edges, tolerance))
+                builder.Add(brep_faces, rebuild_face(geometry, face, edges, tolerance, context))
             except FaceError as exc:
                 failed.append((index, str(exc)))
             except Exception as exc:  # an OCCT exception while rebuilding: name the face
                 failed.append((index, f"its trims cannot be rebuilt in Open CASCADE ({type(exc).__name__}: {exc})"))
             index += 1
+        # The edges a later face's fix replaced, replaced in the faces fixed before it too: shared again.
+        builder.Add(compound, context.Apply(brep_faces))
     if index == 0:
         held = ", ".join(f"{n} {k}" for k, n in sorted(others.items())) or "no objects"
         raise SceneError(path, "", f"no surfaces to render: the .3dm file holds {held}")

@@ -1,4 +1,9 @@
-"""Shared edges (seams) between patches, found geometrically from their boundary curves.
+"""Shared edges (seams) between patches: from the B-rep topology for CAD faces, found geometrically otherwise.
+
+CAD faces carry their B-rep edges (`rtreflect.geometry.topology`): two faces sharing an edge
+are a seam along the whole edge, each side given by its own pcurve at the same edge
+parameters (`topology_seams`); `scene_seams` uses that and the geometric finder below for the
+faces that have no topology.
 
 Inline NURBS and .bpt patches carry no topology: two patches share an edge where their
 boundary curves coincide, within a tolerance, over a common stretch. A boundary curve is
@@ -218,6 +223,9 @@ class Seam:
     t0: float
     t1: float
     length: float  # 3D length of the stretch, model units
+    #: From B-rep topology (`topology_seams`): a's and b's curves run over the same edge parameters, so the
+    #: point of b matching a's point at t is b's at t (no geometric matching).
+    paired: bool = False
 
     @property
     def patches(self) -> tuple[int, int]:
@@ -380,4 +388,66 @@ def find_seams(surfaces: list[NurbsSurface], tol: float | None = None,
             length = _length(sa, a, t0, t1)
             if length > 2.0 * tol:  # corners touching at a point share no edge
                 seams.append(Seam(a, b, t0, t1, length))
+    return seams
+
+
+@dataclass(frozen=True)
+class EdgeBoundary(Boundary):
+    """A B-rep edge's pcurve on one face (`FaceEdge`), as a `Boundary`: its vertices are the pcurve's exact points at
+    the edge's sampled parameters, ``duv`` (m, 2) the pcurve's tangents there; t = vertex index."""
+
+    duv: np.ndarray = None
+
+    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(u, v) linear between vertices (exact at them) and the tangent γ' interpolated likewise (exact at them)."""
+        uv, _ = super().at(t)
+        t = np.asarray(t, dtype=np.float64)
+        seg = np.clip(np.floor(t).astype(np.int64), 0, len(self.uv) - 2)
+        f = (t - seg)[:, None]
+        return uv, (1.0 - f) * self.duv[seg] + f * self.duv[seg + 1]
+
+    @property
+    def exact(self) -> bool:
+        """Exact at its vertices only (the pcurve between them is a chord): the figures are measured there."""
+        return False
+
+
+def _inward(surface: NurbsSurface, uv: np.ndarray) -> np.ndarray:
+    """The (u, v) direction into the face across an edge's polyline ``uv``, one per segment: the side of the edge
+    (left or right, one for the whole edge) on which points a quarter chord off the segments' midpoints lie in
+    the face's trim, by majority (a point may fall outside where the face is thinner than that, at a corner)."""
+    d = np.diff(uv, axis=0)
+    left = np.stack([-d[:, 1], d[:, 0]], axis=1)
+    probe = 0.5 * (uv[:-1] + uv[1:]) + 0.25 * left
+    inside = surface.trim.contains(probe[:, 0], probe[:, 1])
+    return left if 2 * np.count_nonzero(inside) >= len(inside) else -left
+
+
+def topology_seams(surfaces: list[NurbsSurface]) -> list[Seam]:
+    """One seam per B-rep edge two faces share (`topology.shared_edges`), along the whole edge, paired by parameter.
+
+    Faces without topology (``trim.edges`` empty: inline and .bpt patches) take no part; a periodic face's own
+    seam edge and a pole are no seam (see `topology.shared_edges`).
+    """
+    from .topology import edge_record, shared_edges
+
+    edges = [s.trim.edges if s.trim is not None else () for s in surfaces]
+    seams = []
+    for key, ia, ib in shared_edges(edges):
+        ra, rb = edge_record(edges[ia], key), edge_record(edges[ib], key)
+        side = f"edge {key.rsplit('#', 1)[-1]}"
+        a = EdgeBoundary(ia, side, ra.uv, _inward(surfaces[ia], ra.uv), duv=ra.duv)
+        b = EdgeBoundary(ib, side, rb.uv, _inward(surfaces[ib], rb.uv), duv=rb.duv)
+        seams.append(Seam(a, b, 0.0, a.t_max, ra.length, paired=True))
+    return seams
+
+
+def scene_seams(surfaces: list[NurbsSurface], tol: float | None = None) -> list[Seam]:
+    """Every seam of a scene: `topology_seams` among the faces that carry B-rep edges, `find_seams` (geometric,
+    within ``tol``) among the others. A CAD face and an inline patch are never paired."""
+    topo = [k for k, s in enumerate(surfaces) if s.trim is not None and s.trim.edges]
+    others = [bd for k, s in enumerate(surfaces) if k not in set(topo) for bd in face_boundaries(k, s)]
+    seams = topology_seams(surfaces) if topo else []
+    if others:
+        seams += find_seams(surfaces, tol, boundaries=others)
     return seams

@@ -22,7 +22,8 @@ class Trim:
 
     The last point of a loop need not repeat the first. ``u_period`` / ``v_period`` are set for
     a periodic direction whose loops were sampled in one period starting at ``u0`` / ``v0``:
-    parameters are wrapped into ``[u0, u0 + period)`` before the test.
+    parameters are wrapped into ``[u0, u0 + period)`` before the test. ``edges``: the face's B-rep
+    edges with their pcurves (`rtreflect.geometry.topology.FaceEdge`), when its reader knows them.
     """
 
     outer: np.ndarray
@@ -31,6 +32,7 @@ class Trim:
     v_period: float | None = None
     u0: float = 0.0
     v0: float = 0.0
+    edges: tuple = ()
     _polygon: object = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
