@@ -26,6 +26,7 @@ from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color
 from ..modes.lights import TubeLights, reflect
+from ..modes.registry import mode_of
 from ..trace.meshnormals import trace_mesh, vertex_normals
 from ..exchange.scene import ImageSpec, Scene
 from ..geometry.surfaces import SurfaceSet
@@ -130,6 +131,7 @@ class Renderer:
         self.accelerator = Accelerator(self.tessellation)
         self.camera = Camera(scene.camera, scene.image.width, scene.image.height)
         self.lights = TubeLights.from_spec(scene.lights)
+        self.mode = mode_of(scene, self.lights)  # `[render] mode`: φ, its levels and stripes (modes/base.py)
         self.clock = StageClock()
         # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
         self.vertex_normals = vertex_normals(self.tessellation, self.surfaces) if scene.render.normals == "mesh" else None
@@ -141,7 +143,11 @@ class Renderer:
 
     # -- one batch of rays ---------------------------------------------------------------
     def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
-        """Exact hits, reflected directions s, tube distances and 'lit' flags (a tube within its radius, unoccluded)."""
+        """Exact hits, reflected directions s, the mode's nearest level and 'lit' flags.
+
+        Lit: in the mode's stripe and, for a mode seen along the reflected ray (reflection lines:
+        a tube within its radius), not occluded by the surface before it.
+        """
         hits = self.trace(origins, directions)
         n_rays = len(origins)
         s = np.full_like(directions, np.nan)
@@ -152,14 +158,16 @@ class Renderer:
         if len(idx) == 0:
             return shading
         R, n = hits.P[idx], hits.N[idx]
-        with self.clock.stage("tubes (eq. 3, 4)"):
+        with self.clock.stage(self.mode.stage):
             # a, the unit vector towards the eye, is the reversed ray direction for either camera.
             s[idx] = reflect(-directions[idx], n)
-            tubes = self.lights.reach(R, s[idx])
-            line_id[idx], line_dist[idx] = tubes.line_id, tubes.line_dist
-            t_tube = tubes.t_candidate
-            cand = np.flatnonzero(tubes.candidate)
-        if len(cand):
+            stripes = self.mode.stripes(R, n, s[idx])
+            line_id[idx], line_dist[idx] = stripes.level_id, stripes.level_dist
+            t_tube = stripes.occlusion_t
+            cand = np.flatnonzero(stripes.candidate)
+        if t_tube is None:  # a mode not seen along a ray: its stripes are lit where they are
+            lit[idx[cand]] = True
+        elif len(cand):
             start = self.accelerator.surface_origins(R[cand], n[cand], hits.patch[idx[cand]])
             with self.clock.stage("occlusion (Embree)"):
                 blocked = occluded(self.accelerator, self.tessellation, self.surfaces, start, s[idx[cand]], t_tube[cand])
