@@ -324,7 +324,7 @@ CASES = [
     Case("width zero", put("image.width", 0), "image.width"),
     Case("height negative", put("image.height", -18), "image.height"),
     Case("width absurd", put("image.width", 1_000_000),
-         "image.width: must be at most 16384 pixels (17 float32 channels per pixel"),
+         "image.width: must be at most 16384 pixels (22 float32 channels per pixel"),
     Case("height beyond 64 bits", put("image.height", 10**30), "image.height: must be at most 16384 pixels"),
     Case("height absurd float", put("image.height", 1e6), "image.height"),
     Case("too many pixels", together(put("image.width", 16384), put("image.height", 16384)), "image.width"),

@@ -32,13 +32,13 @@ from ..geometry.knots import knot_vector_problem
 from ..geometry.patches import MAX_MAGNITUDE, ZERO_AREA, has_area, patch_problem
 from ..geometry.surfaces import NurbsSurface
 
-#: Largest image side. The film keeps 17 float32 planes per pixel, and beyond this
+#: Largest image side. The film keeps 22 float32 planes per pixel, and beyond this
 #: the planes alone pass the memory of a workstation.
 MAX_SIDE = 16384
-#: Largest pixel count (8192 × 16384): 17 planes × 4 bytes × 2^27 ≈ 9 GB of film.
+#: Largest pixel count (8192 × 16384): 22 planes × 4 bytes × 2^27 ≈ 12 GB of film.
 MAX_PIXELS = 1 << 27
 #: Why the two limits above exist, for the messages that enforce them.
-FILM_LIMIT_REASON = "17 float32 channels per pixel: about 9 GB of EXR at 8192×16384, and validate keeps it in memory"
+FILM_LIMIT_REASON = "22 float32 channels per pixel: about 12 GB of EXR at 8192×16384, and validate keeps it in memory"
 #: Most light tubes: every sample is tested against every tube, so more only slows the render;
 #: no image shows this many stripes apart.
 MAX_TUBES = 10000

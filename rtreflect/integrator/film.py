@@ -11,14 +11,18 @@ from __future__ import annotations
 import numpy as np
 
 COLOR_CHANNELS = ("R", "G", "B", "A")
-AOV_CHANNELS = ("P.X", "P.Y", "P.Z", "N.X", "N.Y", "N.Z", "u", "v", "patch", "Z", "f", "line.id", "line.dist")
+#: The mode's φ and the curvatures (geometry/curvature.py) come after the reflection AOVs, so the channel
+#: indices of the older ones do not move.
+AOV_CHANNELS = ("P.X", "P.Y", "P.Z", "N.X", "N.Y", "N.Z", "u", "v", "patch", "Z", "f", "line.id", "line.dist",
+                "phi", "K", "H", "k1", "k2")
 CHANNELS = COLOR_CHANNELS + AOV_CHANNELS
 
 
 def aov_planes(aovs: dict[str, np.ndarray]) -> np.ndarray:
-    """(N, 13) AOV values in channel order from the named per-pixel arrays (P and N are (N, 3))."""
+    """(N, 18) AOV values in channel order from the named per-pixel arrays (P and N are (N, 3))."""
     return np.column_stack([aovs["P"], aovs["N"], aovs["u"], aovs["v"], aovs["patch"], aovs["Z"], aovs["f"],
-                            aovs["line.id"], aovs["line.dist"]])
+                            aovs["line.id"], aovs["line.dist"], aovs["phi"], aovs["K"], aovs["H"], aovs["k1"],
+                            aovs["k2"]])
 
 
 def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, background) -> np.ndarray:
@@ -38,7 +42,7 @@ class Film:
         self.pixels = np.empty((height, width, len(CHANNELS)), dtype=np.float32)
 
     def put_span(self, start: int, stop: int, pixels: np.ndarray) -> None:
-        """Store pixels [start, stop) in row-major order: (stop − start, 17) values in `CHANNELS` order."""
+        """Store pixels [start, stop) in row-major order: (stop − start, 22) values in `CHANNELS` order."""
         self.pixels.reshape(-1, len(CHANNELS))[start:stop] = pixels
 
     def channel(self, name: str) -> np.ndarray:

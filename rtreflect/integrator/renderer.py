@@ -29,6 +29,7 @@ from ..modes.lights import TubeLights, reflect
 from ..modes.registry import mode_of
 from ..trace.meshnormals import trace_mesh, vertex_normals
 from ..exchange.scene import ImageSpec, Scene
+from ..geometry.curvature import curvatures
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
 from ..trace.tracing import Hits, occluded, trace
@@ -76,7 +77,7 @@ class RenderStats:
 
 @dataclass
 class Tile:
-    """Rendered pixels [start, stop) of the image in row-major order: (stop − start, 17) float32 in `CHANNELS` order."""
+    """Rendered pixels [start, stop) of the image in row-major order: (stop − start, 22) float32 in `CHANNELS` order."""
 
     start: int
     stop: int
@@ -184,9 +185,16 @@ class Renderer:
             f = np.full(len(hits.hit), np.nan)
             idx = np.flatnonzero(hits.hit)
             f[idx] = self.lights.ulmet_f(hits.P[idx], shading.s[idx])
+            phi = np.full(len(hits.hit), np.nan)
+            phi[idx] = self.mode.phi(hits.P[idx], hits.N[idx], shading.s[idx])
+            # K, H, κ1, κ2 from the fundamental forms at the exact hit, signed with N as written (facing the ray).
+            curv = np.full((4, len(hits.hit)), np.nan)
+            if len(idx):
+                derivs = self.surfaces.evaluate(hits.patch[idx], hits.u[idx], hits.v[idx], order=2)
+                curv[:, idx] = curvatures(derivs, hits.N[idx])
         return {"P": hits.P, "N": hits.N, "u": hits.u, "v": hits.v, "patch": hits.patch.astype(np.float64),
                 "Z": hits.t, "f": f, "line.id": shading.line_id.astype(np.float64), "line.dist": shading.line_dist,
-                "shading": shading}
+                "phi": phi, "K": curv[0], "H": curv[1], "k1": curv[2], "k2": curv[3], "shading": shading}
 
     # -- tiles ---------------------------------------------------------------------------
     def render_span(self, start: int, stop: int) -> Tile:
