@@ -11,7 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rtreflect import load_scene, render
+from rtreflect import NurbsSurface, Scene, load_scene, render
+from rtreflect.exchange.scene import RENDER_MODES
+from rtreflect.modes.colormaps import DIVERGING, linear_rgb
+from rtreflect.modes.draft import UNDERCUT_RGB
+from rtreflect.modes.registry import MODES
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
@@ -31,3 +35,121 @@ def test_reflection_phi_is_ulmet_f_and_curvature_channels_match_the_cylinder():
     np.testing.assert_allclose(result.aov("K")[hit], 0.0, atol=1e-5)
     for name in ("phi", "K", "H", "k1", "k2"):
         assert np.isnan(result.aov(name)[~hit]).all(), name
+
+
+SQRT_HALF = np.sqrt(0.5)
+KNOTS2 = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]
+
+
+def revolve(profile, degree: int) -> NurbsSurface:
+    """A quarter turn about z of a profile [(x, z, w)] of the given degree (one Bézier span): u along it, v around z."""
+    turn = [((1.0, 0.0), 1.0), ((1.0, 1.0), SQRT_HALF), ((0.0, 1.0), 1.0)]
+    points = np.array([[[x * cx, x * cy, z] for (cx, cy), _ in turn] for x, z, _ in profile])
+    weights = np.array([[w * wv for _, wv in turn] for _, _, w in profile])
+    knots_u = [0.0] * (degree + 1) + [1.0] * (degree + 1)
+    return NurbsSurface(degree, 2, np.array(knots_u), np.array(KNOTS2), points, weights)
+
+
+def solid_scene(quarter: NurbsSurface, render_table: dict, lights: dict | None = None):
+    """The four quarter turns of a surface of revolution about z, seen from the side and above."""
+    turns = []
+    for k in range(4):
+        c, s = np.cos(k * np.pi / 2), np.sin(k * np.pi / 2)
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        turns.append(NurbsSurface(quarter.degree_u, quarter.degree_v, quarter.knots_u, quarter.knots_v,
+                                  quarter.points @ rot.T, quarter.weights, name=f"turn{k}"))
+    lights = lights or {"point": [0.0, 0.0, 6.0], "normal": [0.0, 0.0, 1.0], "direction": [0.0, 1.0, 0.0],
+                        "spacing": 0.5, "count": 9, "radius": 0.05}
+    return Scene(surfaces=turns, image={"width": 120, "height": 90, "samples": 1},
+                 camera={"eye": [3.6, -4.3, 3.6], "look_at": [0.0, 0.0, 0.3], "fov": 35.0},
+                 lights=lights, render=render_table)
+
+
+def test_isophotes_of_a_sphere_are_circles_of_latitude_about_L():
+    r = 1.5
+    sphere = revolve([(r, 0.0, 1.0), (r, r, SQRT_HALF), (0.0, r, 1.0)], 2)  # upper hemisphere, rational
+    L = np.array([1.0, -1.0, 2.0]) / np.sqrt(6.0)
+    result = render(solid_scene(sphere, {"mode": "isophote", "light": L.tolist(), "step": 15.0}))
+    hit = result.aov("A") > 0
+    assert hit.sum() > 1500
+    P, phi = result.aov("P")[hit], result.aov("phi")[hit]
+    # The latitude about L of the point itself: the angle between its outward radius and L.
+    latitude = np.degrees(np.arccos(np.clip(P @ L / np.linalg.norm(P, axis=1), -1, 1)))
+    np.testing.assert_allclose(phi, latitude, atol=1e-3)
+    # Lit (pixel-centre) stripes lie on the circles every 15°: within 0.1 of a step of one.
+    on_line = result.aov("line.dist")[hit] <= 0.1 * 15.0
+    assert on_line.sum() > 100
+    nearest = 15.0 * np.round(latitude[on_line] / 15.0)
+    assert np.abs(latitude[on_line] - nearest).max() <= 1.5 + 1e-3
+    np.testing.assert_allclose(15.0 * result.aov("line.id")[hit][on_line], nearest)
+
+
+def test_highlight_lines_of_a_cylinder_under_axis_parallel_tubes_are_straight_rulings():
+    """Cylinder of radius 1 about y; tubes along y in the plane z = 3. The normal line at angle θ meets the
+    plane at x = 3 cot θ, so tube c_k lights the ruling θ_k = atan2(3, c_k) whatever the eye."""
+    result = render(load_scene(SCENES / "cylinder.toml").replace(render={"mode": "highlight"}), 160, 90, 1)
+    hit = result.aov("A") > 0
+    P, phi = result.aov("P")[hit], result.aov("phi")[hit]
+    np.testing.assert_allclose(phi, 3.0 * P[:, 0] / P[:, 2], rtol=1e-6, atol=1e-6)
+    scene = load_scene(SCENES / "cylinder.toml")
+    c_k, radius = np.asarray(scene.lights.positions), scene.lights.radius
+    line = result.aov("line.id")[hit].astype(int)
+    lit = (result.aov("line.dist")[hit] <= radius) & (line >= 0)
+    assert len(np.unique(line[lit])) >= 4
+    theta = np.arctan2(P[lit, 2], P[lit, 0])
+    expected = np.arctan2(3.0, c_k[line[lit]])
+    # Within the band: distance ≤ radius between the normal line and the tube, i.e. |Δθ| ≤ radius / distance ≈ 0.06/2.
+    assert np.abs(theta - expected).max() < 0.04
+    # ... and in the image each band is straight: the colour's lit pixels of one tube share one θ, any y.
+    for k in np.unique(line[lit]):
+        ys = P[lit][line[lit] == k, 1]
+        assert np.ptp(ys) > 0.5  # the ruling runs along the cylinder
+
+
+def outside(result) -> np.ndarray:
+    """Pixels whose centre sees the outer side of a surface of revolution about z (N facing away from the axis)."""
+    P, N = result.aov("P"), result.aov("N")
+    return (result.aov("A") == 1) & (N[..., 0] * P[..., 0] + N[..., 1] * P[..., 1] > 0)
+
+
+def test_draft_of_a_cone_is_90_minus_its_half_angle():
+    alpha = 12.0
+    base, height = 1.2, 1.0
+    top = base - height * np.tan(np.radians(alpha))
+    cone = revolve([(base, 0.0, 1.0), (top, height, 1.0)], 1)  # narrowing upwards: a drafted core, rational in v
+    result = render(solid_scene(cone, {"mode": "draft", "pull": [0.0, 0.0, 1.0], "thresholds": [0.0, 5.0, 15.0]}))
+    out = outside(result)
+    assert out.sum() > 800
+    np.testing.assert_allclose(result.aov("phi")[out], 90.0 - alpha, atol=1e-4)
+    # δ = 12° lies in the band [5°, 15°): one colour over the whole outer side (float32 film).
+    rgb = result.rgba[..., :3][out]
+    assert np.ptp(rgb, axis=0).max() < 1e-6
+    # The inside of the open cone, seen over its rim, faces the axis: φ = 90° + α, an undercut as seen.
+    inner = (result.aov("A") == 1) & ~out
+    assert inner.sum() > 100
+    np.testing.assert_allclose(result.aov("phi")[inner], 90.0 + alpha, atol=1e-4)
+    np.testing.assert_allclose(result.rgba[..., :3][inner], np.broadcast_to(UNDERCUT_RGB, (inner.sum(), 3)), atol=1e-6)
+
+
+def test_draft_flags_the_undercut_of_a_cone_widening_upwards():
+    cone = revolve([(1.0, 0.0, 1.0), (1.2, 1.0, 1.0)], 1)  # widening: the outer side hides from the pull
+    result = render(solid_scene(cone, {"mode": "draft"}))
+    out = outside(result)
+    assert out.sum() > 500
+    np.testing.assert_allclose(result.aov("phi")[out], 90.0 + np.degrees(np.arctan(0.2)), atol=1e-4)
+    np.testing.assert_allclose(result.rgba[..., :3][out], np.broadcast_to(UNDERCUT_RGB, (out.sum(), 3)), atol=1e-6)
+
+
+def test_curvature_map_of_a_sphere_is_one_colour_at_minus_one_over_r():
+    r = 1.5
+    sphere = revolve([(r, 0.0, 1.0), (r, r, SQRT_HALF), (0.0, r, 1.0)], 2)
+    result = render(solid_scene(sphere, {"mode": "curvature", "quantity": "k1", "range": [-1.0, 1.0]}))
+    full = result.aov("A") == 1
+    np.testing.assert_allclose(result.aov("phi")[full], -1.0 / r, atol=1e-6)
+    # The map at t = (−1/r + 1)/2 of the diverging map, on every full pixel.
+    expected = linear_rgb(DIVERGING, np.array([(1.0 - 1.0 / r) / 2.0]))[0]
+    np.testing.assert_allclose(result.rgba[..., :3][full], np.broadcast_to(expected, (full.sum(), 3)), atol=1e-6)
+
+
+def test_modes_registry_matches_the_scene_reader():
+    assert tuple(MODES) == RENDER_MODES

@@ -60,6 +60,19 @@ VIEWS = ("iso", "top", "bottom", "front", "back", "left", "right")
 VIEW_HEIGHT = 3.0
 #: `[render] normals`: the exact NURBS normal, or the analysis-mesh normal CAD tools use (for comparison).
 NORMALS_MODES = ("exact", "mesh")
+#: `[render] mode`: the interrogation tools (modes/registry.py builds each; the two lists must agree).
+RENDER_MODES = ("reflection", "highlight", "isophote", "draft", "curvature")
+#: `[render]` keys that belong to some modes only: given with another mode they are an error.
+MODE_KEYS = {"step": ("isophote",), "light": ("isophote",), "pull": ("draft",), "thresholds": ("draft",),
+             "quantity": ("curvature",), "range": ("curvature",), "bands": ("curvature",)}
+#: `[render] quantity` of the curvature map (geometry/curvature.py): K, H, κ1, κ2, max(|κ1|, |κ2|), 1/max(|κ1|, |κ2|).
+CURVATURE_QUANTITIES = ("gaussian", "mean", "k1", "k2", "maxabs", "radius")
+#: Defaults of the mode keys, for the mode that uses them: isophotes every 10°; draft bands at 0°, 1°, 3°
+#: (the usual minimum drafts of moulded parts); the mean curvature on an automatic range.
+MODE_DEFAULTS = {"step": 10.0, "pull": (0.0, 0.0, 1.0), "thresholds": (0.0, 1.0, 3.0), "quantity": "mean",
+                 "range": "auto", "bands": 0}
+#: Most `[render] bands` of a curvature map, and most draft `thresholds`: each is a level of the map.
+MAX_BANDS = 64
 
 
 @dataclass(frozen=True)
@@ -115,6 +128,14 @@ class RenderSettings:
     overlay: bool = False  # draw the analytic contours over the PNG, write NAME.contours.json
     overlay_color: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.2, 0.1]))
     normals: str = "exact"  # "exact": NURBS normal at the exact hit; "mesh": interpolated vertex normals on the mesh
+    mode: str = "reflection"  # `RENDER_MODES`; the keys below are None unless the mode uses them (`MODE_KEYS`)
+    step: float | None = None  # isophote: degrees between levels of angle(n, L)
+    light: np.ndarray | None = None  # isophote: L, unit (None: the light plane's normal m)
+    pull: np.ndarray | None = None  # draft: the pull direction, unit
+    thresholds: tuple | None = None  # draft: draft angles (degrees, ascending) bounding the colour bands
+    quantity: str | None = None  # curvature: `CURVATURE_QUANTITIES`
+    range: tuple | str | None = None  # curvature: (min, max) of the colour map, or "auto"
+    bands: int | None = None  # curvature: iso-curvature lines splitting the range into this many bands (0: none)
 
 
 @dataclass(frozen=True)
@@ -136,7 +157,8 @@ TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "camera": ("projection", "eye", "look_at", "up", "fov", "view_height", "view"),
     "lights": ("auto", "point", "normal", "direction", "positions", "spacing", "count", "radius", "length"),
     "surface": ("name", "degree", "points", "knots_u", "knots_v", "weights", "file"),
-    "render": ("tessellation", "surface_color", "line_color", "background", "overlay", "overlay_color", "normals"),
+    "render": ("tessellation", "surface_color", "line_color", "background", "overlay", "overlay_color", "normals",
+               "mode", "step", "light", "pull", "thresholds", "quantity", "range", "bands"),
     "output": ("name", "exr", "png"),
 }
 #: The tables `Scene.replace` re-reads, in the order a scene file is read (so the first error is the file's first).
@@ -554,8 +576,51 @@ def _parse_render(t: _Table) -> RenderSettings:
             raise t.error(key, f"colour components must be >= 0, got {colors[key].tolist()}")
     overlay = t.boolean("overlay", defaults.overlay)
     normals = t.string("normals", defaults.normals, NORMALS_MODES)
+    mode = t.string("mode", defaults.mode, RENDER_MODES)
+    if overlay and mode != "reflection":
+        raise t.error("overlay", f"draws the analytic reflection lines, not those of mode {mode!r} (not yet): "
+                                 f"remove it (or --overlay) or use mode = \"reflection\"")
+    keys = _mode_keys(t, mode)
     t.finish()
-    return RenderSettings(tess, **colors, overlay=overlay, normals=normals)
+    return RenderSettings(tess, **colors, overlay=overlay, normals=normals, mode=mode, **keys)
+
+
+def _mode_keys(t: _Table, mode: str) -> dict[str, Any]:
+    """The `[render]` keys of ``mode`` (`MODE_KEYS`), checked, with defaults; another mode's key is an error."""
+    for key, modes in MODE_KEYS.items():
+        if t.has(key) and mode not in modes:
+            raise t.error(key, f"not used by mode {mode!r} (only by {', '.join(repr(m) for m in modes)}): "
+                               f"set render.mode or remove it")
+    keys: dict[str, Any] = {}
+    if mode == "isophote":
+        keys["step"] = t.number("step", MODE_DEFAULTS["step"], low=0, high=90, open_low=True)
+        keys["light"] = _unit(t.vector("light", nonzero=True)) if t.has("light") else None
+    elif mode == "draft":
+        keys["pull"] = _unit(t.vector("pull", MODE_DEFAULTS["pull"], nonzero=True))
+        thresholds = t.array("thresholds", (None,), MODE_DEFAULTS["thresholds"])
+        if len(thresholds) > MAX_BANDS:
+            raise t.error("thresholds", f"at most {MAX_BANDS} thresholds, got {len(thresholds)}")
+        if np.any(np.diff(thresholds) <= 0) or np.any(np.abs(thresholds) >= 90):
+            raise t.error("thresholds", f"must be ascending draft angles strictly between -90 and 90 degrees, "
+                                        f"got {thresholds.tolist()}")
+        keys["thresholds"] = tuple(float(x) for x in thresholds)
+    elif mode == "curvature":
+        keys["quantity"] = t.string("quantity", MODE_DEFAULTS["quantity"], CURVATURE_QUANTITIES)
+        keys["range"] = _curvature_range(t)
+        keys["bands"] = t.number("bands", MODE_DEFAULTS["bands"], low=0, high=MAX_BANDS, integer=True)
+    return keys
+
+
+def _curvature_range(t: _Table) -> tuple | str:
+    """``render.range``: "auto", or [min, max] with min < max (1/model unit; model unit for radius)."""
+    if t.raw("range", MODE_DEFAULTS["range"]) == "auto":
+        return "auto"
+    if isinstance(t.data["range"], str):
+        raise t.error("range", f'must be "auto" or [min, max], got {t.data["range"]!r}')
+    low, high = t.array("range", (2,)).tolist()
+    if not low < high:
+        raise t.error("range", f"min must be below max, got [{low:g}, {high:g}]")
+    return (low, high)
 
 
 def _parse_output(t: _Table, path: Path) -> OutputSpec:

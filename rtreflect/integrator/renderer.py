@@ -24,8 +24,9 @@ import numpy as np
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
-from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color
+from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect
+from ..modes.base import SurfacePoints
 from ..modes.registry import mode_of
 from ..trace.meshnormals import trace_mesh, vertex_normals
 from ..exchange.scene import ImageSpec, Scene
@@ -51,11 +52,13 @@ class Shading:
     line_id: np.ndarray
     line_dist: np.ndarray
     lit: np.ndarray
+    surface_rgb: np.ndarray | None = None  # (N, 3) linear RGB of a map mode's surface (NaN where no hit), else None
 
     def take(self, rows: np.ndarray) -> "Shading":
         hits = Hits(**{k: getattr(self.hits, k)[rows] for k in Hits.__dataclass_fields__})
         return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
-                       self.line_dist[rows], self.lit[rows])
+                       self.line_dist[rows], self.lit[rows],
+                       None if self.surface_rgb is None else self.surface_rgb[rows])
 
 
 @dataclass
@@ -132,7 +135,7 @@ class Renderer:
         self.accelerator = Accelerator(self.tessellation)
         self.camera = Camera(scene.camera, scene.image.width, scene.image.height)
         self.lights = TubeLights.from_spec(scene.lights)
-        self.mode = mode_of(scene, self.lights)  # `[render] mode`: φ, its levels and stripes (modes/base.py)
+        self.mode = mode_of(scene, self.lights, self.surfaces)  # `[render] mode`: φ, its levels and stripes (modes/base.py)
         self.clock = StageClock()
         # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
         self.vertex_normals = vertex_normals(self.tessellation, self.surfaces) if scene.render.normals == "mesh" else None
@@ -162,7 +165,12 @@ class Renderer:
         with self.clock.stage(self.mode.stage):
             # a, the unit vector towards the eye, is the reversed ray direction for either camera.
             s[idx] = reflect(-directions[idx], n)
-            stripes = self.mode.stripes(R, n, s[idx])
+            points = SurfacePoints(R, n, s[idx], hits.patch[idx], hits.u[idx], hits.v[idx])
+            stripes = self.mode.stripes(points)
+            rgb = self.mode.surface_rgb(points)
+            if rgb is not None:
+                shading.surface_rgb = np.full((n_rays, 3), np.nan)
+                shading.surface_rgb[idx] = rgb
             line_id[idx], line_dist[idx] = stripes.level_id, stripes.level_dist
             t_tube = stripes.occlusion_t
             cand = np.flatnonzero(stripes.candidate)
@@ -186,7 +194,8 @@ class Renderer:
             idx = np.flatnonzero(hits.hit)
             f[idx] = self.lights.ulmet_f(hits.P[idx], shading.s[idx])
             phi = np.full(len(hits.hit), np.nan)
-            phi[idx] = self.mode.phi(hits.P[idx], hits.N[idx], shading.s[idx])
+            phi[idx] = self.mode.phi(SurfacePoints(hits.P[idx], hits.N[idx], shading.s[idx], hits.patch[idx],
+                                                   hits.u[idx], hits.v[idx]))
             # K, H, κ1, κ2 from the fundamental forms at the exact hit, signed with N as written (facing the ray).
             curv = np.full((4, len(hits.hit)), np.nan)
             if len(idx):
@@ -210,8 +219,13 @@ class Renderer:
         with self.clock.stage("camera rays"):
             origins, directions = self.camera.rays(np.repeat(rows, ns), np.repeat(cols, ns), np.tile(offsets, (len(rows), 1)))
         shading = self.shade(origins, directions)
-        rgba = coverage_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
-                              self.scene.render.surface_color, self.scene.render.line_color, self.scene.render.background)
+        settings = self.scene.render
+        if shading.surface_rgb is None:
+            rgba = coverage_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
+                                  settings.surface_color, settings.line_color, settings.background)
+        else:  # a map mode: each sample's own surface colour
+            rgba = map_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
+                             shading.surface_rgb.reshape(-1, ns, 3), settings.line_color, settings.background)
         fallbacks = int(shading.hits.fallback.sum())
         fell_back = shading.hits.fallback.reshape(-1, ns).any(axis=1)
         rays = len(origins)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Stripes
+from .base import Stripes, SurfacePoints
 from .lights import TubeLights
 
 
@@ -22,13 +22,16 @@ class ReflectionMode:
     name: str = "reflection"
     stage: str = "tubes (eq. 3, 4)"
 
-    def phi(self, R: np.ndarray, n: np.ndarray, s: np.ndarray) -> np.ndarray:
-        return self.lights.ulmet_f(R, s)
+    def phi(self, p: SurfacePoints) -> np.ndarray:
+        return self.lights.ulmet_f(p.R, p.s)
 
-    def stripes(self, R: np.ndarray, n: np.ndarray, s: np.ndarray) -> Stripes:
-        tubes = self.lights.reach(R, s)
+    def stripes(self, p: SurfacePoints) -> Stripes:
+        tubes = self.lights.reach(p.R, p.s)
         return Stripes(tubes.line_id, tubes.line_dist, tubes.candidate, tubes.t_candidate)
 
+    def surface_rgb(self, p: SurfacePoints) -> None:
+        return None
 
-def reflection_mode(scene, lights: TubeLights) -> ReflectionMode:
+
+def reflection_mode(scene, lights: TubeLights, surfaces) -> ReflectionMode:
     return ReflectionMode(lights)

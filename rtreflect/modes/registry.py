@@ -6,15 +6,23 @@ from typing import Callable
 
 from .base import Mode
 from .lights import TubeLights
+from .curvaturemap import curvature_mode
+from .draft import draft_mode
+from .highlight import highlight_mode
+from .isophote import isophote_mode
 from .reflection import reflection_mode
 
-#: ``[render] mode`` name → builder of the mode from (scene, tubes). exchange/scene.py's `RENDER_MODES`
+#: ``[render] mode`` name → builder of the mode from (scene, tubes, surfaces). exchange/scene.py's `RENDER_MODES`
 #: lists the same names (the scene reader sits upstream of the modes); tests check the two agree.
 MODES: dict[str, Callable[..., Mode]] = {
     "reflection": reflection_mode,
+    "highlight": highlight_mode,
+    "isophote": isophote_mode,
+    "draft": draft_mode,
+    "curvature": curvature_mode,
 }
 
 
-def mode_of(scene, lights: TubeLights) -> Mode:
-    """The mode ``scene.render.mode`` names, built for the scene's tubes."""
-    return MODES[getattr(scene.render, "mode", "reflection")](scene, lights)
+def mode_of(scene, lights: TubeLights, surfaces) -> Mode:
+    """The mode ``scene.render.mode`` names, built for the scene's tubes and patches (a `SurfaceSet`)."""
+    return MODES[scene.render.mode](scene, lights, surfaces)
