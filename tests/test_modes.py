@@ -7,13 +7,17 @@ axis for the normal facing the camera, 0 along it).
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from rtreflect import NurbsSurface, Scene, load_scene, render
 from rtreflect.exchange.scene import RENDER_MODES
+from rtreflect.geometry.surfaces import SurfaceSet
 from rtreflect.modes.colormaps import DIVERGING, linear_rgb
+from rtreflect.modes.curvaturemap import auto_range
 from rtreflect.modes.draft import UNDERCUT_RGB
 from rtreflect.modes.registry import MODES
 
@@ -153,3 +157,36 @@ def test_curvature_map_of_a_sphere_is_one_colour_at_minus_one_over_r():
 
 def test_modes_registry_matches_the_scene_reader():
     assert tuple(MODES) == RENDER_MODES
+
+
+def test_map_modes_write_a_legend_with_numbers_and_units(tmp_path: Path):
+    from click.testing import CliRunner
+
+    from rtreflect.cli import cli
+
+    scene = tmp_path / "hood_h.toml"
+    text = (SCENES / "hood_curvature.toml").read_text().replace('range = "auto"', "range = [-0.4, 0.2]")
+    scene.write_text(text)
+    result = CliRunner().invoke(cli, ["render", str(scene), str(SCENES / "cup_draft.toml"), "-o", str(tmp_path / "out"),
+                                      "--width", "64", "--height", "36", "--samples", "1"])
+    assert result.exit_code == 0, result.output + result.stderr
+    svg = (tmp_path / "out" / "hood_h.legend.svg").read_text()
+    assert "mean curvature H (1/unit)" in svg and "fixed range" in svg
+    ticks = [float(x) for x in re.findall(r">(-?[0-9.]+(?:e-?\d+)?)</text>", svg)]
+    assert ticks == pytest.approx([0.2, 0.05, -0.1, -0.25, -0.4])
+    # The bar's ends are the map's colours at the range's ends; the inner band edges are drawn (8 bands: 7 lines).
+    assert svg.count('stroke="white"') == 7
+    draft = (tmp_path / "out" / "cup_draft.legend.svg").read_text()
+    assert all(label in draft for label in ("≥ 3°", "1° to 3°", "0° to 1°", "undercut"))
+    assert not (tmp_path / "out" / "cup_draft.contours.json").exists()
+
+
+def test_auto_range_is_symmetric_and_states_its_clipping():
+    r = 1.5
+    sphere = revolve([(r, 0.0, 1.0), (r, r, SQRT_HALF), (0.0, r, 1.0)], 2)
+    low, high, clipped = auto_range("mean", SurfaceSet([sphere]))
+    assert high == pytest.approx(1.0 / r, rel=1e-9) and low == -high  # |H| = 1/r everywhere
+    assert clipped <= 0.021  # 98th percentile: at most ~2 % beyond it (rounding noise of a constant |H|)
+    hood = load_scene(SCENES / "hood.toml")
+    low, high, clipped = auto_range("gaussian", SurfaceSet(list(hood.surfaces)))
+    assert low == -high and 0.0 < clipped <= 0.021

@@ -54,7 +54,10 @@ class DraftMode:
         return even_stripes(self.phi(p), self.levels, 0.5 * EDGE_WIDTH)
 
     def surface_rgb(self, p: SurfacePoints) -> np.ndarray:
-        draft = 90.0 - self.phi(p)
+        return self.colors(90.0 - self.phi(p))
+
+    def colors(self, draft: np.ndarray) -> np.ndarray:
+        """Linear RGB of draft angles δ (degrees): their band's colour, `UNDERCUT_RGB` where δ < 0."""
         bands = len(self.thresholds) + 1
         # Darker for less draft, lighter for more.
         rgb = linear_rgb(BANDS_MAP, BANDS_FROM + (1.0 - BANDS_FROM) * (self.band(draft) + 0.5) / bands)
