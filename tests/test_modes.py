@@ -80,12 +80,11 @@ def test_isophotes_of_a_sphere_are_circles_of_latitude_about_L():
     # The latitude about L of the point itself: the angle between its outward radius and L.
     latitude = np.degrees(np.arccos(np.clip(P @ L / np.linalg.norm(P, axis=1), -1, 1)))
     np.testing.assert_allclose(phi, latitude, atol=1e-3)
-    # Lit (pixel-centre) stripes lie on the circles every 15°: within 0.1 of a step of one.
-    on_line = result.aov("line.dist")[hit] <= 0.1 * 15.0
-    assert on_line.sum() > 100
-    nearest = 15.0 * np.round(latitude[on_line] / 15.0)
-    assert np.abs(latitude[on_line] - nearest).max() <= 1.5 + 1e-3
-    np.testing.assert_allclose(15.0 * result.aov("line.id")[hit][on_line], nearest)
+    # Lit pixels (one sample each: the line colour exactly) are those within 0.1 of a step of a circle every 15°.
+    lit = np.all(result.rgba[..., :3][hit] == 1.0, axis=1)
+    assert lit.sum() > 100
+    off = np.abs(latitude - 15.0 * np.round(latitude / 15.0))
+    assert off[lit].max() <= 1.5 + 1e-3 and off[~lit].min() >= 1.5 - 1e-3
 
 
 def test_highlight_lines_of_a_cylinder_under_axis_parallel_tubes_are_straight_rulings():
@@ -97,8 +96,8 @@ def test_highlight_lines_of_a_cylinder_under_axis_parallel_tubes_are_straight_ru
     np.testing.assert_allclose(phi, 3.0 * P[:, 0] / P[:, 2], rtol=1e-6, atol=1e-6)
     scene = load_scene(SCENES / "cylinder.toml")
     c_k, radius = np.asarray(scene.lights.positions), scene.lights.radius
-    line = result.aov("line.id")[hit].astype(int)
-    lit = (result.aov("line.dist")[hit] <= radius) & (line >= 0)
+    lit = np.all(result.rgba[..., :3][hit] == 1.0, axis=1)  # one sample per pixel: the line colour exactly
+    line = np.argmin(np.abs(3.0 * P[:, 0:1] / P[:, 2:3] - c_k[None, :]), axis=1)  # the tube the normal line nears
     assert len(np.unique(line[lit])) >= 4
     theta = np.arctan2(P[lit, 2], P[lit, 0])
     expected = np.arctan2(3.0, c_k[line[lit]])

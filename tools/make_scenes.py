@@ -123,8 +123,8 @@ def cup() -> list[tuple[int, int, list, list, np.ndarray, np.ndarray]]:
     The profile (x, z) bulges out a little above the base (an undercut for a pull along +z), rises
     almost vertically (under 1° of draft) and rounds over into the flat top (plenty of draft).
     """
-    profile = [(1.0, 0.0), (1.06, 0.35), (0.98, 0.95), (0.7, 1.15), (0.0, 1.15)]
-    knots_u = [0, 0, 0, 0, 0.5, 1, 1, 1, 1]
+    profile = [(1.0, 0.0), (1.03, 0.2), (1.0, 0.55), (0.98, 0.9), (0.9, 1.12), (0.0, 1.15)]
+    knots_u = [0, 0, 0, 0, 1 / 3, 2 / 3, 1, 1, 1, 1]
     w = np.sqrt(0.5)
     turn = [((1.0, 0.0), 1.0), ((1.0, 1.0), w), ((0.0, 1.0), 1.0)]
     patches = []
@@ -141,10 +141,10 @@ def cup_draft() -> str:
     text = header("Draft analysis of a moulded boss (pull +z): an undercut bulge above the base (red), a side under "
                   "1° of draft, a rounded top with plenty.",
                   {"width": 960, "height": 540, "samples": 4},
-                  {"projection": "perspective", "eye": [3.2, -3.6, 2.6], "look_at": [0.0, 0.0, 0.5],
+                  {"projection": "perspective", "eye": [2.4, -2.7, 2.3], "look_at": [0.0, 0.0, 0.55],
                    "up": [0.0, 0.0, 1.0], "fov": 38.0},
                   {"point": [0.0, 0.0, 4.0], "normal": [0.0, 0.0, 1.0], "direction": [0.0, 1.0, 0.0],
-                   "spacing": 0.5, "count": 15, "radius": 0.05})
+                   "spacing": 0.2, "count": 61, "radius": 0.02})
     for k, (p, q, ku, kv, points, weights) in enumerate(cup()):
         text += surface(f"quarter{k}", (p, q), ku, kv, points, weights)
     return text + footer({"tessellation": 16, "mode": "draft", "pull": [0.0, 0.0, 1.0], "thresholds": [0.0, 1.0, 3.0]})

@@ -27,6 +27,7 @@ from ..clock import StageClock
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect
 from ..modes.base import SurfacePoints
+from ..modes.reflection import ReflectionMode
 from ..modes.registry import mode_of
 from ..trace.meshnormals import trace_mesh, vertex_normals
 from ..exchange.scene import ImageSpec, Scene
@@ -167,11 +168,17 @@ class Renderer:
             s[idx] = reflect(-directions[idx], n)
             points = SurfacePoints(R, n, s[idx], hits.patch[idx], hits.u[idx], hits.v[idx])
             stripes = self.mode.stripes(points)
+            # line.id and line.dist are the tubes' in every mode (the EXR contract): the reflection mode's stripes
+            # are those; another mode's nearest level follows from its φ (channel phi) and levels.
+            if isinstance(self.mode, ReflectionMode):
+                line_id[idx], line_dist[idx] = stripes.level_id, stripes.level_dist
+            else:
+                tubes = self.lights.reach(R, s[idx])
+                line_id[idx], line_dist[idx] = tubes.line_id, tubes.line_dist
             rgb = self.mode.surface_rgb(points)
             if rgb is not None:
                 shading.surface_rgb = np.full((n_rays, 3), np.nan)
                 shading.surface_rgb[idx] = rgb
-            line_id[idx], line_dist[idx] = stripes.level_id, stripes.level_dist
             t_tube = stripes.occlusion_t
             cand = np.flatnonzero(stripes.candidate)
         if t_tube is None:  # a mode not seen along a ray: its stripes are lit where they are
