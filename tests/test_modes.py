@@ -189,3 +189,22 @@ def test_auto_range_is_symmetric_and_states_its_clipping():
     hood = load_scene(SCENES / "hood.toml")
     low, high, clipped = auto_range("gaussian", SurfaceSet(list(hood.surfaces)))
     assert low == -high and 0.0 < clipped <= 0.021
+
+
+def test_zebra_is_the_limit_of_reflection_lines_of_tubes_at_infinity():
+    """ψ = atan2(s·e, s·m) against Ulmet's f of the same scene with its light plane moved to height H: f/H → tan ψ
+    (f = R·e + (H − R·m) tan ψ), a second formula through the renderer's reflection mode."""
+    H = 1e4
+    cylinder = load_scene(SCENES / "cylinder.toml")
+    zebra = render(cylinder.replace(render={"mode": "zebra", "step": 5.0}), 96, 54, 1)
+    far = render(cylinder.replace(lights={"point": [0.0, 0.0, H]}), 96, 54, 1)
+    hit = zebra.aov("A") > 0
+    f = far.aov("f")[hit]
+    ahead = np.isfinite(f)
+    assert ahead.sum() > 500
+    psi = zebra.aov("phi")[hit][ahead]
+    np.testing.assert_allclose(psi, np.degrees(np.arctan(f[ahead] / H)), atol=0.02)
+    # Stripes every 5°, 1° wide (20 % of a step): lit exactly where ψ is within 0.5° of a multiple of 5°.
+    off = np.abs(psi - 5.0 * np.round(psi / 5.0))
+    lit = np.all(zebra.rgba[..., :3][hit][ahead] == 1.0, axis=1)
+    assert lit.sum() > 50 and off[lit].max() <= 0.5 + 1e-4 and off[~lit].min() >= 0.5 - 1e-4

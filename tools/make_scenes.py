@@ -163,6 +163,9 @@ def mode_scenes() -> list[tuple[str, str]]:
                                      "camera: negative where it bends away), with 8 iso-curvature bands.",
                                      {"mode": "curvature", "quantity": "mean", "range": "auto", "bands": 8})),
         ("cup_draft", cup_draft()),
+        ("hood_zebra", with_mode(hood(), "Zebra stripes on the hood: the environment-mapped stripes of CAD tools, a "
+                                 "function of the reflected direction only (tubes at infinity, no parallax).",
+                                 {"mode": "zebra", "step": 6.0})),
     ]
 
 

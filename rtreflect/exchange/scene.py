@@ -61,9 +61,9 @@ VIEW_HEIGHT = 3.0
 #: `[render] normals`: the exact NURBS normal, or the analysis-mesh normal CAD tools use (for comparison).
 NORMALS_MODES = ("exact", "mesh")
 #: `[render] mode`: the interrogation tools (modes/registry.py builds each; the two lists must agree).
-RENDER_MODES = ("reflection", "highlight", "isophote", "draft", "curvature")
+RENDER_MODES = ("reflection", "highlight", "isophote", "draft", "curvature", "zebra")
 #: `[render]` keys that belong to some modes only: given with another mode they are an error.
-MODE_KEYS = {"step": ("isophote",), "light": ("isophote",), "pull": ("draft",), "thresholds": ("draft",),
+MODE_KEYS = {"step": ("isophote", "zebra"), "light": ("isophote",), "pull": ("draft",), "thresholds": ("draft",),
              "quantity": ("curvature",), "range": ("curvature",), "bands": ("curvature",)}
 #: `[render] quantity` of the curvature map (geometry/curvature.py): K, H, κ1, κ2, max(|κ1|, |κ2|), 1/max(|κ1|, |κ2|).
 CURVATURE_QUANTITIES = ("gaussian", "mean", "k1", "k2", "maxabs", "radius")
@@ -129,7 +129,7 @@ class RenderSettings:
     overlay_color: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.2, 0.1]))
     normals: str = "exact"  # "exact": NURBS normal at the exact hit; "mesh": interpolated vertex normals on the mesh
     mode: str = "reflection"  # `RENDER_MODES`; the keys below are None unless the mode uses them (`MODE_KEYS`)
-    step: float | None = None  # isophote: degrees between levels of angle(n, L)
+    step: float | None = None  # isophote: degrees between levels of angle(n, L); zebra: of the angle of s about c
     light: np.ndarray | None = None  # isophote: L, unit (None: the light plane's normal m)
     pull: np.ndarray | None = None  # draft: the pull direction, unit
     thresholds: tuple | None = None  # draft: draft angles (degrees, ascending) bounding the colour bands
@@ -592,8 +592,9 @@ def _mode_keys(t: _Table, mode: str) -> dict[str, Any]:
             raise t.error(key, f"not used by mode {mode!r} (only by {', '.join(repr(m) for m in modes)}): "
                                f"set render.mode or remove it")
     keys: dict[str, Any] = {}
-    if mode == "isophote":
+    if mode in ("isophote", "zebra"):
         keys["step"] = t.number("step", MODE_DEFAULTS["step"], low=0, high=90, open_low=True)
+    if mode == "isophote":
         keys["light"] = _unit(t.vector("light", nonzero=True)) if t.has("light") else None
     elif mode == "draft":
         keys["pull"] = _unit(t.vector("pull", MODE_DEFAULTS["pull"], nonzero=True))

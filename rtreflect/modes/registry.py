@@ -11,6 +11,7 @@ from .draft import draft_mode
 from .highlight import highlight_mode
 from .isophote import isophote_mode
 from .reflection import reflection_mode
+from .zebra import zebra_mode
 
 #: ``[render] mode`` name → builder of the mode from (scene, tubes, surfaces). exchange/scene.py's `RENDER_MODES`
 #: lists the same names (the scene reader sits upstream of the modes); tests check the two agree.
@@ -20,6 +21,7 @@ MODES: dict[str, Callable[..., Mode]] = {
     "isophote": isophote_mode,
     "draft": draft_mode,
     "curvature": curvature_mode,
+    "zebra": zebra_mode,
 }
 
 
