@@ -7,7 +7,7 @@
 folder and times ``rtreflect batch -j 1`` against ``-j 2`` (``--force``), alternating,
 printing every wall time and the ratio of the best of each. ``memory`` renders the benchmark surface of
 ``render_bench.py`` at each size through ``/usr/bin/time -v rtreflect render`` and prints
-the peak resident memory next to what an in-memory film of 17 float32 planes would need.
+the peak resident memory next to what an in-memory film of 22 float32 planes would need.
 Timings on a shared machine are approximate: compare ratios, not seconds.
 """
 

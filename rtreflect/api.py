@@ -51,7 +51,7 @@ def render(scene: Scene | str | Path, width: int | None = None, height: int | No
     override the scene's values (None keeps them; ``overlay="side"`` as ``--overlay=side``). The result has ``rgba`` (H, W, 4 linear
     float32), ``aov(name)`` (an EXR channel such as ``"f"``, or ``"P"``/``"N"`` as (H, W, 3)),
     ``stats`` (rays, seconds, Newton fallbacks) and the ``scene`` rendered. The film holds
-    17 float32 channels per pixel (a 1920×1080 film is 141 MB); `rtreflect render` streams
+    22 float32 channels per pixel (a 1920×1080 film is 182 MB); `rtreflect render` streams
     to files instead.
     """
     scene = _overridden(scene, width, height, samples, normals, overlay)

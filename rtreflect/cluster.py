@@ -78,7 +78,7 @@ def _renderer(scene: Scene, key: str) -> Renderer:
 
 
 def render_tile(scene: Scene, key: str, start: int, stop: int, client_version: str) -> tuple[np.ndarray, int, int]:
-    """A Dask task: pixels [start, stop) of the scene as (P, 17) float32, with ray and Newton-fallback counts."""
+    """A Dask task: pixels [start, stop) of the scene as (P, 22) float32, with ray and Newton-fallback counts."""
     if client_version != __version__:
         raise RtreflectError(f"worker runs rtreflect {__version__} but the client {client_version}: "
                              "install the same version everywhere (outputs would differ)")

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtreflect.exchange.scene import SCHEMA_DOC, TABLE_KEYS, load_scene
+from rtreflect.exchange.scene import MODE_KEYS, RENDER_MODES, SCHEMA_DOC, TABLE_KEYS, load_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 REFERENCE = ROOT / "docs" / "scene-format.md"
@@ -47,17 +47,31 @@ def test_every_top_level_table_has_a_section() -> None:
         section(table)
 
 
+def mode_examples() -> list[str]:
+    """The ``[render]`` tables of "The other modes": one per mode besides reflection."""
+    text = re.search(r"^## The other modes$(.*?)(?=^## )", REFERENCE.read_text(), re.S | re.M)[1]
+    found = re.findall(r"```toml\n(\[render\]\n.*?)```", text, re.S)
+    assert sorted(re.search(r'^mode = "(\w+)"', block, re.M)[1] for block in found) == sorted(RENDER_MODES[1:])
+    return found
+
+
 def test_example_scene_parses_and_means_what_it_says(tmp_path: Path) -> None:
     example = re.search(r"^## Example$.*?```toml\n(.*?)```", REFERENCE.read_text(), re.S | re.M)[1]
     (tmp_path / "example.toml").write_text(example)
     shutil.copy(ROOT / "scenes" / "teapot.bpt", tmp_path / "teapot.bpt")
     scene = load_scene(tmp_path / "example.toml")
-    # Every table and key of the parser is used by the example (a reader sees them all once).
+    # Every table and key of the parser is used by the example (a reader sees them all once); the keys
+    # of the modes other than reflection by the examples of those modes, each parsed in place of [render].
+    modes = mode_examples()
+    for render in modes:
+        (tmp_path / "mode.toml").write_text(re.sub(r"^\[render\]\n(?:[a-z_]+ = .*\n)*", render, example, flags=re.M))
+        assert load_scene(tmp_path / "mode.toml").render.mode in render
     for table, keys in TABLE_KEYS.items():
         if table:
             for key in keys:
                 if not (table == "lights" and key == "positions"):  # spacing/count stand for it
-                    assert re.search(rf"^{key} = ", example, re.M), f"{table}.{key} not in the example"
+                    shown = example if not (table == "render" and key in MODE_KEYS) else "".join(modes)
+                    assert re.search(rf"^{key} = ", shown, re.M), f"{table}.{key} not in the example"
     # spacing/count are centred on Q, as the comments and the [lights] section say.
     assert np.allclose(scene.lights.positions, np.arange(-2.0, 2.01, 0.5))
     assert np.allclose(np.cross(scene.lights.direction, scene.lights.normal), [1.0, 0.0, 0.0])  # e = +x

@@ -1,4 +1,4 @@
-"""Regenerate the inline-NURBS scenes in scenes/ (hood, g1_join, cylinder) from their closed forms.
+"""Regenerate the inline-NURBS scenes in scenes/ (hood, g1_join, cylinder, and one per interrogation mode).
 
 Run: python tools/make_scenes.py   — the .toml files are committed; this records how they were made.
 """
@@ -110,8 +110,66 @@ def cylinder() -> str:
             + footer({"tessellation": 16}))
 
 
+def with_mode(text: str, comment: str, render: dict) -> str:
+    """A scene's text with its first comment line replaced and ``render`` keys added to its [render] table."""
+    first, rest = text.split("\n", 1)
+    return f"# {comment}\n" + rest + "".join(f"{k} = {fmt(v)}\n" for k, v in render.items())
+
+
+def cup() -> list[tuple[int, int, list, list, np.ndarray, np.ndarray]]:
+    """A moulded cup-like boss about z, as four rational quarter turns of one cubic profile.
+
+    The profile (x, z) bulges out a little above the base (an undercut for a pull along +z), rises
+    almost vertically (under 1° of draft) and rounds over into the flat top (plenty of draft).
+    """
+    profile = [(1.0, 0.0), (1.03, 0.2), (1.0, 0.55), (0.98, 0.9), (0.9, 1.12), (0.0, 1.15)]
+    knots_u = [0, 0, 0, 0, 1 / 3, 2 / 3, 1, 1, 1, 1]
+    w = np.sqrt(0.5)
+    turn = [((1.0, 0.0), 1.0), ((1.0, 1.0), w), ((0.0, 1.0), 1.0)]
+    patches = []
+    for k in range(4):
+        c, s = np.cos(k * np.pi / 2), np.sin(k * np.pi / 2)
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        points = np.array([[[x * cx, x * cy, z] for (cx, cy), _ in turn] for x, z in profile]) @ rot.T
+        weights = np.array([[wv for _, wv in turn] for _ in profile])
+        patches.append((3, 2, knots_u, [0, 0, 0, 1, 1, 1], points, weights))
+    return patches
+
+
+def cup_draft() -> str:
+    text = header("Draft analysis of a moulded boss (pull +z): an undercut bulge above the base (red), a side under "
+                  "1° of draft, a rounded top with plenty.",
+                  {"width": 960, "height": 540, "samples": 4},
+                  {"projection": "perspective", "eye": [2.4, -2.7, 2.3], "look_at": [0.0, 0.0, 0.55],
+                   "up": [0.0, 0.0, 1.0], "fov": 38.0},
+                  {"point": [0.0, 0.0, 4.0], "normal": [0.0, 0.0, 1.0], "direction": [0.0, 1.0, 0.0],
+                   "spacing": 0.2, "count": 61, "radius": 0.02})
+    for k, (p, q, ku, kv, points, weights) in enumerate(cup()):
+        text += surface(f"quarter{k}", (p, q), ku, kv, points, weights)
+    return text + footer({"tessellation": 16, "mode": "draft", "pull": [0.0, 0.0, 1.0], "thresholds": [0.0, 1.0, 3.0]})
+
+
+def mode_scenes() -> list[tuple[str, str]]:
+    """One scene per interrogation mode besides reflection (issue 15), each showing what the mode is for."""
+    return [
+        ("cylinder_highlight", with_mode(cylinder(), "Highlight lines (Beier-Chen) of the quarter cylinder: straight "
+                                         "rulings where the normal lines meet the tubes, whatever the eye.",
+                                         {"mode": "highlight"})),
+        ("g1_join_isophote", with_mode(g1_join(), "Isophotes of the G1 join: the curvature jump at x = 0 shows as a "
+                                       "kink in every isophote (they are one order less smooth than the surface).",
+                                       {"mode": "isophote", "step": 4.0, "light": [0.4, -0.6, 1.0]})),
+        ("hood_curvature", with_mode(hood(), "The hood's mean curvature map (signed with the normal facing the "
+                                     "camera: negative where it bends away), with 8 iso-curvature bands.",
+                                     {"mode": "curvature", "quantity": "mean", "range": "auto", "bands": 8})),
+        ("cup_draft", cup_draft()),
+        ("hood_zebra", with_mode(hood(), "Zebra stripes on the hood: the environment-mapped stripes of CAD tools, a "
+                                 "function of the reflected direction only (tubes at infinity, no parallax).",
+                                 {"mode": "zebra", "step": 6.0})),
+    ]
+
+
 def main() -> None:
-    for name, text in (("hood", hood()), ("g1_join", g1_join()), ("cylinder", cylinder())):
+    for name, text in (("hood", hood()), ("g1_join", g1_join()), ("cylinder", cylinder()), *mode_scenes()):
         (SCENES / f"{name}.toml").write_text(text)
         print(f"wrote scenes/{name}.toml")
 

@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..geometry.curvature import normal_curvature
 from ..geometry.seams import Seam, closest_on_surface, curve, match_points, sample_parameters
 from ..geometry.surfaces import NurbsSurface
 
@@ -82,18 +83,6 @@ def across(der, n: np.ndarray, T: np.ndarray, inward_uv: np.ndarray) -> tuple[np
     into = der.Su * inward_uv[:, :1] + der.Sv * inward_uv[:, 1:]
     sigma = np.where(_dot(w, into) >= 0, 1.0, -1.0)
     return _unit(w * sigma[:, None]), sigma
-
-
-def normal_curvature(der, n: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """κ(w) = II(w, w) / I(w, w) at each point, w a tangent vector written as a S_u + b S_v (do Carmo 3-2)."""
-    E, F, G = _dot(der.Su, der.Su), _dot(der.Su, der.Sv), _dot(der.Sv, der.Sv)
-    wu, wv = _dot(w, der.Su), _dot(w, der.Sv)
-    det = E * G - F * F
-    a = (G * wu - F * wv) / det
-    b = (E * wv - F * wu) / det
-    L, M, N = _dot(der.Suu, n), _dot(der.Suv, n), _dot(der.Svv, n)
-    first = E * a * a + 2.0 * F * a * b + G * b * b
-    return (L * a * a + 2.0 * M * a * b + N * b * b) / first
 
 
 @dataclass

@@ -32,13 +32,13 @@ from ..geometry.knots import knot_vector_problem
 from ..geometry.patches import MAX_MAGNITUDE, ZERO_AREA, has_area, patch_problem
 from ..geometry.surfaces import NurbsSurface
 
-#: Largest image side. The film keeps 17 float32 planes per pixel, and beyond this
+#: Largest image side. The film keeps 22 float32 planes per pixel, and beyond this
 #: the planes alone pass the memory of a workstation.
 MAX_SIDE = 16384
-#: Largest pixel count (8192 × 16384): 17 planes × 4 bytes × 2^27 ≈ 9 GB of film.
+#: Largest pixel count (8192 × 16384): 22 planes × 4 bytes × 2^27 ≈ 12 GB of film.
 MAX_PIXELS = 1 << 27
 #: Why the two limits above exist, for the messages that enforce them.
-FILM_LIMIT_REASON = "17 float32 channels per pixel: about 9 GB of EXR at 8192×16384, and validate keeps it in memory"
+FILM_LIMIT_REASON = "22 float32 channels per pixel: about 12 GB of EXR at 8192×16384, and validate keeps it in memory"
 #: Most light tubes: every sample is tested against every tube, so more only slows the render;
 #: no image shows this many stripes apart.
 MAX_TUBES = 10000
@@ -69,6 +69,19 @@ MAX_BLUR = 1.0
 OVERLAY_SIDE = "side"
 #: Widest `[render] overlay_width` in pixels: wider lines hide the stripes they are there to check.
 MAX_OVERLAY_WIDTH = 16.0
+#: `[render] mode`: the interrogation tools (modes/registry.py builds each; the two lists must agree).
+RENDER_MODES = ("reflection", "highlight", "isophote", "draft", "curvature", "zebra")
+#: `[render]` keys that belong to some modes only: given with another mode they are an error.
+MODE_KEYS = {"step": ("isophote", "zebra"), "light": ("isophote",), "pull": ("draft",), "thresholds": ("draft",),
+             "quantity": ("curvature",), "range": ("curvature",), "bands": ("curvature",)}
+#: `[render] quantity` of the curvature map (geometry/curvature.py): K, H, κ1, κ2, max(|κ1|, |κ2|), 1/max(|κ1|, |κ2|).
+CURVATURE_QUANTITIES = ("gaussian", "mean", "k1", "k2", "maxabs", "radius")
+#: Defaults of the mode keys, for the mode that uses them: isophotes every 10°; draft bands at 0°, 1°, 3°
+#: (the usual minimum drafts of moulded parts); the mean curvature on an automatic range.
+MODE_DEFAULTS = {"step": 10.0, "pull": (0.0, 0.0, 1.0), "thresholds": (0.0, 1.0, 3.0), "quantity": "mean",
+                 "range": "auto", "bands": 0}
+#: Most `[render] bands` of a curvature map, and most draft `thresholds`: each is a level of the map.
+MAX_BANDS = 64
 
 
 @dataclass(frozen=True)
@@ -129,6 +142,14 @@ class RenderSettings:
     shading: str = "lambert"  # one of SHADING_MODES: the surface colour lit from the eye, or flat
     blur: float = 0.0  # soft stripe edge, a fraction of the radius (`modes.profile`); 0: the hard tube of eq. 4
     overlay_width: float = 2.0  # pixels: the overlay's line width, anti-aliased
+    mode: str = "reflection"  # `RENDER_MODES`; the keys below are None unless the mode uses them (`MODE_KEYS`)
+    step: float | None = None  # isophote: degrees between levels of angle(n, L); zebra: of the angle of s about c
+    light: np.ndarray | None = None  # isophote: L, unit (None: the light plane's normal m)
+    pull: np.ndarray | None = None  # draft: the pull direction, unit
+    thresholds: tuple | None = None  # draft: draft angles (degrees, ascending) bounding the colour bands
+    quantity: str | None = None  # curvature: `CURVATURE_QUANTITIES`
+    range: tuple | str | None = None  # curvature: (min, max) of the colour map, or "auto"
+    bands: int | None = None  # curvature: iso-curvature lines splitting the range into this many bands (0: none)
 
 
 @dataclass(frozen=True)
@@ -151,7 +172,8 @@ TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "lights": ("auto", "point", "normal", "direction", "positions", "spacing", "count", "radius", "length"),
     "surface": ("name", "degree", "points", "knots_u", "knots_v", "weights", "file"),
     "render": ("tessellation", "surface_color", "line_color", "background", "shading", "blur", "overlay",
-               "overlay_color", "overlay_width", "normals"),
+               "overlay_color", "overlay_width", "normals", "mode", "step", "light", "pull", "thresholds", "quantity",
+               "range", "bands"),
     "output": ("name", "exr", "png"),
 }
 #: The tables `Scene.replace` re-reads, in the order a scene file is read (so the first error is the file's first).
@@ -576,9 +598,53 @@ def _parse_render(t: _Table) -> RenderSettings:
     blur = float(t.number("blur", defaults.blur, low=0, high=MAX_BLUR))
     overlay_width = float(t.number("overlay_width", defaults.overlay_width, low=0, high=MAX_OVERLAY_WIDTH,
                                    open_low=True))
+    mode = t.string("mode", defaults.mode, RENDER_MODES)
+    if overlay and mode != "reflection":
+        raise t.error("overlay", f"draws the analytic reflection lines, not those of mode {mode!r} (not yet): "
+                                 f"remove it (or --overlay) or use mode = \"reflection\"")
+    keys = _mode_keys(t, mode)
     t.finish()
     return RenderSettings(tess, **colors, overlay=overlay, normals=normals, shading=shading, blur=blur,
-                          overlay_width=overlay_width)
+                          overlay_width=overlay_width, mode=mode, **keys)
+
+
+def _mode_keys(t: _Table, mode: str) -> dict[str, Any]:
+    """The `[render]` keys of ``mode`` (`MODE_KEYS`), checked, with defaults; another mode's key is an error."""
+    for key, modes in MODE_KEYS.items():
+        if t.has(key) and mode not in modes:
+            raise t.error(key, f"not used by mode {mode!r} (only by {', '.join(repr(m) for m in modes)}): "
+                               f"set render.mode or remove it")
+    keys: dict[str, Any] = {}
+    if mode in ("isophote", "zebra"):
+        keys["step"] = t.number("step", MODE_DEFAULTS["step"], low=0, high=90, open_low=True)
+    if mode == "isophote":
+        keys["light"] = _unit(t.vector("light", nonzero=True)) if t.has("light") else None
+    elif mode == "draft":
+        keys["pull"] = _unit(t.vector("pull", MODE_DEFAULTS["pull"], nonzero=True))
+        thresholds = t.array("thresholds", (None,), MODE_DEFAULTS["thresholds"])
+        if len(thresholds) > MAX_BANDS:
+            raise t.error("thresholds", f"at most {MAX_BANDS} thresholds, got {len(thresholds)}")
+        if np.any(np.diff(thresholds) <= 0) or np.any(np.abs(thresholds) >= 90):
+            raise t.error("thresholds", f"must be ascending draft angles strictly between -90 and 90 degrees, "
+                                        f"got {thresholds.tolist()}")
+        keys["thresholds"] = tuple(float(x) for x in thresholds)
+    elif mode == "curvature":
+        keys["quantity"] = t.string("quantity", MODE_DEFAULTS["quantity"], CURVATURE_QUANTITIES)
+        keys["range"] = _curvature_range(t)
+        keys["bands"] = t.number("bands", MODE_DEFAULTS["bands"], low=0, high=MAX_BANDS, integer=True)
+    return keys
+
+
+def _curvature_range(t: _Table) -> tuple | str:
+    """``render.range``: "auto", or [min, max] with min < max (1/model unit; model unit for radius)."""
+    if t.raw("range", MODE_DEFAULTS["range"]) == "auto":
+        return "auto"
+    if isinstance(t.data["range"], str):
+        raise t.error("range", f'must be "auto" or [min, max], got {t.data["range"]!r}')
+    low, high = t.array("range", (2,)).tolist()
+    if not low < high:
+        raise t.error("range", f"min must be below max, got [{low:g}, {high:g}]")
+    return (low, high)
 
 
 def _parse_output(t: _Table, path: Path) -> OutputSpec:

@@ -17,7 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from .scene import Scene, _spec_table
+from .scene import MODE_DEFAULTS, MODE_KEYS, Scene, _spec_table
+
+#: Values shown for the commented-out mode keys that have no fixed default (isophote's L defaults to lights.normal).
+_MODE_EXAMPLES = {"light": [0.0, 0.0, 1.0]}
 
 #: The comment after each key (docs/scene-format.md has the full reference).
 COMMENTS = {
@@ -55,6 +58,14 @@ COMMENTS = {
         "overlay_color": "linear RGB",
         "overlay_width": "pixels",
         "normals": '"exact" NURBS normals, or "mesh" (CAD analysis-mesh normals, to compare)',
+        "mode": "reflection, highlight, isophote, draft, curvature or zebra (docs/scene-format.md, The other modes)",
+        "step": "isophote, zebra: degrees between lines",
+        "light": "isophote: the light direction L",
+        "pull": "draft: the mould's pull direction",
+        "thresholds": "draft: draft angles (degrees) bounding the colour bands; below 0: undercut, red",
+        "quantity": "curvature: gaussian, mean, k1, k2, maxabs or radius",
+        "range": 'curvature: [min, max] of the colour map, or "auto"',
+        "bands": "curvature: iso-curvature lines cutting the range into this many bands (0: none)",
     },
     "output": {
         "name": "NAME of NAME.exr and NAME.png",
@@ -99,6 +110,8 @@ def _table_lines(name: str, table: dict[str, Any]) -> list[str]:
     for key, comment in COMMENTS[name].items():
         if key in table:
             lines.append(f"{key} = {toml_value(table[key])}  # {comment}")
+        elif name == "render" and key in MODE_KEYS:  # another mode's key: shown, commented out, at its default
+            lines.append(f"# {key} = {toml_value(_MODE_EXAMPLES.get(key, MODE_DEFAULTS.get(key)))}  # {comment}")
     if name == "lights":
         lines.insert(lines.index(next(line for line in lines if line.startswith("positions"))) + 1,
                      "# spacing = 0.5  # with count, instead of positions: count tubes spacing apart, centred on Q")

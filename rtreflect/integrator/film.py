@@ -13,14 +13,18 @@ from __future__ import annotations
 import numpy as np
 
 COLOR_CHANNELS = ("R", "G", "B", "A")
-AOV_CHANNELS = ("P.X", "P.Y", "P.Z", "N.X", "N.Y", "N.Z", "u", "v", "patch", "Z", "f", "line.id", "line.dist")
+#: The mode's φ and the curvatures (geometry/curvature.py) come after the reflection AOVs, so the channel
+#: indices of the older ones do not move.
+AOV_CHANNELS = ("P.X", "P.Y", "P.Z", "N.X", "N.Y", "N.Z", "u", "v", "patch", "Z", "f", "line.id", "line.dist",
+                "phi", "K", "H", "k1", "k2")
 CHANNELS = COLOR_CHANNELS + AOV_CHANNELS
 
 
 def aov_planes(aovs: dict[str, np.ndarray]) -> np.ndarray:
-    """(N, 13) AOV values in channel order from the named per-pixel arrays (P and N are (N, 3))."""
+    """(N, 18) AOV values in channel order from the named per-pixel arrays (P and N are (N, 3))."""
     return np.column_stack([aovs["P"], aovs["N"], aovs["u"], aovs["v"], aovs["patch"], aovs["Z"], aovs["f"],
-                            aovs["line.id"], aovs["line.dist"]])
+                            aovs["line.id"], aovs["line.dist"], aovs["phi"], aovs["K"], aovs["H"], aovs["k1"],
+                            aovs["k2"]])
 
 
 def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, background,
@@ -40,6 +44,16 @@ def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, 
     return np.column_stack([rgb, n_hit / samples])
 
 
+def map_color(hit: np.ndarray, lit: np.ndarray, surface_rgb: np.ndarray, line_color, background) -> np.ndarray:
+    """(P, 4) linear RGBA from per-sample (P, s²) hit and lit flags and (P, s², 3) surface colours (map modes)."""
+    samples = hit.shape[1]
+    surface = (hit & ~lit)[..., None]
+    rgb = (np.where(surface, np.nan_to_num(surface_rgb), 0.0).sum(axis=1)
+           + (hit & lit).sum(axis=1)[:, None] * np.asarray(line_color)
+           + (samples - hit.sum(axis=1))[:, None] * np.asarray(background)) / samples
+    return np.column_stack([rgb, hit.sum(axis=1) / samples])
+
+
 class Film:
     def __init__(self, width: int, height: int):
         self.width = width
@@ -47,7 +61,7 @@ class Film:
         self.pixels = np.empty((height, width, len(CHANNELS)), dtype=np.float32)
 
     def put_span(self, start: int, stop: int, pixels: np.ndarray) -> None:
-        """Store pixels [start, stop) in row-major order: (stop − start, 17) values in `CHANNELS` order."""
+        """Store pixels [start, stop) in row-major order: (stop − start, 22) values in `CHANNELS` order."""
         self.pixels.reshape(-1, len(CHANNELS))[start:stop] = pixels
 
     def channel(self, name: str) -> np.ndarray:

@@ -24,12 +24,16 @@ import numpy as np
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
-from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color
+from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect
 from ..modes.profile import stripe_reach, stripe_weight
 from ..modes.shading import shade_factor
+from ..modes.base import SurfacePoints
+from ..modes.reflection import ReflectionMode
+from ..modes.registry import mode_of
 from ..trace.meshnormals import trace_mesh, vertex_normals
 from ..exchange.scene import ImageSpec, Scene
+from ..geometry.curvature import curvatures
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
 from ..trace.tracing import Hits, occluded, trace
@@ -51,11 +55,13 @@ class Shading:
     line_id: np.ndarray
     line_dist: np.ndarray
     lit: np.ndarray
+    surface_rgb: np.ndarray | None = None  # (N, 3) linear RGB of a map mode's surface (NaN where no hit), else None
 
     def take(self, rows: np.ndarray) -> "Shading":
         hits = Hits(**{k: getattr(self.hits, k)[rows] for k in Hits.__dataclass_fields__})
         return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
-                       self.line_dist[rows], self.lit[rows])
+                       self.line_dist[rows], self.lit[rows],
+                       None if self.surface_rgb is None else self.surface_rgb[rows])
 
 
 @dataclass
@@ -77,7 +83,7 @@ class RenderStats:
 
 @dataclass
 class Tile:
-    """Rendered pixels [start, stop) of the image in row-major order: (stop − start, 17) float32 in `CHANNELS` order."""
+    """Rendered pixels [start, stop) of the image in row-major order: (stop − start, 22) float32 in `CHANNELS` order."""
 
     start: int
     stop: int
@@ -136,6 +142,9 @@ class Renderer:
         # occlusion test serves every sample the profile lights; without blur, the tubes of eq. (4) themselves.
         reach = stripe_reach(self.lights.radius, scene.render.blur)
         self.stripe_lights = self.lights if reach == self.lights.radius else replace(self.lights, radius=reach)
+        # `[render] mode`: φ, its levels and stripes (modes/base.py); reflection lines see the tubes out to the reach.
+        self.mode = mode_of(scene, self.stripe_lights if scene.render.mode == "reflection" else self.lights,
+                            self.surfaces)
         self.clock = StageClock()
         # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
         self.vertex_normals = vertex_normals(self.tessellation, self.surfaces) if scene.render.normals == "mesh" else None
@@ -147,10 +156,12 @@ class Renderer:
 
     # -- one batch of rays ---------------------------------------------------------------
     def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
-        """Exact hits, reflected directions s, tube distances and 'lit' flags (a tube within its radius, unoccluded).
+        """Exact hits, reflected directions s, the mode's nearest level and 'lit' flags.
 
-        With ``[render] blur`` the radius is the stripe profile's reach (`stripe_lights`): 'lit' then means
-        the sample may show some of the line, by its weight `stripe_weight` of the nearest tube's distance.
+        Lit: in the mode's stripe and, for a mode seen along the reflected ray (reflection lines:
+        a tube within its radius), not occluded by the surface before it. With ``[render] blur`` the
+        reflection mode's radius is the stripe profile's reach (`stripe_lights`): 'lit' then means the
+        sample may show some of the line, by its weight `stripe_weight` of the nearest tube's d.
         """
         hits = self.trace(origins, directions)
         n_rays = len(origins)
@@ -162,14 +173,27 @@ class Renderer:
         if len(idx) == 0:
             return shading
         R, n = hits.P[idx], hits.N[idx]
-        with self.clock.stage("tubes (eq. 3, 4)"):
+        with self.clock.stage(self.mode.stage):
             # a, the unit vector towards the eye, is the reversed ray direction for either camera.
             s[idx] = reflect(-directions[idx], n)
-            tubes = self.stripe_lights.reach(R, s[idx])
-            line_id[idx], line_dist[idx] = tubes.line_id, tubes.line_dist
-            t_tube = tubes.t_candidate
-            cand = np.flatnonzero(tubes.candidate)
-        if len(cand):
+            points = SurfacePoints(R, n, s[idx], hits.patch[idx], hits.u[idx], hits.v[idx])
+            stripes = self.mode.stripes(points)
+            # line.id and line.dist are the tubes' in every mode (the EXR contract): the reflection mode's stripes
+            # are those; another mode's nearest level follows from its φ (channel phi) and levels.
+            if isinstance(self.mode, ReflectionMode):
+                line_id[idx], line_dist[idx] = stripes.level_id, stripes.level_dist
+            else:
+                tubes = self.lights.reach(R, s[idx])
+                line_id[idx], line_dist[idx] = tubes.line_id, tubes.line_dist
+            rgb = self.mode.surface_rgb(points)
+            if rgb is not None:
+                shading.surface_rgb = np.full((n_rays, 3), np.nan)
+                shading.surface_rgb[idx] = rgb
+            t_tube = stripes.occlusion_t
+            cand = np.flatnonzero(stripes.candidate)
+        if t_tube is None:  # a mode not seen along a ray: its stripes are lit where they are
+            lit[idx[cand]] = True
+        elif len(cand):
             start = self.accelerator.surface_origins(R[cand], n[cand], hits.patch[idx[cand]])
             with self.clock.stage("occlusion (Embree)"):
                 blocked = occluded(self.accelerator, self.tessellation, self.surfaces, start, s[idx[cand]], t_tube[cand])
@@ -182,7 +206,7 @@ class Renderer:
         Without blur the profile is the hard tube that 'lit' already decided (d ≤ r): the flags themselves.
         """
         blur = self.scene.render.blur
-        if blur == 0:
+        if blur == 0 or self.scene.render.mode != "reflection":  # other modes' stripes stay hard (not yet blurred)
             return shading.lit
         return np.where(shading.lit, stripe_weight(shading.line_dist, self.lights.radius, blur), 0.0)
 
@@ -205,9 +229,17 @@ class Renderer:
             f = np.full(len(hits.hit), np.nan)
             idx = np.flatnonzero(hits.hit)
             f[idx] = self.lights.ulmet_f(hits.P[idx], shading.s[idx])
+            phi = np.full(len(hits.hit), np.nan)
+            phi[idx] = self.mode.phi(SurfacePoints(hits.P[idx], hits.N[idx], shading.s[idx], hits.patch[idx],
+                                                   hits.u[idx], hits.v[idx]))
+            # K, H, κ1, κ2 from the fundamental forms at the exact hit, signed with N as written (facing the ray).
+            curv = np.full((4, len(hits.hit)), np.nan)
+            if len(idx):
+                derivs = self.surfaces.evaluate(hits.patch[idx], hits.u[idx], hits.v[idx], order=2)
+                curv[:, idx] = curvatures(derivs, hits.N[idx])
         return {"P": hits.P, "N": hits.N, "u": hits.u, "v": hits.v, "patch": hits.patch.astype(np.float64),
                 "Z": hits.t, "f": f, "line.id": shading.line_id.astype(np.float64), "line.dist": shading.line_dist,
-                "shading": shading}
+                "phi": phi, "K": curv[0], "H": curv[1], "k1": curv[2], "k2": curv[3], "shading": shading}
 
     # -- tiles ---------------------------------------------------------------------------
     def render_span(self, start: int, stop: int) -> Tile:
@@ -224,10 +256,14 @@ class Renderer:
         with self.clock.stage("camera rays"):
             origins, directions = self.camera.rays(np.repeat(rows, ns), np.repeat(cols, ns), np.tile(offsets, (len(rows), 1)))
         shading = self.shade(origins, directions)
-        shade = self.surface_shade(shading)
-        rgba = coverage_color(shading.hits.hit.reshape(-1, ns), self.line_weight(shading).reshape(-1, ns),
-                              settings.surface_color, settings.line_color, settings.background,
-                              None if shade is None else shade.reshape(-1, ns))
+        if shading.surface_rgb is None:
+            shade = self.surface_shade(shading)
+            rgba = coverage_color(shading.hits.hit.reshape(-1, ns), self.line_weight(shading).reshape(-1, ns),
+                                  settings.surface_color, settings.line_color, settings.background,
+                                  None if shade is None else shade.reshape(-1, ns))
+        else:  # a map mode: each sample's own surface colour
+            rgba = map_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
+                             shading.surface_rgb.reshape(-1, ns, 3), settings.line_color, settings.background)
         fallbacks = int(shading.hits.fallback.sum())
         fell_back = shading.hits.fallback.reshape(-1, ns).any(axis=1)
         rays = len(origins)

@@ -352,7 +352,7 @@ class ImageWriter:
             self._outputs.append((out, final, is_exr))
 
     def write(self, start: int, pixels: np.ndarray) -> None:
-        """Pixels [start, start + len(pixels)) as (P, 17) float32 in `CHANNELS` order; spans must come in order."""
+        """Pixels [start, start + len(pixels)) as (P, 22) float32 in `CHANNELS` order; spans must come in order."""
         if start != self.next_pixel:
             raise ValueError(f"pixels must arrive in order: expected pixel {self.next_pixel}, got {start}")
         self.next_pixel += len(pixels)

@@ -19,6 +19,7 @@ from ..integrator.autorig import resolve
 from ..integrator.checks import ImageTally
 from ..integrator.renderer import Renderer, RenderStats, default_threads
 from ..exchange.scene import Scene
+from ..modes.legend import LEGEND_MODES, legend_file_name, legend_svg
 from ..integrator.tiling import default_max_memory, rays_per_tile
 
 
@@ -63,7 +64,11 @@ def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, m
 
 
 def overlay_for(scene: Scene, renderer: Renderer | None = None) -> tuple[PngFilter | None, dict[str, str] | None]:
-    """The PNG filter and extra files (contours JSON) of a scene with `[render] overlay`; (None, None) without."""
+    """The PNG filter and extra files of a scene: the contours JSON with `[render] overlay`, the legend
+    (``NAME.legend.svg``) of a map mode (curvature, draft); (None, None) with neither."""
+    if scene.render.mode in LEGEND_MODES:
+        mode = (renderer or Renderer(scene)).mode
+        return None, {legend_file_name(scene): legend_svg(mode)}
     if not scene.render.overlay:
         return None, None
     return overlay_outputs(renderer or Renderer(scene))

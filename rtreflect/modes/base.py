@@ -1,0 +1,78 @@
+"""Interrogation modes: a scalar field φ on the surface, its levels, and the distance to the nearest level.
+
+Every line-drawing tool of the paper's section 1 is the level sets φ(u, v) = c_k of a scalar
+field, shaded by a stripe around each level (DESIGN.md, "Other interrogation modes"). A mode
+computes φ from the exact hit (R, unit normal n, reflected direction s of eq. 3, and its
+(patch, u, v) for modes that need the surface's derivatives), and per point the nearest level,
+the distance to it (in φ's unit, or the skew-line distance of eq. 4 for tubes) and whether the
+point lies in its stripe. A mode whose stripes are seen along a physical ray (reflection lines)
+also names the ray's reach, which the renderer tests for self-occlusion; the others are lit
+where the distance says so. A map mode (curvature, draft) also colours the surface itself.
+
+`registry.MODES` maps each ``[render] mode`` name to the function that builds it for a scene.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+#: Share of each level step a stripe covers when φ's levels are evenly spaced (isophotes, zebra,
+#: curvature bands): as the automatic rig's tubes, whose radius is a tenth of their spacing.
+STRIPE_SHARE = 0.2
+
+
+@dataclass(frozen=True)
+class SurfacePoints:
+    """Exact hits handed to a mode: point R, unit normal n (facing the ray), reflected direction s, (patch, u, v)."""
+
+    R: np.ndarray
+    n: np.ndarray
+    s: np.ndarray
+    patch: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+
+@dataclass(frozen=True)
+class Stripes:
+    """Per point: the nearest level, the distance to it, and whether the point lies in its stripe."""
+
+    level_id: np.ndarray  # index of the nearest level (ahead, for tubes); −1 where none is
+    level_dist: np.ndarray  # distance to it: skew-line distance d for tubes, |φ − c_k| otherwise; NaN where none is
+    candidate: np.ndarray  # bool: within the stripe
+    # Ray parameter along s to test for occlusion before a candidate counts as lit (reflection lines:
+    # the nearest tube within its radius); None when the mode's stripes are not seen along a ray.
+    occlusion_t: np.ndarray | None = None
+
+
+def even_stripes(phi: np.ndarray, levels: np.ndarray, half_width: float) -> Stripes:
+    """Nearest of sorted ``levels`` to each φ, |φ − c_k|, and the stripe test |φ − c_k| ≤ half_width (NaN φ: none)."""
+    levels = np.asarray(levels, dtype=np.float64)
+    found = np.isfinite(phi)
+    if len(levels) == 0:
+        return Stripes(np.full(len(phi), -1), np.full(len(phi), np.nan), np.zeros(len(phi), dtype=bool))
+    right = np.clip(np.searchsorted(levels, np.where(found, phi, 0.0)), 0, len(levels) - 1)
+    left = np.clip(right - 1, 0, len(levels) - 1)
+    pick = np.where(np.abs(phi - levels[left]) <= np.abs(phi - levels[right]), left, right)
+    dist = np.abs(phi - levels[pick])
+    return Stripes(np.where(found, pick, -1), np.where(found, dist, np.nan), found & (dist <= half_width))
+
+
+class Mode(Protocol):
+    """What the renderer, the EXR and the contours need of an interrogation mode."""
+
+    name: str
+    #: Stage name under which the renderer's clock counts the mode's time.
+    stage: str
+
+    def phi(self, p: SurfacePoints) -> np.ndarray:
+        """φ at the points (NaN where undefined)."""
+
+    def stripes(self, p: SurfacePoints) -> Stripes:
+        """The nearest level and the stripe test at each point."""
+
+    def surface_rgb(self, p: SurfacePoints) -> np.ndarray | None:
+        """(N, 3) linear RGB of the surface where no stripe is (map modes), or None: `[render] surface_color`."""

@@ -1,0 +1,126 @@
+"""Curvature maps: K, H, κ1, κ2, max |κ| or the smallest radius of curvature, through a colour map.
+
+φ is the ``[render] quantity`` at the exact hit, from the fundamental forms
+(geometry/curvature.py; signed with the normal as written to the EXR, which faces the camera),
+in 1/model unit (K in 1/model unit², radius in model units). The colour is the map
+(`colormaps`) over ``range``: fixed [min, max], or "auto": `AUTO_PERCENTILE` of |φ| over every
+patch sampled on an `AUTO_GRID` parameter grid, symmetric about 0 for signed quantities, so
+values beyond it clip to the end colours (the percentage clipped is what `auto_range` reports).
+With ``bands`` = b > 0, iso-curvature lines split the range into b equal bands (levels at the
+b − 1 inner edges), `base.STRIPE_SHARE` of a band wide.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry.curvature import curvatures
+from .base import STRIPE_SHARE, Stripes, SurfacePoints, even_stripes
+from .colormaps import DIVERGING, SEQUENTIAL, linear_rgb
+from .lights import TubeLights
+
+#: "auto" range: the 98th percentile of |φ| (2 % of the sampled surface clips), so a few extreme
+#: points (near a pole or a sharp fillet) do not wash out the map of the rest.
+AUTO_PERCENTILE = 98.0
+#: Parameter grid per patch for the "auto" range: 64 × 64 samples see every span of usual patches.
+AUTO_GRID = 64
+#: Units of each quantity, for the legend.
+UNITS = {"gaussian": "1/unit²", "mean": "1/unit", "k1": "1/unit", "k2": "1/unit", "maxabs": "1/unit",
+         "radius": "unit"}
+SIGNED = ("gaussian", "mean", "k1", "k2")
+
+
+def quantity_of(name: str, derivs, n: np.ndarray) -> np.ndarray:
+    """The curvature quantity ``name`` at points with `SurfaceDerivatives` of order 2 and unit normals n."""
+    c = curvatures(derivs, n)
+    if name == "gaussian":
+        return c.K
+    if name == "mean":
+        return c.H
+    if name in ("k1", "k2"):
+        return getattr(c, name)
+    largest = np.maximum(np.abs(c.k1), np.abs(c.k2))
+    if name == "maxabs":
+        return largest
+    with np.errstate(divide="ignore"):
+        return 1.0 / largest  # radius: inf where flat
+
+
+def auto_range(name: str, surfaces) -> tuple[float, float, float]:
+    """(min, max, share clipped) of the "auto" range of quantity ``name`` over the patches (module doc)."""
+    t = (np.arange(AUTO_GRID) + 0.5) / AUTO_GRID
+    values = []
+    for k, patch in enumerate(surfaces.patches):
+        (u0, u1), (v0, v1) = patch.domain
+        u, v = np.meshgrid(u0 + t * (u1 - u0), v0 + t * (v1 - v0), indexing="ij")
+        u, v = u.ravel(), v.ravel()
+        derivs = patch.evaluate(u, v, order=2)
+        values.append(quantity_of(name, derivs, patch.normals(u, v, derivs)))
+    q = np.concatenate(values)
+    q = q[np.isfinite(q)]
+    if len(q) == 0:
+        return (-1.0, 1.0, 0.0)
+    if name in SIGNED:
+        top = float(np.percentile(np.abs(q), AUTO_PERCENTILE))
+        low, high = -top, top
+    else:
+        low, high = float(np.percentile(q, 100.0 - AUTO_PERCENTILE)), float(np.percentile(q, AUTO_PERCENTILE))
+    if not high > low:  # a flat or constant field: a range around its value, so the map is defined
+        pad = max(abs(high), 1e-12)
+        low, high = low - pad, high + pad
+    clipped = float(np.mean((q < low) | (q > high)))
+    return (low, high, clipped)
+
+
+@dataclass(frozen=True)
+class CurvatureMode:
+    surfaces: object  # SurfaceSet
+    quantity: str
+    low: float
+    high: float
+    bands: int
+    clipped: float | None  # share of the sampled surface outside an "auto" range; None for a fixed range
+    name: str = "curvature"
+    stage: str = "curvature (fundamental forms)"
+
+    @property
+    def colormap(self) -> str:
+        return DIVERGING if self.quantity in SIGNED else SEQUENTIAL
+
+    @property
+    def units(self) -> str:
+        return UNITS[self.quantity]
+
+    @property
+    def levels(self) -> np.ndarray:
+        """Iso-curvature levels: the inner edges of ``bands`` equal bands over the range (none without bands)."""
+        if self.bands < 2:
+            return np.zeros(0)
+        return self.low + (self.high - self.low) * np.arange(1, self.bands) / self.bands
+
+    def phi(self, p: SurfacePoints) -> np.ndarray:
+        derivs = self.surfaces.evaluate(p.patch, p.u, p.v, order=2)
+        return quantity_of(self.quantity, derivs, p.n)
+
+    def stripes(self, p: SurfacePoints) -> Stripes:
+        width = (self.high - self.low) / max(self.bands, 1)
+        return even_stripes(self.phi(p), self.levels, 0.5 * STRIPE_SHARE * width)
+
+    def surface_rgb(self, p: SurfacePoints) -> np.ndarray:
+        return self.colors(self.phi(p))
+
+    def colors(self, phi: np.ndarray) -> np.ndarray:
+        """Linear RGB of values φ on the map over [low, high] (clipped to the end colours)."""
+        t = (np.clip(np.where(np.isposinf(phi), self.high, phi), self.low, self.high) - self.low) / (self.high - self.low)
+        return linear_rgb(self.colormap, t)
+
+
+def curvature_mode(scene, lights: TubeLights, surfaces) -> CurvatureMode:
+    settings = scene.render
+    if settings.range == "auto":
+        low, high, clipped = auto_range(settings.quantity, surfaces)
+    else:
+        (low, high), clipped = settings.range, None
+    return CurvatureMode(surfaces, settings.quantity, float(low), float(high), int(settings.bands), clipped)

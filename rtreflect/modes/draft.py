@@ -1,0 +1,68 @@
+"""Draft analysis: the angle between the surface normal and the mould's pull direction, in bands.
+
+φ = angle(n, d) in degrees (0° where n ∥ d), n as written to the EXR (facing the camera), d
+the unit pull direction ``[render] pull``. The draft angle is δ = 90° − φ: the angle between
+the surface and the pull direction, positive where the face opens towards d. A cone of
+half-angle α about d has φ = 90° − α (δ = α) everywhere. The ``thresholds`` t_1 < … < t_m
+(draft angles) cut the surface into bands coloured from a sequential map (`BANDS_MAP`), δ < 0 (undercut:
+the face hides from the pull direction and locks the part in the mould) flagged in
+`UNDERCUT_RGB`; the band edges are the levels φ = 90° − t_k, drawn as lines `EDGE_WIDTH`
+degrees of φ wide.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import Stripes, SurfacePoints, even_stripes
+from .colormaps import linear_rgb
+from .isophote import angle_to
+from .lights import TubeLights
+
+#: The bands' map: Crameri's oslo, sequential black-blue-white with no red in it, so the undercut flag stands out.
+BANDS_MAP = "crameri:oslo"
+#: Part of the map the bands use: from 0.3 up, so the least-draft band is not lost on a black background.
+BANDS_FROM = 0.3
+#: Undercut flag colour (linear RGB): saturated red, a hue the bands' map never takes.
+UNDERCUT_RGB = np.array([0.8, 0.0, 0.0])
+#: Width of the lines at the band edges, degrees of φ: thin against the usual 1°–3° thresholds.
+EDGE_WIDTH = 0.1
+
+
+@dataclass(frozen=True)
+class DraftMode:
+    pull: np.ndarray
+    thresholds: tuple
+    name: str = "draft"
+    stage: str = "draft angles"
+
+    @property
+    def levels(self) -> np.ndarray:
+        """φ at the band edges, ascending: 90° − t_k."""
+        return np.sort(90.0 - np.asarray(self.thresholds, dtype=np.float64))
+
+    def phi(self, p: SurfacePoints) -> np.ndarray:
+        return angle_to(p.n, self.pull)
+
+    def band(self, draft: np.ndarray) -> np.ndarray:
+        """Band index of draft angles δ: 0 below t_1, …, m at or above t_m."""
+        return np.searchsorted(np.asarray(self.thresholds), draft, side="right")
+
+    def stripes(self, p: SurfacePoints) -> Stripes:
+        return even_stripes(self.phi(p), self.levels, 0.5 * EDGE_WIDTH)
+
+    def surface_rgb(self, p: SurfacePoints) -> np.ndarray:
+        return self.colors(90.0 - self.phi(p))
+
+    def colors(self, draft: np.ndarray) -> np.ndarray:
+        """Linear RGB of draft angles δ (degrees): their band's colour, `UNDERCUT_RGB` where δ < 0."""
+        bands = len(self.thresholds) + 1
+        # Darker for less draft, lighter for more.
+        rgb = linear_rgb(BANDS_MAP, BANDS_FROM + (1.0 - BANDS_FROM) * (self.band(draft) + 0.5) / bands)
+        return np.where((draft < 0)[:, None], UNDERCUT_RGB, rgb)
+
+
+def draft_mode(scene, lights: TubeLights, surfaces) -> DraftMode:
+    return DraftMode(np.asarray(scene.render.pull, dtype=np.float64), tuple(scene.render.thresholds))

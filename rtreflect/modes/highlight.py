@@ -1,0 +1,46 @@
+"""Highlight lines (Beier and Chen 1994): where the surface's normal line meets a light tube; view-independent.
+
+The normal line R + λn (λ of either sign) replaces the reflected ray of Ulmet's reflection
+lines: φ = e·(R + λ n − Q) with λ = m·(Q − R)/(m·n), the light-plane coordinate where the
+normal line crosses the plane (DESIGN.md, "Other interrogation modes"); the levels are the tube
+positions c_k, and a point lies in the highlight band of tube k when the normal line passes
+within the tube's radius (the skew-line distance of eq. 4 with s replaced by ±n). The normal
+line is a construction, not light, so nothing occludes it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import Stripes, SurfacePoints
+from .lights import TubeLights, _dot
+
+
+@dataclass(frozen=True)
+class HighlightMode:
+    lights: TubeLights
+    name: str = "highlight"
+    stage: str = "highlight lines (normal line, eq. 4)"
+
+    def phi(self, p: SurfacePoints) -> np.ndarray:
+        lam = self.lights.plane_t(p.R, p.n)  # either sign: the whole normal line
+        with np.errstate(invalid="ignore"):
+            f = _dot(p.R + lam[:, None] * p.n - self.lights.Q, self.lights.e)
+        return np.where(np.isfinite(lam), f, np.nan)
+
+    def stripes(self, p: SurfacePoints) -> Stripes:
+        # Both halves of the normal line: `reach` looks ahead only, so ask along n and along −n.
+        front, back = self.lights.reach(p.R, p.n), self.lights.reach(p.R, -p.n)
+        use_back = np.nan_to_num(back.line_dist, nan=np.inf) < np.nan_to_num(front.line_dist, nan=np.inf)
+        level = np.where(use_back, back.line_id, front.line_id)
+        dist = np.where(use_back, back.line_dist, front.line_dist)
+        return Stripes(level, dist, front.candidate | back.candidate)
+
+    def surface_rgb(self, p: SurfacePoints) -> None:
+        return None
+
+
+def highlight_mode(scene, lights: TubeLights, surfaces) -> HighlightMode:
+    return HighlightMode(lights)

@@ -1,0 +1,37 @@
+"""Reflection lines (Ulmet, sections 3–4): φ = Ulmet's f, the light-plane coordinate of the reflected ray.
+
+φ(u, v) = f = e·(R + t s − Q) with t = m·(Q − R)/(m·s) (paper eq. 5–6, general form); the
+levels are the tube positions c_k. A point lies in a stripe when its reflected ray passes
+within the radius of a tube ahead (eq. 4), and is lit if the surface does not occlude that
+ray before the tube (the renderer's Embree test along s up to `Stripes.occlusion_t`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import Stripes, SurfacePoints
+from .lights import TubeLights
+
+
+@dataclass(frozen=True)
+class ReflectionMode:
+    lights: TubeLights
+    name: str = "reflection"
+    stage: str = "tubes (eq. 3, 4)"
+
+    def phi(self, p: SurfacePoints) -> np.ndarray:
+        return self.lights.ulmet_f(p.R, p.s)
+
+    def stripes(self, p: SurfacePoints) -> Stripes:
+        tubes = self.lights.reach(p.R, p.s)
+        return Stripes(tubes.line_id, tubes.line_dist, tubes.candidate, tubes.t_candidate)
+
+    def surface_rgb(self, p: SurfacePoints) -> None:
+        return None
+
+
+def reflection_mode(scene, lights: TubeLights, surfaces) -> ReflectionMode:
+    return ReflectionMode(lights)
