@@ -21,7 +21,7 @@ with warnings.catch_warnings():
     import colour
 
 #: Size of the legend in SVG user units (pixels): a bar tall enough for five readable ticks.
-WIDTH, HEIGHT = 360, 420
+WIDTH, HEIGHT = 380, 440
 BAR = (24, 60, 40, 300)  # x, y, width, height of the colour bar
 #: Colour stops along a continuous bar: finer than a 300 px bar shows.
 STOPS = 256
@@ -77,8 +77,9 @@ def curvature_legend(mode: CurvatureMode) -> str:
     else:
         kind = "|value|, symmetric about 0" if mode.quantity in SIGNED else "2nd to 98th percentile"
         note = f"auto range: 98th percentile of {kind}; {100 * mode.clipped:.1f} % of the sampled surface clipped"
-    body += [_text(x, y + h + 28, note, 11), _text(x, y + h + 46, "signed with the normal facing the camera "
-                                                                "(positive: bends towards it)", 11)]
+    # One clause a line: the 360-unit-wide legend clipped the range note as one line.
+    lines = [*note.split("; "), "signed with the normal facing the camera (positive: bends towards it)"]
+    body += [_text(x, y + h + 28 + 18 * i, line, 11) for i, line in enumerate(lines)]
     return _svg(body)
 
 
