@@ -61,7 +61,7 @@ from ..modes.lights import reflect
 from ..integrator.autorig import resolve
 from ..integrator.renderer import Renderer
 from ..exchange.scene import MAX_MESH_VERTICES, Scene
-from ..geometry.tessellation import tessellate
+from ..geometry.tessellation import grid_vertex_count, tessellate
 from ..trace.accelerator import Accelerator
 from ..trace.tracing import occluded, refine
 
@@ -252,10 +252,8 @@ def _stored_hit_errors(renderer: Renderer, patch: np.ndarray, u: np.ndarray, v: 
 def fine_tessellation_factor(renderer: Renderer) -> int:
     """`FINE_TESSELLATION`, or the largest factor below it whose mesh fits `MAX_MESH_VERTICES` (at least 1)."""
     per_span = renderer.scene.render.tessellation
-    spans = [tuple(len(b) - 1 for b in surface.span_breaks()) for surface in renderer.scene.surfaces]
     for factor in range(FINE_TESSELLATION, 1, -1):
-        n = factor * per_span
-        if sum((su * n + 1) * (sv * n + 1) for su, sv in spans) <= MAX_MESH_VERTICES:
+        if grid_vertex_count(renderer.scene.surfaces, factor * per_span) <= MAX_MESH_VERTICES:
             return factor
     return 1
 
