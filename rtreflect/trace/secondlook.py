@@ -11,8 +11,8 @@ hits at 960×540 (tessellation 12) where the spout and handle meet the body.
 Two steps, each vectorised over the rays:
 
 1. **Which rays.** A *shell* encloses every sheet on both sides: the coarse mesh's vertices moved by
-   ±`SHELL_CHORDS` chord errors along the exact normal, so the surface, which lies within the chord
-   error of its mesh, lies inside it. A ray that comes within reach of a sheet enters its shell. A
+   ±`SHELL_CHORDS` chord errors along the exact normal, closed by walls along each face's mesh
+   boundary, so the surface, which lies within the chord error of its mesh, lies inside it. A ray that comes within reach of a sheet enters its shell. A
    ray is suspect when its kept hit is grazing (|N·D| < `GRAZING_COS`), or when an any-hit query on
    the shell finds a triangle before the shell passage of its own hit (t* − 2δ/|N·D|, the flat-sheet
    entry with a factor 2 for curvature), or, for a ray that missed, anywhere.
@@ -36,7 +36,7 @@ from .accelerator import Accelerator
 from .tracing import FLOAT32_SLACK, Hits, trace
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceSet
-from ..geometry.tessellation import Tessellation, grid_vertex_count, tessellate
+from ..geometry.tessellation import Tessellation, _boundary_edges, grid_vertex_count, tessellate
 
 #: Half-thickness of the shell in chord errors: the mesh-to-surface distance is sampled at edge
 #: midpoints and vertices (`_chord_error`), a triangle's interior may stray a little farther.
@@ -66,7 +66,11 @@ def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> Accelerator:
                                             tessellation.vertex_uv[:, 1]))  # degenerate points: not moved
     delta = (SHELL_CHORDS * tessellation.chord_error[tessellation.vertex_patch])[:, None] * normal
     vertices = np.concatenate([tessellation.vertices + delta, tessellation.vertices - delta])
-    faces = np.concatenate([tessellation.faces, tessellation.faces + len(tessellation.vertices)])
+    n = len(tessellation.vertices)
+    # Walls along each face's mesh boundary join the two sheets: a ray may enter the shell there, along a sheet.
+    a, b = _boundary_edges(tessellation.faces).T
+    walls = np.concatenate([np.stack([a, b, b + n], 1), np.stack([a, b + n, a + n], 1)])
+    faces = np.concatenate([tessellation.faces, tessellation.faces + n, walls])
     return Accelerator(replace(tessellation, vertices=vertices, faces=faces))
 
 
