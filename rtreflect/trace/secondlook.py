@@ -17,8 +17,8 @@ Two steps, each vectorised over the rays:
    the shell finds a triangle before the shell passage of its own hit (t* − 2δ/|N·D|, the flat-sheet
    entry with a factor 2 for curvature), or, for a ray that missed, anywhere.
 2. **Look again.** The suspects are traced once more by the same candidate search (`trace`) on a
-   finer enclosing mesh of the span grid (`FINE_FACTOR` × the scene's segments per knot span: a
-   chord error 1/16 of the coarse one), up to their kept hit. A valid hit nearer than the kept one
+   finer enclosing mesh (`FINE_FACTOR` × the scene's segments per knot span, or a reader's
+   triangulation split `FINE_LEVELS` times: a chord error ~1/16 of the coarse one), up to their kept hit. A valid hit nearer than the kept one
    by more than float32 rounding replaces it; an undecided one there flags the ray as a fallback.
 
 Rays not suspected keep their hits bit for bit. The fine mesh is built on the first suspect, once
@@ -47,6 +47,8 @@ SHELL_CHORDS = 2.0
 GRAZING_COS = 0.2
 #: The finer mesh's segments per knot span, in multiples of the scene's: chord error ~1/16.
 FINE_FACTOR = 4
+#: A reader's triangulation (CAD faces, `mesh_uv`) is split this many times in (u, v), 4 triangles each: chord error ~1/16.
+FINE_LEVELS = 1
 #: Cap on the finer mesh's vertices (fewer segments where it would exceed it): ~100 bytes each with
 #: their triangles and BVH, so at most ~200 MB besides the scene's own mesh.
 FINE_MAX_VERTICES = 1 << 21
@@ -54,10 +56,25 @@ FINE_MAX_VERTICES = 1 << 21
 
 def fine_factor(surfaces, per_span: int) -> int:
     """`FINE_FACTOR`, or the largest factor below it whose span grid fits `FINE_MAX_VERTICES` (at least 1)."""
+    grid = [s for s in surfaces if s.mesh_uv is None]  # the others: a reader's triangulation, subdivided
     for factor in range(FINE_FACTOR, 1, -1):
-        if grid_vertex_count(surfaces, factor * per_span) <= FINE_MAX_VERTICES:
+        if grid_vertex_count(grid, factor * per_span) <= FINE_MAX_VERTICES:
             return factor
     return 1
+
+
+def subdivided(nodes: np.ndarray, triangles: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
+    """A triangulation in (u, v) with each triangle split in 4 at its edges' midpoints, ``levels`` times."""
+    nodes, triangles = np.asarray(nodes, dtype=np.float64).reshape(-1, 2), np.asarray(triangles).reshape(-1, 3)
+    for _ in range(levels):
+        edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+        unique, edge_of = np.unique(edges, axis=0, return_inverse=True)
+        mid = len(nodes) + edge_of.reshape(3, -1)  # the midpoints of edges 01, 12, 20 of every triangle
+        nodes = np.concatenate([nodes, nodes[unique].mean(axis=1)])
+        a, b, c = triangles.T
+        triangles = np.concatenate([np.stack(x, 1) for x in ((a, mid[0], mid[2]), (mid[0], b, mid[1]),
+                                                             (mid[2], mid[1], c), (mid[0], mid[1], mid[2]))])
+    return nodes, triangles
 
 
 def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> Accelerator:
@@ -89,9 +106,10 @@ class SecondLook:
         """The finer enclosing mesh of the span grid and its BVH (module doc, step 2), built on first use."""
         with self._lock:
             if self._fine is None:
-                # The span grid also where a reader gave its own triangulation: clipped to the trim in (u, v).
-                grid = [replace(s, mesh_uv=None) if s.mesh_uv is not None else s for s in self._scene_surfaces]
-                fine = tessellate(grid, fine_factor(grid, self._per_span) * self._per_span, enclose=True)
+                # A reader's triangulation is subdivided in (u, v) (clipping a span grid to the trim costs ~10×).
+                finer = [s if s.mesh_uv is None else replace(s, mesh_uv=subdivided(*s.mesh_uv, FINE_LEVELS))
+                         for s in self._scene_surfaces]
+                fine = tessellate(finer, fine_factor(finer, self._per_span) * self._per_span, enclose=True)
                 self._fine = fine, Accelerator(fine)
             return self._fine
 
