@@ -188,7 +188,8 @@ def test_batch_junit_is_valid_and_lists_the_batch_verdicts(batch_run):
                        if s["status"] == "failed" or s["golden"] and s["golden"]["status"] != "match"
                        and s["golden"]["status"] != "missing" or s["validate"] and not s["validate"]["passed"]}
     suite = ET.parse(path).getroot().find("testsuite")
-    assert (suite.get("tests"), suite.get("failures"), suite.get("skipped")) == (str(len(verdicts)), "3", "1")
+    # Failures: broken's render and cylinder's golden colour (the teapot validates since the tracer's second look).
+    assert (suite.get("tests"), suite.get("failures"), suite.get("skipped")) == (str(len(verdicts)), "2", "1")
     failure = ET.parse(path).getroot().find(".//testcase[@classname='broken']/failure")
     assert "\n" not in failure.get("message") and "lights.radios" in failure.get("message")
     assert all(float(case.get("time")) > 0 for case in ET.parse(path).getroot().iter("testcase")
