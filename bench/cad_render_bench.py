@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rtreflect.exchange.scene import load_scene
+from rtreflect.exchange.load import load_scene
+from rtreflect.integrator.autorig import resolve
 from rtreflect.integrator.renderer import Renderer
 
 from render_bench import bench_scene_text
@@ -78,7 +79,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="best of N renders (CPU time)")
     args = ap.parse_args()
 
-    part_scene = load_scene(args.part).with_image(args.width, args.height, 1)
+    # A CAD file loads as its default scene (exchange/load.py), whose automatic camera and tubes resolve here.
+    part_scene = resolve(load_scene(args.part).with_image(args.width, args.height, 1))
     part_renderer = Renderer(part_scene)
     share = coverage(part_renderer, PROBE_WIDTH, PROBE_HEIGHT)
     patch_scene = matched_patch_scene(share, args.width, args.height)

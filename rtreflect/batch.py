@@ -18,6 +18,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import contextlib
 import multiprocessing
+import multiprocessing.connection
 import os
 import queue
 import signal
@@ -229,6 +230,28 @@ def _worker_render(scene: Scene, outdir: Path, max_memory: int | None) -> SceneR
 
 
 # -- the local runner --------------------------------------------------------------------
+#: How long to wait for a dead worker's exit code to be stored: the executor's thread stores it right after
+#: reaping the process; a worker still running after this is reported as such (None).
+EXIT_CODE_WAIT = 5.0
+
+
+def exit_code(process: multiprocessing.Process, timeout: float = EXIT_CODE_WAIT) -> int | None:
+    """The exit code of a pool worker that has ended, None while it runs (after ``timeout`` seconds).
+
+    The executor's own thread reaps a dead worker too (it joins every worker of a broken pool). When it
+    wins that race, our waitpid fails (ECHILD) and `Process.exitcode` reads None until that thread has
+    stored the code in the same process object, a moment later; read as None, a SIGKILLed worker's scene
+    was retried like a bystander's. So: wait for the process's sentinel (readable once it has ended, who
+    ever reaps it), then for the code.
+    """
+    deadline = time.monotonic() + timeout
+    if not multiprocessing.connection.wait([process.sentinel], timeout):
+        return None  # still running
+    while (code := process.exitcode) is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return code
+
+
 def default_jobs() -> int:
     """The cores this process may run on (its CPU affinity where the system tells it)."""
     if hasattr(os, "sched_getaffinity"):
@@ -264,8 +287,7 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
         process = processes.get(started.get(str(job.path), -1))
         if process is None:
             return None
-        process.join(timeout=5)  # dead already when the pool broke; this reaps it and sets its exit code
-        code = process.exitcode
+        code = exit_code(process)
         if code is None or code >= 0 or code == -signal.SIGTERM:
             return None  # still running, exited, or stopped by the pool after another worker died
         with contextlib.suppress(ValueError):

@@ -66,7 +66,7 @@ from ..modes.shading import shade_factor
 from ..integrator.autorig import resolve
 from ..integrator.renderer import Renderer
 from ..exchange.scene import MAX_MESH_VERTICES, MODE_KEYS, Scene
-from ..geometry.tessellation import tessellate
+from ..geometry.tessellation import largest_factor, tessellate
 from ..trace.accelerator import Accelerator
 from ..trace.tracing import occluded, refine
 
@@ -113,9 +113,11 @@ TANGENT_FLOOR = 1e-6
 #: A line whose neighbour is too close for more than this share of its clean-view points gets a note: a few
 #: points where lines crowd (near a silhouette, at grazing angles) are normal; most of a line is worth saying.
 NOTE_UNRESOLVED_SHARE = 0.5
-#: The nearer-hit check's own mesh has this many times the scene's segments per knot span (chord error ~1/16 of
+#: The nearer-hit check's own mesh has this many times the scene's segments per knot span (chord error ~1/36 of
 #: the renderer's), fewer where that exceeds the vertex limit: sheets the renderer's mesh merges come apart.
-FINE_TESSELLATION = 4
+#: Not 4 (nor 2): the renderer's second look traces suspect rays on a 4× mesh (trace/secondlook.py), and the
+#: check must not share the mesh it judges.
+FINE_TESSELLATION = 6
 #: How far beyond an exact point the fine mesh's hit may lie, in fine chord errors: 2 chords (the mesh-to-surface
 #: gap across the surface) grown 10× for incidence down to cos θ = 0.1.
 FINE_BAND_CHORDS = 20.0
@@ -264,13 +266,8 @@ def _stored_hit_errors(renderer: Renderer, patch: np.ndarray, u: np.ndarray, v: 
 
 def fine_tessellation_factor(renderer: Renderer) -> int:
     """`FINE_TESSELLATION`, or the largest factor below it whose mesh fits `MAX_MESH_VERTICES` (at least 1)."""
-    per_span = renderer.scene.render.tessellation
-    spans = [tuple(len(b) - 1 for b in surface.span_breaks()) for surface in renderer.scene.surfaces]
-    for factor in range(FINE_TESSELLATION, 1, -1):
-        n = factor * per_span
-        if sum((su * n + 1) * (sv * n + 1) for su, sv in spans) <= MAX_MESH_VERTICES:
-            return factor
-    return 1
+    return largest_factor(renderer.scene.surfaces, renderer.scene.render.tessellation, FINE_TESSELLATION,
+                          MAX_MESH_VERTICES)
 
 
 def _well_inside(surfaces, patch, u, v, Su, Sv, margin: float) -> np.ndarray:

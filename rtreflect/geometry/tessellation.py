@@ -28,6 +28,20 @@ def span_samples(breaks: np.ndarray, per_span: int) -> np.ndarray:
     return np.concatenate([*parts, breaks[-1:]])
 
 
+def grid_vertex_count(surfaces, per_span: int) -> int:
+    """Vertices of the span-grid meshes of ``surfaces`` at ``per_span`` segments per knot span (before trim clipping)."""
+    spans = [tuple(len(b) - 1 for b in surface.span_breaks()) for surface in surfaces]
+    return sum((su * per_span + 1) * (sv * per_span + 1) for su, sv in spans)
+
+
+def largest_factor(surfaces, per_span: int, most: int, max_vertices: int) -> int:
+    """The largest factor f ≤ ``most`` whose span grids at f·``per_span`` segments fit ``max_vertices`` (at least 1)."""
+    for factor in range(most, 1, -1):
+        if grid_vertex_count(surfaces, factor * per_span) <= max_vertices:
+            return factor
+    return 1
+
+
 def grid_faces(nu: int, nv: int) -> np.ndarray:
     """Two triangles per cell of an nu×nv vertex grid (vertex (i, j) has index i·nv + j)."""
     i, j = np.meshgrid(np.arange(nu - 1), np.arange(nv - 1), indexing="ij")

@@ -36,6 +36,7 @@ from ..exchange.scene import ImageSpec, Scene
 from ..geometry.curvature import curvatures
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
+from ..trace.secondlook import SecondLook
 from ..trace.tracing import Hits, occluded, trace
 
 #: Most rays per tile (about 1.2 kB each in flight, see `tiling`): larger tiles buy no speed over numpy's overhead.
@@ -148,11 +149,15 @@ class Renderer:
         self.clock = StageClock()
         # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
         self.vertex_normals = vertex_normals(self.tessellation, self.surfaces) if scene.render.normals == "mesh" else None
+        # Rays that run close to a sheet are traced again on a finer mesh (secondlook.py): the nearest exact hit.
+        self.second_look = None if self.vertex_normals is not None else SecondLook(
+            scene.surfaces, scene.render.tessellation, self.tessellation, self.surfaces)
 
     def trace(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
         if self.vertex_normals is not None:
             return trace_mesh(self.accelerator, self.tessellation, self.vertex_normals, origins, directions, self.clock)
-        return trace(self.accelerator, self.tessellation, self.surfaces, origins, directions, self.clock)
+        hits = trace(self.accelerator, self.tessellation, self.surfaces, origins, directions, self.clock)
+        return self.second_look.apply(hits, origins, directions, np.full(len(origins), np.inf), self.clock)
 
     # -- one batch of rays ---------------------------------------------------------------
     def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:

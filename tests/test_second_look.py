@@ -1,0 +1,75 @@
+"""The nearest exact hit where the coarse mesh misses a nearer sheet (issue 11 item 2, trace/secondlook.py).
+
+A constructed grazing case with a closed form: a cylinder's cap (radius 1 about the x axis, the
+arc from 45° to 135°, one rational quadratic span, x ∈ [0, 1]) in front of a plane. At
+tessellation 2 the cap's mesh near its straight rims (x = 0, x = 1) is the chord at z = cos 45°
+(the rim keeps its vertices on the surface), 0.29 below the cap's top: a ray along y at height
+z ∈ (0.71, 1) near a rim crosses the cap twice without meeting its mesh and used to stop on the
+plane behind (or, higher up, on the farther of the two crossings). The expected first hit is the
+closed form y = −√(1 − z²), t = y − y₀. Fails on the tracer without the second look.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from rtreflect.exchange.load import load_scene
+from rtreflect.geometry.surfaces import NurbsSurface
+from rtreflect.integrator.renderer import Renderer
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+#: Where the rays start along y, in front of the cap; the plane behind stands at y = PLANE_Y.
+Y0, PLANE_Y = -3.0, 2.0
+
+
+def cylinder_cap() -> NurbsSurface:
+    """The cap {(x, cos θ, sin θ): x ∈ [0, 1], θ ∈ [45°, 135°]}: a rational quadratic arc (u) extruded along x (v)."""
+    c = np.sqrt(0.5)
+    arc = np.array([[c, c], [0.0, 2.0 * c], [-c, c]])  # the middle control point where the end tangents meet
+    points = np.array([[[x, y, z] for x in (0.0, 1.0)] for y, z in arc])
+    weights = np.array([[1.0, 1.0], [c, c], [1.0, 1.0]])
+    return NurbsSurface.bezier(points, weights, name="cap")
+
+
+def plane_behind() -> NurbsSurface:
+    points = np.array([[[x, PLANE_Y, z] for z in (-1.0, 2.0)] for x in (-1.0, 2.0)])
+    return NurbsSurface.bezier(points, name="plane")
+
+
+def renderer(tessellation: int = 1) -> Renderer:
+    scene = load_scene(SCENES / "hood.toml").with_image(32, 18, 1)
+    scene = replace(scene, surfaces=(cylinder_cap(), plane_behind()),
+                    render=replace(scene.render, tessellation=tessellation))
+    return Renderer(scene)
+
+
+def grazing_rays():
+    """Rays along +y at heights z across the cap, near each straight rim and in the middle."""
+    x, z = np.meshgrid([0.002, 0.01, 0.03, 0.5, 0.97, 0.99, 0.998], np.linspace(0.72, 0.995, 24), indexing="ij")
+    origins = np.stack([x.ravel(), np.full(x.size, Y0), z.ravel()], axis=1)
+    directions = np.tile([0.0, 1.0, 0.0], (x.size, 1))
+    return origins, directions
+
+
+def test_a_ray_crossing_a_cap_its_mesh_misses_stops_at_the_first_crossing():
+    origins, directions = grazing_rays()
+    hits = renderer().trace(origins, directions)
+    z = origins[:, 2]
+    expected = -np.sqrt(1.0 - z * z) - Y0  # closed form: the nearer of the ray's two crossings of the cylinder
+    assert hits.hit.all() and not hits.fallback.any()
+    assert np.array_equal(hits.patch, np.zeros(len(z))), f"{np.count_nonzero(hits.patch)} rays stopped on the plane"
+    np.testing.assert_allclose(hits.t, expected, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(hits.P[:, 1:], axis=1), 1.0, atol=1e-9)  # on the cylinder
+
+
+def test_rays_that_pass_the_cap_stop_on_the_plane_exactly():
+    """Above the cap (z > 1) and beside it (x outside [0, 1]), the first hit is the plane's closed form."""
+    x, z = np.meshgrid([-0.01, 0.5, 1.01], [0.9, 1.001, 1.05], indexing="ij")
+    origins = np.stack([x.ravel(), np.full(x.size, Y0), z.ravel()], axis=1)
+    above = (z.ravel() > 1.0) | (x.ravel() < 0.0) | (x.ravel() > 1.0)
+    hits = renderer().trace(origins[above], np.tile([0.0, 1.0, 0.0], (above.sum(), 1)))
+    assert hits.hit.all() and (hits.patch == 1).all() and not hits.fallback.any()
+    np.testing.assert_allclose(hits.t, PLANE_Y - Y0, rtol=0, atol=1e-9)
