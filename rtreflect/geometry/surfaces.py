@@ -83,6 +83,30 @@ def _evaluate(table: "kernel.PatchTable", patch: np.ndarray, u: np.ndarray, v: n
     return SurfaceDerivatives(*outs)
 
 
+def _unit_normals(table: "kernel.PatchTable", patch: np.ndarray, d: SurfaceDerivatives):
+    """(S_u × S_v)/|S_u × S_v| by the kernel and where that is degenerate (those rows not yet filled)."""
+    n = patch.shape[0]
+    out, degenerate = np.empty((n, 3)), np.empty(n, dtype=bool)
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    kernel.unit_normals(table.domain, table.scale, np.ascontiguousarray(patch, dtype=np.int64), f64(d.Su), f64(d.Sv),
+                        DEGENERATE_SINE, VANISHING_PARTIAL, out, degenerate)
+    return out, degenerate
+
+
+def _normals(patches: list, table: "kernel.PatchTable", patch: np.ndarray, u: np.ndarray, v: np.ndarray,
+             derivs: SurfaceDerivatives | None) -> np.ndarray:
+    """Unit normals of points on ``patches`` (numbered as in ``table``); degenerate points by their patch's limit."""
+    d = derivs if derivs is not None else _evaluate(table, patch, u, v, 1)
+    out, degenerate = _unit_normals(table, patch, d)
+    bad = np.flatnonzero(degenerate)
+    if len(bad) == 0:
+        return out
+    for k in np.unique(patch[bad]):
+        rows = bad[patch[bad] == k]
+        out[rows] = patches[k]._limit_normal(u[rows], v[rows])
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class NurbsSurface:
     """A tensor-product NURBS surface with full (clamped) knot vectors.
@@ -170,27 +194,11 @@ class NurbsSurface:
         """
         u = np.asarray(u, dtype=np.float64).ravel()
         v = np.asarray(v, dtype=np.float64).ravel()
-        d = derivs if derivs is not None else self.evaluate(u, v, order=1)
-        cross = np.cross(d.Su, d.Sv)
-        norm = np.linalg.norm(cross, axis=1)
-        degenerate = self.degenerate(d, norm)
-        if np.any(degenerate):
-            cross[degenerate] = self._limit_cross(u[degenerate], v[degenerate])
-            norm[degenerate] = np.linalg.norm(cross[degenerate], axis=1)
-        still = ~(norm > 0)
-        if np.any(still):  # a fully flat point in every direction: fall back to the patch's mean normal
-            cross[still] = self._mean_normal()
-            norm[still] = np.linalg.norm(cross[still], axis=1)
-        return cross / norm[:, None]
+        return _normals([self], self.table, np.zeros(u.shape[0], dtype=np.int64), u, v, derivs)
 
-    def degenerate(self, d: SurfaceDerivatives, cross_norm: np.ndarray | None = None) -> np.ndarray:
+    def degenerate(self, d: SurfaceDerivatives) -> np.ndarray:
         """True where S_u × S_v is too small to define the normal: `DEGENERATE_SINE`, `VANISHING_PARTIAL`."""
-        norm = np.linalg.norm(np.cross(d.Su, d.Sv), axis=1) if cross_norm is None else cross_norm
-        len_u, len_v = np.linalg.norm(d.Su, axis=1), np.linalg.norm(d.Sv, axis=1)
-        (u0, u1), (v0, v1) = self.domain
-        floor = VANISHING_PARTIAL * math.sqrt(self.size * self.reach)
-        return ~((norm > DEGENERATE_SINE * len_u * len_v)
-                 & (len_u * (u1 - u0) > floor) & (len_v * (v1 - v0) > floor))
+        return _unit_normals(self.table, np.zeros(len(d.Su), dtype=np.int64), d)[1]
 
     def _limit_cross(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Leading Taylor term of S_u × S_v at (u + h δu, v + h δv) as h → 0+.
@@ -212,6 +220,16 @@ class NurbsSurface:
                * (np.linalg.norm(d.Sv, axis=1) + np.linalg.norm(Sv_h, axis=1)))
         use_first = np.linalg.norm(first, axis=1) > DEGENERATE_SINE * ref
         return np.where(use_first[:, None], first, second)
+
+    def _limit_normal(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The unit normal at degenerate points: `_limit_cross` normalised, the mean normal where even that is 0."""
+        cross = self._limit_cross(u, v)
+        norm = np.linalg.norm(cross, axis=1)
+        still = ~(norm > 0)
+        if np.any(still):  # a fully flat point in every direction: fall back to the patch's mean normal
+            cross[still] = self._mean_normal()
+            norm[still] = np.linalg.norm(cross[still], axis=1)
+        return cross / norm[:, None]
 
     def _mean_normal(self) -> np.ndarray:
         P = self.points
@@ -256,13 +274,12 @@ class SurfaceSet:
     def _domain_table(self) -> np.ndarray:
         return np.array([[*p.domain[0], *p.domain[1]] for p in self.patches])
 
-    def normals(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, derivs: SurfaceDerivatives | None = None) -> np.ndarray:
-        n = np.asarray(patch).size
-        out = np.full((n, 3), np.nan)
-        for k, idx in self._by_patch(patch):
-            sub = None if derivs is None else SurfaceDerivatives(derivs.S[idx], derivs.Su[idx], derivs.Sv[idx])
-            out[idx] = self.patches[k].normals(u[idx], v[idx], sub)
-        return out
+    def normals(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray,
+                derivs: SurfaceDerivatives | None = None) -> np.ndarray:
+        """`NurbsSurface.normals` for points given by patch index and (u, v); rows with patch < 0 are NaN."""
+        patch = np.asarray(patch).ravel()
+        u, v = np.asarray(u, dtype=np.float64).ravel(), np.asarray(v, dtype=np.float64).ravel()
+        return _normals(self.patches, self.table, patch, u, v, derivs)
 
     @property
     def trimmed(self) -> bool:

@@ -115,7 +115,7 @@ def power_form(patch) -> np.ndarray | None:
     return np.ascontiguousarray(coef.reshape(-1, 4))
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def find_span_at(knots, lo, p, n_ctrl, t):
     """Knot span i with knots[i] <= t < knots[i+1], clamped to [p, n_ctrl − 1] (Piegl & Tiller A2.1).
 
@@ -134,7 +134,7 @@ def find_span_at(knots, lo, p, n_ctrl, t):
     return low
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def basis_ders_at(knots, lo, span, t, p, n, ders, ndu, a, left, right):
     """Non-zero basis functions N_{span−p+r}^p and derivatives up to n at t (Piegl & Tiller A2.3).
 
@@ -206,10 +206,10 @@ def find_span_many(knots, p, n_ctrl, t, out):
 def new_scratch(max_degree):
     m = max_degree + 1
     return (np.empty((MAX_ORDER + 1, m)), np.empty((MAX_ORDER + 1, m)), np.empty((m, m)), np.empty((2, m)),
-            np.empty(m), np.empty(m), np.empty((MAX_ORDER + 1, MAX_ORDER + 1, 4)), np.empty((MAX_ORDER + 1, 4)))
+            np.empty(m), np.empty(m), np.empty((MAX_ORDER + 1, MAX_ORDER + 1, 4)))
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def power_rows(tau, inv_len, degree, order, out):
     """out[m, k] = d^m/dt^m τ^k = k!/(k−m)! τ^(k−m) / h^m for t = start + τ h, m <= order (the power form's basis)."""
     out[0, 0] = 1.0
@@ -227,31 +227,40 @@ def power_rows(tau, inv_len, degree, order, out):
             out[m, k] = falling * out[0, k - m] * scale
 
 
-@njit(**JIT)
-def contract(Nu, Nv, points, base, stride, p, q, order, H, row):
-    """H[k, l] = Σ_i Σ_j Nu[k, i] Nv[l, j] points[base + i·stride + j], k + l <= order: A^(k,l), w^(k,l)."""
-    for i in range(order + 1):
-        for j in range(order + 1):
-            for c in range(4):
-                H[i, j, c] = 0.0
-    for i in range(p + 1):
-        for l in range(order + 1):
-            for c in range(4):
-                row[l, c] = 0.0
-        first = base + i * stride
-        for j in range(q + 1):
-            for l in range(order + 1):
-                nvl = Nv[l, j]
-                for c in range(4):
-                    row[l, c] += nvl * points[first + j, c]
-        for kk in range(order + 1):
-            nuk = Nu[kk, i]
-            for l in range(order + 1 - kk):
-                for c in range(4):
-                    H[kk, l, c] += nuk * row[l, c]
+@njit(inline="always", **JIT)
+def contract(Nu, Nv, points, base, stride, p, q, order, H):
+    """H[k, l] = Σ_i Σ_j Nu[k, i] Nv[l, j] points[base + i·stride + j], k + l <= order: A^(k,l), w^(k,l).
+
+    One coordinate at a time, the sums over j (v) and then i (u) in scalar accumulators, so they
+    stay in registers.
+    """
+    for c in range(4):
+        h00 = h01 = h10 = h02 = h11 = h20 = 0.0
+        for i in range(p + 1):
+            first = base + i * stride
+            r0 = r1 = r2 = 0.0
+            if order == 1:
+                for j in range(q + 1):
+                    x = points[first + j, c]
+                    r0 += Nv[0, j] * x
+                    r1 += Nv[1, j] * x
+            else:
+                for j in range(q + 1):
+                    x = points[first + j, c]
+                    r0 += Nv[0, j] * x
+                    r1 += Nv[1, j] * x
+                    r2 += Nv[2, j] * x
+                h02 += Nu[0, i] * r2
+                h11 += Nu[1, i] * r1
+                h20 += Nu[2, i] * r0
+            h00 += Nu[0, i] * r0
+            h01 += Nu[0, i] * r1
+            h10 += Nu[1, i] * r0
+        H[0, 0, c], H[0, 1, c], H[1, 0, c] = h00, h01, h10
+        H[0, 2, c], H[1, 1, c], H[2, 0, c] = h02, h11, h20
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, u, v, order, out,
              scratch):
     """S, S_u, S_v (and S_uu, S_uv, S_vv for order 2) of patch k at (u, v), clamped to its domain, into out (6, 3).
@@ -260,7 +269,7 @@ def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_off
     eq. 4.20: S = A/w, S_u = (A_u − w_u S)/w, S_uu = (A_uu − 2 w_u S_u − w_uu S)/w,
     S_uv = (A_uv − w_uv S − w_u S_v − w_v S_u)/w.
     """
-    Nu, Nv, ndu, a, left, right, H, row = scratch
+    Nu, Nv, ndu, a, left, right, H = scratch
     p, q = degree[k, 0], degree[k, 1]
     nu, nv = count[k, 0], count[k, 1]
     if u < domain[k, 0]:
@@ -280,11 +289,11 @@ def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_off
         power_rows((u - start_u) / len_u, 1.0 / len_u, p, order, Nu)
         power_rows((v - start_v) / len_v, 1.0 / len_v, q, order, Nv)
         span = (su - p) * (nv - q) + (sv - q)
-        contract(Nu, Nv, power, power_offset[k] + span * (p + 1) * (q + 1), q + 1, p, q, order, H, row)
+        contract(Nu, Nv, power, power_offset[k] + span * (p + 1) * (q + 1), q + 1, p, q, order, H)
     else:
         basis_ders_at(knots, ku, su, u, p, order, Nu, ndu, a, left, right)
         basis_ders_at(knots, kv, sv, v, q, order, Nv, ndu, a, left, right)
-        contract(Nu, Nv, pw, pw_offset[k] + (su - p) * nv + (sv - q), nv, p, q, order, H, row)
+        contract(Nu, Nv, pw, pw_offset[k] + (su - p) * nv + (sv - q), nv, p, q, order, H)
     w = H[0, 0, 3]
     for c in range(3):
         S = H[0, 0, c] / w
@@ -315,7 +324,7 @@ def evaluate(degree, count, knot_offset, knots, pw_offset, pw, domain, power_off
                 outs[r, i, c] = one[r, c]
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def across_at(D, i, e):
     """Two unit vectors e[0], e[1] spanning the plane normal to direction D[i] (e1 = D × axis / |…|, e2 = D × e1).
 
@@ -343,3 +352,31 @@ def across(D, e1, e2):
         across_at(D, i, e)
         for c in range(3):
             e1[i, c], e2[i, c] = e[0, c], e[1, c]
+
+
+@njit(**JIT)
+def unit_normals(domain, scale, patch, Su, Sv, sine, vanishing, out, degenerate):
+    """n = (S_u × S_v)/|S_u × S_v| per point into out; degenerate[i] where that does not define the normal.
+
+    Degenerate (`geometry.surfaces.NurbsSurface.degenerate`): |S_u × S_v| <= sine·|S_u||S_v|, or a
+    partial that vanishes, |S_u|(u1 − u0) or |S_v|(v1 − v0) <= vanishing·√(size · reach). Such rows
+    of out are left untouched (the caller takes the limit from the interior). Rows with patch < 0: NaN.
+    """
+    for i in range(patch.shape[0]):
+        k = patch[i]
+        if k < 0:
+            degenerate[i] = False
+            out[i, 0] = out[i, 1] = out[i, 2] = np.nan
+            continue
+        a0, a1, a2 = Su[i, 0], Su[i, 1], Su[i, 2]
+        b0, b1, b2 = Sv[i, 0], Sv[i, 1], Sv[i, 2]
+        x0, x1, x2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+        norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+        len_u = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        len_v = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
+        floor = vanishing * math.sqrt(scale[k, 0] * scale[k, 1])
+        bad = not ((norm > sine * len_u * len_v) and (len_u * (domain[k, 1] - domain[k, 0]) > floor)
+                   and (len_v * (domain[k, 3] - domain[k, 2]) > floor))
+        degenerate[i] = bad
+        if not bad:
+            out[i, 0], out[i, 1], out[i, 2] = x0 / norm, x1 / norm, x2 / norm
