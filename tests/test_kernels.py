@@ -129,7 +129,7 @@ from rtreflect.exchange.bpt import read_bpt
 from rtreflect.geometry.surfaces import SurfaceSet
 from rtreflect.trace.tracing import refine
 from rtreflect.modes.lights import TubeLights
-from rtreflect.kernels import nurbs, newton, tubes
+from rtreflect.kernels import nurbs, tubes
 surfaces = SurfaceSet(read_bpt(Path("scenes/teapot.bpt")))
 k, u = np.array([0, 3]), np.array([0.2, 0.7])
 surfaces.normals(k, u, u)
@@ -137,10 +137,20 @@ refine(surfaces, k, u, u, np.zeros((2, 3)), np.eye(3)[:2], np.ones(2), 1.0)
 c, m = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
 lights = TubeLights(np.zeros(3), m, c, np.cross(c, m), np.array([0.0, 1.0]), 0.1, 4.0)
 lights.reach(np.ones((2, 3)), np.eye(3)[:2]); lights.distances(np.ones((2, 3)), np.eye(3)[:2])
-used = [nurbs.evaluate, nurbs.unit_normals, newton.newton, tubes.reach, tubes.distances]
+used = [nurbs.evaluate, nurbs.unit_normals, nurbs.newton, tubes.reach, tubes.distances]
 print(sum(sum(f.stats.cache_misses.values()) for f in used), sum(sum(f.stats.cache_hits.values()) for f in used))
 """
     runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT,
                            env={"PYTHONPATH": str(ROOT), "PATH": ""}) for _ in range(2)]
     misses, hits = map(int, runs[1].stdout.split())
     assert misses == 0 and hits == 5, f"second process compiled {misses} kernels (cache hits {hits})"
+
+
+def test_kernels_call_only_kernels_of_their_own_file():
+    """numba's cache watches the file defining a kernel: a caller cached in another file than its
+    callee kept running the callee's old machine code after the callee changed (a segmentation
+    fault in Newton after an edit of the evaluator). So no kernel module imports another's functions."""
+    for file in (ROOT / "rtreflect" / "kernels").glob("*.py"):
+        for line in file.read_text().splitlines():
+            if line.startswith("from .") or line.startswith("from rtreflect.kernels"):
+                assert line == "from . import JIT", f"{file.name}: {line}"

@@ -8,7 +8,9 @@ point by point, in registers, with no (N, …) temporaries:
 * the homogeneous derivatives A^(k,l), w^(k,l) as Σ_i Σ_j N_i^(k)(u) N_j^(l)(v) P^w_ij; up to
   degree `POWER_FORM_MAX_DEGREE` from each span's power (Taylor) form instead, Σ_kl C_kl τ_u^k τ_v^l
   with τ the local parameter in [0, 1]: no divisions, about 3× fewer operations than A2.3;
-* the rational derivatives by Piegl & Tiller eq. 4.20 (algorithm A4.4), for k + l <= 2.
+* the rational derivatives by Piegl & Tiller eq. 4.20 (algorithm A4.4), for k + l <= 2;
+* the unit normal (S_u × S_v)/|S_u × S_v| and its degenerate test, and Newton's iteration onto
+  the exact ray–surface hit (`newton`).
 
 The patches of a scene live in one flat table (`PatchTable`): degrees, control-point counts,
 knot vectors and homogeneous control points concatenated, so one kernel call serves points on
@@ -260,7 +262,7 @@ def contract(Nu, Nv, points, base, stride, p, q, order, H):
         H[0, 2, c], H[1, 1, c], H[2, 0, c] = h02, h11, h20
 
 
-@njit(inline="always", **JIT)
+@njit(**JIT)
 def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, u, v, order, out,
              scratch):
     """S, S_u, S_v (and S_uu, S_uv, S_vv for order 2) of patch k at (u, v), clamped to its domain, into out (6, 3).
@@ -380,3 +382,67 @@ def unit_normals(domain, scale, patch, Su, Sv, sine, vanishing, out, degenerate)
         degenerate[i] = bad
         if not bad:
             out[i, 0], out[i, 1], out[i, 2] = x0 / norm, x1 / norm, x2 / norm
+
+
+# -- Newton onto the exact hit (`trace.tracing.refine`) ---------------------------------------------
+# In this file, not one of its own: numba's cache watches only the file that defines a kernel, and a
+# cached caller of a changed callee in another file ran stale machine code (a segmentation fault).
+
+#: A step is refused where |det J| <= this × |S_u| |S_v| (det J = D·(S_u × S_v), a sine of the incidence).
+SINGULAR_SINE = 1e-12
+
+
+@njit(**JIT)
+def newton(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
+           patch, u, v, O, D, tol, max_steps, S, Su, Sv, converged):
+    """Newton on S(u, v) = O + tD from (u, v), in place for each ray; S, S_u, S_v at the final (u, v); converged.
+
+    DESIGN.md, "Exact hit": the ray condition as two equations across the ray, r1 = e1·(S − O) = 0
+    and r2 = e2·(S − O) = 0 with e1, e2 ⊥ D (`across_at`), Jacobian J = [[e1·S_u, e1·S_v],
+    [e2·S_u, e2·S_v]]; each step solves J (δu, δv) = (r1, r2) by Cramer's rule and clamps (u, v)
+    to the patch's domain. det J = D·(S_u × S_v): tiny at grazing rays and degenerate points,
+    where Newton is not to be trusted (`SINGULAR_SINE`).
+
+    A ray is converged once |(r1, r2)| <= tol[i], checked after each evaluation (at most
+    max_steps steps, max_steps + 1 evaluations); a singular Jacobian or a non-finite step
+    stops it unconverged.
+    """
+    scratch = new_scratch(max_degree)
+    d = np.empty((6, 3))
+    e = np.empty((2, 3))
+    for i in range(patch.shape[0]):
+        k = patch[i]
+        across_at(D, i, e)
+        u0, u1, v0, v1 = domain[k, 0], domain[k, 1], domain[k, 2], domain[k, 3]
+        ui, vi = u[i], v[i]
+        ok = False
+        for step in range(max_steps + 1):
+            point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, ui, vi, 1, d,
+                     scratch)
+            r0, r1, r2 = d[0, 0] - O[i, 0], d[0, 1] - O[i, 1], d[0, 2] - O[i, 2]
+            f1 = e[0, 0] * r0 + e[0, 1] * r1 + e[0, 2] * r2
+            f2 = e[1, 0] * r0 + e[1, 1] * r1 + e[1, 2] * r2
+            if math.hypot(f1, f2) <= tol[i]:
+                ok = True
+                break
+            if step == max_steps:
+                break
+            a = e[0, 0] * d[1, 0] + e[0, 1] * d[1, 1] + e[0, 2] * d[1, 2]
+            b = e[0, 0] * d[2, 0] + e[0, 1] * d[2, 1] + e[0, 2] * d[2, 2]
+            c = e[1, 0] * d[1, 0] + e[1, 1] * d[1, 1] + e[1, 2] * d[1, 2]
+            dd = e[1, 0] * d[2, 0] + e[1, 1] * d[2, 1] + e[1, 2] * d[2, 2]
+            det = a * dd - b * c
+            len_u = math.sqrt(d[1, 0] ** 2 + d[1, 1] ** 2 + d[1, 2] ** 2)
+            len_v = math.sqrt(d[2, 0] ** 2 + d[2, 1] ** 2 + d[2, 2] ** 2)
+            if not abs(det) > SINGULAR_SINE * len_u * len_v:
+                break
+            du = (dd * f1 - b * f2) / det
+            dv = (a * f2 - c * f1) / det
+            if not (math.isfinite(du) and math.isfinite(dv)):  # derivatives ~1e-296 pass the test, then overflow
+                break
+            ui = min(max(ui - du, u0), u1)
+            vi = min(max(vi - dv, v0), v1)
+        u[i], v[i] = ui, vi
+        converged[i] = ok
+        for c in range(3):
+            S[i, c], Su[i, c], Sv[i, c] = d[0, c], d[1, c], d[2, c]

@@ -46,7 +46,6 @@ from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation
 from ..kernels import nurbs as nurbs_kernel
-from ..kernels.newton import newton
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance (or the part's size),
 #: and at least to the hit's distance from the origin: S's coordinates cannot be computed more finely than
@@ -119,7 +118,7 @@ def _across(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, tolerance_distance):
-    """Newton on S(u, v) = O + tD from the mesh hit, by the compiled kernel `kernels.newton.newton`.
+    """Newton on S(u, v) = O + tD from the mesh hit, by the compiled kernel `kernels.nurbs.newton`.
 
     Returns (u, v, derivatives at the final (u, v), converged); the derivatives serve the normals.
     """
@@ -131,7 +130,7 @@ def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, toler
     S, Su, Sv = (np.empty((n, 3)) for _ in range(3))
     converged = np.zeros(n, dtype=bool)
     contiguous = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
-    newton(*surfaces.table.args, np.ascontiguousarray(patch, dtype=np.int64), u, v, contiguous(origins),
+    nurbs_kernel.newton(*surfaces.table.args, np.ascontiguousarray(patch, dtype=np.int64), u, v, contiguous(origins),
            contiguous(directions), contiguous(tol), NEWTON_MAX_STEPS, S, Su, Sv, converged)
     return u, v, SurfaceDerivatives(S, Su, Sv), converged
 
