@@ -262,7 +262,7 @@ def contract(Nu, Nv, points, base, stride, p, q, order, H):
         H[0, 2, c], H[1, 1, c], H[2, 0, c] = h02, h11, h20
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, u, v, order, out,
              scratch):
     """S, S_u, S_v (and S_uu, S_uv, S_vv for order 2) of patch k at (u, v), clamped to its domain, into out (6, 3).
