@@ -14,7 +14,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent.parent / "rtreflect"
 #: The sub-packages of the pipeline stages: none may import `TOP_LEVEL_ONLY`.
-STAGES = ("geometry", "trace", "modes", "exchange", "integrator", "analysis", "output", "ci")
+STAGES = ("kernels", "geometry", "trace", "modes", "exchange", "integrator", "analysis", "output", "ci")
 #: Modules at the top of the arrows: the command line and the runners that only it (and users) call.
 TOP_LEVEL_ONLY = ("cli", "batch", "cluster")
 

@@ -13,11 +13,6 @@ import warnings
 
 import numpy as np
 
-with warnings.catch_warnings():
-    # colour-science warns at import about optional SciPy/Matplotlib features we do not use.
-    warnings.simplefilter("ignore")
-    import colour
-
 #: Signed quantities (K, H, κ1, κ2, draft): diverging, white at the middle of the range (zero).
 DIVERGING = "crameri:vik"
 #: Non-negative quantities (max |κ|, radius): sequential, dark to light.
@@ -30,6 +25,11 @@ TABLE_SIZE = 1024
 def _table(name: str) -> np.ndarray:
     """(TABLE_SIZE, 3) linear RGB of the named map at evenly spaced t in [0, 1]."""
     import cmap  # the map data; imported here so the reflection mode never loads it
+    with warnings.catch_warnings():
+        # colour-science warns at import about optional SciPy/Matplotlib features we do not use; imported here
+        # (as cmap) so that start-up does not pay for it (tests/test_startup.py).
+        warnings.simplefilter("ignore")
+        import colour
 
     srgb = np.asarray(cmap.Colormap(name)(np.linspace(0.0, 1.0, TABLE_SIZE)), dtype=np.float64)[:, :3]
     return np.asarray(colour.cctf_decoding(srgb, function="sRGB"), dtype=np.float64)

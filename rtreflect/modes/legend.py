@@ -16,10 +16,6 @@ import numpy as np
 from .curvaturemap import SIGNED, CurvatureMode
 from .draft import UNDERCUT_RGB, DraftMode
 
-with warnings.catch_warnings():
-    warnings.simplefilter("ignore")  # colour-science's import-time notes on optional packages
-    import colour
-
 #: Size of the legend in SVG user units (pixels): a bar tall enough for five readable ticks.
 WIDTH, HEIGHT = 380, 440
 BAR = (24, 60, 40, 300)  # x, y, width, height of the colour bar
@@ -39,6 +35,9 @@ def legend_file_name(scene) -> str:
 
 
 def _hex(linear: np.ndarray) -> str:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # colour-science's import-time notes; imported here: start-up stays light
+        import colour
     srgb = np.clip(colour.cctf_encoding(np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0), function="sRGB"), 0, 1)
     r, g, b = np.round(srgb * 255).astype(int)
     return f"#{r:02x}{g:02x}{b:02x}"

@@ -13,8 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exchange.scene import LightSpec
+from ..kernels import tubes as tubes_kernel
 
-#: Point × tube pairs per chunk of the skew-line distances (eq. 4): about 80 MB of temporaries.
+#: Point × tube pairs per chunk of the skew-line distances (eq. 4): about 80 MB of temporaries. `reach` (the
+#: renderer's path) no longer builds the tables: `integrator.tiling` still budgets memory with it.
 TUBE_ENTRIES_PER_CHUNK = 1 << 20
 
 
@@ -79,39 +81,23 @@ class TubeLights:
         """B_k = Q + c_k e: a point of each tube's axis, its centre for a finite tube."""
         return self.Q + self.c_k[:, None] * self.e
 
+    def _kernel_args(self) -> tuple:
+        half = 0.5 * self.length if np.isfinite(self.length) else np.inf
+        f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+        return f64(self.Q), f64(self.c), f64(self.e), f64(self.c_k), half
+
     def distances(self, R: np.ndarray, s: np.ndarray) -> TubeDistances:
-        """Skew-line distance d between the ray R + t s and every light line, paper eq. (4).
+        """Skew-line distance d between the ray R + t s and every light line, paper eq. (4) (`kernels.tubes`).
 
         d = |(s × c)·b| / |s × c| with b = B_k − R; if s ∥ c, d = |b × c|. Since
         b = (Q − R) + c_k e, d and the ray parameter t of closest approach are
         per-point scalars combined with c_k: d = |g − c_k h| / |s × c|, t = α + β c_k.
         """
-        rho = R - self.Q  # = −b − c_k e
-        sxc = np.cross(s, self.c)
-        sxc_norm = np.linalg.norm(sxc, axis=1)
-        parallel = sxc_norm <= 1e-12
-        ck = self.c_k[None, :]
-        sc = _dot(s, self.c)
-        se = _dot(s, self.e)
-        s_rho = _dot(s, rho)
-        c_rho = _dot(rho, self.c)
-        with np.errstate(divide="ignore", invalid="ignore"):  # s ∥ c rows are replaced below
-            inv_sxc = 1.0 / sxc_norm
-            inv_denom = inv_sxc**2  # 1 − (s·c)² = |s × c|² for unit s and c
-            d = np.abs(_dot(sxc, rho)[:, None] - ck * _dot(sxc, self.e)[:, None]) * inv_sxc[:, None]
-            # Closest approach of R + t s and B_k + τ c, with w0 = R − B_k = rho − c_k e (and c ⊥ e).
-            t = ((sc * c_rho - s_rho) * inv_denom)[:, None] + ck * (se * inv_denom)[:, None]
-            ahead = t > 0
-            if np.isfinite(self.length):
-                tau = ((c_rho - sc * s_rho) * inv_denom)[:, None] + ck * (sc * se * inv_denom)[:, None]
-                ahead &= np.abs(tau) <= 0.5 * self.length
-        par = np.flatnonzero(parallel)
-        if len(par):
-            # s ∥ c: d = |b × c|, the point-to-line distance; the ray runs along the tube, never reaching a finite one.
-            w0 = rho[par, None, :] - ck[..., None] * self.e
-            d[par] = np.linalg.norm(np.cross(w0, self.c), axis=2)
-            t[par] = np.inf
-            ahead[par] = not np.isfinite(self.length)
+        Q, c, e, c_k, half = self._kernel_args()
+        n, k = len(R), len(c_k)
+        d, t, ahead = np.empty((n, k)), np.empty((n, k)), np.empty((n, k), dtype=bool)
+        tubes_kernel.distances(Q, c, e, c_k, half, np.ascontiguousarray(R, dtype=np.float64),
+                               np.ascontiguousarray(s, dtype=np.float64), d, t, ahead)
         return TubeDistances(d, t, ahead)
 
     def ulmet_f(self, R: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -140,22 +126,19 @@ class TubeLights:
         return within.any(axis=1), t_hit
 
     def reach(self, R: np.ndarray, s: np.ndarray, tube: np.ndarray | None = None) -> TubeReach:
-        """`nearest` and `candidates` of eq. (4)'s distances, in chunks of TUBE_ENTRIES_PER_CHUNK point × tube pairs.
+        """`nearest` and `candidates` of eq. (4)'s distances, per point by the kernel `kernels.tubes.reach`.
 
-        The (points, tubes) temporaries of `distances` stay bounded; each point's values depend on
-        its own row only, so the chunking does not change them. With ``tube`` (one tube index per
-        point), also the ray parameter t of closest approach to that tube.
+        No (points, tubes) table is built, so memory does not grow with the number of tubes; each
+        point's values depend on its own row only. With ``tube`` (one tube index per point), also
+        the ray parameter t of closest approach to that tube.
         """
+        Q, c, e, c_k, half = self._kernel_args()
         n = len(R)
-        line_id, line_dist = np.full(n, -1), np.full(n, np.nan)
-        candidate, t_candidate = np.zeros(n, dtype=bool), np.full(n, np.inf)
-        t_of = None if tube is None else np.full(n, np.nan)
-        step = max(1, TUBE_ENTRIES_PER_CHUNK // max(1, len(self.c_k)))
-        for lo in range(0, n, step):
-            part = slice(lo, lo + step)
-            dist = self.distances(R[part], s[part])
-            line_id[part], line_dist[part] = self.nearest(dist)
-            candidate[part], t_candidate[part] = self.candidates(dist)
-            if tube is not None:
-                t_of[part] = dist.t[np.arange(len(dist.t)), tube[part]]
-        return TubeReach(line_id, line_dist, candidate, t_candidate, t_of)
+        line_id, line_dist = np.empty(n, dtype=np.int64), np.empty(n)
+        candidate, t_candidate = np.empty(n, dtype=bool), np.empty(n)
+        t_of = np.full(n, np.nan)
+        which = np.zeros(0, dtype=np.int64) if tube is None else np.ascontiguousarray(tube, dtype=np.int64)
+        tubes_kernel.reach(Q, c, e, c_k, float(self.radius), half, np.ascontiguousarray(R, dtype=np.float64),
+                           np.ascontiguousarray(s, dtype=np.float64), which, line_id, line_dist, candidate,
+                           t_candidate, t_of)
+        return TubeReach(line_id, line_dist, candidate, t_candidate, None if tube is None else t_of)

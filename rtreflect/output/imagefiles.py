@@ -11,17 +11,11 @@ import json
 import os
 import sys
 import tempfile
-import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
 import numpy as np
 import OpenImageIO as oiio
-
-with warnings.catch_warnings():
-    # colour-science warns at import about optional SciPy/Matplotlib features we do not use.
-    warnings.simplefilter("ignore")
-    import colour
 
 from ..errors import RtreflectError
 from ..exchange.scene import OVERLAY_SIDE
@@ -167,8 +161,25 @@ def _png_spec(width: int, height: int, attributes: dict[str, str]) -> oiio.Image
     return spec
 
 
+#: The sRGB encoding (IEC 61966-2-1:1999, eq. for V'): linear segment below this, slope 12.92 ...
+SRGB_LINEAR_LIMIT = 0.0031308
+SRGB_SLOPE = 12.92
+#: ... and V' = 1.055 L^(1/2.4) − 0.055 above.
+SRGB_SCALE, SRGB_OFFSET, SRGB_GAMMA = 1.055, 0.055, 2.4
+
+
+def srgb_oetf(L: np.ndarray) -> np.ndarray:
+    """sRGB encoding V' of linear L in [0, 1] (IEC 61966-2-1:1999; colour-science's ``eotf_inverse_sRGB``).
+
+    Written out rather than imported: importing colour-science costs more than a small render
+    (issue 14, start-up); tests/test_startup.py checks the bytes against colour-science.
+    """
+    with np.errstate(invalid="ignore"):
+        return np.where(L <= SRGB_LINEAR_LIMIT, L * SRGB_SLOPE, SRGB_SCALE * np.power(L, 1 / SRGB_GAMMA) - SRGB_OFFSET)
+
+
 def encode_srgb(rgba: np.ndarray) -> np.ndarray:
-    """Linear RGBA → 8-bit sRGB RGBA, opaque (colour-science's sRGB transfer function; alpha 255).
+    """Linear RGBA → 8-bit sRGB RGBA, opaque (`srgb_oetf`; alpha 255).
 
     The film's RGB is already composited over ``background``, so the PNG is the picture as
     rendered: an opaque background, whatever a viewer does with alpha (one that honours it
@@ -176,7 +187,7 @@ def encode_srgb(rgba: np.ndarray) -> np.ndarray:
     The coverage A stays in the EXR.
     """
     rgb = np.clip(np.nan_to_num(rgba[..., :3], nan=0.0), 0.0, 1.0)
-    encoded = np.round(colour.cctf_encoding(rgb, function="sRGB") * 255.0).astype(np.uint8)
+    encoded = np.round(srgb_oetf(rgb) * 255.0).astype(np.uint8)
     return np.concatenate([encoded, np.full(encoded.shape[:-1] + (1,), 255, dtype=np.uint8)], axis=-1)
 
 

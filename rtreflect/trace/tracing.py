@@ -45,6 +45,7 @@ from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation
+from ..kernels import nurbs as nurbs_kernel
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance (or the part's size),
 #: and at least to the hit's distance from the origin: S's coordinates cannot be computed more finely than
@@ -110,61 +111,28 @@ def facing(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
 
 
 def _across(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors e1, e2 spanning the plane normal to each direction."""
-    helper = np.zeros_like(directions)
-    helper[np.arange(len(directions)), np.argmin(np.abs(directions), axis=1)] = 1.0
-    e1 = np.cross(directions, helper)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    return e1, np.cross(directions, e1)
+    """Two unit vectors e1, e2 spanning the plane normal to each direction (`kernels.nurbs.across_at`)."""
+    e1, e2 = np.empty_like(directions), np.empty_like(directions)
+    nurbs_kernel.across(np.ascontiguousarray(directions, dtype=np.float64), e1, e2)
+    return e1, e2
 
 
 def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, tolerance_distance):
-    """Newton on S(u, v) = O + tD from the mesh hit.
+    """Newton on S(u, v) = O + tD from the mesh hit, by the compiled kernel `kernels.nurbs.newton`.
 
     Returns (u, v, derivatives at the final (u, v), converged); the derivatives serve the normals.
     """
-    u, v = u.copy(), v.copy()
-    u0, u1, v0, v1 = surfaces.domains(patch)
-    e1, e2 = _across(directions)
+    n = len(u)
+    u = np.array(u, dtype=np.float64)
+    v = np.array(v, dtype=np.float64)
     magnitude = np.abs(origins + t_mesh[:, None] * directions).max(axis=1)  # |S| near the mesh hit
     tol = NEWTON_TOLERANCE * np.maximum(np.maximum(t_mesh, tolerance_distance), magnitude)
-    converged = np.zeros(len(u), dtype=bool)
-    singular = np.zeros(len(u), dtype=bool)
-    active = np.arange(len(u))
-    S, Su_all, Sv_all = (np.empty((len(u), 3)) for _ in range(3))
-    for step in range(NEWTON_MAX_STEPS + 1):
-        d = surfaces.evaluate(patch[active], u[active], v[active])
-        S[active], Su_all[active], Sv_all[active] = d.S, d.Su, d.Sv
-        rel = d.S - origins[active]
-        r1 = np.einsum("ij,ij->i", e1[active], rel)
-        r2 = np.einsum("ij,ij->i", e2[active], rel)
-        done = np.hypot(r1, r2) <= tol[active]
-        converged[active[done]] = True
-        if step == NEWTON_MAX_STEPS:
-            break
-        keep = ~done
-        active, r1, r2 = active[keep], r1[keep], r2[keep]
-        if len(active) == 0:
-            break
-        Su, Sv = d.Su[keep], d.Sv[keep]
-        a = np.einsum("ij,ij->i", e1[active], Su)
-        b = np.einsum("ij,ij->i", e1[active], Sv)
-        c = np.einsum("ij,ij->i", e2[active], Su)
-        dd = np.einsum("ij,ij->i", e2[active], Sv)
-        det = a * dd - b * c
-        # det = D·(S_u × S_v): tiny at grazing rays and degenerate points, where Newton is not to be trusted.
-        ok = np.abs(det) > 1e-12 * np.linalg.norm(Su, axis=1) * np.linalg.norm(Sv, axis=1)
-        singular[active[~ok]] = True
-        active, a, b, c, dd, det, r1, r2 = (x[ok] for x in (active, a, b, c, dd, det, r1, r2))
-        with np.errstate(over="ignore", invalid="ignore"):  # derivatives ~1e-296 pass the relative test, then overflow
-            du, dv = (dd * r1 - b * r2) / det, (a * r2 - c * r1) / det
-        finite = np.isfinite(du) & np.isfinite(dv)
-        singular[active[~finite]] = True
-        active, du, dv = active[finite], du[finite], dv[finite]
-        u[active] = np.clip(u[active] - du, u0[active], u1[active])
-        v[active] = np.clip(v[active] - dv, v0[active], v1[active])
-    converged &= ~singular
-    return u, v, SurfaceDerivatives(S, Su_all, Sv_all), converged
+    S, Su, Sv = (np.empty((n, 3)) for _ in range(3))
+    converged = np.zeros(n, dtype=bool)
+    contiguous = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    nurbs_kernel.newton(*surfaces.table.args, np.ascontiguousarray(patch, dtype=np.int64), u, v, contiguous(origins),
+           contiguous(directions), contiguous(tol), NEWTON_MAX_STEPS, S, Su, Sv, converged)
+    return u, v, SurfaceDerivatives(S, Su, Sv), converged
 
 
 def _near_mesh_hit(derivs: SurfaceDerivatives, O, D, mesh_point, chord) -> tuple[np.ndarray, np.ndarray]:

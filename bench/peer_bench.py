@@ -1,0 +1,77 @@
+"""Peer benchmark (issue 14): rtreflect's RMSE against render time on the peer scene, ratios to a bare intersect.
+
+The scene is bench/peer.toml (the issue's side-by-side with a general-purpose renderer). Quality is
+the RMSE of the per-pixel tube coverage (the R channel: white lines on a black surface) over the
+pixels that see the surface, against rtreflect at samples = 16 (256 samples per pixel) computed in
+the same run, and the share of those pixels off by more than 0.1. Times are best of --repeat, and
+are printed as ratios to a bare embreex intersect of one float32 ray per pixel in the same run, so
+the figures compare across machines (the issue's goal 1: the whole render <= 3x that intersect at
+RMSE <= 0.0125 and <= 0.3 % of pixels off by > 0.1).
+
+    python bench/peer_bench.py [--samples 1 2 4 --repeat 3 --threads 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rtreflect.exchange.scene import load_scene
+from rtreflect.integrator.renderer import Renderer
+
+SCENE = Path(__file__).resolve().parent / "peer.toml"
+#: Reference sample grid (s×s per pixel), as in the issue.
+REFERENCE_SAMPLES = 16
+#: A pixel is "off" where its coverage differs from the reference by more than this.
+OFF_BY = 0.1
+
+
+def render(scene, samples: int, repeat: int, threads: int | None):
+    renderer = Renderer(dataclasses.replace(scene, image=dataclasses.replace(scene.image, samples=samples)))
+    best, film = np.inf, None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        result = renderer.render(threads=threads)
+        best = min(best, time.perf_counter() - t0)
+        film = result.film
+    return best, film.channel("R").astype(np.float64), film.channel("A"), renderer
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--samples", type=int, nargs="+", default=[1, 2, 4])
+    ap.add_argument("--repeat", type=int, default=3, help="best of N renders")
+    ap.add_argument("--threads", type=int, default=None)
+    args = ap.parse_args()
+    scene = load_scene(SCENE)
+
+    _, reference, alpha, renderer = render(scene, REFERENCE_SAMPLES, 1, args.threads)
+    sees = alpha > 0
+    width, height = scene.image.width, scene.image.height
+    rows, cols = np.divmod(np.arange(width * height), width)
+    origins, directions = renderer.camera.rays(rows, cols)
+    o32, d32 = origins.astype(np.float32), directions.astype(np.float32)
+    bare = np.inf
+    for _ in range(args.repeat):
+        t0 = time.perf_counter()
+        renderer.accelerator.scene.run(o32, d32, query="INTERSECT", output=1)
+        bare = min(bare, time.perf_counter() - t0)
+
+    print(f"peer scene {SCENE.name}: {width}×{height}, surface in {100 * sees.mean():.0f}% of the pixels; "
+          f"reference samples = {REFERENCE_SAMPLES}")
+    print(f"bare embreex intersect, 1 ray/px: {bare:.3f} s (one thread, float32 rays ready)")
+    print(f"{'setting':<26} {'render s':>9} {'× bare':>7} {'RMSE':>8} {'off > 0.1':>10}")
+    for s in args.samples:
+        seconds, coverage, _, _ = render(scene, s, args.repeat, args.threads)
+        error = coverage[sees] - reference[sees]
+        rmse = float(np.sqrt(np.mean(error**2)))
+        off = 100.0 * float(np.mean(np.abs(error) > OFF_BY))
+        print(f"{f'samples {s} ({s * s} spp)':<26} {seconds:>9.3f} {seconds / bare:>7.2f} {rmse:>8.4f} {off:>9.2f}%")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,93 @@
+"""Compiled skew-line distances to the light tubes (Ulmet, paper eq. 4; `modes.lights.TubeLights`).
+
+Notation of the paper: surface point R, reflected direction s, light line k through
+B_k = Q + c_k e with unit direction c. With ρ = R − Q (so b = B_k − R = c_k e − ρ):
+
+    d_k = |(s × c)·b| / |s × c| = |(s × c)·ρ − c_k (s × c)·e| / |s × c|,
+    t_k = ((s·c)(c·ρ) − s·ρ)/|s × c|² + c_k (s·e)/|s × c|²   (closest approach on R + t s),
+    τ_k = ((c·ρ) − (s·c)(s·ρ))/|s × c|² + c_k (s·c)(s·e)/|s × c|²   (on the tube's axis),
+
+using 1 − (s·c)² = |s × c|² for unit s and c. Where s ∥ c (|s × c| <= `PARALLEL`), d_k = |b × c|,
+the point-to-line distance, and the ray runs along the tube: t = ∞, ahead only if the tube is
+infinite. A tube is *ahead* where t > 0 and |τ| <= length/2.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from . import JIT
+
+#: |s × c| below this: the reflected ray runs along the tubes (unit vectors: a sine).
+PARALLEL = 1e-12
+
+
+@njit(inline="always", **JIT)
+def _prepare(Q, c, e, R, s, i):
+    """Per-point scalars of eq. (4): (parallel, g, h, 1/|s×c|, α, β, α_τ, β_τ) with d = |g − c_k h|/|s×c|."""
+    rho0, rho1, rho2 = R[i, 0] - Q[0], R[i, 1] - Q[1], R[i, 2] - Q[2]
+    s0, s1, s2 = s[i, 0], s[i, 1], s[i, 2]
+    x0, x1, x2 = s1 * c[2] - s2 * c[1], s2 * c[0] - s0 * c[2], s0 * c[1] - s1 * c[0]  # s × c
+    norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    sc = s0 * c[0] + s1 * c[1] + s2 * c[2]
+    se = s0 * e[0] + s1 * e[1] + s2 * e[2]
+    s_rho = s0 * rho0 + s1 * rho1 + s2 * rho2
+    c_rho = rho0 * c[0] + rho1 * c[1] + rho2 * c[2]
+    inv = 1.0 / norm
+    inv_denom = inv * inv
+    return (norm <= PARALLEL, x0 * rho0 + x1 * rho1 + x2 * rho2, x0 * e[0] + x1 * e[1] + x2 * e[2], inv,
+            (sc * c_rho - s_rho) * inv_denom, se * inv_denom, (c_rho - sc * s_rho) * inv_denom, sc * se * inv_denom)
+
+
+@njit(inline="always", **JIT)
+def _pair(Q, c, e, R, i, ck, half_length, pre):
+    """(d, t, ahead) of point i and the tube at c_k, from `_prepare`'s scalars."""
+    parallel, g, h, inv, alpha, beta, alpha_tau, beta_tau = pre
+    if not parallel:
+        t = alpha + ck * beta
+        ahead = t > 0
+        if half_length < np.inf:
+            ahead = ahead and abs(alpha_tau + ck * beta_tau) <= half_length
+        return abs(g - ck * h) * inv, t, ahead
+    w0, w1, w2 = R[i, 0] - Q[0] - ck * e[0], R[i, 1] - Q[1] - ck * e[1], R[i, 2] - Q[2] - ck * e[2]
+    y0, y1, y2 = w1 * c[2] - w2 * c[1], w2 * c[0] - w0 * c[2], w0 * c[1] - w1 * c[0]
+    return math.sqrt(y0 * y0 + y1 * y1 + y2 * y2), np.inf, not half_length < np.inf
+
+
+@njit(**JIT)
+def distances(Q, c, e, c_k, half_length, R, s, d, t, ahead):
+    """d, t, ahead (N, K) of every point and tube (eq. 4)."""
+    for i in range(R.shape[0]):
+        pre = _prepare(Q, c, e, R, s, i)
+        for k in range(c_k.shape[0]):
+            d[i, k], t[i, k], ahead[i, k] = _pair(Q, c, e, R, i, c_k[k], half_length, pre)
+
+
+@njit(**JIT)
+def reach(Q, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, candidate, t_candidate, t_of):
+    """Per point, without the (N, K) tables: the nearest tube ahead (index, d; first of equals; −1, NaN where
+    none is), whether a tube ahead lies within the radius and the t of the nearest such (∞ where none),
+    and where tube.shape[0] > 0 the t of tube[i]."""
+    want = tube.shape[0] > 0
+    for i in range(R.shape[0]):
+        pre = _prepare(Q, c, e, R, s, i)
+        best, best_d, hit, t_hit = -1, np.inf, False, np.inf
+        for k in range(c_k.shape[0]):
+            dk, tk, ahead = _pair(Q, c, e, R, i, c_k[k], half_length, pre)
+            if want and k == tube[i]:
+                t_of[i] = tk
+            if not ahead:
+                continue
+            if dk < best_d:
+                best, best_d = k, dk
+            if dk <= radius:
+                hit = True
+                if tk < t_hit:
+                    t_hit = tk
+        line_id[i] = best
+        line_dist[i] = best_d if best >= 0 else np.nan
+        candidate[i] = hit
+        t_candidate[i] = t_hit
