@@ -58,14 +58,15 @@ from typing import Callable
 
 import numpy as np
 
-from .contours import ContourLines, UlmetField, analytic_contours, reaches_light_plane
+from .contours import ContourLines, analytic_contours, field_of, reaches_light_plane
 from ..integrator.film import Film
+from ..modes.base import SurfacePoints
 from ..modes.lights import reflect
 from ..modes.profile import stripe_weight
 from ..modes.shading import shade_factor
 from ..integrator.autorig import resolve
 from ..integrator.renderer import Renderer
-from ..exchange.scene import MAX_MESH_VERTICES, MODE_KEYS, Scene
+from ..exchange.scene import MAX_MESH_VERTICES, Scene
 from ..geometry.tessellation import tessellate
 from ..trace.accelerator import Accelerator
 from ..trace.tracing import occluded, refine
@@ -138,6 +139,33 @@ def neighbour_gaps(c_k: np.ndarray) -> np.ndarray:
     steps = np.diff(positions)
     nearest = np.minimum(np.concatenate([[math.inf], steps]), np.concatenate([steps, [math.inf]]))
     return nearest[np.searchsorted(positions, c_k)]
+
+
+@dataclass(frozen=True)
+class LineSpec:
+    """The lines under test: the levels c_k of φ, the stripe's half width in line.dist's unit and its profile.
+
+    Reflection lines (`along_ray`): φ = f, the tubes' radius, the blur, and stripes seen along the
+    reflected ray, so their traced centres and colours are checked for occlusion up to the tube
+    (`reach`: the radius out to the blur's reach). Another mode's lines are drawn where they are:
+    φ its own, line.dist |φ − c_k| (highlight: the skew-line distance to the tube), hard edges.
+    """
+
+    levels: np.ndarray
+    radius: float
+    blur: float
+    along_ray: bool
+    reach: float
+
+
+def line_spec(renderer: Renderer) -> LineSpec:
+    """The `LineSpec` of the renderer's `[render] mode`."""
+    if renderer.scene.render.mode == "reflection":
+        return LineSpec(renderer.lights.c_k, renderer.lights.radius, renderer.scene.render.blur, True,
+                        renderer.stripe_lights.radius)
+    mode = renderer.mode
+    return LineSpec(np.asarray(mode.levels, dtype=np.float64), float(mode.half_width), 0.0, False,
+                    float(mode.half_width))
 
 
 @dataclass
@@ -231,6 +259,34 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
         incidence=incidence.reshape(height, width), normal_error=normal_error.reshape(height, width),
         nearer=nearer.reshape(height, width),
     )
+
+
+def mode_aovs(renderer: Renderer, film: Film, aovs: PixelAOVs) -> PixelAOVs:
+    """The AOVs as another mode's lines see them: f := φ (channel phi), line.id and line.dist of the mode's stripes.
+
+    The nearest level and its distance are the mode's own (`Mode.stripes`) at the pixel-centre hit
+    (P as S(u, v), the stored N, s); a map mode's line share is read against its own surface
+    colour there (map modes are not shaded, `film.map_color`).
+    """
+    height, width = film.height, film.width
+    size = height * width
+    hit = np.flatnonzero(aovs.patch.ravel() >= 0)
+    points = SurfacePoints(aovs.P.reshape(-1, 3)[hit], aovs.N.reshape(-1, 3)[hit], aovs.s.reshape(-1, 3)[hit],
+                           aovs.patch.ravel()[hit].astype(int), film.channel("u").ravel()[hit].astype(np.float64),
+                           film.channel("v").ravel()[hit].astype(np.float64))
+    stripes = renderer.mode.stripes(points)
+    line_id, line_dist = np.full(size, -1.0), np.full(size, np.nan)
+    line_id[hit], line_dist[hit] = stripes.level_id, stripes.level_dist
+    coverage = aovs.line_coverage
+    rgb = renderer.mode.surface_rgb(points)
+    if rgb is not None:
+        surface = np.broadcast_to(renderer.scene.render.background, (size, 3)).copy()
+        surface[hit] = rgb
+        render = renderer.scene.render
+        coverage = line_coverage(film.pixels[..., :4], surface.reshape(height, width, 3), render.line_color,
+                                 render.background)
+    return replace(aovs, f=film.channel("phi").astype(np.float64), line_id=line_id.reshape(height, width),
+                   line_dist=line_dist.reshape(height, width), line_coverage=coverage)
 
 
 def _stored_hit_errors(renderer: Renderer, patch: np.ndarray, u: np.ndarray, v: np.ndarray, P: np.ndarray,
@@ -462,15 +518,17 @@ def _crossing(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, jump_n
 
 
 def traced_centres(renderer: Renderer, aovs: PixelAOVs,
-                   pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> TracedCentres:
+                   pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None,
+                   levels: np.ndarray | None = None) -> TracedCentres:
     """Where f − c_k changes sign between neighbouring pixel centres, on the cubic through four pixels (module doc).
 
     ``pairs``: `_resolved_pairs` of these AOVs (the geometry alone), when the caller has them already;
-    each crossing of tube k is kept where tube k's own neighbour gap is resolved.
+    each crossing of tube k is kept where tube k's own neighbour gap is resolved. ``levels``: the
+    c_k of the lines (`LineSpec.levels`; the tube positions by default).
     """
     pairs = pairs if pairs is not None else _resolved_pairs(renderer, aovs)
     height, width = aovs.f.shape
-    c_k = renderer.lights.c_k
+    c_k = renderer.lights.c_k if levels is None else levels
     limits = neighbour_gaps(c_k) / MIN_LINE_GAP_PX
     order = np.argsort(c_k)
     c_sorted = c_k[order]
@@ -517,7 +575,7 @@ def _filter_unblocked(renderer: Renderer, aovs: PixelAOVs, centres: TracedCentre
 # -- the colour image -----------------------------------------------------------------------------
 
 
-def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, np.ndarray]:
+def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) masks of the pixels whose colour was checked, and of those whose colour is wrong (module doc).
 
     A pixel is checked where it and its four neighbours hit one smooth piece of one patch
@@ -533,8 +591,9 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
     checked only where the bounds are at most `COLOUR_CHECK_SPAN` apart. Without blur (the hard
     tube of eq. 4) this is: d + 0.71·g < r with the rays unblocked, fully lit; d − 0.71·g > r,
     or no tube ahead, or blocked within the radius, no line at all; pixels across a stripe's
-    edge unchecked.
+    edge unchecked. Another mode's lines (``spec``, `LineSpec`) are seen where they are: no occlusion.
     """
+    spec = spec or line_spec(renderer)
     height, width = aovs.f.shape
     size = height * width
     line_id, d = aovs.line_id.ravel(), aovs.line_dist.ravel()
@@ -557,22 +616,23 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
         has_prev[b] = True
         checked &= has_next & has_prev
     g = np.hypot(slope[0], slope[1])
-    radius, blur = renderer.lights.radius, renderer.scene.render.blur
+    radius, blur = spec.radius, spec.blur
     # The line's share each sample may show, by the stripe profile (monotone in d): at least its weight at the
     # farthest sample, d + 0.71·g, at most at the nearest, d − 0.71·g (NaN d, no tube ahead: 0).
     low = stripe_weight(d + 0.71 * g, radius, blur)
     high = stripe_weight(d - 0.71 * g, radius, blur)
     with np.errstate(invalid="ignore"):
-        within = (line_id >= 0) & (d + 0.71 * g < renderer.stripe_lights.radius)  # every sample may see the tube
+        within = (line_id >= 0) & (d + 0.71 * g < spec.reach)  # every sample may see the tube
     # Occlusion of the reflected ray, for every pixel with a tube ahead: up to the nearest tube within the
     # profile's reach along the ray (as the renderer does), else up to the nearest tube ahead.
-    ahead = np.flatnonzero(line_id >= 0)
+    ahead = np.flatnonzero(line_id >= 0) if spec.along_ray else np.zeros(0, dtype=int)
     blocked = np.zeros(size, dtype=bool)
-    P, n, s = aovs.P.reshape(-1, 3)[ahead], aovs.N.reshape(-1, 3)[ahead], aovs.s.reshape(-1, 3)[ahead]
-    tubes = renderer.stripe_lights.reach(P, s, tube=line_id[ahead].astype(int))
-    t = np.where(tubes.candidate, tubes.t_candidate, tubes.t_of)
-    start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[ahead].astype(int))
-    blocked[ahead] = occluded(renderer.accelerator, renderer.tessellation, renderer.surfaces, start, s, t)
+    if len(ahead):
+        P, n, s = aovs.P.reshape(-1, 3)[ahead], aovs.N.reshape(-1, 3)[ahead], aovs.s.reshape(-1, 3)[ahead]
+        tubes = renderer.stripe_lights.reach(P, s, tube=line_id[ahead].astype(int))
+        t = np.where(tubes.candidate, tubes.t_candidate, tubes.t_of)
+        start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[ahead].astype(int))
+        blocked[ahead] = occluded(renderer.accelerator, renderer.tessellation, renderer.surfaces, start, s, t)
     blocked_grid = blocked.reshape(height, width)
     padded = np.pad(blocked_grid, 1, mode="edge")
     uniform = ((padded[1:-1, :-2] == blocked_grid) & (padded[1:-1, 2:] == blocked_grid)
@@ -792,11 +852,14 @@ class SceneReport:
 
 def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, tolerance: float) -> SceneReport:
     """Deviation of traced centres from the analytic contours, misses both ways and colour mismatches, per line."""
+    spec = line_spec(renderer)
     pairs = _resolved_pairs(renderer, aovs)  # the geometry alone; each line's gap is applied on top
-    centres = _filter_unblocked(renderer, aovs, traced_centres(renderer, aovs, pairs))
-    checked, wrong = colour_mismatches(renderer, aovs)
+    centres = traced_centres(renderer, aovs, pairs, spec.levels)
+    if spec.along_ray:
+        centres = _filter_unblocked(renderer, aovs, centres)
+    checked, wrong = colour_mismatches(renderer, aovs, spec)
     wrong_light = aovs.line_id[wrong].astype(int)
-    c_k = renderer.lights.c_k
+    c_k = spec.levels
     gaps = neighbour_gaps(c_k)
     clean_by_gap: dict[float, np.ndarray] = {}  # few distinct gaps in a scene: one clean map each
 
@@ -847,14 +910,15 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
                              f"{MIN_LINE_GAP_PX:g} px in the image there")
     deviations = np.concatenate(all_dev) if all_dev else np.zeros(0)
     seen = int(np.count_nonzero(aovs.coverage > 0))
-    drawn = int(np.count_nonzero((aovs.coverage > 0) & (aovs.line_id >= 0) & (aovs.line_dist <= renderer.lights.radius)))
+    with np.errstate(invalid="ignore"):
+        drawn = int(np.count_nonzero((aovs.coverage > 0) & (aovs.line_id >= 0) & (aovs.line_dist <= spec.radius)))
     if seen == 0:
         reasons.insert(0, "no traced line centre was compared (the camera sees no surface)")
     elif len(deviations) == 0:
         why = ("every line's neighbour lies closer than the pixels resolve" if notes and len(notes) == sum(counted)
                else "no tube is reflected where the camera sees the surface")
         reasons.insert(0, f"no traced line centre was compared ({why})")
-    elif drawn < MIN_DRAWN_SHARE * seen:
+    elif spec.along_ray and drawn < MIN_DRAWN_SHARE * seen:
         # A few stray centres (grazing rays at silhouettes) compare well, but the picture shows no lines.
         reasons.insert(0, f"no tube is reflected where the camera sees the surface: {drawn} of its {seen} pixels "
                           f"see a tube within its radius (fewer than {100 * MIN_DRAWN_SHARE:g} %)")
@@ -871,20 +935,13 @@ def validate_scene(scene: Scene, tolerance: float = DEFAULT_TOLERANCE_PX, progre
                    threads: int | None = None, renderer: Renderer | None = None) -> SceneReport:
     """Render the scene (colour at its samples, pixel-centre AOVs) in memory and check it against the analytic contours.
 
-    The contours are those of reflection lines. A scene in another `[render] mode` is checked on the
-    reflection lines of the same hits and tubes (its own lines are not compared yet), and the report
-    says so in a note.
+    The contours are the level sets of the scene's `[render] mode`: Ulmet's f for reflection lines,
+    the mode's φ otherwise (`contours.field_of`), compared by the same rules (`compare`, `LineSpec`).
     """
-    mode = scene.render.mode
-    if mode != "reflection":
-        plain = replace(scene.render, mode="reflection", **{key: None for key in MODE_KEYS})
-        scene = scene.replace(render=plain)
-        renderer = None
     renderer = renderer or Renderer(resolve(scene))
     film = renderer.render(progress, threads).film
-    contours = analytic_contours(UlmetField.of(renderer))
-    report = compare(renderer, film_aovs(renderer, film), contours, tolerance)
-    if mode != "reflection":
-        report.notes.append(f"render.mode = {mode!r}: its own lines are not compared with analytic contours yet; "
-                            f"the reflection lines of the same hits and tubes were validated instead")
-    return report
+    contours = analytic_contours(field_of(renderer))
+    aovs = film_aovs(renderer, film)
+    if renderer.scene.render.mode != "reflection":
+        aovs = mode_aovs(renderer, film, aovs)
+    return compare(renderer, aovs, contours, tolerance)

@@ -24,6 +24,16 @@ class HighlightMode:
     name: str = "highlight"
     stage: str = "highlight lines (normal line, eq. 4)"
 
+    @property
+    def levels(self) -> np.ndarray:
+        """The tube positions c_k."""
+        return self.lights.c_k
+
+    @property
+    def half_width(self) -> float:
+        """A band's half width: the tube radius, in the skew-line distance of eq. (4)."""
+        return self.lights.radius
+
     def phi(self, p: SurfacePoints) -> np.ndarray:
         lam = self.lights.plane_t(p.R, p.n)  # either sign: the whole normal line
         with np.errstate(invalid="ignore"):
