@@ -617,12 +617,22 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
         checked &= has_next & has_prev
     g = np.hypot(slope[0], slope[1])
     radius, blur = spec.radius, spec.blur
+    # How far d may move to a sample in the pixel: 0.71·g to first order. Another mode's φ may bend within a pixel
+    # (a curvature map near a fold of its field), so there the second differences' share is added: d_xx x²/2 +
+    # d_yy y²/2 with |x|, |y| ≤ ½ is at most (|d_xx| + |d_yy|)/8.
+    move = 0.71 * g
+    if not spec.along_ray:
+        grid = np.nan_to_num(d.reshape(height, width))
+        bend = np.zeros((height, width))
+        bend[:, 1:-1] += np.abs(grid[:, :-2] - 2.0 * grid[:, 1:-1] + grid[:, 2:])
+        bend[1:-1, :] += np.abs(grid[:-2, :] - 2.0 * grid[1:-1, :] + grid[2:, :])
+        move = move + bend.ravel() / 8.0
     # The line's share each sample may show, by the stripe profile (monotone in d): at least its weight at the
-    # farthest sample, d + 0.71·g, at most at the nearest, d − 0.71·g (NaN d, no tube ahead: 0).
-    low = stripe_weight(d + 0.71 * g, radius, blur)
-    high = stripe_weight(d - 0.71 * g, radius, blur)
+    # farthest sample, d + move, at most at the nearest, d − move (NaN d, no tube ahead: 0).
+    low = stripe_weight(d + move, radius, blur)
+    high = stripe_weight(d - move, radius, blur)
     with np.errstate(invalid="ignore"):
-        within = (line_id >= 0) & (d + 0.71 * g < spec.reach)  # every sample may see the tube
+        within = (line_id >= 0) & (d + move < spec.reach)  # every sample may see the tube
     # Occlusion of the reflected ray, for every pixel with a tube ahead: up to the nearest tube within the
     # profile's reach along the ray (as the renderer does), else up to the nearest tube ahead.
     ahead = np.flatnonzero(line_id >= 0) if spec.along_ray else np.zeros(0, dtype=int)

@@ -599,9 +599,6 @@ def _parse_render(t: _Table) -> RenderSettings:
     overlay_width = float(t.number("overlay_width", defaults.overlay_width, low=0, high=MAX_OVERLAY_WIDTH,
                                    open_low=True))
     mode = t.string("mode", defaults.mode, RENDER_MODES)
-    if overlay and mode != "reflection":
-        raise t.error("overlay", f"draws the analytic reflection lines, not those of mode {mode!r} (not yet): "
-                                 f"remove it (or --overlay) or use mode = \"reflection\"")
     keys = _mode_keys(t, mode)
     t.finish()
     return RenderSettings(tess, **colors, overlay=overlay, normals=normals, shading=shading, blur=blur,
