@@ -31,6 +31,9 @@ from rtreflect.analysis.validate import (TracedCentres, _filter_unblocked, film_
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 SCENE_FILES = sorted(SCENES.glob("*.toml"))
 WIDTH, HEIGHT = 320, 180
+#: Scenes whose lines need more pixels than WIDTH × HEIGHT to be resolved: cup_draft's draft band edges (0°, 1°, 3°)
+#: lie 1° apart in φ, and at 320 px the 0° and 1° edges crowd within 3 px over most of the cup (217 points).
+SIZES = {"cup_draft": (480, 270)}
 #: Shipped scenes whose render still stores some hits behind a nearer exact surface point (issue 11 item 2, open):
 #: the teapot's grazing rays near where the spout meets the body, whose coarse mesh (tessellation 12) has no
 #: triangle near the nearer point, so the tracer never sees it. validate must say so, and only that.
@@ -48,7 +51,7 @@ def assert_passes_but_for_known_first_hits(report, name: str) -> None:
 
 @pytest.mark.parametrize("path", SCENE_FILES, ids=lambda p: p.stem)
 def test_shipped_scene_validates(path: Path):
-    report = validate_scene(load_scene(path).with_image(WIDTH, HEIGHT, 1))
+    report = validate_scene(load_scene(path).with_image(*SIZES.get(path.stem, (WIDTH, HEIGHT)), 1))
     assert report.points >= 300, "too few traced centres for the check to mean anything"
     assert report.misses == 0
     assert report.max_px <= 0.5
