@@ -32,6 +32,7 @@ from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera
 from ..modes.base import SurfacePoints
 from ..modes.lights import TubeLights, reflect
+from ..modes.reflection import ReflectionMode
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import Tessellation
 from ..trace.tracing import facing, occluded
@@ -242,7 +243,8 @@ class ModeField(UlmetField):
     the exact evaluator as f's. The levels are the mode's. A mode whose stripes are not seen
     along a reflected ray (highlight, isophote, zebra, draft, curvature) is cut by the eye's
     visibility and the trims only; highlight lines also where the normal line meets the light
-    plane beyond a finite tube's ends.
+    plane beyond a finite tube's ends; circular reflection lines (`modes.circles`) also where the
+    reflected ray is blocked before the light plane.
     """
 
     def __init__(self, surfaces: SurfaceSet, tessellation: Tessellation, accelerator: Accelerator, camera: Camera,
@@ -266,7 +268,7 @@ class ModeField(UlmetField):
 
     def seen(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """True where S(u, v) is on its face, in front of the camera and seen from the eye (and on a highlight's tube)."""
-        R, n, a, _ = self.geometry(patch, u, v)
+        R, n, a, s = self.geometry(patch, u, v)
         w = self.camera.basis[0]
         good = (((R - self.camera.spec.eye) @ w) > 0) & self.surfaces.on_face(patch, u, v)
         lights = self.lights
@@ -282,12 +284,16 @@ class ModeField(UlmetField):
             to_eye = np.linalg.norm(self.camera.spec.eye - origin, axis=1)
         idx = np.flatnonzero(good)
         good[idx] &= ~occluded(self.accelerator, self.tessellation, self.surfaces, origin[idx], a[idx], to_eye[idx])
+        if getattr(self.mode, "along_ray", False):  # circular reflection lines: the reflected ray reaches the plane
+            idx = np.flatnonzero(good)
+            good[idx] &= reaches_light_plane(self, lights, R[idx], n[idx], patch[idx], s[idx])
         return good
 
 
 def field_of(renderer) -> UlmetField:
-    """The field whose level sets are the lines of a `Renderer`'s `[render] mode`: f for reflection lines, else φ."""
-    if renderer.scene.render.mode == "reflection":
+    """The field whose level sets are the lines of a `Renderer`'s `[render] mode`: f for the tubes' reflection lines,
+    else the mode's φ (circles too)."""
+    if isinstance(renderer.mode, ReflectionMode):
         return UlmetField.of(renderer)
     return ModeField(renderer.surfaces, renderer.tessellation, renderer.accelerator, renderer.camera, renderer.lights,
                      renderer.mode)

@@ -62,6 +62,7 @@ from .contours import ContourLines, analytic_contours, field_of, reaches_light_p
 from ..integrator.film import Film
 from ..modes.base import SurfacePoints
 from ..modes.lights import reflect
+from ..modes.reflection import ReflectionMode
 from ..modes.profile import stripe_weight
 from ..modes.shading import shade_factor
 from ..integrator.autorig import resolve
@@ -156,16 +157,17 @@ class LineSpec:
     blur: float
     along_ray: bool
     reach: float
+    tubes: bool = True  # line.id names a tube (occlusion up to it); else the ray is tested up to the light plane
 
 
 def line_spec(renderer: Renderer) -> LineSpec:
-    """The `LineSpec` of the renderer's `[render] mode`."""
-    if renderer.scene.render.mode == "reflection":
+    """The `LineSpec` of the renderer's `[render] mode` (circular reflection lines are seen along the ray too)."""
+    if isinstance(renderer.mode, ReflectionMode):
         return LineSpec(renderer.lights.c_k, renderer.lights.radius, renderer.scene.render.blur, True,
                         renderer.stripe_lights.radius)
     mode = renderer.mode
-    return LineSpec(np.asarray(mode.levels, dtype=np.float64), float(mode.half_width), 0.0, False,
-                    float(mode.half_width))
+    return LineSpec(np.asarray(mode.levels, dtype=np.float64), float(mode.half_width), 0.0,
+                    bool(getattr(mode, "along_ray", False)), float(mode.half_width), tubes=False)
 
 
 @dataclass
@@ -639,8 +641,11 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
     blocked = np.zeros(size, dtype=bool)
     if len(ahead):
         P, n, s = aovs.P.reshape(-1, 3)[ahead], aovs.N.reshape(-1, 3)[ahead], aovs.s.reshape(-1, 3)[ahead]
-        tubes = renderer.stripe_lights.reach(P, s, tube=line_id[ahead].astype(int))
-        t = np.where(tubes.candidate, tubes.t_candidate, tubes.t_of)
+        if spec.tubes:
+            tubes = renderer.stripe_lights.reach(P, s, tube=line_id[ahead].astype(int))
+            t = np.where(tubes.candidate, tubes.t_candidate, tubes.t_of)
+        else:  # circles: the ray up to the light plane
+            t = renderer.lights.plane_t(P, s)
         start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[ahead].astype(int))
         blocked[ahead] = occluded(renderer.accelerator, renderer.tessellation, renderer.surfaces, start, s, t)
     blocked_grid = blocked.reshape(height, width)
@@ -952,6 +957,6 @@ def validate_scene(scene: Scene, tolerance: float = DEFAULT_TOLERANCE_PX, progre
     film = renderer.render(progress, threads).film
     contours = analytic_contours(field_of(renderer))
     aovs = film_aovs(renderer, film)
-    if renderer.scene.render.mode != "reflection":
+    if not isinstance(renderer.mode, ReflectionMode):
         aovs = mode_aovs(renderer, film, aovs)
     return compare(renderer, aovs, contours, tolerance)

@@ -143,7 +143,8 @@ class Renderer:
         reach = stripe_reach(self.lights.radius, scene.render.blur)
         self.stripe_lights = self.lights if reach == self.lights.radius else replace(self.lights, radius=reach)
         # `[render] mode`: φ, its levels and stripes (modes/base.py); reflection lines see the tubes out to the reach.
-        self.mode = mode_of(scene, self.stripe_lights if scene.render.mode == "reflection" else self.lights,
+        tubes = scene.render.mode == "reflection" and scene.lights.shape == "tubes"
+        self.mode = mode_of(scene, self.stripe_lights if tubes else self.lights,
                             self.surfaces)
         self.clock = StageClock()
         # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
@@ -206,7 +207,7 @@ class Renderer:
         Without blur the profile is the hard tube that 'lit' already decided (d ≤ r): the flags themselves.
         """
         blur = self.scene.render.blur
-        if blur == 0 or self.scene.render.mode != "reflection":  # other modes' stripes stay hard (not yet blurred)
+        if blur == 0 or not isinstance(self.mode, ReflectionMode):  # other modes' stripes stay hard (not yet blurred)
             return shading.lit
         return np.where(shading.lit, stripe_weight(shading.line_dist, self.lights.radius, blur), 0.0)
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .base import Stripes, SurfacePoints
+from .circles import circle_mode
 from .lights import TubeLights, _dot
 
 
@@ -52,5 +53,8 @@ class HighlightMode:
         return None
 
 
-def highlight_mode(scene, lights: TubeLights, surfaces) -> HighlightMode:
+def highlight_mode(scene, lights: TubeLights, surfaces):
+    """Highlight lines of the scene's tubes, or of its circles (`circles.CircleMode`) with ``[lights] shape``."""
+    if scene.lights.shape == "circles":
+        return circle_mode(scene, lights, "highlight")
     return HighlightMode(lights)
