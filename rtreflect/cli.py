@@ -384,6 +384,12 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
                    f"{_fmt(report.max_px):>8} {report.misses:>6} {report.colour_mismatches:>6}  "
                    f"{'PASS' if report.passed else 'FAIL'} (tolerance {tolerance:g} px; "
                    f"{report.colour_checked} pixels' colour checked)")
+        if report.parallax is not None:
+            par = report.parallax
+            click.echo(f"  zebra parallax against tubes in the light plane (seen alike from the part's centre): "
+                       f"{par['points']} points, mean {_fmt(par['mean_px'])} px, p95 {_fmt(par['p95_px'])} px, "
+                       f"max {_fmt(par['max_px'])} px ({par['unmatched']} with no reflection line of their tube in "
+                       f"view)")
         for reason in report.reasons:
             click.echo(f"  FAIL: {reason}")
         for note in report.notes:

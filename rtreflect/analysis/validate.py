@@ -831,6 +831,7 @@ class SceneReport:
     counted: list[bool] | None = field(default=None, repr=False)  # per line: first tube at its position
     contours: ContourLines | None = field(default=None, repr=False)
     centres: TracedCentres | None = field(default=None, repr=False)
+    parallax: dict | None = None  # zebra: `parallax.ParallaxReport.to_json`, the stripes against physical tubes (not judged)
 
     @property
     def points(self) -> int:
@@ -862,7 +863,8 @@ class SceneReport:
         return {"max_px": self.max_px, "p95_px": self.p95_px, "mean_px": self.mean_px, "points": self.points,
                 "misses": self.misses, "colour_mismatches": self.colour_mismatches,
                 "colour_checked": self.colour_checked, "reasons": list(self.reasons),
-                "lines": [line.to_json() for line in self.lines]}
+                "lines": [line.to_json() for line in self.lines],
+                **({"parallax": self.parallax} if self.parallax is not None else {})}
 
 
 def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, tolerance: float) -> SceneReport:
@@ -952,6 +954,8 @@ def validate_scene(scene: Scene, tolerance: float = DEFAULT_TOLERANCE_PX, progre
 
     The contours are the level sets of the scene's `[render] mode`: Ulmet's f for reflection lines,
     the mode's φ otherwise (`contours.field_of`), compared by the same rules (`compare`, `LineSpec`).
+    A zebra render also gets its parallax against equivalent physical tubes (`parallax`), reported
+    beside the verdict, not part of it.
     """
     renderer = renderer or Renderer(resolve(scene))
     film = renderer.render(progress, threads).film
@@ -959,4 +963,8 @@ def validate_scene(scene: Scene, tolerance: float = DEFAULT_TOLERANCE_PX, progre
     aovs = film_aovs(renderer, film)
     if not isinstance(renderer.mode, ReflectionMode):
         aovs = mode_aovs(renderer, film, aovs)
-    return compare(renderer, aovs, contours, tolerance)
+    report = compare(renderer, aovs, contours, tolerance)
+    if renderer.mode.name == "zebra":
+        from .parallax import zebra_parallax  # noqa: PLC0415 (parallax measures with this module's nearest_segment)
+        report.parallax = zebra_parallax(renderer, contours).to_json()
+    return report
