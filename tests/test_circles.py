@@ -14,7 +14,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rtreflect import NurbsSurface, Scene, render
+from click.testing import CliRunner
+
+from rtreflect import NurbsSurface, Scene, load_scene, render
+from rtreflect.cli import cli
 from rtreflect.analysis.contours import analytic_contours, field_of
 from rtreflect.analysis.validate import validate_scene
 from rtreflect.errors import SceneError
@@ -88,6 +91,50 @@ def test_bad_circles_name_the_field(change, field):
     with pytest.raises(SceneError) as error:
         mirror_scene("reflection", **change)
     assert error.value.field == field and "\n" not in str(error.value)
+
+
+MIRROR_TOML = """
+[image]
+width = 320
+height = 240
+
+[camera]
+eye = [0.3, -2.4, 1.8]
+look_at = [0.0, 0.0, 0.0]
+
+[lights]
+point = [0.0, 0.0, 2.0]
+normal = [0.0, 0.0, 1.0]
+direction = [0.0, 1.0, 0.0]
+shape = "circles"
+centre = [0.2, 0.4, 2.0]
+spacing = 0.4
+count = 6
+
+[render]
+mode = "highlight"
+
+[[surface]]
+degree = [1, 1]
+knots_u = [0, 0, 1, 1]
+knots_v = [0, 0, 1, 1]
+points = [[[-1.0, -1.0, 0.0], [-1.0, 1.0, 0.0]], [[1.0, -1.0, 0.0], [1.0, 1.0, 0.0]]]
+"""
+
+
+def test_init_writes_the_circles_keys_and_reads_back(tmp_path):
+    source = tmp_path / "mirror.toml"
+    source.write_text(MIRROR_TOML)
+    scene = load_scene(source)
+    assert scene.lights.positions.tolist() == pytest.approx([0.4, 0.8, 1.2, 1.6, 2.0, 2.4])  # spacing × 1..count
+    result = CliRunner().invoke(cli, ["init", str(source)])
+    assert result.exit_code == 0, result.output
+    assert 'shape = "circles"' in result.output and "centre = [0.2, 0.4, 2.0]" in result.output
+    again = tmp_path / "again.toml"
+    again.write_text(result.output)
+    back = load_scene(again).lights
+    assert back.shape == "circles" and back.centre.tolist() == [0.2, 0.4, 2.0]
+    assert back.positions.tolist() == pytest.approx(scene.lights.positions.tolist())
 
 
 def test_circles_with_a_mode_that_does_not_see_the_plane_is_an_error():

@@ -559,8 +559,8 @@ def _parse_lights(t: _Table) -> LightSpec:
         raise t.error("positions", "required field is missing (or give lights.spacing and lights.count)")
     radius = t.number("radius", 0.05, low=0, open_low=True)
     length = t.number("length", math.inf, low=0, open_low=True, infinite_ok=True)
-    if shape == "circles" and t.has("length"):
-        raise t.error("length", "circles have no length (only tubes do): remove it")
+    if shape == "circles" and math.isfinite(length):
+        raise t.error("length", "circles have no length (only tubes do): remove it (or inf)")
     t.finish()
     return LightSpec(point, m, c, positions, radius, length, shape=shape, centre=centre)
 
