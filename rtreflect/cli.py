@@ -347,6 +347,10 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
     its gradient, eq. 4) with the reflected ray unblocked must be fully lit, one whose
     every sample lies outside must show no line; "colour" counts the pixels that do not.
 
+    In another [render] mode the lines are the mode's own: the phi AOV's crossings of
+    the mode's levels against the analytic level sets phi(u, v) = c_k, by the same
+    rules; a zebra scene also reports its parallax against equivalent physical tubes.
+
     Exit status 0 when every scene's maximum deviation is within --tolerance, there are
     no misses and no colour mismatches, and something was compared; 1 otherwise (the
     reason is printed), 2 on bad input.
