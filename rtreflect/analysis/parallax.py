@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .contours import ContourLines, UlmetField, analytic_contours
+from .nearest import nearest_segment
 
 #: Levels farther than this from the plane's normal get no tube: tan ψ puts it far out, grazing the plane.
 MAX_ANGLE = 75.0
@@ -72,8 +73,6 @@ def equivalent_tubes(levels: np.ndarray, lights, reference: np.ndarray) -> tuple
 
 def zebra_parallax(renderer, zebra: ContourLines) -> ParallaxReport:
     """The parallax of a zebra render's stripes (``zebra``: the analytic contours of ψ) against equivalent tubes."""
-    from .validate import nearest_segment  # noqa: PLC0415 (validate imports this module)
-
     vertices = renderer.tessellation.vertices
     reference = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
     keep, positions = equivalent_tubes([line.position for line in zebra.lines], renderer.lights, reference)

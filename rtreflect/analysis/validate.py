@@ -59,6 +59,8 @@ from typing import Callable
 import numpy as np
 
 from .contours import ContourLines, analytic_contours, field_of, reaches_light_plane
+from .nearest import nearest_segment
+from .parallax import zebra_parallax
 from ..integrator.film import Film
 from ..modes.base import SurfacePoints
 from ..modes.lights import reflect
@@ -667,43 +669,6 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
 # -- nearest distances ------------------------------------------------------------------------
 
 
-def nearest_segment(points: np.ndarray, a: np.ndarray, b: np.ndarray, radius: float,
-                    chunk: int = 256) -> tuple[np.ndarray, np.ndarray]:
-    """Distance from each point to the nearest segment [a, b] within ``radius`` (inf beyond), and that segment's index.
-
-    Points are taken in chunks sorted by y; each chunk is compared only with the segments
-    whose y-range comes within ``radius`` of the chunk's, so the work stays near-linear.
-    """
-    n = len(points)
-    best = np.full(n, np.inf)
-    best_seg = np.full(n, -1)
-    if n == 0 or len(a) == 0:
-        return best, best_seg
-    seg_lo = np.minimum(a[:, 1], b[:, 1])
-    seg_hi = np.maximum(a[:, 1], b[:, 1])
-    d = b - a
-    dd = np.einsum("ij,ij->i", d, d)
-    order = np.argsort(points[:, 1])
-    for lo in range(0, n, chunk):
-        rows = order[lo:lo + chunk]
-        p = points[rows]
-        near = np.flatnonzero((seg_hi >= p[:, 1].min() - radius) & (seg_lo <= p[:, 1].max() + radius))
-        if len(near) == 0:
-            continue
-        rel = p[:, None, :] - a[near][None]  # (c, s, 2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.clip(np.einsum("csj,sj->cs", rel, d[near]) / dd[near], 0.0, 1.0)
-        t = np.where(dd[near] > 0, t, 0.0)
-        gap = rel - t[..., None] * d[near][None]
-        dist = np.hypot(gap[..., 0], gap[..., 1])
-        j = np.argmin(dist, axis=1)
-        dmin = dist[np.arange(len(rows)), j]
-        within = dmin <= radius
-        best[rows[within]] = dmin[within]
-        best_seg[rows[within]] = near[j[within]]
-    return best, best_seg
-
-
 @dataclass
 class _Segments:
     a: np.ndarray
@@ -965,6 +930,5 @@ def validate_scene(scene: Scene, tolerance: float = DEFAULT_TOLERANCE_PX, progre
         aovs = mode_aovs(renderer, film, aovs)
     report = compare(renderer, aovs, contours, tolerance)
     if renderer.mode.name == "zebra":
-        from .parallax import zebra_parallax  # noqa: PLC0415 (parallax measures with this module's nearest_segment)
         report.parallax = zebra_parallax(renderer, contours).to_json()
     return report
