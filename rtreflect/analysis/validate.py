@@ -58,7 +58,7 @@ from typing import Callable
 
 import numpy as np
 
-from .contours import ContourLines, analytic_contours, field_of, reaches_light_plane
+from .contours import ContourLines, UlmetField, analytic_contours, field_of, reaches_light_plane  # noqa: F401 (UlmetField: callers)
 from .nearest import nearest_segment
 from .parallax import zebra_parallax
 from ..integrator.film import Film
