@@ -142,3 +142,12 @@ def test_circles_with_a_mode_that_does_not_see_the_plane_is_an_error():
         mirror_scene("isophote")
     assert error.value.field == "lights.shape"
     assert "isophote" in str(error.value)
+
+
+def test_circles_get_no_tube_bank_warnings(tmp_path):
+    """The tube-bank warnings (f past the bank, too few tubes drawn) count tubes: not said of circles."""
+    source = tmp_path / "mirror.toml"
+    source.write_text(MIRROR_TOML.replace('mode = "highlight"', 'mode = "reflection"'))
+    result = CliRunner().invoke(cli, ["render", str(source), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert "warning" not in result.output
