@@ -20,6 +20,7 @@ from rtreflect.analysis.contours import ModeField, analytic_contours, field_of
 from rtreflect.analysis.validate import DEFAULT_TOLERANCE_PX, compare, film_aovs, mode_aovs, validate_scene
 from rtreflect.integrator.autorig import resolve
 from rtreflect.integrator.renderer import Renderer
+from rtreflect.modes.profile import stripe_weight
 
 from test_modes import SQRT_HALF, revolve, solid_scene
 
@@ -95,3 +96,23 @@ def test_validate_names_no_fallback_to_reflection_lines():
     step = scene.render.step
     assert [line.position for line in report.lines] == pytest.approx(np.arange(0.0, 180.0 + step / 2, step).tolist())
     assert not any("reflection lines" in note for note in report.notes)
+
+
+@pytest.mark.parametrize("mode", ["isophote", "curvature"])
+def test_blur_softens_every_modes_stripes_and_validate_checks_it(mode):
+    """`[render] blur` about each mode's half width (a line mode and a map mode): with one sample per pixel (the
+    pixel centre) each pixel's line share is the profile's weight of the mode's distance to its level there, soft
+    edges included, and the render validates."""
+    stem, size = MODE_SCENES[mode]
+    scene = load_scene(SCENES / f"{stem}.toml").with_image(*size, 1).replace(render={"blur": 0.5})
+    renderer = Renderer(resolve(scene))
+    assert renderer.soft_stripes
+    film = renderer.render().film
+    aovs = mode_aovs(renderer, film, film_aovs(renderer, film))
+    inside = (aovs.coverage == 1) & np.isfinite(aovs.line_coverage)
+    share = aovs.line_coverage[inside]
+    assert np.count_nonzero((share > 0.05) & (share < 0.95)) > 100  # the soft edges
+    expected = stripe_weight(aovs.line_dist[inside], renderer.mode.half_width, 0.5)
+    np.testing.assert_allclose(share, expected, atol=1e-3)  # float32 colour
+    report = compare(renderer, aovs, analytic_contours(field_of(renderer)), DEFAULT_TOLERANCE_PX)
+    assert report.passed and report.colour_checked > 1000, report.reasons

@@ -65,7 +65,7 @@ from ..integrator.film import Film
 from ..modes.base import SurfacePoints
 from ..modes.lights import reflect
 from ..modes.reflection import ReflectionMode
-from ..modes.profile import stripe_weight
+from ..modes.profile import stripe_reach, stripe_weight
 from ..modes.shading import shade_factor
 from ..integrator.autorig import resolve
 from ..integrator.renderer import Renderer
@@ -168,8 +168,9 @@ def line_spec(renderer: Renderer) -> LineSpec:
         return LineSpec(renderer.lights.c_k, renderer.lights.radius, renderer.scene.render.blur, True,
                         renderer.stripe_lights.radius)
     mode = renderer.mode
-    return LineSpec(np.asarray(mode.levels, dtype=np.float64), float(mode.half_width), 0.0,
-                    bool(getattr(mode, "along_ray", False)), float(mode.half_width), tubes=False)
+    blur = renderer.scene.render.blur if renderer.soft_stripes else 0.0
+    return LineSpec(np.asarray(mode.levels, dtype=np.float64), float(mode.half_width), blur,
+                    bool(getattr(mode, "along_ray", False)), stripe_reach(float(mode.half_width), blur), tubes=False)
 
 
 @dataclass
