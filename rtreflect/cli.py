@@ -347,6 +347,10 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
     its gradient, eq. 4) with the reflected ray unblocked must be fully lit, one whose
     every sample lies outside must show no line; "colour" counts the pixels that do not.
 
+    In another [render] mode the lines are the mode's own: the phi AOV's crossings of
+    the mode's levels against the analytic level sets phi(u, v) = c_k, by the same
+    rules; a zebra scene also reports its parallax against equivalent physical tubes.
+
     Exit status 0 when every scene's maximum deviation is within --tolerance, there are
     no misses and no colour mismatches, and something was compared; 1 otherwise (the
     reason is printed), 2 on bad input.
@@ -384,6 +388,12 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
                    f"{_fmt(report.max_px):>8} {report.misses:>6} {report.colour_mismatches:>6}  "
                    f"{'PASS' if report.passed else 'FAIL'} (tolerance {tolerance:g} px; "
                    f"{report.colour_checked} pixels' colour checked)")
+        if report.parallax is not None:
+            par = report.parallax
+            click.echo(f"  zebra parallax against tubes in the light plane (seen alike from the part's centre): "
+                       f"{par['points']} points, mean {_fmt(par['mean_px'])} px, p95 {_fmt(par['p95_px'])} px, "
+                       f"max {_fmt(par['max_px'])} px ({par['unmatched']} with no reflection line of their tube in "
+                       f"view)")
         for reason in report.reasons:
             click.echo(f"  FAIL: {reason}")
         for note in report.notes:

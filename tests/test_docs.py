@@ -47,6 +47,12 @@ def test_every_top_level_table_has_a_section() -> None:
         section(table)
 
 
+def circle_examples() -> list[str]:
+    """The ``[lights]`` tables of "The other modes" (circles), each parsed in place of the example's."""
+    text = re.search(r"^## The other modes$(.*?)(?=^## )", REFERENCE.read_text(), re.S | re.M)[1]
+    return re.findall(r"```toml\n(\[lights\]\n.*?)```", text, re.S)
+
+
 def mode_examples() -> list[str]:
     """The ``[render]`` tables of "The other modes": one per mode besides reflection."""
     text = re.search(r"^## The other modes$(.*?)(?=^## )", REFERENCE.read_text(), re.S | re.M)[1]
@@ -66,11 +72,19 @@ def test_example_scene_parses_and_means_what_it_says(tmp_path: Path) -> None:
     for render in modes:
         (tmp_path / "mode.toml").write_text(re.sub(r"^\[render\]\n(?:[a-z_]+ = .*\n)*", render, example, flags=re.M))
         assert load_scene(tmp_path / "mode.toml").render.mode in render
+    # The circles' keys by the examples of circles, each parsed in place of [lights] (with a mode that sees circles).
+    circles = circle_examples()
+    assert circles
+    for lights in circles:
+        text = re.sub(r"^\[lights\]\n(?:[a-z_]+ = .*\n)*", lights, example, flags=re.M)
+        (tmp_path / "circles.toml").write_text(text)
+        assert load_scene(tmp_path / "circles.toml").lights.shape == "circles"
     for table, keys in TABLE_KEYS.items():
         if table:
             for key in keys:
                 if not (table == "lights" and key == "positions"):  # spacing/count stand for it
                     shown = example if not (table == "render" and key in MODE_KEYS) else "".join(modes)
+                    shown += "".join(circles) if table == "lights" else ""
                     assert re.search(rf"^{key} = ", shown, re.M), f"{table}.{key} not in the example"
     # spacing/count are centred on Q, as the comments and the [lights] section say.
     assert np.allclose(scene.lights.positions, np.arange(-2.0, 2.01, 0.5))

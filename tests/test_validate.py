@@ -31,7 +31,12 @@ from rtreflect.analysis.validate import (TracedCentres, _filter_unblocked, film_
 SCENES = Path(__file__).resolve().parent.parent / "scenes"
 SCENE_FILES = sorted(SCENES.glob("*.toml"))
 WIDTH, HEIGHT = 320, 180
-def assert_passes_but_for_known_first_hits(report, name: str) -> None:
+#: Scenes whose lines need more pixels than WIDTH × HEIGHT to be resolved: cup_draft's draft band edges (0°, 1°, 3°)
+#: lie 1° apart in φ, and at 320 px the 0° and 1° edges crowd within 3 px over most of the cup (217 points).
+SIZES = {"cup_draft": (480, 270)}
+
+
+def assert_passes_every_check(report, name: str) -> None:
     """Every shipped scene passes, the teapot included: its grazing rays where the spout meets the body stored
     hits behind a nearer exact surface point until the tracer's second look (issue 11 item 2)."""
     assert report.passed and not report.reasons, report.reasons
@@ -39,20 +44,20 @@ def assert_passes_but_for_known_first_hits(report, name: str) -> None:
 
 @pytest.mark.parametrize("path", SCENE_FILES, ids=lambda p: p.stem)
 def test_shipped_scene_validates(path: Path):
-    report = validate_scene(load_scene(path).with_image(WIDTH, HEIGHT, 1))
+    report = validate_scene(load_scene(path).with_image(*SIZES.get(path.stem, (WIDTH, HEIGHT)), 1))
     assert report.points >= 300, "too few traced centres for the check to mean anything"
     assert report.misses == 0
     assert report.max_px <= 0.5
     assert report.p95_px <= 0.1
     assert report.colour_checked >= 500 and report.colour_mismatches == 0
-    assert_passes_but_for_known_first_hits(report, path.stem)
+    assert_passes_every_check(report, path.stem)
 
 
 def test_colour_check_holds_with_supersampling():
     """s = 2: the colour comes from 4 samples per pixel, the AOVs from a separate pixel-centre ray."""
     report = validate_scene(load_scene(SCENES / "teapot.toml").with_image(WIDTH, HEIGHT, 2))
     assert report.colour_checked >= 500 and report.colour_mismatches == 0
-    assert_passes_but_for_known_first_hits(report, "teapot")
+    assert_passes_every_check(report, "teapot")
 
 
 def test_orthographic_camera_tilted_light_plane_and_short_tubes_validate():

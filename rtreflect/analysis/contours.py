@@ -30,7 +30,9 @@ import numpy as np
 
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera
+from ..modes.base import SurfacePoints
 from ..modes.lights import TubeLights, reflect
+from ..modes.reflection import ReflectionMode
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import Tessellation
 from ..trace.tracing import facing, occluded
@@ -104,6 +106,17 @@ class UlmetField:
         """The field of a `render.Renderer`'s scene, sharing its patches, mesh, BVH, camera and tubes."""
         return cls(renderer.surfaces, renderer.tessellation, renderer.accelerator, renderer.camera, renderer.lights)
 
+    @property
+    def levels(self) -> np.ndarray:
+        """The levels c_k whose level sets are the lines: the tube positions."""
+        return self.lights.c_k
+
+    def newton_scale(self) -> float:
+        """φ's natural unit, for Newton's tolerance: the tube spacing (1 with one tube), not below rounding."""
+        spacing = self.lights.spacing
+        scale = spacing if math.isfinite(spacing) else 1.0
+        return max(scale, 1e-9 * (self.tessellation.extent + float(np.abs(self.lights.c_k).max())))
+
     # -- the function ----------------------------------------------------------------------
     def eye_vectors(self, R: np.ndarray) -> np.ndarray:
         """a: unit vectors from R towards the eye A (the reversed view direction for an orthographic camera)."""
@@ -153,9 +166,7 @@ class UlmetField:
         hold_v = (v <= v0) | (v >= v1)
         hu = 1e-7 * (u1 - u0)
         hv = 1e-7 * (v1 - v0)
-        spacing = self.lights.spacing
-        scale = spacing if math.isfinite(spacing) else 1.0  # the tube spacing: f's natural unit
-        scale = max(scale, 1e-9 * (self.tessellation.extent + float(np.abs(self.lights.c_k).max())))
+        scale = self.newton_scale()
         ok = np.zeros(len(u), dtype=bool)
         active = np.arange(len(u))
         for _ in range(NEWTON_STEPS):
@@ -221,6 +232,71 @@ class UlmetField:
         idx = np.flatnonzero(good)
         good[idx] &= reaches_light_plane(self, lights, R[idx], n[idx], patch[idx], s[idx])
         return good
+
+
+class ModeField(UlmetField):
+    """φ(u, v) of another line-drawing mode (`modes.base.Mode`) in place of Ulmet's f: same grid, Newton and cuts.
+
+    φ comes from the mode itself, at S(u, v) with the exact unit normal turned towards the eye
+    (as the renderer writes N) and s of eq. (3), so the contours are the level sets φ = c_k of
+    the very function the renderer shades; ∇φ for Newton by the same one-sided differences of
+    the exact evaluator as f's. The levels are the mode's. A mode whose stripes are not seen
+    along a reflected ray (highlight, isophote, zebra, draft, curvature) is cut by the eye's
+    visibility and the trims only; highlight lines also where the normal line meets the light
+    plane beyond a finite tube's ends; circular reflection lines (`modes.circles`) also where the
+    reflected ray is blocked before the light plane.
+    """
+
+    def __init__(self, surfaces: SurfaceSet, tessellation: Tessellation, accelerator: Accelerator, camera: Camera,
+                 lights: TubeLights, mode):
+        super().__init__(surfaces, tessellation, accelerator, camera, lights)
+        self.mode = mode
+
+    @property
+    def levels(self) -> np.ndarray:
+        return np.asarray(self.mode.levels, dtype=np.float64)
+
+    def newton_scale(self) -> float:
+        """The smallest gap between the mode's levels (φ's natural unit), 1 with one level."""
+        gaps = np.diff(np.unique(self.levels))
+        return float(gaps.min()) if len(gaps) else 1.0
+
+    def f(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The mode's φ at (patch, u, v)."""
+        R, n, a, s = self.geometry(patch, u, v)
+        return self.mode.phi(SurfacePoints(R, facing(n, -a), s, patch, u, v))
+
+    def seen(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """True where S(u, v) is on its face, in front of the camera and seen from the eye (and on a highlight's tube)."""
+        R, n, a, s = self.geometry(patch, u, v)
+        w = self.camera.basis[0]
+        good = (((R - self.camera.spec.eye) @ w) > 0) & self.surfaces.on_face(patch, u, v)
+        lights = self.lights
+        if self.mode.name == "highlight" and math.isfinite(lights.length):
+            lam = lights.plane_t(R, n)  # the normal line, either sign
+            tau = (R + np.where(np.isfinite(lam), lam, 0.0)[:, None] * n - lights.Q) @ lights.c
+            good &= np.isfinite(lam) & (np.abs(tau) <= 0.5 * lights.length)
+        n = facing(n, -a)
+        origin = self.accelerator.surface_origins(R, n, patch)
+        if self.camera.orthographic:
+            to_eye = (origin - self.camera.spec.eye) @ w
+        else:
+            to_eye = np.linalg.norm(self.camera.spec.eye - origin, axis=1)
+        idx = np.flatnonzero(good)
+        good[idx] &= ~occluded(self.accelerator, self.tessellation, self.surfaces, origin[idx], a[idx], to_eye[idx])
+        if getattr(self.mode, "along_ray", False):  # circular reflection lines: the reflected ray reaches the plane
+            idx = np.flatnonzero(good)
+            good[idx] &= reaches_light_plane(self, lights, R[idx], n[idx], patch[idx], s[idx])
+        return good
+
+
+def field_of(renderer) -> UlmetField:
+    """The field whose level sets are the lines of a `Renderer`'s `[render] mode`: f for the tubes' reflection lines,
+    else the mode's φ (circles too)."""
+    if isinstance(renderer.mode, ReflectionMode):
+        return UlmetField.of(renderer)
+    return ModeField(renderer.surfaces, renderer.tessellation, renderer.accelerator, renderer.camera, renderer.lights,
+                     renderer.mode)
 
 
 def reaches_light_plane(scene, lights: TubeLights, R: np.ndarray, n: np.ndarray,
@@ -299,7 +375,7 @@ def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float
     lines_u, lines_v, chain_light = [], [], []
     finite = f[np.isfinite(f)]
     lo, hi = (finite.min(), finite.max()) if finite.size else (np.inf, -np.inf)
-    for j, level in enumerate(field.lights.c_k):
+    for j, level in enumerate(field.levels):
         if not lo <= level <= hi:
             continue
         for line in generator.lines(float(level)):
@@ -327,7 +403,7 @@ def _cut_points(field: UlmetField, patch: np.ndarray, light: np.ndarray, ua, va,
     good_v = np.where(good_a, va, vb)
     bad_u = np.where(good_a, ub, ua)
     bad_v = np.where(good_a, vb, va)
-    c = field.lights.c_k[light]
+    c = field.levels[light]
     for _ in range(BISECTION_STEPS):
         mu, mv, ok = field.polish(patch, 0.5 * (good_u + bad_u), 0.5 * (good_v + bad_v), c, np.full(len(patch), cell))
         mid_good = ok & field.seen(patch, mu, mv)
@@ -341,7 +417,7 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.
     chains, chain_light, cell = _patch_chains(field, k)
     if len(chains.u) == 0:
         return []
-    c_of = lambda rows: field.lights.c_k[chain_light[chains.chain[rows]]]  # noqa: E731
+    c_of = lambda rows: field.levels[chain_light[chains.chain[rows]]]  # noqa: E731
     every = np.arange(len(chains.u))
     pk = np.full(len(chains.u), k)
     chains.u, chains.v, chains.ok = field.polish(pk, chains.u, chains.v, c_of(every), np.full(len(pk), cell))
@@ -416,11 +492,12 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.
 
 def analytic_contours(field: UlmetField, progress=None) -> ContourLines:
     """Every tube's visible reflection line as projected polylines (the contour theorem, section 4)."""
-    per_light: dict[int, list[Polyline]] = {j: [] for j in range(len(field.lights.c_k))}
+    levels = field.levels
+    per_light: dict[int, list[Polyline]] = {j: [] for j in range(len(levels))}
     for k in range(len(field.surfaces)):
         for light, uv, px in patch_contours(field, k):
             per_light[light].append(Polyline(k, uv, px))
         if progress:
             progress(1)
-    lines = [ContourLine(j, float(field.lights.c_k[j]), per_light[j]) for j in range(len(field.lights.c_k))]
+    lines = [ContourLine(j, float(levels[j]), per_light[j]) for j in range(len(levels))]
     return ContourLines(field.camera.width, field.camera.height, lines)

@@ -16,7 +16,7 @@ from typing import Callable
 
 import numpy as np
 
-from .contours import ContourLines, UlmetField, analytic_contours
+from .contours import ContourLines, analytic_contours, field_of
 
 #: `coverage`'s default line width, in pixels (the seam picture's thin guides); the overlay's is the scene's.
 LINE_WIDTH_PX = 1.0
@@ -114,7 +114,7 @@ def overlay_outputs(renderer) -> tuple[Callable[[int, np.ndarray], np.ndarray] |
     filter is None and only the JSON is written.
     """
     scene = renderer.scene
-    contours = analytic_contours(UlmetField.of(renderer))
+    contours = analytic_contours(field_of(renderer))
     document = {"scene": str(scene.path), "normals": scene.render.normals, **contours.to_json()}
     files = {contours_file_name(scene): json.dumps(document, separators=(",", ":")) + "\n"}
     if not scene.output.png:

@@ -58,14 +58,18 @@ from typing import Callable
 
 import numpy as np
 
-from .contours import ContourLines, UlmetField, analytic_contours, reaches_light_plane
+from .contours import ContourLines, UlmetField, analytic_contours, field_of, reaches_light_plane  # noqa: F401 (UlmetField: callers)
+from .nearest import nearest_segment
+from .parallax import zebra_parallax
 from ..integrator.film import Film
+from ..modes.base import SurfacePoints
 from ..modes.lights import reflect
-from ..modes.profile import stripe_weight
+from ..modes.reflection import ReflectionMode
+from ..modes.profile import stripe_reach, stripe_weight
 from ..modes.shading import shade_factor
 from ..integrator.autorig import resolve
 from ..integrator.renderer import Renderer
-from ..exchange.scene import MAX_MESH_VERTICES, MODE_KEYS, Scene
+from ..exchange.scene import MAX_MESH_VERTICES, Scene
 from ..geometry.tessellation import largest_factor, tessellate
 from ..trace.accelerator import Accelerator
 from ..trace.tracing import occluded, refine
@@ -140,6 +144,35 @@ def neighbour_gaps(c_k: np.ndarray) -> np.ndarray:
     steps = np.diff(positions)
     nearest = np.minimum(np.concatenate([[math.inf], steps]), np.concatenate([steps, [math.inf]]))
     return nearest[np.searchsorted(positions, c_k)]
+
+
+@dataclass(frozen=True)
+class LineSpec:
+    """The lines under test: the levels c_k of φ, the stripe's half width in line.dist's unit and its profile.
+
+    Reflection lines (`along_ray`): φ = f, the tubes' radius, the blur, and stripes seen along the
+    reflected ray, so their traced centres and colours are checked for occlusion up to the tube
+    (`reach`: the radius out to the blur's reach). Another mode's lines are drawn where they are:
+    φ its own, line.dist |φ − c_k| (highlight: the skew-line distance to the tube), hard edges.
+    """
+
+    levels: np.ndarray
+    radius: float
+    blur: float
+    along_ray: bool
+    reach: float
+    tubes: bool = True  # line.id names a tube (occlusion up to it); else the ray is tested up to the light plane
+
+
+def line_spec(renderer: Renderer) -> LineSpec:
+    """The `LineSpec` of the renderer's `[render] mode` (circular reflection lines are seen along the ray too)."""
+    if isinstance(renderer.mode, ReflectionMode):
+        return LineSpec(renderer.lights.c_k, renderer.lights.radius, renderer.scene.render.blur, True,
+                        renderer.stripe_lights.radius)
+    mode = renderer.mode
+    blur = renderer.scene.render.blur if renderer.soft_stripes else 0.0
+    return LineSpec(np.asarray(mode.levels, dtype=np.float64), float(mode.half_width), blur,
+                    bool(getattr(mode, "along_ray", False)), stripe_reach(float(mode.half_width), blur), tubes=False)
 
 
 @dataclass
@@ -233,6 +266,34 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
         incidence=incidence.reshape(height, width), normal_error=normal_error.reshape(height, width),
         nearer=nearer.reshape(height, width),
     )
+
+
+def mode_aovs(renderer: Renderer, film: Film, aovs: PixelAOVs) -> PixelAOVs:
+    """The AOVs as another mode's lines see them: f := φ (channel phi), line.id and line.dist of the mode's stripes.
+
+    The nearest level and its distance are the mode's own (`Mode.stripes`) at the pixel-centre hit
+    (P as S(u, v), the stored N, s); a map mode's line share is read against its own surface
+    colour there (map modes are not shaded, `film.map_color`).
+    """
+    height, width = film.height, film.width
+    size = height * width
+    hit = np.flatnonzero(aovs.patch.ravel() >= 0)
+    points = SurfacePoints(aovs.P.reshape(-1, 3)[hit], aovs.N.reshape(-1, 3)[hit], aovs.s.reshape(-1, 3)[hit],
+                           aovs.patch.ravel()[hit].astype(int), film.channel("u").ravel()[hit].astype(np.float64),
+                           film.channel("v").ravel()[hit].astype(np.float64))
+    stripes = renderer.mode.stripes(points)
+    line_id, line_dist = np.full(size, -1.0), np.full(size, np.nan)
+    line_id[hit], line_dist[hit] = stripes.level_id, stripes.level_dist
+    coverage = aovs.line_coverage
+    rgb = renderer.mode.surface_rgb(points)
+    if rgb is not None:
+        surface = np.broadcast_to(renderer.scene.render.background, (size, 3)).copy()
+        surface[hit] = rgb
+        render = renderer.scene.render
+        coverage = line_coverage(film.pixels[..., :4], surface.reshape(height, width, 3), render.line_color,
+                                 render.background)
+    return replace(aovs, f=film.channel("phi").astype(np.float64), line_id=line_id.reshape(height, width),
+                   line_dist=line_dist.reshape(height, width), line_coverage=coverage)
 
 
 def _stored_hit_errors(renderer: Renderer, patch: np.ndarray, u: np.ndarray, v: np.ndarray, P: np.ndarray,
@@ -459,15 +520,17 @@ def _crossing(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, jump_n
 
 
 def traced_centres(renderer: Renderer, aovs: PixelAOVs,
-                   pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> TracedCentres:
+                   pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None,
+                   levels: np.ndarray | None = None) -> TracedCentres:
     """Where f − c_k changes sign between neighbouring pixel centres, on the cubic through four pixels (module doc).
 
     ``pairs``: `_resolved_pairs` of these AOVs (the geometry alone), when the caller has them already;
-    each crossing of tube k is kept where tube k's own neighbour gap is resolved.
+    each crossing of tube k is kept where tube k's own neighbour gap is resolved. ``levels``: the
+    c_k of the lines (`LineSpec.levels`; the tube positions by default).
     """
     pairs = pairs if pairs is not None else _resolved_pairs(renderer, aovs)
     height, width = aovs.f.shape
-    c_k = renderer.lights.c_k
+    c_k = renderer.lights.c_k if levels is None else levels
     limits = neighbour_gaps(c_k) / MIN_LINE_GAP_PX
     order = np.argsort(c_k)
     c_sorted = c_k[order]
@@ -514,7 +577,7 @@ def _filter_unblocked(renderer: Renderer, aovs: PixelAOVs, centres: TracedCentre
 # -- the colour image -----------------------------------------------------------------------------
 
 
-def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, np.ndarray]:
+def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) masks of the pixels whose colour was checked, and of those whose colour is wrong (module doc).
 
     A pixel is checked where it and its four neighbours hit one smooth piece of one patch
@@ -530,8 +593,9 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
     checked only where the bounds are at most `COLOUR_CHECK_SPAN` apart. Without blur (the hard
     tube of eq. 4) this is: d + 0.71·g < r with the rays unblocked, fully lit; d − 0.71·g > r,
     or no tube ahead, or blocked within the radius, no line at all; pixels across a stripe's
-    edge unchecked.
+    edge unchecked. Another mode's lines (``spec``, `LineSpec`) are seen where they are: no occlusion.
     """
+    spec = spec or line_spec(renderer)
     height, width = aovs.f.shape
     size = height * width
     line_id, d = aovs.line_id.ravel(), aovs.line_dist.ravel()
@@ -554,22 +618,36 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
         has_prev[b] = True
         checked &= has_next & has_prev
     g = np.hypot(slope[0], slope[1])
-    radius, blur = renderer.lights.radius, renderer.scene.render.blur
+    radius, blur = spec.radius, spec.blur
+    # How far d may move to a sample in the pixel: 0.71·g to first order. Another mode's φ may bend within a pixel
+    # (a curvature map near a fold of its field), so there the second differences' share is added: d_xx x²/2 +
+    # d_yy y²/2 with |x|, |y| ≤ ½ is at most (|d_xx| + |d_yy|)/8.
+    move = 0.71 * g
+    if not spec.along_ray:
+        grid = np.nan_to_num(d.reshape(height, width))
+        bend = np.zeros((height, width))
+        bend[:, 1:-1] += np.abs(grid[:, :-2] - 2.0 * grid[:, 1:-1] + grid[:, 2:])
+        bend[1:-1, :] += np.abs(grid[:-2, :] - 2.0 * grid[1:-1, :] + grid[2:, :])
+        move = move + bend.ravel() / 8.0
     # The line's share each sample may show, by the stripe profile (monotone in d): at least its weight at the
-    # farthest sample, d + 0.71·g, at most at the nearest, d − 0.71·g (NaN d, no tube ahead: 0).
-    low = stripe_weight(d + 0.71 * g, radius, blur)
-    high = stripe_weight(d - 0.71 * g, radius, blur)
+    # farthest sample, d + move, at most at the nearest, d − move (NaN d, no tube ahead: 0).
+    low = stripe_weight(d + move, radius, blur)
+    high = stripe_weight(d - move, radius, blur)
     with np.errstate(invalid="ignore"):
-        within = (line_id >= 0) & (d + 0.71 * g < renderer.stripe_lights.radius)  # every sample may see the tube
+        within = (line_id >= 0) & (d + move < spec.reach)  # every sample may see the tube
     # Occlusion of the reflected ray, for every pixel with a tube ahead: up to the nearest tube within the
     # profile's reach along the ray (as the renderer does), else up to the nearest tube ahead.
-    ahead = np.flatnonzero(line_id >= 0)
+    ahead = np.flatnonzero(line_id >= 0) if spec.along_ray else np.zeros(0, dtype=int)
     blocked = np.zeros(size, dtype=bool)
-    P, n, s = aovs.P.reshape(-1, 3)[ahead], aovs.N.reshape(-1, 3)[ahead], aovs.s.reshape(-1, 3)[ahead]
-    tubes = renderer.stripe_lights.reach(P, s, tube=line_id[ahead].astype(int))
-    t = np.where(tubes.candidate, tubes.t_candidate, tubes.t_of)
-    start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[ahead].astype(int))
-    blocked[ahead] = occluded(renderer.accelerator, renderer.tessellation, renderer.surfaces, start, s, t)
+    if len(ahead):
+        P, n, s = aovs.P.reshape(-1, 3)[ahead], aovs.N.reshape(-1, 3)[ahead], aovs.s.reshape(-1, 3)[ahead]
+        if spec.tubes:
+            tubes = renderer.stripe_lights.reach(P, s, tube=line_id[ahead].astype(int))
+            t = np.where(tubes.candidate, tubes.t_candidate, tubes.t_of)
+        else:  # circles: the ray up to the light plane
+            t = renderer.lights.plane_t(P, s)
+        start = renderer.accelerator.surface_origins(P, n, aovs.patch.ravel()[ahead].astype(int))
+        blocked[ahead] = occluded(renderer.accelerator, renderer.tessellation, renderer.surfaces, start, s, t)
     blocked_grid = blocked.reshape(height, width)
     padded = np.pad(blocked_grid, 1, mode="edge")
     uniform = ((padded[1:-1, :-2] == blocked_grid) & (padded[1:-1, 2:] == blocked_grid)
@@ -587,43 +665,6 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs) -> tuple[np.ndarray, 
 
 
 # -- nearest distances ------------------------------------------------------------------------
-
-
-def nearest_segment(points: np.ndarray, a: np.ndarray, b: np.ndarray, radius: float,
-                    chunk: int = 256) -> tuple[np.ndarray, np.ndarray]:
-    """Distance from each point to the nearest segment [a, b] within ``radius`` (inf beyond), and that segment's index.
-
-    Points are taken in chunks sorted by y; each chunk is compared only with the segments
-    whose y-range comes within ``radius`` of the chunk's, so the work stays near-linear.
-    """
-    n = len(points)
-    best = np.full(n, np.inf)
-    best_seg = np.full(n, -1)
-    if n == 0 or len(a) == 0:
-        return best, best_seg
-    seg_lo = np.minimum(a[:, 1], b[:, 1])
-    seg_hi = np.maximum(a[:, 1], b[:, 1])
-    d = b - a
-    dd = np.einsum("ij,ij->i", d, d)
-    order = np.argsort(points[:, 1])
-    for lo in range(0, n, chunk):
-        rows = order[lo:lo + chunk]
-        p = points[rows]
-        near = np.flatnonzero((seg_hi >= p[:, 1].min() - radius) & (seg_lo <= p[:, 1].max() + radius))
-        if len(near) == 0:
-            continue
-        rel = p[:, None, :] - a[near][None]  # (c, s, 2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.clip(np.einsum("csj,sj->cs", rel, d[near]) / dd[near], 0.0, 1.0)
-        t = np.where(dd[near] > 0, t, 0.0)
-        gap = rel - t[..., None] * d[near][None]
-        dist = np.hypot(gap[..., 0], gap[..., 1])
-        j = np.argmin(dist, axis=1)
-        dmin = dist[np.arange(len(rows)), j]
-        within = dmin <= radius
-        best[rows[within]] = dmin[within]
-        best_seg[rows[within]] = near[j[within]]
-    return best, best_seg
 
 
 @dataclass
@@ -753,6 +794,7 @@ class SceneReport:
     counted: list[bool] | None = field(default=None, repr=False)  # per line: first tube at its position
     contours: ContourLines | None = field(default=None, repr=False)
     centres: TracedCentres | None = field(default=None, repr=False)
+    parallax: dict | None = None  # zebra: `parallax.ParallaxReport.to_json`, the stripes against physical tubes (not judged)
 
     @property
     def points(self) -> int:
@@ -784,16 +826,20 @@ class SceneReport:
         return {"max_px": self.max_px, "p95_px": self.p95_px, "mean_px": self.mean_px, "points": self.points,
                 "misses": self.misses, "colour_mismatches": self.colour_mismatches,
                 "colour_checked": self.colour_checked, "reasons": list(self.reasons),
-                "lines": [line.to_json() for line in self.lines]}
+                "lines": [line.to_json() for line in self.lines],
+                **({"parallax": self.parallax} if self.parallax is not None else {})}
 
 
 def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, tolerance: float) -> SceneReport:
     """Deviation of traced centres from the analytic contours, misses both ways and colour mismatches, per line."""
+    spec = line_spec(renderer)
     pairs = _resolved_pairs(renderer, aovs)  # the geometry alone; each line's gap is applied on top
-    centres = _filter_unblocked(renderer, aovs, traced_centres(renderer, aovs, pairs))
-    checked, wrong = colour_mismatches(renderer, aovs)
+    centres = traced_centres(renderer, aovs, pairs, spec.levels)
+    if spec.along_ray:
+        centres = _filter_unblocked(renderer, aovs, centres)
+    checked, wrong = colour_mismatches(renderer, aovs, spec)
     wrong_light = aovs.line_id[wrong].astype(int)
-    c_k = renderer.lights.c_k
+    c_k = spec.levels
     gaps = neighbour_gaps(c_k)
     clean_by_gap: dict[float, np.ndarray] = {}  # few distinct gaps in a scene: one clean map each
 
@@ -844,14 +890,15 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
                              f"{MIN_LINE_GAP_PX:g} px in the image there")
     deviations = np.concatenate(all_dev) if all_dev else np.zeros(0)
     seen = int(np.count_nonzero(aovs.coverage > 0))
-    drawn = int(np.count_nonzero((aovs.coverage > 0) & (aovs.line_id >= 0) & (aovs.line_dist <= renderer.lights.radius)))
+    with np.errstate(invalid="ignore"):
+        drawn = int(np.count_nonzero((aovs.coverage > 0) & (aovs.line_id >= 0) & (aovs.line_dist <= spec.radius)))
     if seen == 0:
         reasons.insert(0, "no traced line centre was compared (the camera sees no surface)")
     elif len(deviations) == 0:
         why = ("every line's neighbour lies closer than the pixels resolve" if notes and len(notes) == sum(counted)
                else "no tube is reflected where the camera sees the surface")
         reasons.insert(0, f"no traced line centre was compared ({why})")
-    elif drawn < MIN_DRAWN_SHARE * seen:
+    elif spec.along_ray and drawn < MIN_DRAWN_SHARE * seen:
         # A few stray centres (grazing rays at silhouettes) compare well, but the picture shows no lines.
         reasons.insert(0, f"no tube is reflected where the camera sees the surface: {drawn} of its {seen} pixels "
                           f"see a tube within its radius (fewer than {100 * MIN_DRAWN_SHARE:g} %)")
@@ -868,20 +915,18 @@ def validate_scene(scene: Scene, tolerance: float = DEFAULT_TOLERANCE_PX, progre
                    threads: int | None = None, renderer: Renderer | None = None) -> SceneReport:
     """Render the scene (colour at its samples, pixel-centre AOVs) in memory and check it against the analytic contours.
 
-    The contours are those of reflection lines. A scene in another `[render] mode` is checked on the
-    reflection lines of the same hits and tubes (its own lines are not compared yet), and the report
-    says so in a note.
+    The contours are the level sets of the scene's `[render] mode`: Ulmet's f for reflection lines,
+    the mode's φ otherwise (`contours.field_of`), compared by the same rules (`compare`, `LineSpec`).
+    A zebra render also gets its parallax against equivalent physical tubes (`parallax`), reported
+    beside the verdict, not part of it.
     """
-    mode = scene.render.mode
-    if mode != "reflection":
-        plain = replace(scene.render, mode="reflection", **{key: None for key in MODE_KEYS})
-        scene = scene.replace(render=plain)
-        renderer = None
     renderer = renderer or Renderer(resolve(scene))
     film = renderer.render(progress, threads).film
-    contours = analytic_contours(UlmetField.of(renderer))
-    report = compare(renderer, film_aovs(renderer, film), contours, tolerance)
-    if mode != "reflection":
-        report.notes.append(f"render.mode = {mode!r}: its own lines are not compared with analytic contours yet; "
-                            f"the reflection lines of the same hits and tubes were validated instead")
+    contours = analytic_contours(field_of(renderer))
+    aovs = film_aovs(renderer, film)
+    if not isinstance(renderer.mode, ReflectionMode):
+        aovs = mode_aovs(renderer, film, aovs)
+    report = compare(renderer, aovs, contours, tolerance)
+    if renderer.mode.name == "zebra":
+        report.parallax = zebra_parallax(renderer, contours).to_json()
     return report

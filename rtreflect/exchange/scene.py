@@ -54,6 +54,10 @@ MAX_SAMPLES = 16
 MAX_TESSELLATION = 256
 #: |c·m| above this means the tube direction is not in the light plane.
 IN_PLANE_TOLERANCE = 1e-6
+#: `[lights] shape`: parallel tubes (Ulmet), or concentric circles about a centre in the light plane (circular
+#: reflection and highlight lines, Maekawa et al.), for the modes that see the light plane (`CIRCLE_MODES`).
+LIGHT_SHAPES = ("tubes", "circles")
+CIRCLE_MODES = ("reflection", "highlight")
 #: `[camera] view` names: where an automatic eye looks from, relative to the model's up axis (`camera.up`).
 VIEWS = ("iso", "top", "bottom", "front", "back", "left", "right")
 #: Orthographic view height of a camera with an explicit eye and no view_height (the reader's old default).
@@ -126,6 +130,8 @@ class LightSpec:
     auto: bool = False
     count: int | None = None  # auto: tubes across the visible range of f (default `AUTO_TUBES`)
     spacing: float | None = None  # auto: fixed spacing of the tubes (default: the range of f over count)
+    shape: str = "tubes"  # `LIGHT_SHAPES`: "circles" reads positions as radii r_k about ``centre`` in the plane
+    centre: np.ndarray | None = None  # circles: C, on the light plane (default: point Q)
 
 
 @dataclass(frozen=True)
@@ -169,7 +175,8 @@ TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "": ("image", "camera", "lights", "surface", "render", "output"),
     "image": ("width", "height", "samples"),
     "camera": ("projection", "eye", "look_at", "up", "fov", "view_height", "view"),
-    "lights": ("auto", "point", "normal", "direction", "positions", "spacing", "count", "radius", "length"),
+    "lights": ("auto", "point", "normal", "direction", "positions", "spacing", "count", "radius", "length", "shape",
+               "centre"),
     "surface": ("name", "degree", "points", "knots_u", "knots_v", "weights", "file"),
     "render": ("tessellation", "surface_color", "line_color", "background", "shading", "blur", "overlay",
                "overlay_color", "overlay_width", "normals", "mode", "step", "light", "pull", "thresholds", "quantity",
@@ -283,6 +290,7 @@ class Scene:
             new_surfaces, geometry_files = read.surfaces, read.files
         errors.raise_any()
         changed = replace(self, **specs, surfaces=tuple(new_surfaces))
+        _check_light_shape(self.path, changed.lights, changed.render)
         if surfaces is not None or "render" in specs:
             _check_mesh_size(self.path, list(changed.surfaces), changed.render.tessellation)
         moved = {name: _unkeyed(name, specs[name]) for name in specs
@@ -534,18 +542,44 @@ def _parse_lights(t: _Table) -> LightSpec:
     c = _unit(direction)
     if abs(float(c @ m)) > IN_PLANE_TOLERANCE:
         raise t.error("direction", f"must lie in the light plane (perpendicular to lights.normal); c·m = {float(c @ m):.3g}")
+    shape = t.string("shape", "tubes", LIGHT_SHAPES)
+    centre = _circle_centre(t, shape, point, m)
     if t.has("positions"):
         positions = _given_positions(t)
+        if shape == "circles" and np.any(positions <= 0):
+            raise t.error("positions", f"circle radii must be > 0, got {positions.tolist()}")
     elif t.has("spacing") or t.has("count"):
         spacing = t.number("spacing", required_default(), low=0, open_low=True)
         count = t.number("count", required_default(), low=1, high=MAX_TUBES, integer=True)
-        positions = (np.arange(count) - 0.5 * (count - 1)) * spacing
+        if shape == "circles":  # radii spacing, 2·spacing, …, count·spacing about the centre
+            positions = np.arange(1, count + 1) * spacing
+        else:
+            positions = (np.arange(count) - 0.5 * (count - 1)) * spacing
     else:
         raise t.error("positions", "required field is missing (or give lights.spacing and lights.count)")
     radius = t.number("radius", 0.05, low=0, open_low=True)
     length = t.number("length", math.inf, low=0, open_low=True, infinite_ok=True)
+    if shape == "circles" and math.isfinite(length):
+        raise t.error("length", "circles have no length (only tubes do): remove it (or inf)")
     t.finish()
-    return LightSpec(point, m, c, positions, radius, length)
+    return LightSpec(point, m, c, positions, radius, length, shape=shape, centre=centre)
+
+
+def _circle_centre(t: _Table, shape: str, point: np.ndarray, m: np.ndarray) -> np.ndarray | None:
+    """``lights.centre`` of circles: on the light plane (to `IN_PLANE_TOLERANCE` of the scene's scale), default Q."""
+    if shape != "circles":
+        if t.has("centre"):
+            raise t.error("centre", "only circles have a centre: set lights.shape = \"circles\" or remove it")
+        return None
+    if not t.has("centre"):
+        return np.asarray(point, dtype=np.float64)
+    centre = t.vector("centre", required_default())
+    off = float((centre - point) @ m)
+    scale = max(1.0, float(np.abs(point).max()), float(np.abs(centre).max()))
+    if abs(off) > IN_PLANE_TOLERANCE * scale:
+        raise t.error("centre", f"must lie in the light plane (through lights.point, normal lights.normal); "
+                                f"it is {off:.3g} off it")
+    return centre
 
 
 def _given_positions(t: _Table) -> np.ndarray:
@@ -572,6 +606,9 @@ def _parse_auto_lights(t: _Table) -> LightSpec:
     spacing = t.number("spacing", None, low=0, open_low=True)
     radius = t.number("radius", None, low=0, open_low=True)
     length = t.number("length", math.inf, low=0, open_low=True, infinite_ok=True)
+    if t.string("shape", "tubes", LIGHT_SHAPES) != "tubes":
+        raise t.error("shape", "the automatic rig places tubes: circles need lights.point, normal, direction and "
+                               "their radii")
     t.finish()
     return LightSpec(point, normal, direction, positions, radius, length, True, count, spacing)
 
@@ -599,9 +636,6 @@ def _parse_render(t: _Table) -> RenderSettings:
     overlay_width = float(t.number("overlay_width", defaults.overlay_width, low=0, high=MAX_OVERLAY_WIDTH,
                                    open_low=True))
     mode = t.string("mode", defaults.mode, RENDER_MODES)
-    if overlay and mode != "reflection":
-        raise t.error("overlay", f"draws the analytic reflection lines, not those of mode {mode!r} (not yet): "
-                                 f"remove it (or --overlay) or use mode = \"reflection\"")
     keys = _mode_keys(t, mode)
     t.finish()
     return RenderSettings(tess, **colors, overlay=overlay, normals=normals, shading=shading, blur=blur,
@@ -859,7 +893,15 @@ def _parse_document(path: Path, doc: Any, skip_bad_faces: bool = False) -> tuple
     errors.drop_consequences()
     errors.raise_any()
     _check_mesh_size(path, geometry.surfaces, specs["render"].tessellation)
+    _check_light_shape(path, specs["lights"], specs["render"])
     return specs, geometry
+
+
+def _check_light_shape(path: Path, lights: LightSpec, render: RenderSettings) -> None:
+    """Circles light only the modes that see the light plane (`CIRCLE_MODES`)."""
+    if lights.shape == "circles" and render.mode not in CIRCLE_MODES:
+        raise SceneError(path, "lights.shape", f"circles are seen by render.mode {' or '.join(map(repr, CIRCLE_MODES))}"
+                                               f", not {render.mode!r}: set lights.shape = \"tubes\" or change the mode")
 
 
 def load_scene(path: str | Path, skip_bad_faces: bool = False) -> Scene:

@@ -46,6 +46,8 @@ COMMENTS = {
         "positions": "c_k: tube k passes through Q + c_k e, e = c × m (or give spacing and count)",
         "radius": "tube radius: the stripes' width",
         "length": "tube length (inf: unbounded)",
+        "shape": '"tubes", or "circles": positions are radii of circles about centre (reflection, highlight)',
+        "centre": "circles: C, the circles' centre, in the light plane (default: point)",
     },
     "render": {
         "tessellation": "mesh segments per knot span (hits are refined onto the exact surface)",
@@ -117,6 +119,9 @@ def _table_lines(name: str, table: dict[str, Any]) -> list[str]:
                      "# spacing = 0.5  # with count, instead of positions: count tubes spacing apart, centred on Q")
         lines.insert(lines.index(next(line for line in lines if line.startswith("# spacing"))) + 1,
                      "# count = 12")
+        if "centre" not in table and "point" in table:  # tubes: the circles' key shown, commented out
+            lines.insert(lines.index(next(line for line in lines if line.startswith("shape"))) + 1,
+                         f"# centre = {toml_value(table['point'])}  # {COMMENTS['lights']['centre']}")
     return lines
 
 

@@ -10,6 +10,8 @@ counters and a set of tube indices kept), so a streamed render needs no second p
 - most of the visible surface reflects past the tube bank: its reflected rays meet the light plane
   (f finite) more than one spacing beyond the outermost tubes at more than `PAST_BANK_SHARE` of the
   surface pixels (a wider bank would light them; rays leaving away from the plane it would not).
+
+The last two count tubes: circles (`[lights] shape`) get the first two only.
 """
 
 from __future__ import annotations
@@ -63,6 +65,8 @@ class ImageTally:
             return ["no reflected ray reaches the light plane (it lies behind the surface as the camera sees it): "
                     "no line can show (move [lights] to the camera's side, or remove it for the automatic rig)"]
         found = []
+        if self.scene.lights.shape == "circles":  # the two counts below are of the tube bank (f, line.id)
+            return found
         if len(self.lines) < MIN_LINES:
             found.append(f"{len(self.lines)} distinct reflected line{'' if len(self.lines) == 1 else 's'} visible: "
                          f"too few to read the surface (widen lights.spacing or add tubes, or use [lights] auto = true)")

@@ -44,12 +44,13 @@ def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, 
     return np.column_stack([rgb, n_hit / samples])
 
 
-def map_color(hit: np.ndarray, lit: np.ndarray, surface_rgb: np.ndarray, line_color, background) -> np.ndarray:
-    """(P, 4) linear RGBA from per-sample (P, s²) hit and lit flags and (P, s², 3) surface colours (map modes)."""
+def map_color(hit: np.ndarray, weight: np.ndarray, surface_rgb: np.ndarray, line_color, background) -> np.ndarray:
+    """(P, 4) linear RGBA from per-sample (P, s²) hit flags, line weights w in [0, 1] (lit flags: 0 or 1) and
+    (P, s², 3) surface colours (map modes): a hit shows w·line_color + (1 − w)·its surface colour."""
     samples = hit.shape[1]
-    surface = (hit & ~lit)[..., None]
-    rgb = (np.where(surface, np.nan_to_num(surface_rgb), 0.0).sum(axis=1)
-           + (hit & lit).sum(axis=1)[:, None] * np.asarray(line_color)
+    w = np.where(hit, weight, 0.0)
+    rgb = ((np.nan_to_num(surface_rgb) * np.where(hit, 1.0 - w, 0.0)[..., None]).sum(axis=1)
+           + w.sum(axis=1)[:, None] * np.asarray(line_color)
            + (samples - hit.sum(axis=1))[:, None] * np.asarray(background)) / samples
     return np.column_stack([rgb, hit.sum(axis=1) / samples])
 

@@ -57,12 +57,16 @@ class Shading:
     line_dist: np.ndarray
     lit: np.ndarray
     surface_rgb: np.ndarray | None = None  # (N, 3) linear RGB of a map mode's surface (NaN where no hit), else None
+    # Another mode's distance to its nearest level (`Stripes.level_dist`) where `[render] blur` softens its stripes
+    # (`Renderer.soft_stripes`), else None.
+    stripe_dist: np.ndarray | None = None
 
     def take(self, rows: np.ndarray) -> "Shading":
         hits = Hits(**{k: getattr(self.hits, k)[rows] for k in Hits.__dataclass_fields__})
         return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
                        self.line_dist[rows], self.lit[rows],
-                       None if self.surface_rgb is None else self.surface_rgb[rows])
+                       None if self.surface_rgb is None else self.surface_rgb[rows],
+                       None if self.stripe_dist is None else self.stripe_dist[rows])
 
 
 @dataclass
@@ -144,8 +148,13 @@ class Renderer:
         reach = stripe_reach(self.lights.radius, scene.render.blur)
         self.stripe_lights = self.lights if reach == self.lights.radius else replace(self.lights, radius=reach)
         # `[render] mode`: φ, its levels and stripes (modes/base.py); reflection lines see the tubes out to the reach.
-        self.mode = mode_of(scene, self.stripe_lights if scene.render.mode == "reflection" else self.lights,
+        tubes = scene.render.mode == "reflection" and scene.lights.shape == "tubes"
+        self.mode = mode_of(scene, self.stripe_lights if tubes else self.lights,
                             self.surfaces)
+        # Another mode's stripes seen where they are (not along a ray) are softened by `blur` about their half width:
+        # lit out to the profile's reach, weighted by `stripe_weight` of their distance to the nearest level.
+        self.soft_stripes = (scene.render.blur > 0 and not isinstance(self.mode, ReflectionMode)
+                             and not getattr(self.mode, "along_ray", False))
         self.clock = StageClock()
         # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
         self.vertex_normals = vertex_normals(self.tessellation, self.surfaces) if scene.render.normals == "mesh" else None
@@ -195,7 +204,13 @@ class Renderer:
                 shading.surface_rgb = np.full((n_rays, 3), np.nan)
                 shading.surface_rgb[idx] = rgb
             t_tube = stripes.occlusion_t
-            cand = np.flatnonzero(stripes.candidate)
+            candidate = stripes.candidate
+            if self.soft_stripes:
+                shading.stripe_dist = np.full(n_rays, np.nan)
+                shading.stripe_dist[idx] = stripes.level_dist
+                with np.errstate(invalid="ignore"):
+                    candidate = stripes.level_dist <= stripe_reach(self.mode.half_width, self.scene.render.blur)
+            cand = np.flatnonzero(candidate)
         if t_tube is None:  # a mode not seen along a ray: its stripes are lit where they are
             lit[idx[cand]] = True
         elif len(cand):
@@ -211,9 +226,13 @@ class Renderer:
         Without blur the profile is the hard tube that 'lit' already decided (d ≤ r): the flags themselves.
         """
         blur = self.scene.render.blur
-        if blur == 0 or self.scene.render.mode != "reflection":  # other modes' stripes stay hard (not yet blurred)
+        if blur == 0:
             return shading.lit
-        return np.where(shading.lit, stripe_weight(shading.line_dist, self.lights.radius, blur), 0.0)
+        if isinstance(self.mode, ReflectionMode):
+            return np.where(shading.lit, stripe_weight(shading.line_dist, self.lights.radius, blur), 0.0)
+        if shading.stripe_dist is None:  # circles seen along the reflected ray stay hard (`soft_stripes`)
+            return shading.lit
+        return np.where(shading.lit, stripe_weight(shading.stripe_dist, self.mode.half_width, blur), 0.0)
 
     def surface_shade(self, shading: Shading) -> np.ndarray | None:
         """Per sample the factor k of ``surface_color`` (`modes.shading`; 1 where no hit), or None when flat."""
@@ -267,7 +286,7 @@ class Renderer:
                                   settings.surface_color, settings.line_color, settings.background,
                                   None if shade is None else shade.reshape(-1, ns))
         else:  # a map mode: each sample's own surface colour
-            rgba = map_color(shading.hits.hit.reshape(-1, ns), shading.lit.reshape(-1, ns),
+            rgba = map_color(shading.hits.hit.reshape(-1, ns), self.line_weight(shading).reshape(-1, ns),
                              shading.surface_rgb.reshape(-1, ns, 3), settings.line_color, settings.background)
         fallbacks = int(shading.hits.fallback.sum())
         fell_back = shading.hits.fallback.reshape(-1, ns).any(axis=1)

@@ -100,13 +100,17 @@ class CurvatureMode:
             return np.zeros(0)
         return self.low + (self.high - self.low) * np.arange(1, self.bands) / self.bands
 
+    @property
+    def half_width(self) -> float:
+        """Half an iso-curvature line's width in φ: `STRIPE_SHARE` of a band."""
+        return 0.5 * STRIPE_SHARE * (self.high - self.low) / max(self.bands, 1)
+
     def phi(self, p: SurfacePoints) -> np.ndarray:
         derivs = self.surfaces.evaluate(p.patch, p.u, p.v, order=2)
         return quantity_of(self.quantity, derivs, p.n)
 
     def stripes(self, p: SurfacePoints) -> Stripes:
-        width = (self.high - self.low) / max(self.bands, 1)
-        return even_stripes(self.phi(p), self.levels, 0.5 * STRIPE_SHARE * width)
+        return even_stripes(self.phi(p), self.levels, self.half_width)
 
     def surface_rgb(self, p: SurfacePoints) -> np.ndarray:
         return self.colors(self.phi(p))

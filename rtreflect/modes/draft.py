@@ -43,6 +43,11 @@ class DraftMode:
         """φ at the band edges, ascending: 90° − t_k."""
         return np.sort(90.0 - np.asarray(self.thresholds, dtype=np.float64))
 
+    @property
+    def half_width(self) -> float:
+        """Half a band edge's width in φ (degrees)."""
+        return 0.5 * EDGE_WIDTH
+
     def phi(self, p: SurfacePoints) -> np.ndarray:
         return angle_to(p.n, self.pull)
 
@@ -51,7 +56,7 @@ class DraftMode:
         return np.searchsorted(np.asarray(self.thresholds), draft, side="right")
 
     def stripes(self, p: SurfacePoints) -> Stripes:
-        return even_stripes(self.phi(p), self.levels, 0.5 * EDGE_WIDTH)
+        return even_stripes(self.phi(p), self.levels, self.half_width)
 
     def surface_rgb(self, p: SurfacePoints) -> np.ndarray:
         return self.colors(90.0 - self.phi(p))

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .base import Stripes, SurfacePoints
+from .circles import circle_mode
 from .lights import TubeLights, _dot
 
 
@@ -23,6 +24,16 @@ class HighlightMode:
     lights: TubeLights
     name: str = "highlight"
     stage: str = "highlight lines (normal line, eq. 4)"
+
+    @property
+    def levels(self) -> np.ndarray:
+        """The tube positions c_k."""
+        return self.lights.c_k
+
+    @property
+    def half_width(self) -> float:
+        """A band's half width: the tube radius, in the skew-line distance of eq. (4)."""
+        return self.lights.radius
 
     def phi(self, p: SurfacePoints) -> np.ndarray:
         lam = self.lights.plane_t(p.R, p.n)  # either sign: the whole normal line
@@ -42,5 +53,8 @@ class HighlightMode:
         return None
 
 
-def highlight_mode(scene, lights: TubeLights, surfaces) -> HighlightMode:
+def highlight_mode(scene, lights: TubeLights, surfaces):
+    """Highlight lines of the scene's tubes, or of its circles (`circles.CircleMode`) with ``[lights] shape``."""
+    if scene.lights.shape == "circles":
+        return circle_mode(scene, lights, "highlight")
     return HighlightMode(lights)

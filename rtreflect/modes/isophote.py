@@ -33,11 +33,16 @@ class IsophoteMode:
     def levels(self) -> np.ndarray:
         return np.arange(0.0, 180.0 + 0.5 * self.step, self.step)
 
+    @property
+    def half_width(self) -> float:
+        """Half a stripe's width in φ (degrees)."""
+        return 0.5 * STRIPE_SHARE * self.step
+
     def phi(self, p: SurfacePoints) -> np.ndarray:
         return angle_to(p.n, self.L)
 
     def stripes(self, p: SurfacePoints) -> Stripes:
-        return even_stripes(self.phi(p), self.levels, 0.5 * STRIPE_SHARE * self.step)
+        return even_stripes(self.phi(p), self.levels, self.half_width)
 
     def surface_rgb(self, p: SurfacePoints) -> None:
         return None

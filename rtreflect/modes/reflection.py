@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .base import Stripes, SurfacePoints
+from .circles import circle_mode
 from .lights import TubeLights
 
 
@@ -33,5 +34,8 @@ class ReflectionMode:
         return None
 
 
-def reflection_mode(scene, lights: TubeLights, surfaces) -> ReflectionMode:
+def reflection_mode(scene, lights: TubeLights, surfaces):
+    """Reflection lines of the scene's tubes, or of its circles (`circles.CircleMode`) with ``[lights] shape``."""
+    if scene.lights.shape == "circles":
+        return circle_mode(scene, lights, "reflection")
     return ReflectionMode(lights)

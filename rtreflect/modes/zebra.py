@@ -32,11 +32,16 @@ class ZebraMode:
         k = np.arange(-np.floor(180.0 / self.step), np.floor(180.0 / self.step) + 1)
         return k * self.step
 
+    @property
+    def half_width(self) -> float:
+        """Half a stripe's width in φ (degrees)."""
+        return 0.5 * STRIPE_SHARE * self.step
+
     def phi(self, p: SurfacePoints) -> np.ndarray:
         return np.degrees(np.arctan2(p.s @ self.e, p.s @ self.m))
 
     def stripes(self, p: SurfacePoints) -> Stripes:
-        return even_stripes(self.phi(p), self.levels, 0.5 * STRIPE_SHARE * self.step)
+        return even_stripes(self.phi(p), self.levels, self.half_width)
 
     def surface_rgb(self, p: SurfacePoints) -> None:
         return None

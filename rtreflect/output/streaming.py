@@ -66,12 +66,14 @@ def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, m
 def overlay_for(scene: Scene, renderer: Renderer | None = None) -> tuple[PngFilter | None, dict[str, str] | None]:
     """The PNG filter and extra files of a scene: the contours JSON with `[render] overlay`, the legend
     (``NAME.legend.svg``) of a map mode (curvature, draft); (None, None) with neither."""
+    legend = None
     if scene.render.mode in LEGEND_MODES:
-        mode = (renderer or Renderer(scene)).mode
-        return None, {legend_file_name(scene): legend_svg(mode)}
+        renderer = renderer or Renderer(scene)
+        legend = {legend_file_name(scene): legend_svg(renderer.mode)}
     if not scene.render.overlay:
-        return None, None
-    return overlay_outputs(renderer or Renderer(scene))
+        return None, legend
+    draw, files = overlay_outputs(renderer or Renderer(scene))
+    return draw, {**files, **(legend or {})}
 
 
 def then(first: PngFilter | None, second: PngFilter) -> PngFilter:

@@ -1,0 +1,118 @@
+"""validate and the overlay for the other line-drawing modes (issue 15): each mode's own lines, φ = c_k.
+
+- the analytic contours of a mode's φ (`contours.ModeField`) are checked against closed forms:
+  isophotes of a sphere are circles of latitude about L, highlight lines of a cylinder under
+  axis-parallel tubes are the rulings x/z = c_k/3;
+- a render whose φ is shifted by 30 % of a level step (lines drawn and stored at the wrong
+  place) fails validation for every mode: the check can fail. (The shipped mode scenes
+  passing is tests/test_validate.py's test_shipped_scene_validates.)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtreflect import load_scene
+from rtreflect.analysis.contours import ModeField, analytic_contours, field_of
+from rtreflect.analysis.validate import DEFAULT_TOLERANCE_PX, compare, film_aovs, mode_aovs, validate_scene
+from rtreflect.integrator.autorig import resolve
+from rtreflect.integrator.renderer import Renderer
+from rtreflect.modes.profile import stripe_weight
+
+from test_modes import SQRT_HALF, revolve, solid_scene
+
+SCENES = Path(__file__).resolve().parent.parent / "scenes"
+#: The shipped scene of each line-drawing mode but reflection, and the size it is checked at (test_validate's SIZES).
+MODE_SCENES = {"isophote": ("g1_join_isophote", (320, 180)), "highlight": ("cylinder_highlight", (320, 180)),
+               "zebra": ("hood_zebra", (320, 180)), "draft": ("cup_draft", (480, 270)),
+               "curvature": ("hood_curvature", (320, 180))}
+#: The wrong render's shift of φ, as a share of the levels' smallest gap: far beyond the tolerances.
+SHIFT = 0.3
+
+
+def contour_points(renderer: Renderer):
+    """(level c_k, S(u, v)) of every analytic contour vertex of the renderer's mode."""
+    field = field_of(renderer)
+    assert isinstance(field, ModeField)
+    lines = analytic_contours(field).lines
+    levels, points = [], []
+    for line in lines:
+        for poly in line.polylines:
+            S = renderer.surfaces.evaluate(np.full(len(poly.uv), poly.patch), poly.uv[:, 0], poly.uv[:, 1]).S
+            levels.append(np.full(len(S), line.position))
+            points.append(S)
+    return np.concatenate(levels), np.concatenate(points)
+
+
+def test_isophote_contours_of_a_sphere_are_circles_of_latitude_about_L():
+    r = 1.5
+    sphere = revolve([(r, 0.0, 1.0), (r, r, SQRT_HALF), (0.0, r, 1.0)], 2)  # upper hemisphere, rational
+    L = np.array([1.0, -1.0, 2.0]) / np.sqrt(6.0)
+    scene = solid_scene(sphere, {"mode": "isophote", "light": L.tolist(), "step": 15.0}).replace(
+        image={"width": 320, "height": 240})
+    c, P = contour_points(Renderer(resolve(scene)))
+    assert len(np.unique(c)) >= 5 and len(c) > 500
+    latitude = np.degrees(np.arccos(np.clip(P @ L / np.linalg.norm(P, axis=1), -1, 1)))
+    np.testing.assert_allclose(latitude, c, atol=1e-7)
+    np.testing.assert_allclose(np.linalg.norm(P, axis=1), r, atol=1e-9)
+
+
+def test_highlight_contours_of_a_cylinder_are_its_rulings():
+    """Cylinder of radius 1 about y, tubes along y in z = 3: the normal line at (x, z) meets the plane at 3x/z."""
+    scene = load_scene(SCENES / "cylinder.toml").replace(render={"mode": "highlight"}).with_image(320, 180, 1)
+    c, P = contour_points(Renderer(resolve(scene)))
+    assert len(np.unique(c)) >= 4 and len(c) > 200
+    np.testing.assert_allclose(3.0 * P[:, 0] / P[:, 2], c, atol=1e-9)
+
+
+@pytest.mark.parametrize("mode", sorted(MODE_SCENES))
+def test_lines_at_shifted_levels_fail_validation(mode, monkeypatch):
+    stem, size = MODE_SCENES[mode]
+    scene = load_scene(SCENES / f"{stem}.toml").with_image(*size, 1)
+    renderer = Renderer(resolve(scene))
+    assert renderer.mode.name == mode
+    levels = np.unique(np.asarray(renderer.mode.levels, dtype=np.float64))
+    shift = SHIFT * float(np.diff(levels).min())
+    kind = type(renderer.mode)
+    true_phi = kind.phi
+    with monkeypatch.context() as m:  # the render (its colour and its phi channel) at the wrong φ
+        m.setattr(kind, "phi", lambda self, p: true_phi(self, p) + shift)
+        film = renderer.render().film
+    # The analytic side sees the true φ.
+    report = compare(renderer, mode_aovs(renderer, film, film_aovs(renderer, film)),
+                     analytic_contours(field_of(renderer)), DEFAULT_TOLERANCE_PX)
+    assert not report.passed
+    assert (report.max_px or 0.0) > DEFAULT_TOLERANCE_PX or report.misses > 0
+
+
+def test_validate_names_no_fallback_to_reflection_lines():
+    """A mode scene's report is about its own levels (the isophotes every `step` degrees), not the tubes' positions."""
+    scene = load_scene(SCENES / "g1_join_isophote.toml").with_image(320, 180, 1)
+    report = validate_scene(scene)
+    assert report.passed, report.reasons
+    step = scene.render.step
+    assert [line.position for line in report.lines] == pytest.approx(np.arange(0.0, 180.0 + step / 2, step).tolist())
+    assert not any("reflection lines" in note for note in report.notes)
+
+
+@pytest.mark.parametrize("mode", ["isophote", "curvature"])
+def test_blur_softens_every_modes_stripes_and_validate_checks_it(mode):
+    """`[render] blur` about each mode's half width (a line mode and a map mode): with one sample per pixel (the
+    pixel centre) each pixel's line share is the profile's weight of the mode's distance to its level there, soft
+    edges included, and the render validates."""
+    stem, size = MODE_SCENES[mode]
+    scene = load_scene(SCENES / f"{stem}.toml").with_image(*size, 1).replace(render={"blur": 0.5})
+    renderer = Renderer(resolve(scene))
+    assert renderer.soft_stripes
+    film = renderer.render().film
+    aovs = mode_aovs(renderer, film, film_aovs(renderer, film))
+    inside = (aovs.coverage == 1) & np.isfinite(aovs.line_coverage)
+    share = aovs.line_coverage[inside]
+    assert np.count_nonzero((share > 0.05) & (share < 0.95)) > 100  # the soft edges
+    expected = stripe_weight(aovs.line_dist[inside], renderer.mode.half_width, 0.5)
+    np.testing.assert_allclose(share, expected, atol=1e-3)  # float32 colour
+    report = compare(renderer, aovs, analytic_contours(field_of(renderer)), DEFAULT_TOLERANCE_PX)
+    assert report.passed and report.colour_checked > 1000, report.reasons
