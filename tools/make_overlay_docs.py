@@ -7,6 +7,8 @@ docs/g1_join_overlay.png: `rtreflect render scenes/g1_join.toml --overlay` at th
 docs/hood_t4_exact_vs_mesh.png: the hood with tessellation = 4, a crop enlarged 6× (nearest),
 exact normals on the left, mesh normals on the right, the analytic contours drawn over both
 1 px wide (`overlay_width = 1`: at 6× a thin line shows the mesh's drift off the centre best).
+docs/SCENE.png (and SCENE.legend.svg for the map modes): the README's gallery of modes, `rtreflect render
+scenes/SCENE.toml --width 480 --height 270 --samples 3` for each scene of `GALLERY`.
 Each picture is written atomically; on failure the script prints one line and exits 1.
 """
 
@@ -84,11 +86,27 @@ def coarse_hood(folder: Path) -> Path:
     return path
 
 
+#: The README's gallery: one shipped scene per interrogation mode besides reflection lines (docs/hood.png).
+GALLERY = ("cylinder_highlight", "g1_join_isophote", "hood_curvature", "cup_draft", "hood_zebra")
+
+
+def gallery(folder: Path) -> None:
+    """docs/SCENE.png and, for the map modes, docs/SCENE.legend.svg, as the README's gallery commands make them."""
+    for name in GALLERY:
+        png = render(ROOT / f"scenes/{name}.toml", folder / name, "--width", "480", "--height", "270",
+                     "--samples", "3", overlay=False)
+        copy_to_docs(png, png.name)
+        legend = png.with_name(f"{png.stem}.legend.svg")
+        if legend.exists():
+            copy_to_docs(legend, legend.name)
+
+
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         copy_to_docs(render(ROOT / "scenes/hood.toml", tmp / "hood", overlay=False), "hood.png")
         looks(tmp)
+        gallery(tmp)
         copy_to_docs(render(ROOT / "scenes/g1_join.toml", tmp / "g1"), "g1_join_overlay.png")
         coarse = coarse_hood(tmp)
         exact = linear(render(coarse, tmp / "exact", "--normals", "exact"))
