@@ -156,6 +156,13 @@ class Tessellation:
         return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
 
     @cached_property
+    def rim_face(self) -> np.ndarray:
+        """(F,) bool: the triangles with a corner on their face's mesh boundary (where a neighbouring face may join)."""
+        on_rim = np.zeros(len(self.vertices), dtype=bool)
+        on_rim[self.boundary] = True
+        return on_rim[self.faces].any(axis=1)
+
+    @cached_property
     def _domain_span(self) -> np.ndarray:
         """(patches, 2): the extent of each patch's vertices in u and in v."""
         span = np.zeros((int(self.vertex_patch.max(initial=-1)) + 1, 2))

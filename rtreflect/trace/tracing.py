@@ -313,8 +313,44 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         for have, new in zip(derivs[:3], d3[:3]):
             have[won] = new[ok3]
         seam, at, tried = seam[~ok3], at[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
+    _rim_neighbours(tessellation, surfaces, O, D, prim, tm, mesh_point, status, pk, ur, vr, tr, derivs, band_of)
     t = np.where(status == VALID, tr, tm)
     return _Candidates(status, pk, ur, vr, t, derivs, us, vs, mesh_point)
+
+
+def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, mesh_point, status, pk, ur, vr,
+                    tr, derivs, band_of) -> None:
+    """Valid hits on a triangle at its face's rim: the neighbouring faces across the rim refined too, in place.
+
+    Another face's triangle can meet the ray at the mesh hit's own distance, to float32 rounding: where
+    faces join (a reader's mesh with a row of slivers lying in the neighbouring face's plane, faces
+    joined tangentially). Embree returns one of them and the next query starts past float32 rounding
+    (`trace`), so the other's candidate is never examined, though its exact hit may be the nearer (on
+    trimmed.3dm at 480×270, 7 pixels: a boss's top and bottom caps behind its wall's slivers). So
+    the nearest faces across the rim (`across_seam`, as the seam restart, up to `SEAM_TRIES`) are
+    refined from their boundary vertex; a valid hit nearer than the kept one by more than float32
+    rounding replaces it (the same point on the shared edge does not: pixels there keep their face).
+    """
+    rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
+    slack = FLOAT32_SLACK * tessellation.extent
+    tried = np.zeros((len(rays), 0), dtype=int)
+    for _ in range(SEAM_TRIES):
+        if len(rays) == 0:
+            break
+        pn, un, vn, gap = tessellation.across_seam(mesh_point[rays], pk[rays], tried)
+        # The neighbour's mesh reaches the point: its boundary vertex lies within two of its mesh edges.
+        close = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[np.maximum(pn, 0)])
+        rays, tried, pn, un, vn = (x[close] for x in (rays, tried, pn, un, vn))
+        if len(rays) == 0:
+            break
+        u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
+        near3, t3 = _near_mesh_hit(d3, O[rays], D[rays], mesh_point[rays], band_of(pn))
+        ok3 &= near3 & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
+        won = rays[ok3]
+        pk[won], ur[won], vr[won], tr[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3]
+        for have, new in zip(derivs[:3], d3[:3]):
+            have[won] = new[ok3]
+        rays, tried = rays[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
 
 
 def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
