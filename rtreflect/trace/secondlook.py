@@ -126,7 +126,7 @@ class SecondLook:
         slack = FLOAT32_SLACK * self.tessellation.extent
         with np.errstate(divide="ignore"):
             passage = np.where(hits.hit, hits.t - self._reach / np.maximum(cos, GRAZING_COS) - slack, far)
-        look = hits.hit & ~hits.fallback & (cos < GRAZING_COS)
+        look = hits.hit & ~hits.fallback & ((cos < GRAZING_COS) | hits.aside)
         # Any shell before the kept hit, but the kept face's own within its passage: walk the shell's hits.
         rays = np.flatnonzero(~look & ~hits.fallback)
         start, end = np.zeros(len(rays)), np.where(hits.hit[rays], hits.t[rays] - slack, far[rays])
@@ -159,7 +159,7 @@ class SecondLook:
             # The same root refined from another start agrees to Newton's tolerance: nearer means beyond float32 rounding.
             nearer = again.hit & ~again.fallback & (again.t < kept - FLOAT32_SLACK * self.tessellation.extent)
             rows = rays[nearer]
-            for name in ("hit", "patch", "u", "v", "t", "P", "N"):
+            for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside"):
                 getattr(hits, name)[rows] = getattr(again, name)[nearer]
             hits.fallback[rays[again.fallback]] = True
         return hits

@@ -99,12 +99,15 @@ class Hits:
     P: np.ndarray  # (N, 3) exact surface point S(u, v)
     N: np.ndarray  # (N, 3) exact unit normal, turned to face the incoming ray
     fallback: np.ndarray  # bool: a mesh hit nearer than the stored hit (or miss) could not be decided (module doc)
+    #: bool: the stored hit was not the refinement of a mesh hit but found beside it (`_other_root`,
+    #: `_rim_neighbours`): the mesh did not lead there, so the second look (secondlook.py) traces the ray again.
+    aside: np.ndarray
 
     @classmethod
     def blank(cls, n: int, hit: np.ndarray) -> "Hits":
         """Rows for n rays flagged ``hit``, every value still that of a miss: to be filled in where hit."""
         return cls(hit, np.full(n, -1), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan),
-                   np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool))
+                   np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
 
 
 def facing(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -269,6 +272,7 @@ class _Candidates:
     start_u: np.ndarray  # the mesh hit's interpolated (u, v): kept by an unresolved candidate
     start_v: np.ndarray
     mesh_point: np.ndarray
+    aside: np.ndarray  # bool: VALID by `_other_root` or `_rim_neighbours`, not the mesh hit's own refinement
 
 
 def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1, b2, tm) -> _Candidates:
@@ -317,13 +321,14 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         for have, new in zip(derivs[:3], d3[:3]):
             have[won] = new[ok3]
         seam, at, tried = seam[~ok3], at[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
-    _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs)
-    _rim_neighbours(tessellation, surfaces, O, D, prim, tm, mesh_point, status, pk, ur, vr, tr, derivs, band_of)
+    aside = np.zeros(len(pk), dtype=bool)
+    _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, aside)
+    _rim_neighbours(tessellation, surfaces, O, D, prim, tm, mesh_point, status, pk, ur, vr, tr, derivs, band_of, aside)
     t = np.where(status == VALID, tr, tm)
-    return _Candidates(status, pk, ur, vr, t, derivs, us, vs, mesh_point)
+    return _Candidates(status, pk, ur, vr, t, derivs, us, vs, mesh_point, aside)
 
 
-def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs) -> None:
+def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs, aside) -> None:
     """Grazing valid hits: the nearer of the ray's two crossings of the same sheet, in place.
 
     A ray meeting a sheet at grazing incidence crosses it twice, close together; where the mesh
@@ -366,13 +371,13 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
     ok3 &= (t3 > 0) & (t3 < tr[rays] - FLOAT32_SLACK * tessellation.extent) & surfaces.on_face(pk[rays], u3, v3)
     won = rays[ok3]
-    ur[won], vr[won], tr[won] = u3[ok3], v3[ok3], t3[ok3]
+    ur[won], vr[won], tr[won], aside[won] = u3[ok3], v3[ok3], t3[ok3], True
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[ok3]
 
 
 def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, mesh_point, status, pk, ur, vr,
-                    tr, derivs, band_of) -> None:
+                    tr, derivs, band_of, aside) -> None:
     """Valid hits on a triangle at its face's rim: the neighbouring faces across the rim refined too, in place.
 
     Another face's triangle can meet the ray at the mesh hit's own distance, to float32 rounding: where
@@ -386,6 +391,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     """
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
+    skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
     tried = np.zeros((len(rays), 0), dtype=int)
     for _ in range(SEAM_TRIES):
         if len(rays) == 0:
@@ -397,10 +403,17 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
         if len(rays) == 0:
             break
         u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
-        near3, t3 = _near_mesh_hit(d3, O[rays], D[rays], mesh_point[rays], band_of(pn))
-        ok3 &= near3 & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
+        t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
+        # Only the hit a triangle at the mesh hit's distance leads to (the one the next query skips): within
+        # the neighbour's band of it (2 chord errors grown as 1/cos θ there), plus the skipped step.
+        cross = np.cross(d3.Su, d3.Sv)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cos = np.abs(np.einsum("ij,ij->i", cross, D[rays])) / np.linalg.norm(cross, axis=1)
+        allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
+        reach = BAND_CHORDS * band_of(pn) * allowance + skip
+        ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
         won = rays[ok3]
-        pk[won], ur[won], vr[won], tr[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3]
+        pk[won], ur[won], vr[won], tr[won], aside[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], True
         for have, new in zip(derivs[:3], d3[:3]):
             have[won] = new[ok3]
         rays, tried = rays[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
@@ -460,7 +473,7 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 take = slice(None)
             rows = rays[take]
             best[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = c.t[take], c.patch[take], c.u[take], c.v[take]
-            hits.P[rows] = c.derivs.S[take]
+            hits.P[rows], hits.aside[rows] = c.derivs.S[take], c.aside[take]
             odd = np.flatnonzero((c.status == UNRESOLVED) & (mesh.t < doubt[rays]))
             doubt[rays[odd]] = mesh.t[odd]
         with clock.stage("exact normals"):
