@@ -25,6 +25,10 @@ Embree from just beyond the previous one (vectorised over the rays still open, a
 - *unresolved*: neither could be shown (Newton and the search failed in the face's interior, or
   Newton converged on another sheet far from its mesh hit).
 
+Two places beside a valid candidate's mesh hit are refined too (`_rim_neighbours`: the faces across
+its triangle's rim, whose coincident triangle the next query skips; `_other_root`: the nearer of two
+crossings of a sheet met at grazing incidence); a hit found so is flagged ``aside`` for the second look.
+
 The ray keeps the nearest valid candidate; one whose candidates are all misses or unresolved
 continues to the next mesh hit, and to the background when there is none. An unresolved
 candidate that could hide a nearer exact hit (its mesh hit before the kept hit plus the error
