@@ -116,7 +116,7 @@ class SecondLook:
                 # A reader's triangulation is subdivided in (u, v) (clipping a span grid to the trim costs ~10×).
                 finer = [s if s.mesh_uv is None else replace(s, mesh_uv=subdivided(*s.mesh_uv, FINE_LEVELS))
                          for s in self._scene_surfaces]
-                fine = tessellate(finer, fine_factor(finer, self._per_span) * self._per_span, enclose=True)
+                fine = tessellate(finer, fine_factor(finer, self._per_span) * self._per_span, enclose=True, widen=True)
                 self._fine = fine, Accelerator(fine)
             return self._fine
 
