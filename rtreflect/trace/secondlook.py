@@ -17,10 +17,12 @@ Two steps, each vectorised over the rays:
    triangle before the kept hit other than its own face's within the passage of that hit
    (t* − 2δ/|N·D|, the flat-sheet entry with a factor 2 for curvature): the shell's hits are walked
    along the ray (at most `SHELL_STEPS`), so a neighbouring face the ray meets where it meets the
-   kept face's edge is not hidden behind it; or, for a ray that missed, any shell triangle.
+   kept face's edge is not hidden behind it; or, for a ray that missed, any shell triangle; or
+   a hit the tracer found beside its mesh hit (``Hits.aside``: no mesh hit led there).
 2. **Look again.** The suspects are traced once more by the same candidate search (`trace`) on a
    finer enclosing mesh (`FINE_FACTOR` × the scene's segments per knot span, a chord error ~1/16
-   of the coarse one; a reader's triangulation split `FINE_LEVELS` times, ~1/4), up to their kept
+   of the coarse one; a reader's triangulation split `FINE_LEVELS` times, ~1/4; an untrimmed face's
+   edge vertices moved out past the edge, `tessellation._widened`), up to their kept
    hit. A valid hit nearer than the kept one by more than float32 rounding replaces it; an
    undecided one there flags the ray as a fallback.
 
