@@ -166,6 +166,15 @@ class Tessellation:
         return on_rim[self.faces].any(axis=1)
 
     @cached_property
+    def rim_neighbour(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per vertex (V,): the nearest boundary vertex of another face to each boundary vertex (`across_seam`),
+        as (patch, (V, 2) uv, distance); patch −1 and distance inf elsewhere. Built once, on first use."""
+        patch, uv, dist = np.full(len(self.vertices), -1), np.full((len(self.vertices), 2), np.nan), np.full(len(self.vertices), np.inf)
+        pn, un, vn, gap = self.across_seam(self.vertices[self.boundary], self.vertex_patch[self.boundary])
+        patch[self.boundary], uv[self.boundary, 0], uv[self.boundary, 1], dist[self.boundary] = pn, un, vn, gap
+        return patch, uv, dist
+
+    @cached_property
     def _domain_span(self) -> np.ndarray:
         """(patches, 2): the extent of each patch's vertices in u and in v."""
         span = np.zeros((int(self.vertex_patch.max(initial=-1)) + 1, 2))

@@ -84,6 +84,10 @@ STALLED_DAMPING = 1e9
 #: corner their boundary vertices coincide, and the nearest need not be the one the ray goes on to.
 SEAM_TRIES = 3
 
+#: `_rim_neighbours` looks across the rim where the mesh hit lies within this many of the scene's largest chord
+#: errors of a rim edge: both meshes lie within their chord errors of the shared edge, 2 as `BAND_CHORDS` (the
+#: measured chord error can fall short), 2 for the two meshes.
+RIM_REACH_CHORDS = 4.0
 #: Below this |N·D| a valid hit may be the farther of two close crossings of its sheet: the nearer one is
 #: sought (`_other_root`). As the second look's grazing threshold (78°): ~6% of the teapot's hits at 960×540.
 OTHER_ROOT_COS = 0.2
@@ -380,47 +384,76 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
         have[won] = new[ok3]
 
 
+def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each point on its triangle ``prim``: the distance to the nearest of the triangle's edges from a vertex of
+    its face's mesh boundary (inf where it has none), and that edge's boundary vertex nearest the point (−1: none).
+
+    One boundary end suffices: a reader's mesh may run a row of slivers from its boundary nodes to
+    interior nodes a float64 rounding away in (u, v), which `_enclosing` moves off the edge.
+    """
+    corners = tessellation.faces[prim]
+    on_rim = np.zeros(len(tessellation.vertices), dtype=bool)
+    on_rim[tessellation.boundary] = True
+    best, corner, corner_dist = np.full(len(prim), np.inf), np.full(len(prim), -1), np.full(len(prim), np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        a, b = tessellation.vertices[corners[:, i]], tessellation.vertices[corners[:, j]]
+        ab = b - a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.clip(np.nan_to_num(np.einsum("ij,ij->i", points - a, ab) / np.einsum("ij,ij->i", ab, ab)), 0.0, 1.0)
+        dist = np.linalg.norm(points - a - s[:, None] * ab, axis=1)
+        best = np.where(on_rim[corners[:, i]] | on_rim[corners[:, j]], np.minimum(best, dist), best)
+    for i in range(3):
+        dist = np.where(on_rim[corners[:, i]], np.linalg.norm(points - tessellation.vertices[corners[:, i]], axis=1), np.inf)
+        closer = dist < corner_dist
+        corner, corner_dist = np.where(closer, corners[:, i], corner), np.where(closer, dist, corner_dist)
+    return best, corner
+
+
 def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, mesh_point, status, pk, ur, vr,
                     tr, derivs, band_of, aside) -> None:
-    """Valid hits on a triangle at its face's rim: the neighbouring faces across the rim refined too, in place.
+    """Valid hits on a triangle at its face's rim: the neighbouring face across the rim refined too, in place.
 
     Another face's triangle can meet the ray at the mesh hit's own distance, to float32 rounding: where
     faces join (a reader's mesh with a row of slivers lying in the neighbouring face's plane, faces
     joined tangentially). Embree returns one of them and the next query starts past float32 rounding
     (`trace`), so the other's candidate is never examined, though its exact hit may be the nearer (on
-    trimmed.3dm at 480×270, 7 pixels: a boss's top and bottom caps behind its wall's slivers). So
-    the nearest faces across the rim (`across_seam`, as the seam restart, up to `SEAM_TRIES`) are
-    refined from their boundary vertex; a valid hit nearer than the kept one by more than float32
-    rounding replaces it (the same point on the shared edge does not: pixels there keep their face).
+    trimmed.3dm at 480×270, 7 pixels: a boss's top and bottom caps behind its wall's slivers). The
+    other face's mesh lies there only near the edge the faces share, so where the mesh hit lies within
+    `RIM_REACH_CHORDS` chord errors of a rim edge of its triangle, the face across the rim (the nearest
+    boundary vertex of another face to the triangle's nearest boundary vertex, `Tessellation.rim_neighbour`)
+    is refined from that vertex. Its valid hit within its band of the mesh hit's distance (the skipped
+    triangle's hit) and nearer than the kept one by more than float32 rounding replaces it (the same point
+    on the shared edge does not: pixels there keep their face).
     """
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
     skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
-    tried = np.zeros((len(rays), 0), dtype=int)
-    for _ in range(SEAM_TRIES):
-        if len(rays) == 0:
-            break
-        pn, un, vn, gap = tessellation.across_seam(mesh_point[rays], pk[rays], tried)
-        # The neighbour's mesh reaches the point: its boundary vertex lies within two of its mesh edges.
-        close = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[np.maximum(pn, 0)])
-        rays, tried, pn, un, vn = (x[close] for x in (rays, tried, pn, un, vn))
-        if len(rays) == 0:
-            break
-        u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
-        t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
-        # Only the hit a triangle at the mesh hit's distance leads to (the one the next query skips): within
-        # the neighbour's band of it (2 chord errors grown as 1/cos θ there), plus the skipped step.
-        cross = np.cross(d3.Su, d3.Sv)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cos = np.abs(np.einsum("ij,ij->i", cross, D[rays])) / np.linalg.norm(cross, axis=1)
-        allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
-        reach = BAND_CHORDS * band_of(pn) * allowance + skip
-        ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
-        won = rays[ok3]
-        pk[won], ur[won], vr[won], tr[won], aside[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], True
-        for have, new in zip(derivs[:3], d3[:3]):
-            have[won] = new[ok3]
-        rays, tried = rays[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
+    near_rim = RIM_REACH_CHORDS * float(tessellation.chord_error.max(initial=0.0)) + skip
+    edge_dist, corner = _rim_corner(tessellation, prim[rays], mesh_point[rays])
+    rays, corner = rays[edge_dist <= near_rim], corner[edge_dist <= near_rim]
+    if len(rays) == 0:
+        return
+    patch_of, uv_of, gap_of = tessellation.rim_neighbour
+    pn, un, vn, gap = patch_of[corner], uv_of[corner, 0], uv_of[corner, 1], gap_of[corner]
+    # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the corner.
+    close = (pn >= 0) & (gap <= tessellation.edge_length[np.maximum(pn, 0)])
+    rays, pn, un, vn = rays[close], pn[close], un[close], vn[close]
+    if len(rays) == 0:
+        return
+    u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
+    t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
+    # Only the hit a triangle at the mesh hit's distance leads to (the one the next query skips): within
+    # the neighbour's band of it (2 chord errors grown as 1/cos θ there), plus the skipped step.
+    cross = np.cross(d3.Su, d3.Sv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos = np.abs(np.einsum("ij,ij->i", cross, D[rays])) / np.linalg.norm(cross, axis=1)
+    allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
+    reach = BAND_CHORDS * band_of(pn) * allowance + skip
+    ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
+    won = rays[ok3]
+    pk[won], ur[won], vr[won], tr[won], aside[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], True
+    for have, new in zip(derivs[:3], d3[:3]):
+        have[won] = new[ok3]
 
 
 def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
