@@ -84,10 +84,10 @@ STALLED_DAMPING = 1e9
 #: corner their boundary vertices coincide, and the nearest need not be the one the ray goes on to.
 SEAM_TRIES = 3
 
-#: `_rim_neighbours` looks across the rim where the mesh hit lies within this many of the scene's largest chord
-#: errors of a rim edge: both meshes lie within their chord errors of the shared edge, 2 as `BAND_CHORDS` (the
-#: measured chord error can fall short), 2 for the two meshes.
-RIM_REACH_CHORDS = 4.0
+#: `_rim_neighbours` looks across the rim where the mesh hit lies within this many times the two faces' summed
+#: chord errors of a rim edge: each mesh lies within its chord error of the shared edge, ×2 as `BAND_CHORDS`
+#: (the measured chord error can fall short).
+RIM_REACH_CHORDS = 2.0
 #: Below this |N·D| a valid hit may be the farther of two close crossings of its sheet: the nearer one is
 #: sought (`_other_root`). As the second look's grazing threshold (78°): ~6% of the teapot's hits at 960×540.
 OTHER_ROOT_COS = 0.2
@@ -419,7 +419,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     (`trace`), so the other's candidate is never examined, though its exact hit may be the nearer (on
     trimmed.3dm at 480×270, 7 pixels: a boss's top and bottom caps behind its wall's slivers). The
     other face's mesh lies there only near the edge the faces share, so where the mesh hit lies within
-    `RIM_REACH_CHORDS` chord errors of a rim edge of its triangle, the face across the rim (the nearest
+    `RIM_REACH_CHORDS` times both faces' chord errors of a rim edge of its triangle, the face across the rim (the nearest
     boundary vertex of another face to the triangle's nearest boundary vertex, `Tessellation.rim_neighbour`)
     is refined from that vertex. Its valid hit within its band of the mesh hit's distance (the skipped
     triangle's hit) and nearer than the kept one by more than float32 rounding replaces it (the same point
@@ -428,15 +428,15 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
     skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
-    near_rim = RIM_REACH_CHORDS * float(tessellation.chord_error.max(initial=0.0)) + skip
     edge_dist, corner = _rim_corner(tessellation, prim[rays], mesh_point[rays])
-    rays, corner = rays[edge_dist <= near_rim], corner[edge_dist <= near_rim]
-    if len(rays) == 0:
-        return
     patch_of, uv_of, gap_of = tessellation.rim_neighbour
     pn, un, vn, gap = patch_of[corner], uv_of[corner, 0], uv_of[corner, 1], gap_of[corner]
-    # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the corner.
-    close = (pn >= 0) & (gap <= tessellation.edge_length[np.maximum(pn, 0)])
+    chord = tessellation.chord_error
+    # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the corner; and the mesh hit
+    # lies within both meshes' chord errors of the edge (`RIM_REACH_CHORDS`), where the other mesh can be.
+    pn_ = np.maximum(pn, 0)
+    close = (pn >= 0) & (gap <= tessellation.edge_length[pn_]) \
+        & (edge_dist <= RIM_REACH_CHORDS * (chord[pk[rays]] + chord[pn_]) + skip)
     rays, pn, un, vn = rays[close], pn[close], un[close], vn[close]
     if len(rays) == 0:
         return
