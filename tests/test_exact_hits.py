@@ -122,6 +122,34 @@ def test_thin_plate_keeps_the_upper_sheet():
     assert_same_hits(hits, expected, t_expected, renderer.tessellation.extent)
 
 
+def test_coincident_triangle_of_the_face_across_the_edge_is_not_skipped():
+    """Two faces meeting at an edge, B under A (a wedge 0.1 deep): B's mesh lies in A's plane 1e-6 above it
+    (as a reader's row of slivers at a cylinder's rim lay in its cap's plane on trimmed.3dm), so the ray
+    meets B's triangle first and A's at the same distance to float32 rounding. The next query starts past
+    that rounding and never met A's triangle: the ray kept B's exact hit 0.1 (1 − x) behind A's. Every ray
+    must keep the plane A's closed-form hit."""
+    from rtreflect.geometry.surfaces import SurfaceSet
+    from rtreflect.geometry.tessellation import tessellate
+    from rtreflect.trace.accelerator import Accelerator
+    from rtreflect.trace.tracing import trace
+
+    a = plane_patch([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], name="A")
+    b = plane_patch([0.0, 0.0, -0.1], [1.0, 0.0, 0.1], [0.0, 1.0, 0.0], name="B")  # z = 0.1 (x − 1): joins A at x = 1
+    tessellation = tessellate([a, b], 2)
+    vertices = tessellation.vertices.copy()
+    vertices[tessellation.vertex_patch == 1, 2] = 1e-6  # B's mesh: in A's plane, a hair nearer the eye
+    chord = tessellation.chord_error.copy()
+    chord[1] = 0.1  # so its mesh lies within its chord error of B, as a mesh must
+    tessellation = replace(tessellation, vertices=vertices, chord_error=chord)
+    surfaces = SurfaceSet([a, b])
+    x, y = np.meshgrid(np.linspace(0.05, 0.95, 19), np.linspace(0.05, 0.95, 19))
+    origins = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)])
+    directions = np.tile([0.0, 0.0, -1.0], (len(origins), 1))
+    hits = trace(Accelerator(tessellation), tessellation, surfaces, origins, directions)
+    t_a, _ = plane_hits(a, origins, directions)
+    assert_same_hits(hits, np.zeros(len(origins), dtype=int), t_a, tessellation.extent)
+
+
 # --- Issue 12: trimmed faces -------------------------------------------------------------------------
 
 

@@ -73,3 +73,19 @@ def test_rays_that_pass_the_cap_stop_on_the_plane_exactly():
     hits = renderer().trace(origins[above], np.tile([0.0, 1.0, 0.0], (above.sum(), 1)))
     assert hits.hit.all() and (hits.patch == 1).all() and not hits.fallback.any()
     np.testing.assert_allclose(hits.t, PLANE_Y - Y0, rtol=0, atol=1e-9)
+
+
+def test_a_ray_between_an_edge_chord_and_the_edge_hits():
+    """The cylinder scene at 320×180: pixel (82, 215)'s ray meets the surface 6e-5 inside its edge v = 1, at
+    |N·D| = 0.49, between the edge's chords and the edge, where neither the mesh nor the second look's finer
+    mesh had a triangle: it missed. Every pixel-centre ray must hit or miss as on a tessellation-96 mesh, at
+    the same point."""
+    scene = load_scene(SCENES / "cylinder.toml").with_image(320, 180, 1)
+    coarse = Renderer(scene)
+    rows, cols = np.divmod(np.arange(320 * 180), 320)
+    origins, directions = coarse.camera.rays(rows, cols)
+    hits = coarse.trace(origins, directions)
+    fine = Renderer(replace(scene, render=replace(scene.render, tessellation=96))).trace(origins, directions)
+    assert fine.hit[82 * 320 + 215] and fine.v[82 * 320 + 215] > 1.0 - 1e-4  # the case is still in the scene
+    assert np.array_equal(hits.hit, fine.hit), f"{np.count_nonzero(hits.hit != fine.hit)} rays differ"
+    np.testing.assert_allclose(hits.t[hits.hit], fine.t[fine.hit], rtol=0, atol=1e-9 * coarse.tessellation.extent)

@@ -50,7 +50,8 @@ def grid_faces(nu: int, nv: int) -> np.ndarray:
     return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int64)
 
 
-def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enclose: bool = False) -> trimesh.Trimesh:
+def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enclose: bool = False,
+                     widen: bool = False) -> trimesh.Trimesh:
     """A mesh of one patch (of its trimmed face, see the module doc).
 
     ``vertex_attributes`` hold ``uv`` (V, 2), ``patch`` (V,) and ``rim`` (V,): the vertices on the face's
@@ -73,6 +74,8 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enc
     points = surface.evaluate(uv[:, 0], uv[:, 1]).S
     if enclose:
         points = _enclosing(surface, uv, points, faces, rim)
+    if widen and surface.mesh_uv is None and surface.trim is None:
+        points = _widened(surface, uv, points, faces, rim)
     return trimesh.Trimesh(
         vertices=points,
         faces=faces,
@@ -156,6 +159,22 @@ class Tessellation:
         return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
 
     @cached_property
+    def rim_face(self) -> np.ndarray:
+        """(F,) bool: the triangles with a corner on their face's mesh boundary (where a neighbouring face may join)."""
+        on_rim = np.zeros(len(self.vertices), dtype=bool)
+        on_rim[self.boundary] = True
+        return on_rim[self.faces].any(axis=1)
+
+    @cached_property
+    def rim_neighbour(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per vertex (V,): the nearest boundary vertex of another face to each boundary vertex (`across_seam`),
+        as (patch, (V, 2) uv, distance); patch −1 and distance inf elsewhere. Built once, on first use."""
+        patch, uv, dist = np.full(len(self.vertices), -1), np.full((len(self.vertices), 2), np.nan), np.full(len(self.vertices), np.inf)
+        pn, un, vn, gap = self.across_seam(self.vertices[self.boundary], self.vertex_patch[self.boundary])
+        patch[self.boundary], uv[self.boundary, 0], uv[self.boundary, 1], dist[self.boundary] = pn, un, vn, gap
+        return patch, uv, dist
+
+    @cached_property
     def _domain_span(self) -> np.ndarray:
         """(patches, 2): the extent of each patch's vertices in u and in v."""
         span = np.zeros((int(self.vertex_patch.max(initial=-1)) + 1, 2))
@@ -190,6 +209,9 @@ def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:
 #: `_enclosing` moves vertices by this many times the largest chord deviation of their edges: a
 #: triangle's interior can stray a little farther from its plane than its edges' midpoints do.
 ENCLOSE_MARGIN = 1.25
+#: `_widened` divides by the sine of the angle between S_u and S_v (the reach across the edge): below this
+#: (partials within 6° of each other, or a degenerate point) it does not grow further.
+WIDEN_MIN_SINE = 0.1
 
 
 def _enclosing(surface: NurbsSurface, uv: np.ndarray, points: np.ndarray, faces: np.ndarray, rim: np.ndarray) -> np.ndarray:
@@ -219,10 +241,43 @@ def _enclosing(surface: NurbsSurface, uv: np.ndarray, points: np.ndarray, faces:
     return points + ENCLOSE_MARGIN * shift[:, None] * normal
 
 
+def _widened(surface: NurbsSurface, uv: np.ndarray, points: np.ndarray, faces: np.ndarray, rim: np.ndarray) -> np.ndarray:
+    """A span grid's domain-edge vertices moved out past the edge in the tangent plane, so its chords cover the edge.
+
+    The edge's chords cut inside the curved edge by their sagitta: a ray meeting the surface
+    between chord and edge met no triangle (the cylinder scene at 320×180: 6e-5 inside v = 1, at
+    |N·D| = 0.49). Each edge vertex moves along the outward parameter direction's image
+    (u, v steps of ±1 at u₀/u₁, v₀/v₁, through S_u/|S_u| and S_v/|S_v|) by ENCLOSE_MARGIN times its edges'
+    largest chord deviation over the sine of the partials' angle (at least `WIDEN_MIN_SINE`):
+    the reach across the edge is then at least the sagitta. Rays there that miss the face are
+    refined off its domain and restarted across the seam or missed (tracing.py), as on a reader's skirt.
+    """
+    (u0, u1), (v0, v1) = surface.domain
+    wu = np.where(uv[rim, 0] == u0, -1.0, np.where(uv[rim, 0] == u1, 1.0, 0.0))
+    wv = np.where(uv[rim, 1] == v0, -1.0, np.where(uv[rim, 1] == v1, 1.0, 0.0))
+    edges = _boundary_edges(faces)
+    mid = uv[edges].mean(axis=1)
+    deviation = np.linalg.norm(surface.evaluate(mid[:, 0], mid[:, 1]).S - points[edges].mean(axis=1), axis=1)
+    reach = np.zeros(len(points))
+    for end in (0, 1):
+        np.maximum.at(reach, edges[:, end], deviation)
+    d = surface.evaluate(uv[rim, 0], uv[rim, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        eu = d.Su / np.linalg.norm(d.Su, axis=1, keepdims=True)
+        ev = d.Sv / np.linalg.norm(d.Sv, axis=1, keepdims=True)
+        out = wu[:, None] * eu + wv[:, None] * ev
+        sine = np.maximum(np.linalg.norm(np.cross(eu, ev), axis=1), WIDEN_MIN_SINE)
+    shift = np.nan_to_num(out * (ENCLOSE_MARGIN * reach[rim] / sine)[:, None])  # degenerate points: not moved
+    moved = points.copy()
+    moved[rim] += shift
+    return moved
+
+
 def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span: int,
-               enclose: bool = False) -> Tessellation:
-    """All patches' meshes; ``enclose``: vertices moved so the mesh covers the surface (`_enclosing`), for the exact tracer."""
-    meshes = tuple(tessellate_patch(s, k, per_span, enclose) for k, s in enumerate(surfaces))
+               enclose: bool = False, widen: bool = False) -> Tessellation:
+    """All patches' meshes; ``enclose``: vertices moved so the mesh covers the surface (`_enclosing`), for the exact
+    tracer; ``widen``: a domain's edge vertices moved out past the edge too (`_widened`), for the second look."""
+    meshes = tuple(tessellate_patch(s, k, per_span, enclose, widen) for k, s in enumerate(surfaces))
     offsets = np.cumsum([0] + [len(m.vertices) for m in meshes])
     return Tessellation(
         vertices=np.concatenate([m.vertices for m in meshes]),

@@ -17,10 +17,12 @@ Two steps, each vectorised over the rays:
    triangle before the kept hit other than its own face's within the passage of that hit
    (t* − 2δ/|N·D|, the flat-sheet entry with a factor 2 for curvature): the shell's hits are walked
    along the ray (at most `SHELL_STEPS`), so a neighbouring face the ray meets where it meets the
-   kept face's edge is not hidden behind it; or, for a ray that missed, any shell triangle.
+   kept face's edge is not hidden behind it; or, for a ray that missed, any shell triangle; or
+   a hit the tracer found beside its mesh hit (``Hits.aside``: no mesh hit led there).
 2. **Look again.** The suspects are traced once more by the same candidate search (`trace`) on a
    finer enclosing mesh (`FINE_FACTOR` × the scene's segments per knot span, a chord error ~1/16
-   of the coarse one; a reader's triangulation split `FINE_LEVELS` times, ~1/4), up to their kept
+   of the coarse one; a reader's triangulation split `FINE_LEVELS` times, ~1/4; an untrimmed face's
+   edge vertices moved out past the edge, `tessellation._widened`), up to their kept
    hit. A valid hit nearer than the kept one by more than float32 rounding replaces it; an
    undecided one there flags the ray as a fallback.
 
@@ -116,7 +118,7 @@ class SecondLook:
                 # A reader's triangulation is subdivided in (u, v) (clipping a span grid to the trim costs ~10×).
                 finer = [s if s.mesh_uv is None else replace(s, mesh_uv=subdivided(*s.mesh_uv, FINE_LEVELS))
                          for s in self._scene_surfaces]
-                fine = tessellate(finer, fine_factor(finer, self._per_span) * self._per_span, enclose=True)
+                fine = tessellate(finer, fine_factor(finer, self._per_span) * self._per_span, enclose=True, widen=True)
                 self._fine = fine, Accelerator(fine)
             return self._fine
 
@@ -126,7 +128,7 @@ class SecondLook:
         slack = FLOAT32_SLACK * self.tessellation.extent
         with np.errstate(divide="ignore"):
             passage = np.where(hits.hit, hits.t - self._reach / np.maximum(cos, GRAZING_COS) - slack, far)
-        look = hits.hit & ~hits.fallback & (cos < GRAZING_COS)
+        look = hits.hit & ~hits.fallback & ((cos < GRAZING_COS) | hits.aside)
         # Any shell before the kept hit, but the kept face's own within its passage: walk the shell's hits.
         rays = np.flatnonzero(~look & ~hits.fallback)
         start, end = np.zeros(len(rays)), np.where(hits.hit[rays], hits.t[rays] - slack, far[rays])
@@ -159,7 +161,7 @@ class SecondLook:
             # The same root refined from another start agrees to Newton's tolerance: nearer means beyond float32 rounding.
             nearer = again.hit & ~again.fallback & (again.t < kept - FLOAT32_SLACK * self.tessellation.extent)
             rows = rays[nearer]
-            for name in ("hit", "patch", "u", "v", "t", "P", "N"):
+            for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside"):
                 getattr(hits, name)[rows] = getattr(again, name)[nearer]
             hits.fallback[rays[again.fallback]] = True
         return hits

@@ -25,6 +25,10 @@ Embree from just beyond the previous one (vectorised over the rays still open, a
 - *unresolved*: neither could be shown (Newton and the search failed in the face's interior, or
   Newton converged on another sheet far from its mesh hit).
 
+Two places beside a valid candidate's mesh hit are refined too (`_rim_neighbours`: the faces across
+its triangle's rim, whose coincident triangle the next query skips; `_other_root`: the nearer of two
+crossings of a sheet met at grazing incidence); a hit found so is flagged ``aside`` for the second look.
+
 The ray keeps the nearest valid candidate; one whose candidates are all misses or unresolved
 continues to the next mesh hit, and to the background when there is none. An unresolved
 candidate that could hide a nearer exact hit (its mesh hit before the kept hit plus the error
@@ -81,6 +85,14 @@ STALLED_DAMPING = 1e9
 #: corner their boundary vertices coincide, and the nearest need not be the one the ray goes on to.
 SEAM_TRIES = 3
 
+#: `_rim_neighbours` looks across the rim where the mesh hit lies within this many times the two faces' summed
+#: chord errors of a rim edge: each mesh lies within its chord error of the shared edge, ×2 as `BAND_CHORDS`
+#: (the measured chord error can fall short).
+RIM_REACH_CHORDS = 2.0
+#: Below this |N·D| a valid hit may be the farther of two close crossings of its sheet: the nearer one is
+#: sought (`_other_root`). As the second look's grazing threshold (78°): ~6% of the teapot's hits at 960×540.
+OTHER_ROOT_COS = 0.2
+
 VALID, MISS, UNRESOLVED = 0, 1, 2
 
 
@@ -96,12 +108,15 @@ class Hits:
     P: np.ndarray  # (N, 3) exact surface point S(u, v)
     N: np.ndarray  # (N, 3) exact unit normal, turned to face the incoming ray
     fallback: np.ndarray  # bool: a mesh hit nearer than the stored hit (or miss) could not be decided (module doc)
+    #: bool: the stored hit was not the refinement of a mesh hit but found beside it (`_other_root`,
+    #: `_rim_neighbours`): the mesh did not lead there, so the second look (secondlook.py) traces the ray again.
+    aside: np.ndarray
 
     @classmethod
     def blank(cls, n: int, hit: np.ndarray) -> "Hits":
         """Rows for n rays flagged ``hit``, every value still that of a miss: to be filled in where hit."""
         return cls(hit, np.full(n, -1), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan),
-                   np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool))
+                   np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
 
 
 def facing(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -233,6 +248,7 @@ class _Candidates:
     start_u: np.ndarray  # the mesh hit's interpolated (u, v): kept by an unresolved candidate
     start_v: np.ndarray
     mesh_point: np.ndarray
+    aside: np.ndarray  # bool: VALID by `_other_root` or `_rim_neighbours`, not the mesh hit's own refinement
 
 
 def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1, b2, tm) -> _Candidates:
@@ -281,8 +297,131 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         for have, new in zip(derivs[:3], d3[:3]):
             have[won] = new[ok3]
         seam, at, tried = seam[~ok3], at[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
+    aside = np.zeros(len(pk), dtype=bool)
+    _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, aside)
+    _rim_neighbours(tessellation, surfaces, O, D, prim, tm, mesh_point, status, pk, ur, vr, tr, derivs, band_of, aside)
     t = np.where(status == VALID, tr, tm)
-    return _Candidates(status, pk, ur, vr, t, derivs, us, vs, mesh_point)
+    return _Candidates(status, pk, ur, vr, t, derivs, us, vs, mesh_point, aside)
+
+
+def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs, aside) -> None:
+    """Grazing valid hits: the nearer of the ray's two crossings of the same sheet, in place.
+
+    A ray meeting a sheet at grazing incidence crosses it twice, close together; where the mesh
+    lies on the wrong side of the sheet by a fraction of its chord error (at a face's rim, which
+    `_enclosing` does not move) its first mesh hit lies between the two crossings and Newton goes
+    to the farther one (assembly.step at 480×270: |N·D| = 0.02, the nearer crossing 0.24 before
+    it, missed by the second look's finer mesh too). To second order about the hit at t₁ the sheet
+    leaves the ray as g(s) = ½ κ s² − (n·D) s along the normal n, κ = n·S''(δ, δ) with δ the
+    parameter step per unit length of D's tangential part: the other crossing lies at s = 2(n·D)/κ.
+    Where that is before the hit, Newton starts there on the same face; a valid point nearer than
+    t₁ by more than float32 rounding replaces it.
+    """
+    cross = np.cross(derivs.Su, derivs.Sv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n = cross / np.linalg.norm(cross, axis=1, keepdims=True)
+        cos = np.einsum("ij,ij->i", n, D)
+    rays = np.flatnonzero((status == VALID) & (np.abs(cos) < OTHER_ROOT_COS))
+    if len(rays) == 0:
+        return
+    d2 = surfaces.evaluate(pk[rays], ur[rays], vr[rays], order=2)
+    nr, cr, Dr = n[rays], cos[rays], D[rays]
+    tangential = Dr - cr[:, None] * nr
+    # δ = (du, dv): least squares of [S_u S_v] δ = D_T (the 2×2 normal equations).
+    a, b, c = (np.einsum("ij,ij->i", x, y) for x, y in ((d2.Su, d2.Su), (d2.Su, d2.Sv), (d2.Sv, d2.Sv)))
+    p, q = np.einsum("ij,ij->i", d2.Su, tangential), np.einsum("ij,ij->i", d2.Sv, tangential)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        det = a * c - b * b
+        du, dv = (c * p - b * q) / det, (a * q - b * p) / det
+        kappa = np.einsum("ij,ij->i", nr, d2.Suu * (du * du)[:, None] + 2.0 * d2.Suv * (du * dv)[:, None]
+                          + d2.Svv * (dv * dv)[:, None])
+        step = 2.0 * cr / kappa
+    ahead = np.isfinite(step) & (step < 0.0) & (tr[rays] + step > 0.0)
+    rays, step, du, dv = rays[ahead], step[ahead], du[ahead], dv[ahead]
+    if len(rays) == 0:
+        return
+    u0, u1, v0, v1 = surfaces.domains(pk[rays])
+    us, vs = np.clip(ur[rays] + step * du, u0, u1), np.clip(vr[rays] + step * dv, v0, v1)
+    t_start = tr[rays] + step
+    u3, v3, d3, ok3 = refine(surfaces, pk[rays], us, vs, O[rays], D[rays], t_start, tessellation.extent)
+    t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
+    ok3 &= (t3 > 0) & (t3 < tr[rays] - FLOAT32_SLACK * tessellation.extent) & surfaces.on_face(pk[rays], u3, v3)
+    won = rays[ok3]
+    ur[won], vr[won], tr[won], aside[won] = u3[ok3], v3[ok3], t3[ok3], True
+    for have, new in zip(derivs[:3], d3[:3]):
+        have[won] = new[ok3]
+
+
+def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each point on its triangle ``prim``: the distance to the nearest of the triangle's edges from a vertex of
+    its face's mesh boundary (inf where it has none), and that edge's boundary vertex nearest the point (−1: none).
+
+    One boundary end suffices: a reader's mesh may run a row of slivers from its boundary nodes to
+    interior nodes a float64 rounding away in (u, v), which `_enclosing` moves off the edge.
+    """
+    corners = tessellation.faces[prim]
+    on_rim = np.zeros(len(tessellation.vertices), dtype=bool)
+    on_rim[tessellation.boundary] = True
+    best, corner, corner_dist = np.full(len(prim), np.inf), np.full(len(prim), -1), np.full(len(prim), np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        a, b = tessellation.vertices[corners[:, i]], tessellation.vertices[corners[:, j]]
+        ab = b - a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.clip(np.nan_to_num(np.einsum("ij,ij->i", points - a, ab) / np.einsum("ij,ij->i", ab, ab)), 0.0, 1.0)
+        dist = np.linalg.norm(points - a - s[:, None] * ab, axis=1)
+        best = np.where(on_rim[corners[:, i]] | on_rim[corners[:, j]], np.minimum(best, dist), best)
+    for i in range(3):
+        dist = np.where(on_rim[corners[:, i]], np.linalg.norm(points - tessellation.vertices[corners[:, i]], axis=1), np.inf)
+        closer = dist < corner_dist
+        corner, corner_dist = np.where(closer, corners[:, i], corner), np.where(closer, dist, corner_dist)
+    return best, corner
+
+
+def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, mesh_point, status, pk, ur, vr,
+                    tr, derivs, band_of, aside) -> None:
+    """Valid hits on a triangle at its face's rim: the neighbouring face across the rim refined too, in place.
+
+    Another face's triangle can meet the ray at the mesh hit's own distance, to float32 rounding: where
+    faces join (a reader's mesh with a row of slivers lying in the neighbouring face's plane, faces
+    joined tangentially). Embree returns one of them and the next query starts past float32 rounding
+    (`trace`), so the other's candidate is never examined, though its exact hit may be the nearer (on
+    trimmed.3dm at 480×270, 7 pixels: a boss's top and bottom caps behind its wall's slivers). The
+    other face's mesh lies there only near the edge the faces share, so where the mesh hit lies within
+    `RIM_REACH_CHORDS` times both faces' chord errors of a rim edge of its triangle, the face across the rim (the nearest
+    boundary vertex of another face to the triangle's nearest boundary vertex, `Tessellation.rim_neighbour`)
+    is refined from that vertex. Its valid hit within its band of the mesh hit's distance (the skipped
+    triangle's hit) and nearer than the kept one by more than float32 rounding replaces it (the same point
+    on the shared edge does not: pixels there keep their face).
+    """
+    rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
+    slack = FLOAT32_SLACK * tessellation.extent
+    skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
+    edge_dist, corner = _rim_corner(tessellation, prim[rays], mesh_point[rays])
+    patch_of, uv_of, gap_of = tessellation.rim_neighbour
+    pn, un, vn, gap = patch_of[corner], uv_of[corner, 0], uv_of[corner, 1], gap_of[corner]
+    chord = tessellation.chord_error
+    # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the corner; and the mesh hit
+    # lies within both meshes' chord errors of the edge (`RIM_REACH_CHORDS`), where the other mesh can be.
+    pn_ = np.maximum(pn, 0)
+    close = (pn >= 0) & (gap <= tessellation.edge_length[pn_]) \
+        & (edge_dist <= RIM_REACH_CHORDS * (chord[pk[rays]] + chord[pn_]) + skip)
+    rays, pn, un, vn = rays[close], pn[close], un[close], vn[close]
+    if len(rays) == 0:
+        return
+    u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
+    t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
+    # Only the hit a triangle at the mesh hit's distance leads to (the one the next query skips): within
+    # the neighbour's band of it (2 chord errors grown as 1/cos θ there), plus the skipped step.
+    cross = np.cross(d3.Su, d3.Sv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos = np.abs(np.einsum("ij,ij->i", cross, D[rays])) / np.linalg.norm(cross, axis=1)
+    allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
+    reach = BAND_CHORDS * band_of(pn) * allowance + skip
+    ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
+    won = rays[ok3]
+    pk[won], ur[won], vr[won], tr[won], aside[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], True
+    for have, new in zip(derivs[:3], d3[:3]):
+        have[won] = new[ok3]
 
 
 def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
@@ -339,7 +478,7 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 take = slice(None)
             rows = rays[take]
             best[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = c.t[take], c.patch[take], c.u[take], c.v[take]
-            hits.P[rows] = c.derivs.S[take]
+            hits.P[rows], hits.aside[rows] = c.derivs.S[take], c.aside[take]
             odd = np.flatnonzero((c.status == UNRESOLVED) & (mesh.t < doubt[rays]))
             doubt[rays[odd]] = mesh.t[odd]
         with clock.stage("exact normals"):
