@@ -24,7 +24,7 @@ import queue
 import signal
 import time
 import traceback
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -36,6 +36,7 @@ from .analysis.overlay import contours_file_name
 from .exchange.cad import CAD_SUFFIXES
 from .output.sharing import remove_dead_temporaries
 from .exchange.load import load_scene
+from .exchange.partscene import format_qualified_name
 from .exchange.scene import Scene
 from .integrator.tiling import default_max_memory
 
@@ -114,6 +115,23 @@ def load_jobs(files: list[Path], skip_bad_faces: bool = False) -> list[Job]:
             jobs.append(Job(file, scene=load_scene(file, skip_bad_faces)))
         except RtreflectError as exc:
             jobs.append(Job(file, error="; ".join(error_lines(exc))))  # every problem of the file, on one line
+    return name_parts_apart(jobs)
+
+
+def name_parts_apart(jobs: list[Job]) -> list[Job]:
+    """CAD files rendered in their default scene whose stems coincide (``block.step`` beside ``block.igs``): each
+    named with its format (``block_step``, `format_qualified_name`) rather than refused as colliding outputs.
+
+    Only names nobody chose change: a scene file's ``[output] name`` (or stem) stays, and still collides.
+    """
+    stems: dict[str, int] = {}
+    for job in jobs:
+        if job.scene is not None:
+            stems[job.scene.output.name] = stems.get(job.scene.output.name, 0) + 1
+    for job in jobs:
+        scene = job.scene
+        if scene is not None and Path(job.path).suffix.lower() in CAD_SUFFIXES and stems[scene.output.name] > 1:
+            job.scene = replace(scene, output=replace(scene.output, name=format_qualified_name(Path(job.path))))
     return jobs
 
 

@@ -20,6 +20,7 @@ from click.testing import CliRunner
 
 OCP = pytest.importorskip("OCP")
 
+from rtreflect.batch import load_jobs  # noqa: E402
 from rtreflect.cli import cli  # noqa: E402
 from rtreflect.exchange import occt  # noqa: E402
 from rtreflect.exchange.cad import read_cad  # noqa: E402
@@ -244,6 +245,23 @@ def test_batch_finds_cad_files_and_resumes(tmp_path):
     assert {"vase.png", "rhino.png", "vase.exr", "rhino.exr"} <= {p.name for p in outdir.iterdir()}
     code, output, _ = run("batch", folder, "-o", outdir)
     assert code == 0 and output.count("skipped") >= 2, output
+
+
+def test_batch_names_one_part_in_two_formats_apart(tmp_path):
+    """`rtreflect batch parts/` with block.step beside block.igs: two outputs named with their format, not an error."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    shutil.copy(PARTS / "revolved.step", folder / "vase.step")
+    shutil.copy(PARTS / "revolved.step", folder / "vase.stp")
+    outdir = tmp_path / "out"
+    code, output, _ = run("batch", folder, "-o", outdir)
+    assert code == 0, output
+    assert {"vase_step.png", "vase_stp.png", "vase_step.exr", "vase_stp.exr"} <= {p.name for p in outdir.iterdir()}
+    assert not (outdir / "vase.png").exists()
+    # A scene file's name is the user's and stays; the part beside it is the one named with its format.
+    (folder / "vase.toml").write_text('[[surface]]\nfile = "vase.step"\n')
+    jobs = load_jobs(sorted(folder.iterdir()))
+    assert sorted(job.scene.output.name for job in jobs) == ["vase", "vase_step", "vase_stp"]
 
 
 # --- geometry edge cases of real exports ------------------------------------------------------

@@ -26,6 +26,7 @@ from ..output.imagefiles import read_image, save_render
 from ..integrator.autorig import resolve
 from ..integrator.renderer import Renderer
 from ..exchange.load import load_scene
+from ..exchange.partscene import format_qualified_name
 from ..exchange.scene import Scene
 
 __all__ = ["GOLDEN_WIDTH", "GOLDEN_HEIGHT", "GOLDEN_MAX_SAMPLES", "GOLDEN_CHECKS", "golden_name", "golden_scene",
@@ -42,9 +43,7 @@ def golden_name(path: str | Path) -> str:
     """The golden image's name for a scene file: its stem (``hood``); for a CAD part rendered in its default scene,
     stem and format (``filleted_block_step``, ``filleted_block_igs``), as one part may ship in several formats."""
     path = Path(path)
-    if path.suffix.lower() == ".toml":
-        return path.stem
-    return f"{path.stem}_{path.suffix.lower().lstrip('.')}"
+    return path.stem if path.suffix.lower() == ".toml" else format_qualified_name(path)
 
 
 def golden_scene(path: str | Path) -> Scene:

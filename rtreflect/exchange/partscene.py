@@ -45,6 +45,13 @@ def image_for(lo: np.ndarray, hi: np.ndarray) -> ImageSpec:
     return ImageSpec(round(LONG_SIDE * aspect), LONG_SIDE, SAMPLES)
 
 
+def format_qualified_name(path: Path) -> str:
+    """A part's name with its format, ``filleted_block_step``: the output name where one part ships in several
+    formats side by side (``batch``, the golden images), which would otherwise write the same ``NAME.*``."""
+    path = Path(path)
+    return f"{path.stem}_{path.suffix.lower().lstrip('.')}"
+
+
 def load_part_scene(path: Path, skip_bad_faces: bool = False) -> Scene:
     """A CAD file given where a scene file is expected: the part in the default scene (`part_scene`)."""
     model = read_cad(path, "", skip_bad_faces)
