@@ -50,14 +50,24 @@ marks.append(("other imports (click, OpenImageIO, rtreflect, ...)", cpu()))
 from numba.core.registry import cpu_target
 cpu_target.target_context.refresh()  # what the first cached kernel's load does
 marks.append(("numba registry load (+ scipy.linalg)", cpu()))
+from numba.core import caching
+loads = []
+plain_load = caching.Cache.load_overload
+def timed_load(self, *args, **kwargs):  # each cached kernel's index + machine code, linked
+    start = cpu()
+    try:
+        return plain_load(self, *args, **kwargs)
+    finally:
+        loads.append(cpu() - start)
+caching.Cache.load_overload = timed_load
 sys.argv = ["rtreflect", *sys.argv[1:]]
 try:
-    cli._run()
+    getattr(cli, "_run", cli.main)()  # the command without `main`'s exit, which would end the probe
 except SystemExit:
     pass
 marks.append(("render, files written", cpu()))
 import json
-print(json.dumps(marks), file=sys.stderr)
+print(json.dumps({"marks": marks, "loads": loads}), file=sys.stderr)
 """
 
 #: numba's own floor: the interpreter, numpy, numba and its registry load, nothing of rtreflect.
@@ -121,7 +131,8 @@ def main() -> None:
             sys.exit(f"cold run failed:\n{result.stderr}")
         compiled = len(list(cache.rglob("*.nbi")))
         _, _, probe = timed([sys.executable, "-c", PROBE, *command], env)
-    marks = json.loads(probe.stderr.strip().splitlines()[-1])
+    probed = json.loads(probe.stderr.strip().splitlines()[-1])
+    marks, loads = probed["marks"], probed["loads"]
 
     print(f"`rtreflect render {args.scene} --width {width} --height {height} --samples 1`, whole process, "
           f"best of {args.repeat}:")
@@ -136,6 +147,9 @@ def main() -> None:
         print(f"  {name:<52} {seconds - previous:.3f}")
         previous = seconds
     print(f"  {'exit (handlers; teardown skipped)':<52} {max(warm_cpu - previous, 0.0):.3f}  (warm run's CPU − probe's)")
+    if loads:
+        print(f"  of the render: {len(loads)} cached kernels loaded, {sum(loads):.3f} s CPU "
+              f"({1000 * sum(loads) / len(loads):.1f} ms each, {1000 * min(loads):.1f}–{1000 * max(loads):.1f})")
     print("import rtreflect.cli, self time per top-level package (-X importtime, wall):")
     for name, seconds in import_breakdown(env)[:12]:
         print(f"  {name:<24} {seconds:.3f}")
