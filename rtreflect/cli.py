@@ -854,7 +854,7 @@ def exit_now(code: int | str | None) -> "NoReturn":  # noqa: F821
     The exit handlers still run (`atexit`: temporary folders removed, log and worker-process cleanup),
     and stdout and stderr are flushed; every output file is closed by then (written to a temporary,
     closed, renamed). What is skipped is freeing every module and object one by one, numba's and
-    LLVM's ~10⁵ above all: ~0.3 s CPU of a small render, which the OS reclaims at once. Where a
+    LLVM's above all: 0.3–0.4 s CPU after a small render, which the OS reclaims at once. Where a
     thread other than daemons is still running, the ordinary exit waits for it instead.
     """
     if isinstance(code, str):

@@ -42,6 +42,7 @@ class PatchMesh:
 
     @cached_property
     def edges_unique_length(self) -> np.ndarray:
+        """(E,) the lengths of `edges_unique` (summed as trimesh's row norm did, so bit for bit its values)."""
         vector = self.vertices[self.edges_unique[:, 0]] - self.vertices[self.edges_unique[:, 1]]
         return np.sqrt(np.dot(vector**2, [1, 1, 1]))
 
