@@ -108,3 +108,72 @@ def test_flipping_the_normal_negates_the_mean_and_principal_curvatures_but_not_K
     np.testing.assert_allclose(b.k1, -a.k2, atol=1e-12)
     np.testing.assert_allclose(b.k2, -a.k1, atol=1e-12)
     assert np.all(a.k1 >= a.k2)
+
+
+# -- The compiled kernel against the numpy formulas it replaced (kept here as the reference) ----------
+
+def reference_curvatures(d, n):
+    """K, H, κ1, κ2 by the module doc's formulas in numpy (the implementation before the kernel)."""
+    dot = lambda a, b: np.einsum("ij,ij->i", a, b)  # noqa: E731
+    E, F, G = dot(d.Su, d.Su), dot(d.Su, d.Sv), dot(d.Sv, d.Sv)
+    L, M, N = dot(d.Suu, n), dot(d.Suv, n), dot(d.Svv, n)
+    det = E * G - F * F
+    K = (L * N - M * M) / det
+    H = (E * N - 2 * F * M + G * L) / (2 * det)
+    root = np.sqrt(np.maximum(H * H - K, 0.0))
+    return K, H, H + root, H - root, (E, F, G, L, M, N)
+
+
+def two_patches():
+    sphere = revolve([(2.0, 0.0, 1.0), (2.0, 2.0, SQRT_HALF), (0.0, 2.0, 1.0)])
+    torus = revolve([(3.0, 1.0, 1.0), (2.0, 1.0, SQRT_HALF), (2.0, 0.0, 1.0)])
+    return sphere, torus
+
+
+def test_kernel_curvatures_match_the_numpy_formulas_to_rounding():
+    for surface in two_patches():
+        d, n = sample(surface, count=300, seed=11)
+        got = curvatures(d, n)
+        *want, _ = reference_curvatures(d, n)
+        np.testing.assert_allclose(got.K, want[0], rtol=1e-11, atol=1e-12)
+        np.testing.assert_allclose(got.H, want[1], rtol=1e-11, atol=1e-12)
+        # κ1,2 = H ± √(H² − K): at the sphere's umbilics the root of a rounding-sized H² − K is ~1e-8.
+        np.testing.assert_allclose(got.k1, want[2], atol=1e-7)
+        np.testing.assert_allclose(got.k2, want[3], atol=1e-7)
+
+
+def test_fused_curvatures_at_equal_evaluate_then_curvatures_bit_for_bit_on_a_mix_of_patches():
+    from rtreflect.geometry.curvature import curvatures_at
+    from rtreflect.geometry.surfaces import SurfaceSet
+
+    surfaces = SurfaceSet(list(two_patches()))
+    rng = np.random.default_rng(5)
+    count = 400
+    patch = rng.integers(-1, 2, count)  # −1: a ray that hit nothing
+    u, v = rng.uniform(0.05, 0.95, (2, count))
+    u[patch < 0] = np.nan
+    d = surfaces.evaluate(patch, u, v, order=2)
+    n = -surfaces.normals(patch, u, v, d)  # signed as the caller gives them (here: flipped)
+    fused = curvatures_at(surfaces, patch, u, v, n)
+    hit = patch >= 0
+    assert 100 < hit.sum() < count
+    two_pass = curvatures(type(d)(*(x[hit] for x in d)), n[hit])
+    for a, b in zip(fused, two_pass):
+        assert np.array_equal(a[hit], b)
+        assert np.isnan(a[~hit]).all()
+    # and both are the closed form: the sphere's |κ1| = |κ2| = 1/r.
+    on_sphere = patch == 0
+    np.testing.assert_allclose(np.abs(fused.k1[on_sphere]), 0.5, atol=1e-7)
+    np.testing.assert_allclose(np.abs(fused.k2[on_sphere]), 0.5, atol=1e-7)
+
+
+def test_kernel_normal_curvature_matches_the_numpy_formula():
+    _, torus = two_patches()
+    d, n = sample(torus, count=200, seed=2)
+    rng = np.random.default_rng(4)
+    w = np.cross(n, rng.normal(size=(len(n), 3)))  # a random tangent direction
+    *_, (E, F, G, L, M, N) = reference_curvatures(d, n)
+    wu, wv = np.einsum("ij,ij->i", w, d.Su), np.einsum("ij,ij->i", w, d.Sv)
+    a, b = (G * wu - F * wv) / (E * G - F * F), (E * wv - F * wu) / (E * G - F * F)
+    want = (L * a * a + 2 * M * a * b + N * b * b) / (E * a * a + 2 * F * a * b + G * b * b)
+    np.testing.assert_allclose(normal_curvature(d, n, w), want, rtol=1e-10)

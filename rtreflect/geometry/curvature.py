@@ -14,6 +14,10 @@ Signs follow the normal n given: a curvature is positive where the surface bends
 S_uu, S_uv, S_vv of `NurbsSurface.evaluate(order=2)` are already those of the rational surface.
 At a degenerate point (EG − F² = 0: a pole, a collapsed edge) the forms do not define the
 curvature and the values are NaN.
+
+The formulas live in one place, the compiled kernel (`kernels.nurbs.fundamental_forms_at`,
+`curvature_of`); this module marshals arrays. `curvatures_at` fuses them with the order-2
+evaluation, per point in registers (the renderer's K, H, k1, k2 AOVs).
 """
 
 from __future__ import annotations
@@ -22,25 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.einsum("...j,...j->...", a, b)
-
-
-class FundamentalForms(NamedTuple):
-    """I = (E, F, G) and II = (L, M, N) at N points."""
-
-    E: np.ndarray
-    F: np.ndarray
-    G: np.ndarray
-    L: np.ndarray
-    M: np.ndarray
-    N: np.ndarray
-
-    @property
-    def det_first(self) -> np.ndarray:
-        """EG − F² = |S_u × S_v|²."""
-        return self.E * self.G - self.F * self.F
+from ..kernels import nurbs as kernel
 
 
 class Curvatures(NamedTuple):
@@ -52,30 +38,37 @@ class Curvatures(NamedTuple):
     k2: np.ndarray
 
 
-def fundamental_forms(derivs, n: np.ndarray) -> FundamentalForms:
-    """E, F, G, L, M, N from `SurfaceDerivatives` of order 2 and unit normals n (N, 3)."""
-    return FundamentalForms(_dot(derivs.Su, derivs.Su), _dot(derivs.Su, derivs.Sv), _dot(derivs.Sv, derivs.Sv),
-                            _dot(derivs.Suu, n), _dot(derivs.Suv, n), _dot(derivs.Svv, n))
+def _f64(x: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=np.float64)
 
 
 def curvatures(derivs, n: np.ndarray) -> Curvatures:
-    """K, H, κ1, κ2 from the fundamental forms at each point (module doc); NaN at degenerate points."""
-    f = fundamental_forms(derivs, n)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        det = np.where(f.det_first > 0, f.det_first, np.nan)
-        K = (f.L * f.N - f.M * f.M) / det
-        H = (f.E * f.N - 2.0 * f.F * f.M + f.G * f.L) / (2.0 * det)
-    # H² − K = ((κ1 − κ2)/2)² ≥ 0; rounding makes it slightly negative at umbilics (a sphere): clamp.
-    root = np.sqrt(np.maximum(H * H - K, 0.0))
-    return Curvatures(K, H, H + root, H - root)
+    """K, H, κ1, κ2 from `SurfaceDerivatives` of order 2 and unit normals n (N, 3) (module doc); NaN at degenerate points.
+
+    The formulas are the kernel's (`kernels.nurbs.curvature_of`), point by point.
+    """
+    n = _f64(n).reshape(-1, 3)
+    out = np.empty((4, n.shape[0]))
+    kernel.curvatures(_f64(derivs.Su), _f64(derivs.Sv), _f64(derivs.Suu), _f64(derivs.Suv), _f64(derivs.Svv), n, out)
+    return Curvatures(*out)
+
+
+def curvatures_at(surfaces, patch: np.ndarray, u: np.ndarray, v: np.ndarray, n: np.ndarray) -> Curvatures:
+    """K, H, κ1, κ2 at points (patch, u, v) of a `SurfaceSet` with unit normals n: `curvatures` of the order-2
+    derivatives there, evaluated and reduced in one kernel pass (`kernels.nurbs.curvatures_at`). NaN where patch < 0."""
+    patch = np.ascontiguousarray(patch, dtype=np.int64).ravel()
+    out = np.empty((4, patch.shape[0]))
+    kernel.curvatures_at(*surfaces.table.args, patch, _f64(u).ravel(), _f64(v).ravel(), _f64(n).reshape(-1, 3), out)
+    return Curvatures(*out)
 
 
 def normal_curvature(derivs, n: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """κ(w) = II(w, w) / I(w, w) at each point, w a tangent vector written as a S_u + b S_v (do Carmo 3-2)."""
-    f = fundamental_forms(derivs, n)
-    wu, wv = _dot(w, derivs.Su), _dot(w, derivs.Sv)
-    det = f.det_first
-    a = (f.G * wu - f.F * wv) / det
-    b = (f.E * wv - f.F * wu) / det
-    first = f.E * a * a + 2.0 * f.F * a * b + f.G * b * b
-    return (f.L * a * a + 2.0 * f.M * a * b + f.N * b * b) / first
+    """κ(w) = II(w, w) / I(w, w) at each point, w a tangent vector written as a S_u + b S_v (do Carmo 3-2).
+
+    By the kernel `kernels.nurbs.normal_curvatures`, from the same fundamental forms as `curvatures`.
+    """
+    n = _f64(n).reshape(-1, 3)
+    out = np.empty(n.shape[0])
+    kernel.normal_curvatures(_f64(derivs.Su), _f64(derivs.Sv), _f64(derivs.Suu), _f64(derivs.Suv), _f64(derivs.Svv),
+                             n, _f64(w).reshape(-1, 3), out)
+    return out

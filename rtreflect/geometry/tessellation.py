@@ -1,4 +1,4 @@
-"""Tessellation: each patch to a trimesh mesh whose vertices carry (u, v) and the patch index.
+"""Tessellation: each patch to a triangle mesh (`PatchMesh`) whose vertices carry (u, v) and the patch index.
 
 The mesh only *finds* hits (DESIGN.md); the exact point and normal come from the
 NURBS evaluator afterwards. Each knot span gets ``tessellation`` segments per
@@ -17,9 +17,49 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-import trimesh
 
 from .surfaces import NurbsSurface
+
+
+@dataclass(frozen=True)
+class PatchMesh:
+    """One patch's triangles: vertices (V, 3), faces (F, 3) and per vertex its (u, v), patch index and rim flag.
+
+    Plain arrays (trimesh's `Trimesh` served only as this container and cost every process ~0.5 s of
+    imports, scipy included).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uv: np.ndarray
+    patch: np.ndarray
+    rim: np.ndarray
+
+    @cached_property
+    def edges_unique(self) -> np.ndarray:
+        """(E, 2) each edge once, its vertex indices sorted (`unique_edges`)."""
+        return unique_edges(self.faces)
+
+    @cached_property
+    def edges_unique_length(self) -> np.ndarray:
+        """(E,) the lengths of `edges_unique` (summed as trimesh's row norm did, so bit for bit its values)."""
+        vector = self.vertices[self.edges_unique[:, 0]] - self.vertices[self.edges_unique[:, 1]]
+        return np.sqrt(np.dot(vector**2, [1, 1, 1]))
+
+
+def _edge_keys(pairs: np.ndarray, major: int) -> tuple[np.ndarray, int]:
+    """One int64 per vertex pair, ordered by column ``major`` then the other: sorting keys sorts the pairs
+    lexicographically, as ``np.unique(..., axis=0)`` does on its rows, but as one integer sort (~10× faster)."""
+    base = int(pairs.max(initial=0)) + 1
+    return pairs[:, major] * base + pairs[:, 1 - major], base
+
+
+def unique_edges(faces: np.ndarray) -> np.ndarray:
+    """(E, 2) every edge of the triangles once, as (smaller, larger) vertex, in lexicographic order."""
+    pairs = np.sort(np.asarray(faces, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    keys, base = _edge_keys(pairs, 0)
+    keys = np.unique(keys)
+    return np.stack([keys // base, keys % base], axis=1)
 
 
 def span_samples(breaks: np.ndarray, per_span: int) -> np.ndarray:
@@ -51,10 +91,10 @@ def grid_faces(nu: int, nv: int) -> np.ndarray:
 
 
 def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enclose: bool = False,
-                     widen: bool = False) -> trimesh.Trimesh:
+                     widen: bool = False) -> PatchMesh:
     """A mesh of one patch (of its trimmed face, see the module doc).
 
-    ``vertex_attributes`` hold ``uv`` (V, 2), ``patch`` (V,) and ``rim`` (V,): the vertices on the face's
+    Per vertex ``uv`` (V, 2), ``patch`` (V,) and ``rim`` (V,): the vertices on the face's
     boundary (domain edge, or the trimmed mesh's boundary), where a neighbouring face may join.
     """
     if surface.mesh_uv is not None:
@@ -76,13 +116,9 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enc
         points = _enclosing(surface, uv, points, faces, rim)
     if widen and surface.mesh_uv is None and surface.trim is None:
         points = _widened(surface, uv, points, faces, rim)
-    return trimesh.Trimesh(
-        vertices=points,
-        faces=faces,
-        vertex_attributes={"uv": uv, "patch": np.full(len(uv), patch_index), "rim": np.isin(np.arange(len(uv)), rim)},
-        process=False,  # keep the grid as built: merging would mix vertices of different (u, v)
-        validate=False,
-    )
+    # The grid as built, never merged: merging would mix vertices of different (u, v).
+    return PatchMesh(np.ascontiguousarray(points, dtype=np.float64), np.asarray(faces, dtype=np.int64), uv,
+                     np.full(len(uv), patch_index), np.isin(np.arange(len(uv)), rim))
 
 
 #: Boundary vertices the seam restart asks the k-d tree for at first (more for points whose nearest all lie on their own face).
@@ -99,7 +135,7 @@ class Tessellation:
     vertex_patch: np.ndarray  # (V,)
     face_patch: np.ndarray  # (F,)
     chord_error: np.ndarray  # per patch: largest mesh-to-surface distance found at edge midpoints
-    meshes: tuple[trimesh.Trimesh, ...]
+    meshes: tuple[PatchMesh, ...]
     boundary: np.ndarray  # indices of the vertices on a face's mesh boundary (where a neighbour may join)
     edge_length: np.ndarray  # per patch: its longest mesh edge
 
@@ -132,7 +168,9 @@ class Tessellation:
         patch_out = np.full(len(points), -1)
         uv_out = np.full((len(points), 2), np.nan)
         dist_out = np.full(len(points), np.inf)
-        if len(self.boundary) == 0 or len(points) == 0:
+        # One patch and no far side of its own seam to look for: no other vertex can qualify, and the tree
+        # (scipy.spatial: ~0.1 s to import) is not built.
+        if len(self.boundary) == 0 or len(points) == 0 or (uv is None and np.all(self.vertex_patch == self.vertex_patch[0])):
             return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
         tree, cand_patch = self._boundary_tree
         todo = np.arange(len(points))
@@ -191,17 +229,17 @@ class Tessellation:
         return cKDTree(self.vertices[self.boundary]), self.vertex_patch[self.boundary]
 
 
-def _chord_error(surface: NurbsSurface, mesh: trimesh.Trimesh) -> float:
+def _chord_error(surface: NurbsSurface, mesh: PatchMesh) -> float:
     """Largest distance between the mesh and the surface, sampled at the midpoints of every triangle edge
     and at the vertices (which `_enclosing` moves off the surface).
 
     Edge midpoints, not centroids: a chord strays farthest from the surface at its middle.
     """
     edges = mesh.edges_unique
-    uv = mesh.vertex_attributes["uv"][edges].mean(axis=1)
+    uv = mesh.uv[edges].mean(axis=1)
     exact = surface.evaluate(uv[:, 0], uv[:, 1]).S
     chord_mid = mesh.vertices[edges].mean(axis=1)
-    vertex_uv = mesh.vertex_attributes["uv"]
+    vertex_uv = mesh.uv
     at_vertices = np.linalg.norm(surface.evaluate(vertex_uv[:, 0], vertex_uv[:, 1]).S - mesh.vertices, axis=1)
     return float(max(np.max(np.linalg.norm(exact - chord_mid, axis=1), initial=0.0), np.max(at_vertices, initial=0.0)))
 
@@ -226,7 +264,7 @@ def _enclosing(surface: NurbsSurface, uv: np.ndarray, points: np.ndarray, faces:
     """
     if len(faces) == 0:
         return points
-    edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
+    edges = unique_edges(faces)
     mid = uv[edges].mean(axis=1)
     deviation = surface.evaluate(mid[:, 0], mid[:, 1]).S - points[edges].mean(axis=1)
     normal = surface.normals(uv[:, 0], uv[:, 1])
@@ -282,12 +320,12 @@ def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span
     return Tessellation(
         vertices=np.concatenate([m.vertices for m in meshes]),
         faces=np.concatenate([m.faces + off for m, off in zip(meshes, offsets)]),
-        vertex_uv=np.concatenate([m.vertex_attributes["uv"] for m in meshes]),
-        vertex_patch=np.concatenate([m.vertex_attributes["patch"] for m in meshes]),
+        vertex_uv=np.concatenate([m.uv for m in meshes]),
+        vertex_patch=np.concatenate([m.patch for m in meshes]),
         face_patch=np.concatenate([np.full(len(m.faces), k) for k, m in enumerate(meshes)]),
         chord_error=np.array([_chord_error(s, m) for s, m in zip(surfaces, meshes)]),
         meshes=meshes,
-        boundary=np.concatenate([np.flatnonzero(m.vertex_attributes["rim"]) + off for m, off in zip(meshes, offsets)]),
+        boundary=np.concatenate([np.flatnonzero(m.rim) + off for m, off in zip(meshes, offsets)]),
         edge_length=np.array([float(m.edges_unique_length.max(initial=0.0)) for m in meshes]),
     )
 
@@ -349,8 +387,19 @@ def _clip_to_trim(uv: np.ndarray, faces: np.ndarray, trim) -> tuple[np.ndarray, 
 
 
 def _once(edges: np.ndarray) -> np.ndarray:
-    """Rows of an (E, 2) edge list whose edge (either direction) occurs once: the mesh's boundary edges."""
-    return trimesh.grouping.group_rows(np.sort(edges, axis=1), require_count=1)
+    """Rows of an (E, 2) edge list whose edge (either direction) occurs once: the mesh's boundary edges.
+
+    In the order of the sorted pair (larger vertex, then smaller): trimesh's ``group_rows(..., require_count=1)``,
+    which this replaces, gives that order, and the skirt's vertices (`_with_skirt`) are numbered by it.
+    """
+    if len(edges) == 0:
+        return np.zeros(0, dtype=np.int64)
+    keys, _ = _edge_keys(np.sort(edges, axis=1), 1)
+    order = np.argsort(keys, kind="stable")
+    keys = keys[order]
+    first = np.r_[True, keys[1:] != keys[:-1]]  # first of a run of equal edges
+    last = np.r_[first[1:], True]
+    return order[first & last]
 
 
 def _boundary_edges(faces: np.ndarray) -> np.ndarray:

@@ -33,7 +33,7 @@ from ..modes.reflection import ReflectionMode
 from ..modes.registry import mode_of
 from ..trace.meshnormals import trace_mesh, vertex_normals
 from ..exchange.scene import ImageSpec, Scene
-from ..geometry.curvature import curvatures
+from ..geometry.curvature import curvatures_at
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
 from ..trace.secondlook import SecondLook
@@ -253,14 +253,15 @@ class Renderer:
             f = np.full(len(hits.hit), np.nan)
             idx = np.flatnonzero(hits.hit)
             f[idx] = self.lights.ulmet_f(hits.P[idx], shading.s[idx])
-            phi = np.full(len(hits.hit), np.nan)
-            phi[idx] = self.mode.phi(SurfacePoints(hits.P[idx], hits.N[idx], shading.s[idx], hits.patch[idx],
-                                                   hits.u[idx], hits.v[idx]))
-            # K, H, κ1, κ2 from the fundamental forms at the exact hit, signed with N as written (facing the ray).
-            curv = np.full((4, len(hits.hit)), np.nan)
-            if len(idx):
-                derivs = self.surfaces.evaluate(hits.patch[idx], hits.u[idx], hits.v[idx], order=2)
-                curv[:, idx] = curvatures(derivs, hits.N[idx])
+            if isinstance(self.mode, ReflectionMode):  # its φ is Ulmet's f itself: not computed twice
+                phi = f
+            else:
+                phi = np.full(len(hits.hit), np.nan)
+                phi[idx] = self.mode.phi(SurfacePoints(hits.P[idx], hits.N[idx], shading.s[idx], hits.patch[idx],
+                                                       hits.u[idx], hits.v[idx]))
+            # K, H, κ1, κ2 from the fundamental forms at the exact hit, signed with N as written (facing the ray):
+            # one kernel pass over every ray (NaN where none hit).
+            curv = curvatures_at(self.surfaces, np.where(hits.hit, hits.patch, -1), hits.u, hits.v, hits.N)
         return {"P": hits.P, "N": hits.N, "u": hits.u, "v": hits.v, "patch": hits.patch.astype(np.float64),
                 "Z": hits.t, "f": f, "line.id": shading.line_id.astype(np.float64), "line.dist": shading.line_dist,
                 "phi": phi, "K": curv[0], "H": curv[1], "k1": curv[2], "k2": curv[3], "shading": shading}

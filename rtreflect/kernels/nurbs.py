@@ -446,3 +446,79 @@ def newton(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offse
         converged[i] = ok
         for c in range(3):
             S[i, c], Su[i, c], Sv[i, c] = d[0, c], d[1, c], d[2, c]
+
+
+# -- Curvature from the fundamental forms (`geometry.curvature`) -----------------------------------
+# In this file for the same reason as `newton`: the fused kernel inlines `point_at`.
+
+
+@njit(inline="always", **JIT)
+def fundamental_forms_at(Su, Sv, Suu, Suv, Svv, n):
+    """I = (E, F, G) = (S_u·S_u, S_u·S_v, S_v·S_v) and II = (L, M, N) = (S_uu·n, S_uv·n, S_vv·n) (do Carmo 3-3)."""
+    E = Su[0] * Su[0] + Su[1] * Su[1] + Su[2] * Su[2]
+    F = Su[0] * Sv[0] + Su[1] * Sv[1] + Su[2] * Sv[2]
+    G = Sv[0] * Sv[0] + Sv[1] * Sv[1] + Sv[2] * Sv[2]
+    L = Suu[0] * n[0] + Suu[1] * n[1] + Suu[2] * n[2]
+    M = Suv[0] * n[0] + Suv[1] * n[1] + Suv[2] * n[2]
+    N = Svv[0] * n[0] + Svv[1] * n[1] + Svv[2] * n[2]
+    return E, F, G, L, M, N
+
+
+@njit(inline="always", **JIT)
+def curvature_of(E, F, G, L, M, N):
+    """(K, H, κ1, κ2) from the fundamental forms; NaN where EG − F² is not > 0 (`geometry.curvature`).
+
+    K = (LN − M²)/(EG − F²), H = (EN − 2FM + GL)/(2(EG − F²)), κ1,2 = H ± √(H² − K), the root's
+    argument clamped at 0 (rounding makes it slightly negative at umbilics).
+    """
+    det = E * G - F * F
+    if not det > 0:
+        return np.nan, np.nan, np.nan, np.nan
+    K = (L * N - M * M) / det
+    H = (E * N - 2.0 * F * M + G * L) / (2.0 * det)
+    spread = H * H - K
+    root = math.sqrt(spread) if spread > 0 else 0.0
+    if spread != spread:  # NaN in, NaN out (as numpy's maximum)
+        root = np.nan
+    return K, H, H + root, H - root
+
+
+@njit(**JIT)
+def curvatures(Su, Sv, Suu, Suv, Svv, n, out):
+    """`curvature_of` at every row of the (N, 3) derivatives and unit normals n; out (4, N): K, H, κ1, κ2."""
+    for i in range(n.shape[0]):
+        E, F, G, L, M, N = fundamental_forms_at(Su[i], Sv[i], Suu[i], Suv[i], Svv[i], n[i])
+        out[0, i], out[1, i], out[2, i], out[3, i] = curvature_of(E, F, G, L, M, N)
+
+
+@njit(**JIT)
+def normal_curvatures(Su, Sv, Suu, Suv, Svv, n, w, out):
+    """κ(w) = II(w, w)/I(w, w) per row, w a tangent vector written as a S_u + b S_v (do Carmo 3-2): (a, b) from
+    w·S_u = aE + bF, w·S_v = aF + bG by Cramer's rule."""
+    for i in range(n.shape[0]):
+        E, F, G, L, M, N = fundamental_forms_at(Su[i], Sv[i], Suu[i], Suv[i], Svv[i], n[i])
+        wu = w[i, 0] * Su[i, 0] + w[i, 1] * Su[i, 1] + w[i, 2] * Su[i, 2]
+        wv = w[i, 0] * Sv[i, 0] + w[i, 1] * Sv[i, 1] + w[i, 2] * Sv[i, 2]
+        det = E * G - F * F
+        a = (G * wu - F * wv) / det
+        b = (E * wv - F * wu) / det
+        first = E * a * a + 2.0 * F * a * b + G * b * b
+        out[i] = (L * a * a + 2.0 * M * a * b + N * b * b) / first
+
+
+@njit(**JIT)
+def curvatures_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
+                  patch, u, v, n, out):
+    """K, H, κ1, κ2 of points (patch, u, v) with unit normals n into out (4, N), fused: `point_at` of order 2
+    and `curvature_of` per point in registers, no (N, 3) derivative arrays. Rows with patch < 0: NaN."""
+    scratch = new_scratch(max_degree)
+    d = np.empty((6, 3))
+    for i in range(patch.shape[0]):
+        k = patch[i]
+        if k < 0:
+            out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
+            continue
+        point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, u[i], v[i], 2, d,
+                 scratch)
+        E, F, G, L, M, N = fundamental_forms_at(d[1], d[2], d[3], d[4], d[5], n[i])
+        out[0, i], out[1, i], out[2, i], out[3, i] = curvature_of(E, F, G, L, M, N)
