@@ -37,10 +37,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from .accelerator import Accelerator
-from .tracing import FLOAT32_SLACK, Hits, trace
+from .accelerator import Accelerator, MeshHits
+from .tracing import FLOAT32_SLACK, VALID, Hits, _candidates, facing, trace
 from ..clock import NULL_CLOCK, StageClock
-from ..geometry.surfaces import SurfaceSet
+from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
 
 #: Half-thickness of the shell in chord errors: the mesh-to-surface distance is sampled at edge
@@ -82,9 +82,10 @@ def subdivided(nodes: np.ndarray, triangles: np.ndarray, levels: int) -> tuple[n
     return nodes, triangles
 
 
-def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator, np.ndarray]:
-    """A BVH of the mesh moved by ±`SHELL_CHORDS` chord errors along the exact normals (module doc, step 1),
-    and each of its triangles' face."""
+def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator, Tessellation]:
+    """A BVH of the mesh moved by ±`SHELL_CHORDS` chord errors along the exact normals (module doc, step 1), and
+    the shell as a `Tessellation` (each sheet's vertices keep their (u, v) and face; a wall triangle's face is that
+    of its rim edge), so a shell hit gives a starting (u, v) as a mesh hit does (`Tessellation.start_parameters`)."""
     normal = np.nan_to_num(surfaces.normals(tessellation.vertex_patch, tessellation.vertex_uv[:, 0],
                                             tessellation.vertex_uv[:, 1]))  # degenerate points: not moved
     delta = (SHELL_CHORDS * tessellation.chord_error[tessellation.vertex_patch])[:, None] * normal
@@ -97,7 +98,11 @@ def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator
     walls = np.concatenate([np.stack([a, b, b + n], 1), np.stack([a, b + n, a + n], 1)])
     patch = tessellation.face_patch
     shell_patch = np.concatenate([patch, patch, np.tile(patch[rim % len(faces)], 2)])
-    return Accelerator(replace(tessellation, vertices=vertices, faces=np.concatenate([faces, faces + n, walls]))), shell_patch
+    shelled = replace(tessellation, vertices=vertices, faces=np.concatenate([faces, faces + n, walls]),
+                      vertex_uv=np.concatenate([tessellation.vertex_uv] * 2),
+                      vertex_patch=np.concatenate([tessellation.vertex_patch] * 2), face_patch=shell_patch,
+                      boundary=np.concatenate([tessellation.boundary, tessellation.boundary + n]))
+    return Accelerator(shelled), shelled
 
 
 class SecondLook:
@@ -106,7 +111,8 @@ class SecondLook:
     def __init__(self, scene_surfaces, per_span: int, tessellation: Tessellation, surfaces: SurfaceSet):
         self._scene_surfaces, self._per_span = list(scene_surfaces), per_span
         self.tessellation, self.surfaces = tessellation, surfaces
-        self.shell, self._shell_patch = shell(tessellation, surfaces)
+        self.shell, self.shell_mesh = shell(tessellation, surfaces)
+        self._shell_patch = self.shell_mesh.face_patch
         self._reach = 2.0 * SHELL_CHORDS * float(tessellation.chord_error.max(initial=0.0))
         self._lock = threading.Lock()
         self._fine: tuple[Tessellation, Accelerator] | None = None
@@ -122,8 +128,12 @@ class SecondLook:
                 self._fine = fine, Accelerator(fine)
             return self._fine
 
-    def suspects(self, hits: Hits, origins: np.ndarray, directions: np.ndarray, far: np.ndarray) -> np.ndarray:
-        """Indices of the rays to look at again (module doc, step 1)."""
+    def suspects(self, hits: Hits, origins: np.ndarray, directions: np.ndarray,
+                 far: np.ndarray) -> tuple[np.ndarray, MeshHits]:
+        """Indices of the rays to look at again (module doc, step 1), and per ray the shell hit that made it a
+        suspect (prim −1 where none did: grazing, ``aside``, a fallback or still walking)."""
+        n = len(origins)
+        entry = MeshHits(np.full(n, -1), np.zeros(n), np.zeros(n), np.full(n, np.nan))
         cos = np.abs(np.einsum("ij,ij->i", np.nan_to_num(hits.N), directions))
         slack = FLOAT32_SLACK * self.tessellation.extent
         with np.errstate(divide="ignore"):
@@ -143,25 +153,56 @@ class SecondLook:
             met = mesh.prim >= 0
             t = mesh.t + start
             own = met & (self._shell_patch[np.maximum(mesh.prim, 0)] == hits.patch[rays]) & (t >= passage[rays])
-            look[rays[met & ~own]] = True
+            other = met & ~own
+            look[rays[other]] = True
+            for have, new in zip(entry, (mesh.prim, mesh.b1, mesh.b2, t)):
+                have[rays[other]] = new[other]
             rays, start, end = rays[own], t[own] + skip, end[own]
         look[rays] = True  # still walking after SHELL_STEPS: looked at again rather than passed
-        return np.flatnonzero(look)
+        # Suspects not walked (grazing, aside) or still walking: their first shell hit is refined too (step 3).
+        rays = np.flatnonzero(look & ~hits.fallback & (entry.prim < 0))
+        if len(rays):
+            end = np.where(hits.hit[rays], hits.t[rays] - slack, far[rays])
+            mesh = self.shell.intersect(origins[rays], directions[rays], end)
+            for have, new in zip(entry, mesh):
+                have[rays] = new
+        return np.flatnonzero(look), entry
 
     def apply(self, hits: Hits, origins: np.ndarray, directions: np.ndarray, far: np.ndarray,
               clock: StageClock = NULL_CLOCK) -> Hits:
         """``hits`` (from `trace` on the coarse mesh) with the suspects' nearer hits, in place (module doc)."""
         with clock.stage("second look"):
-            rays = self.suspects(hits, origins, directions, far)
+            rays, entry = self.suspects(hits, origins, directions, far)
             if len(rays) == 0:
                 return hits
             fine, accelerator = self.fine()
             kept = np.where(hits.hit[rays], hits.t[rays], far[rays])
             again = trace(accelerator, fine, self.surfaces, origins[rays], directions[rays], max_distance=kept)
             # The same root refined from another start agrees to Newton's tolerance: nearer means beyond float32 rounding.
-            nearer = again.hit & ~again.fallback & (again.t < kept - FLOAT32_SLACK * self.tessellation.extent)
+            slack = FLOAT32_SLACK * self.tessellation.extent
+            nearer = again.hit & ~again.fallback & (again.t < kept - slack)
             rows = rays[nearer]
             for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside"):
                 getattr(hits, name)[rows] = getattr(again, name)[nearer]
             hits.fallback[rays[again.fallback]] = True
+            self._from_shell(hits, origins, directions, far, rays, entry)
         return hits
+
+    def _from_shell(self, hits: Hits, origins, directions, far, rays, entry: MeshHits) -> None:
+        """The suspects' shell hits of another sheet refined as candidates (module doc, step 3), in place."""
+        rays = rays[entry.prim[rays] >= 0]
+        rays = rays[~hits.fallback[rays]]
+        if len(rays) == 0:
+            return
+        O, D = origins[rays], directions[rays]
+        c = _candidates(self.shell_mesh, self.surfaces, O, D, entry.prim[rays], entry.b1[rays], entry.b2[rays],
+                        entry.t[rays])
+        kept = np.where(hits.hit[rays], hits.t[rays], far[rays])
+        nearer = (c.status == VALID) & (c.t < kept - FLOAT32_SLACK * self.tessellation.extent)
+        rows = rays[nearer]
+        if len(rows) == 0:
+            return
+        S = SurfaceDerivatives(c.derivs.S[nearer], c.derivs.Su[nearer], c.derivs.Sv[nearer])
+        hits.hit[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = True, c.patch[nearer], c.u[nearer], c.v[nearer]
+        hits.t[rows], hits.P[rows], hits.aside[rows] = c.t[nearer], S.S, True
+        hits.N[rows] = facing(self.surfaces.normals(c.patch[nearer], c.u[nearer], c.v[nearer], S), D[nearer])
