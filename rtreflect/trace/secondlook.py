@@ -38,7 +38,7 @@ from dataclasses import replace
 import numpy as np
 
 from .accelerator import Accelerator, MeshHits
-from .tracing import FLOAT32_SLACK, VALID, Hits, _candidates, facing, trace
+from .tracing import FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _on_domain_edge, _other_root, _rescue, facing, refine, trace
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
@@ -52,6 +52,9 @@ SHELL_STEPS = 6
 #: (the passage is 2δ/|N·D| long): such rays are looked at again. At 0.2 (78°) on the teapot at
 #: 960×540, ~6% of the hits; every wrong hit found there had |N·D| ≤ 0.16 at one of its two points.
 GRAZING_COS = 0.2
+#: Levenberg–Marquardt steps (`tracing._rescue`) where Newton from a shell hit fails: a start up to the shell's
+#: depth from the sheet, far along a grazing ray. 200 (the tracer's) on the saddle test; fewer left 3 of 468 rays on the plane.
+SHELL_RESCUE_STEPS = 60
 #: The finer mesh's segments per knot span, in multiples of the scene's: chord error ~1/16.
 FINE_FACTOR = 4
 #: A reader's triangulation (CAD faces, `mesh_uv`) is split this many times in (u, v), 4 triangles each (chord
@@ -189,20 +192,41 @@ class SecondLook:
         return hits
 
     def _from_shell(self, hits: Hits, origins, directions, far, rays, entry: MeshHits) -> None:
-        """The suspects' shell hits of another sheet refined as candidates (module doc, step 3), in place."""
-        rays = rays[entry.prim[rays] >= 0]
-        rays = rays[~hits.fallback[rays]]
+        """The suspects' shell hits refined by Newton (module doc, step 3), in place.
+
+        Any converged point on the ray, on its face, ahead of the eye and nearer than the kept hit is an exact
+        surface point before it, wherever Newton went; at grazing incidence the nearer of the sheet's two
+        crossings is sought as the tracer does (`tracing._other_root`). Newton only, no miss search: a start
+        that leads nowhere decides nothing (the finer mesh's trace has looked there too).
+        """
+        rays = rays[(entry.prim[rays] >= 0) & ~hits.fallback[rays]]
         if len(rays) == 0:
             return
         O, D = origins[rays], directions[rays]
-        c = _candidates(self.shell_mesh, self.surfaces, O, D, entry.prim[rays], entry.b1[rays], entry.b2[rays],
-                        entry.t[rays])
+        patch, u, v = self.shell_mesh.start_parameters(entry.prim[rays], entry.b1[rays], entry.b2[rays])
+        u0, v0 = u, v
+        u, v, derivs, converged = refine(self.surfaces, patch, u, v, O, D, entry.t[rays], self.tessellation.extent)
+        # Newton from a start far along a grazing ray can fail where the ray does meet the sheet: search there.
+        # (Not where Newton ran off the face's domain: the ray leaves the face there, as `tracing._candidates` decides.)
+        stuck = np.flatnonzero(~converged & ~_on_domain_edge(self.surfaces, patch, u, v))
+        if len(stuck):
+            tol = NEWTON_TOLERANCE * np.maximum(entry.t[rays][stuck], self.tessellation.extent)
+            u2, v2, d2, ok2, _, _ = _rescue(self.surfaces, patch[stuck], u0[stuck], v0[stuck], O[stuck], D[stuck], tol,
+                                            SHELL_RESCUE_STEPS)
+            u[stuck], v[stuck], converged[stuck] = u2, v2, ok2
+            for have, new in zip(derivs[:3], d2[:3]):
+                have[stuck] = new
+        t = np.einsum("ij,ij->i", derivs.S - O, D)
         kept = np.where(hits.hit[rays], hits.t[rays], far[rays])
-        nearer = (c.status == VALID) & (c.t < kept - FLOAT32_SLACK * self.tessellation.extent)
-        rows = rays[nearer]
-        if len(rows) == 0:
+        slack = FLOAT32_SLACK * self.tessellation.extent
+        ok = converged & (t > 0) & (t < kept - slack)
+        ok[ok] = self.surfaces.on_face(patch[ok], u[ok], v[ok])
+        rays, O, D, patch, u, v, t = (x[ok] for x in (rays, O, D, patch, u, v, t))
+        if len(rays) == 0:
             return
-        S = SurfaceDerivatives(c.derivs.S[nearer], c.derivs.Su[nearer], c.derivs.Sv[nearer])
-        hits.hit[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = True, c.patch[nearer], c.u[nearer], c.v[nearer]
-        hits.t[rows], hits.P[rows], hits.aside[rows] = c.t[nearer], S.S, True
-        hits.N[rows] = facing(self.surfaces.normals(c.patch[nearer], c.u[nearer], c.v[nearer], S), D[nearer])
+        derivs = SurfaceDerivatives(derivs.S[ok], derivs.Su[ok], derivs.Sv[ok])
+        _other_root(self.tessellation, self.surfaces, O, D, np.full(len(rays), VALID), patch, u, v, t, derivs,
+                    np.zeros(len(rays), dtype=bool))
+        hits.hit[rays], hits.patch[rays], hits.u[rays], hits.v[rays], hits.t[rays] = True, patch, u, v, t
+        hits.P[rays], hits.aside[rays] = derivs.S, True
+        hits.N[rays] = facing(self.surfaces.normals(patch, u, v, derivs), D)

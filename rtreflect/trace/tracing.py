@@ -173,7 +173,7 @@ def _on_domain_edge(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
 
 
 
-def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol):
+def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol, steps: int = RESCUE_STEPS):
     """Levenberg–Marquardt on the ray residual r = (e1·(S − O), e2·(S − O)) where Newton failed.
 
     A descent on |r|² from the mesh hit's (u, v), damped by Marquardt's diagonal scaling
@@ -192,7 +192,7 @@ def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol):
     converged = np.zeros(n, dtype=bool)
     stationary = np.zeros(n, dtype=bool)
     active = np.arange(n)
-    for _ in range(RESCUE_STEPS):
+    for _ in range(steps):
         rel = S[active] - origins[active]
         r1 = np.einsum("ij,ij->i", e1[active], rel)
         r2 = np.einsum("ij,ij->i", e2[active], rel)
