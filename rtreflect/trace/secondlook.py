@@ -55,6 +55,8 @@ GRAZING_COS = 0.2
 #: Levenberg–Marquardt steps (`tracing._rescue`) where Newton from a shell hit fails: a start up to the shell's
 #: depth from the sheet, far along a grazing ray. 200 (the tracer's) on the saddle test; fewer left 3 of 468 rays on the plane.
 SHELL_RESCUE_STEPS = 60
+#: Faces per block of `isolated`'s box tests (a block × all faces booleans, ×3 axes).
+ISOLATION_CHUNK = 512
 #: The finer mesh's segments per knot span, in multiples of the scene's: chord error ~1/16.
 FINE_FACTOR = 4
 #: A reader's triangulation (CAD faces, `mesh_uv`) is split this many times in (u, v), 4 triangles each (chord
@@ -108,6 +110,25 @@ def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator
     return Accelerator(shelled), shelled
 
 
+def isolated(shell_mesh: Tessellation, reach: float) -> np.ndarray:
+    """Per face: True where no other face's shell comes within ``reach`` of its own (bounding boxes: conservative).
+
+    A ray's passage of its kept hit lies within its face's shell's box grown by the longest passage,
+    so there it can meet no other face's shell: its walk is skipped (always so in a one-face scene).
+    """
+    faces = int(shell_mesh.vertex_patch.max(initial=-1)) + 1
+    lo, hi = np.full((faces, 3), np.inf), np.full((faces, 3), -np.inf)
+    np.minimum.at(lo, shell_mesh.vertex_patch, shell_mesh.vertices)
+    np.maximum.at(hi, shell_mesh.vertex_patch, shell_mesh.vertices)
+    alone = np.ones(faces, dtype=bool)
+    for first in range(0, faces, ISOLATION_CHUNK):  # faces × faces box tests, in bounded memory
+        rows = slice(first, min(first + ISOLATION_CHUNK, faces))
+        overlap = np.all((lo[rows, None] - reach <= hi[None]) & (lo[None] <= hi[rows, None] + reach), axis=2)
+        overlap[np.arange(overlap.shape[0]), np.arange(first, rows.stop)] = False  # a face and itself
+        alone[rows] = ~overlap.any(axis=1)
+    return alone
+
+
 class SecondLook:
     """Built once per scene from its surfaces (``scene_surfaces``, as read) and the coarse tessellation."""
 
@@ -117,6 +138,8 @@ class SecondLook:
         self.shell, self.shell_mesh = shell(tessellation, surfaces)
         self._shell_patch = self.shell_mesh.face_patch
         self._reach = 2.0 * SHELL_CHORDS * float(tessellation.chord_error.max(initial=0.0))
+        self.isolated = isolated(self.shell_mesh, self._reach / GRAZING_COS
+                                 + 2.0 * FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0))))
         self._lock = threading.Lock()
         self._fine: tuple[Tessellation, Accelerator] | None = None
 
@@ -142,9 +165,17 @@ class SecondLook:
         with np.errstate(divide="ignore"):
             passage = np.where(hits.hit, hits.t - self._reach / np.maximum(cos, GRAZING_COS) - slack, far)
         look = hits.hit & ~hits.fallback & ((cos < GRAZING_COS) | hits.aside)
-        # Any shell before the kept hit, but the kept face's own within its passage: walk the shell's hits.
         rays = np.flatnonzero(~look & ~hits.fallback)
-        start, end = np.zeros(len(rays)), np.where(hits.hit[rays], hits.t[rays] - slack, far[rays])
+        end = np.where(hits.hit[rays], hits.t[rays] - slack, far[rays])
+        # Any shell before the passage (for a ray that missed: anywhere) makes a suspect, whatever its face:
+        # Embree's occlusion query answers that, cheaper than the nearest hit (the entry is found below).
+        before = np.clip(np.minimum(passage[rays], end), 0.0, None)
+        look[rays[self.shell.occluded(origins[rays], directions[rays], before)]] = True
+        # Within the passage only another face's shell does: walk its hits, unless no other face's shell comes
+        # within the longest passage of the kept face's (`isolated`: then every hit there is its own).
+        rays = rays[~look[rays] & hits.hit[rays]]
+        rays = rays[~self.isolated[hits.patch[rays]]]
+        start, end = np.maximum(passage[rays], 0.0), hits.t[rays] - slack
         skip = FLOAT32_SLACK * (self.tessellation.extent + float(np.abs(self.tessellation.vertices).max(initial=0.0)))
         for _ in range(SHELL_STEPS):
             go = start < end
@@ -155,7 +186,7 @@ class SecondLook:
             mesh = self.shell.intersect(O + start[:, None] * D, D, end - start)
             met = mesh.prim >= 0
             t = mesh.t + start
-            own = met & (self._shell_patch[np.maximum(mesh.prim, 0)] == hits.patch[rays]) & (t >= passage[rays])
+            own = met & (self._shell_patch[np.maximum(mesh.prim, 0)] == hits.patch[rays])
             other = met & ~own
             look[rays[other]] = True
             for have, new in zip(entry, (mesh.prim, mesh.b1, mesh.b2, t)):
