@@ -8,23 +8,33 @@ a patch's rim, where the enclosing mesh keeps its vertices on the surface so nei
 or where it skims a saddle or a rim before the surface it stops on. The shipped teapot stored 63 such
 hits at 960×540 (tessellation 12) where the spout and handle meet the body.
 
-Two steps, each vectorised over the rays:
+Three steps, each vectorised over the rays:
 
 1. **Which rays.** A *shell* encloses every sheet on both sides: the coarse mesh's vertices moved by
    ±`SHELL_CHORDS` chord errors along the exact normal, closed by walls along each face's mesh
    boundary, so the surface, which lies within the chord error of its mesh, lies inside it. A ray
-   that comes within reach of a sheet enters its shell. A ray is suspect when its kept hit is grazing (|N·D| < `GRAZING_COS`), or when the shell has a
-   triangle before the kept hit other than its own face's within the passage of that hit
-   (t* − 2δ/|N·D|, the flat-sheet entry with a factor 2 for curvature): the shell's hits are walked
-   along the ray (at most `SHELL_STEPS`), so a neighbouring face the ray meets where it meets the
-   kept face's edge is not hidden behind it; or, for a ray that missed, any shell triangle; or
-   a hit the tracer found beside its mesh hit (``Hits.aside``: no mesh hit led there).
+   that comes within reach of a sheet enters its shell. A ray is suspect when its kept hit is grazing
+   (|N·D| < `GRAZING_COS`); or when the shell has a triangle before the *passage* of that hit
+   (t* − 2δ/|N·D|, the flat-sheet entry with a factor 2 for curvature), whatever its face (Embree's
+   occlusion query, cheaper than the nearest hit); or another face's shell triangle within the passage:
+   the shell's hits there are walked along the ray (at most `SHELL_STEPS`), so a neighbouring face the
+   ray meets where it meets the kept face's edge is not hidden behind it, except for faces no other
+   face's shell comes near (`isolated`); or, for a ray that missed, any shell triangle; or a hit the
+   tracer found beside its mesh hit (``Hits.aside``: no mesh hit led there).
 2. **Look again.** The suspects are traced once more by the same candidate search (`trace`) on a
    finer enclosing mesh (`FINE_FACTOR` × the scene's segments per knot span, a chord error ~1/16
    of the coarse one; a reader's triangulation split `FINE_LEVELS` times, ~1/4; an untrimmed face's
    edge vertices moved out past the edge, `tessellation._widened`), up to their kept
    hit. A valid hit nearer than the kept one by more than float32 rounding replaces it; an
    undecided one there flags the ray as a fallback.
+3. **From the shell.** An enclosing mesh covers a sheet on one side only (`tessellation._enclosing`):
+   where the surface is a saddle (the teapot's rim lip, 960×540 pixel (211, 570)) or the ray runs
+   along it for a while ((177, 621), |N·D| = 0.006), a ray can cross it at grazing incidence between
+   both meshes and their surface. The shell, which selected the ray, lies on both sides: the
+   suspect's first shell hit of another sheet (of any, for the grazing and ``aside`` suspects)
+   starts Newton on its face (a short miss search, `SHELL_RESCUE_STEPS`, where Newton fails inside
+   the domain); a point on the ray, on the face, nearer than the kept hit replaces it (at grazing
+   incidence the nearer of the sheet's two crossings, `tracing._other_root`).
 
 Rays not suspected keep their hits bit for bit. The fine mesh is built on the first suspect, once
 per scene (thread-safe), and bounded by `FINE_MAX_VERTICES`.
