@@ -175,12 +175,13 @@ class SecondLook:
         with np.errstate(divide="ignore"):
             passage = np.where(hits.hit, hits.t - self._reach / np.maximum(cos, GRAZING_COS) - slack, far)
         look = hits.hit & ~hits.fallback & ((cos < GRAZING_COS) | hits.aside)
-        rays = np.flatnonzero(~look & ~hits.fallback)
-        end = np.where(hits.hit[rays], hits.t[rays] - slack, far[rays])
+        ask = ~look & ~hits.fallback
         # Any shell before the passage (for a ray that missed: anywhere) makes a suspect, whatever its face:
-        # Embree's occlusion query answers that, cheaper than the nearest hit (the entry is found below).
-        before = np.clip(np.minimum(passage[rays], end), 0.0, None)
-        look[rays[self.shell.occluded(origins[rays], directions[rays], before)]] = True
+        # Embree's occlusion query answers that, cheaper than the nearest hit (the entry is found below). Asked of
+        # every ray (an empty segment for the others): gathering the rays first cost more than the query saves.
+        before = np.where(ask, np.clip(np.minimum(passage, np.where(hits.hit, hits.t - slack, far)), 0.0, None), 0.0)
+        look |= ask & self.shell.occluded(origins, directions, before)
+        rays = np.flatnonzero(ask)
         # Within the passage only another face's shell does: walk its hits, unless no other face's shell comes
         # within the longest passage of the kept face's (`isolated`: then every hit there is its own).
         rays = rays[~look[rays] & hits.hit[rays]]
