@@ -48,7 +48,8 @@ from dataclasses import replace
 import numpy as np
 
 from .accelerator import Accelerator, MeshHits
-from .tracing import FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _on_domain_edge, _other_root, _rescue, facing, refine, trace
+from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _on_domain_edge, _other_root, _rescue, facing,
+                      refine, trace)
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
@@ -168,8 +169,9 @@ class SecondLook:
 
     def suspects(self, hits: Hits, origins: np.ndarray, directions: np.ndarray,
                  far: np.ndarray) -> tuple[np.ndarray, MeshHits]:
-        """Indices of the rays to look at again (module doc, step 1), and per ray the shell hit that made it a
-        suspect (prim −1 where none did: grazing, ``aside``, a fallback or still walking)."""
+        """Indices of the rays to look at again (module doc, step 1), and per suspect the shell hit that made it
+        one, or for the others (grazing, ``aside``, blocked before the passage, still walking) its first shell hit
+        (step 3; prim −1 where there is none, and for every ray not suspected or a fallback)."""
         n = len(origins)
         entry = MeshHits(np.full(n, -1), np.zeros(n), np.zeros(n), np.full(n, np.nan))
         cos = np.abs(np.einsum("ij,ij->i", np.nan_to_num(hits.N), directions))
@@ -240,8 +242,9 @@ class SecondLook:
 
         Any converged point on the ray, on its face, ahead of the eye and nearer than the kept hit is an exact
         surface point before it, wherever Newton went; at grazing incidence the nearer of the sheet's two
-        crossings is sought as the tracer does (`tracing._other_root`). Newton only, no miss search: a start
-        that leads nowhere decides nothing (the finer mesh's trace has looked there too).
+        crossings is sought as the tracer does (`tracing._other_root`). Where Newton fails inside the domain a
+        short miss search (`SHELL_RESCUE_STEPS`) follows; a start that leads nowhere decides nothing (no miss
+        verdict, no fallback: the finer mesh's trace has looked there too).
         """
         rays = rays[(entry.prim[rays] >= 0) & ~hits.fallback[rays]]
         if len(rays) == 0:
