@@ -151,8 +151,9 @@ class SecondLook:
         self.shell, self.shell_mesh = shell(tessellation, surfaces)
         self._shell_patch = self.shell_mesh.face_patch
         self._reach = 2.0 * SHELL_CHORDS * float(tessellation.chord_error.max(initial=0.0))
-        self.isolated = isolated(self.shell_mesh, self._reach / GRAZING_COS
-                                 + 2.0 * FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0))))
+        # Past a shell hit by float32 rounding of the scene's largest coordinates, with margin (as `trace`'s).
+        self._skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+        self.isolated = isolated(self.shell_mesh, self._reach / GRAZING_COS + 2.0 * self._skip)
         self._lock = threading.Lock()
         self._fine: tuple[Tessellation, Accelerator] | None = None
 
@@ -191,7 +192,6 @@ class SecondLook:
         rays = rays[~look[rays] & hits.hit[rays]]
         rays = rays[~self.isolated[hits.patch[rays]]]
         start, end = np.maximum(passage[rays], 0.0), hits.t[rays] - slack
-        skip = FLOAT32_SLACK * (self.tessellation.extent + float(np.abs(self.tessellation.vertices).max(initial=0.0)))
         for _ in range(SHELL_STEPS):
             go = start < end
             rays, start, end = rays[go], start[go], end[go]
@@ -206,7 +206,7 @@ class SecondLook:
             look[rays[other]] = True
             for have, new in zip(entry, (mesh.prim, mesh.b1, mesh.b2, t)):
                 have[rays[other]] = new[other]
-            rays, start, end = rays[own], t[own] + skip, end[own]
+            rays, start, end = rays[own], t[own] + self._skip, end[own]
         look[rays] = True  # still walking after SHELL_STEPS: looked at again rather than passed
         # Suspects not walked (grazing, aside) or still walking: their first shell hit is refined too (step 3).
         rays = np.flatnonzero(look & ~hits.fallback & (entry.prim < 0))
