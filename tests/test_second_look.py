@@ -103,7 +103,7 @@ def test_a_ray_clipping_a_saddles_ridge_stops_at_its_first_crossing():
     """A saddle's enclosing mesh moves to one side (the deeper chords', along x): along y its ridge z = x₀² − y²/2
     pokes out of the mesh, of the coarse one and of the second look's 4× one alike. A ray along y at height
     x₀² − ε crosses the ridge twice, at y = ∓√(2ε), meeting no triangle of either mesh; it used to stop on the
-    plane behind (129 of these 468 rays) or on the farther crossing. The shell around the saddle (which
+    plane behind (96 of these 468 rays) or on the farther crossing (33). The shell around the saddle (which
     selects the ray) now starts a refinement of its own: the first hit is the closed form y = −√(2ε)."""
     scene = load_scene(SCENES / "hood.toml").with_image(32, 18, 1)
     plane = NurbsSurface.bezier(np.array([[[x, PLANE_Y, z] for z in (-1.0, 2.0)] for x in (-2.0, 2.0)]), name="plane")
