@@ -38,7 +38,8 @@ def measure(scene, repeat: int) -> tuple[int, int, float, float]:
     hits = trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
     far = np.full(len(origins), np.inf)
     look = renderer.second_look
-    suspects = len(look.suspects(hits, origins, directions, far)[0])
+    suspects = look.suspects(hits, origins, directions, far)
+    suspects = len(suspects[0] if isinstance(suspects, tuple) else suspects)  # older checkouts: the indices only
     look.apply(copy.deepcopy(hits), origins, directions, far)  # builds the finer mesh
     best = np.inf
     for _ in range(repeat):
