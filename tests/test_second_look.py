@@ -89,3 +89,31 @@ def test_a_ray_between_an_edge_chord_and_the_edge_hits():
     assert fine.hit[82 * 320 + 215] and fine.v[82 * 320 + 215] > 1.0 - 1e-4  # the case is still in the scene
     assert np.array_equal(hits.hit, fine.hit), f"{np.count_nonzero(hits.hit != fine.hit)} rays differ"
     np.testing.assert_allclose(hits.t[hits.hit], fine.t[fine.hit], rtol=0, atol=1e-9 * coarse.tessellation.extent)
+
+
+def saddle() -> NurbsSurface:
+    """z = x² − y²/2 over [−1, 1]²: a biquadratic Bézier patch (the control net's z is the sum of the two parabolas')."""
+    cx, cy = (1.0, -1.0, 1.0), (-0.5, 0.5, -0.5)
+    points = np.array([[[x, y, cx[i] + cy[j]] for j, y in enumerate((-1.0, 0.0, 1.0))]
+                       for i, x in enumerate((-1.0, 0.0, 1.0))])
+    return NurbsSurface.bezier(points, name="saddle")
+
+
+def test_a_ray_clipping_a_saddles_ridge_stops_at_its_first_crossing():
+    """A saddle's enclosing mesh moves to one side (the deeper chords', along x): along y its ridge z = x₀² − y²/2
+    pokes out of the mesh, of the coarse one and of the second look's 4× one alike. A ray along y at height
+    x₀² − ε crosses the ridge twice, at y = ∓√(2ε), meeting no triangle of either mesh; it used to stop on the
+    plane behind (96 of these 468 rays) or on the farther crossing (33). The shell around the saddle (which
+    selects the ray) now starts a refinement of its own: the first hit is the closed form y = −√(2ε)."""
+    scene = load_scene(SCENES / "hood.toml").with_image(32, 18, 1)
+    plane = NurbsSurface.bezier(np.array([[[x, PLANE_Y, z] for z in (-1.0, 2.0)] for x in (-2.0, 2.0)]), name="plane")
+    scene = replace(scene, surfaces=(saddle(), plane), render=replace(scene.render, tessellation=2))
+    x0, eps = np.meshgrid(np.linspace(-0.95, 0.95, 39), np.geomspace(1e-6, 3e-2, 12), indexing="ij")
+    x0, eps = x0.ravel(), eps.ravel()
+    origins = np.stack([x0, np.full(x0.size, Y0), x0 * x0 - eps], axis=1)
+    hits = Renderer(scene).trace(origins, np.tile([0.0, 1.0, 0.0], (x0.size, 1)))
+    expected = -np.sqrt(2.0 * eps) - Y0
+    assert hits.hit.all() and not hits.fallback.any()
+    assert (hits.patch == 0).all(), f"{np.count_nonzero(hits.patch)} rays stopped on the plane"
+    # Newton's tolerance across the ray (~1e-12 of the part) moves t by that over the incidence |N·D| ≈ √(2ε).
+    assert np.all(np.abs(hits.t - expected) <= 1e-9 + 1e-11 / np.sqrt(2.0 * eps))

@@ -348,7 +348,9 @@ def test_validate_fails_a_hit_behind_a_nearer_surface(monkeypatch):
     right = Renderer(scene)
     good = V.film_aovs(right, right.render().film)
     with monkeypatch.context() as m:  # the old tracer: no band behind the first hit, so no later candidate
-        m.setattr(tracing, "_band", lambda tessellation, cos: np.full(len(cos), -np.inf))
+        # NaN, not −inf: every comparison with the limit is False either way, but −inf added to the t = inf of a ray
+        # with no valid candidate yet warned "invalid value encountered in add" (tracing.trace).
+        m.setattr(tracing, "_band", lambda tessellation, cos: np.full(len(cos), np.nan))
         wrong = Renderer(scene)
         bad = V.film_aovs(wrong, wrong.render().film)
     tol = V.ON_SURFACE * right.tessellation.extent + 2.0 * V.FLOAT32_ROUNDOFF * np.abs(good.Z)

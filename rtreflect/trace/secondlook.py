@@ -8,23 +8,33 @@ a patch's rim, where the enclosing mesh keeps its vertices on the surface so nei
 or where it skims a saddle or a rim before the surface it stops on. The shipped teapot stored 63 such
 hits at 960×540 (tessellation 12) where the spout and handle meet the body.
 
-Two steps, each vectorised over the rays:
+Three steps, each vectorised over the rays:
 
 1. **Which rays.** A *shell* encloses every sheet on both sides: the coarse mesh's vertices moved by
    ±`SHELL_CHORDS` chord errors along the exact normal, closed by walls along each face's mesh
    boundary, so the surface, which lies within the chord error of its mesh, lies inside it. A ray
-   that comes within reach of a sheet enters its shell. A ray is suspect when its kept hit is grazing (|N·D| < `GRAZING_COS`), or when the shell has a
-   triangle before the kept hit other than its own face's within the passage of that hit
-   (t* − 2δ/|N·D|, the flat-sheet entry with a factor 2 for curvature): the shell's hits are walked
-   along the ray (at most `SHELL_STEPS`), so a neighbouring face the ray meets where it meets the
-   kept face's edge is not hidden behind it; or, for a ray that missed, any shell triangle; or
-   a hit the tracer found beside its mesh hit (``Hits.aside``: no mesh hit led there).
+   that comes within reach of a sheet enters its shell. A ray is suspect when its kept hit is grazing
+   (|N·D| < `GRAZING_COS`); or when the shell has a triangle before the *passage* of that hit
+   (t* − 2δ/|N·D|, the flat-sheet entry with a factor 2 for curvature), whatever its face (Embree's
+   occlusion query, cheaper than the nearest hit); or another face's shell triangle within the passage:
+   the shell's hits there are walked along the ray (at most `SHELL_STEPS`), so a neighbouring face the
+   ray meets where it meets the kept face's edge is not hidden behind it, except for faces no other
+   face's shell comes near (`isolated`); or, for a ray that missed, any shell triangle; or a hit the
+   tracer found beside its mesh hit (``Hits.aside``: no mesh hit led there).
 2. **Look again.** The suspects are traced once more by the same candidate search (`trace`) on a
    finer enclosing mesh (`FINE_FACTOR` × the scene's segments per knot span, a chord error ~1/16
    of the coarse one; a reader's triangulation split `FINE_LEVELS` times, ~1/4; an untrimmed face's
    edge vertices moved out past the edge, `tessellation._widened`), up to their kept
    hit. A valid hit nearer than the kept one by more than float32 rounding replaces it; an
    undecided one there flags the ray as a fallback.
+3. **From the shell.** An enclosing mesh covers a sheet on one side only (`tessellation._enclosing`):
+   where the surface is a saddle (the teapot's rim lip, 960×540 pixel (211, 570)) or the ray runs
+   along it for a while ((177, 621), |N·D| = 0.006), a ray can cross it at grazing incidence between
+   both meshes and their surface. The shell, which selected the ray, lies on both sides: the
+   suspect's first shell hit of another sheet (of any, for the grazing and ``aside`` suspects)
+   starts Newton on its face (a short miss search, `SHELL_RESCUE_STEPS`, where Newton fails inside
+   the domain); a point on the ray, on the face, nearer than the kept hit replaces it (at grazing
+   incidence the nearer of the sheet's two crossings, `tracing._other_root`).
 
 Rays not suspected keep their hits bit for bit. The fine mesh is built on the first suspect, once
 per scene (thread-safe), and bounded by `FINE_MAX_VERTICES`.
@@ -37,10 +47,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from .accelerator import Accelerator
-from .tracing import FLOAT32_SLACK, Hits, trace
+from .accelerator import Accelerator, MeshHits
+from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _on_domain_edge, _other_root, _rescue, facing,
+                      refine, trace)
 from ..clock import NULL_CLOCK, StageClock
-from ..geometry.surfaces import SurfaceSet
+from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
 
 #: Half-thickness of the shell in chord errors: the mesh-to-surface distance is sampled at edge
@@ -52,6 +63,13 @@ SHELL_STEPS = 6
 #: (the passage is 2δ/|N·D| long): such rays are looked at again. At 0.2 (78°) on the teapot at
 #: 960×540, ~6% of the hits; every wrong hit found there had |N·D| ≤ 0.16 at one of its two points.
 GRAZING_COS = 0.2
+#: Levenberg–Marquardt steps (`tracing._rescue`) where Newton from a shell hit fails: a start up to the shell's
+#: depth from the sheet, far along a grazing ray. The saddle test (tests/test_second_look.py) needs 15 (10 leave 77 of
+#: its 468 rays on the plane, Newton alone 95): 60 for margin; the tracer's 200 cost trimmed_face.step 1.3 s at
+#: 480×270 before the domain-edge filter below.
+SHELL_RESCUE_STEPS = 60
+#: Faces per block of `isolated`'s box tests (a block × all faces booleans, ×3 axes).
+ISOLATION_CHUNK = 512
 #: The finer mesh's segments per knot span, in multiples of the scene's: chord error ~1/16.
 FINE_FACTOR = 4
 #: A reader's triangulation (CAD faces, `mesh_uv`) is split this many times in (u, v), 4 triangles each (chord
@@ -82,9 +100,10 @@ def subdivided(nodes: np.ndarray, triangles: np.ndarray, levels: int) -> tuple[n
     return nodes, triangles
 
 
-def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator, np.ndarray]:
-    """A BVH of the mesh moved by ±`SHELL_CHORDS` chord errors along the exact normals (module doc, step 1),
-    and each of its triangles' face."""
+def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator, Tessellation]:
+    """A BVH of the mesh moved by ±`SHELL_CHORDS` chord errors along the exact normals (module doc, step 1), and
+    the shell as a `Tessellation` (each sheet's vertices keep their (u, v) and face; a wall triangle's face is that
+    of its rim edge), so a shell hit gives a starting (u, v) as a mesh hit does (`Tessellation.start_parameters`)."""
     normal = np.nan_to_num(surfaces.normals(tessellation.vertex_patch, tessellation.vertex_uv[:, 0],
                                             tessellation.vertex_uv[:, 1]))  # degenerate points: not moved
     delta = (SHELL_CHORDS * tessellation.chord_error[tessellation.vertex_patch])[:, None] * normal
@@ -97,7 +116,30 @@ def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator
     walls = np.concatenate([np.stack([a, b, b + n], 1), np.stack([a, b + n, a + n], 1)])
     patch = tessellation.face_patch
     shell_patch = np.concatenate([patch, patch, np.tile(patch[rim % len(faces)], 2)])
-    return Accelerator(replace(tessellation, vertices=vertices, faces=np.concatenate([faces, faces + n, walls]))), shell_patch
+    shelled = replace(tessellation, vertices=vertices, faces=np.concatenate([faces, faces + n, walls]),
+                      vertex_uv=np.concatenate([tessellation.vertex_uv] * 2),
+                      vertex_patch=np.concatenate([tessellation.vertex_patch] * 2), face_patch=shell_patch,
+                      boundary=np.concatenate([tessellation.boundary, tessellation.boundary + n]))
+    return Accelerator(shelled), shelled
+
+
+def isolated(shell_mesh: Tessellation, reach: float) -> np.ndarray:
+    """Per face: True where no other face's shell comes within ``reach`` of its own (bounding boxes: conservative).
+
+    A ray's passage of its kept hit lies within its face's shell's box grown by the longest passage,
+    so there it can meet no other face's shell: its walk is skipped (always so in a one-face scene).
+    """
+    faces = int(shell_mesh.vertex_patch.max(initial=-1)) + 1
+    lo, hi = np.full((faces, 3), np.inf), np.full((faces, 3), -np.inf)
+    np.minimum.at(lo, shell_mesh.vertex_patch, shell_mesh.vertices)
+    np.maximum.at(hi, shell_mesh.vertex_patch, shell_mesh.vertices)
+    alone = np.ones(faces, dtype=bool)
+    for first in range(0, faces, ISOLATION_CHUNK):  # faces × faces box tests, in bounded memory
+        rows = slice(first, min(first + ISOLATION_CHUNK, faces))
+        overlap = np.all((lo[rows, None] - reach <= hi[None]) & (lo[None] <= hi[rows, None] + reach), axis=2)
+        overlap[np.arange(overlap.shape[0]), np.arange(first, rows.stop)] = False  # a face and itself
+        alone[rows] = ~overlap.any(axis=1)
+    return alone
 
 
 class SecondLook:
@@ -106,8 +148,12 @@ class SecondLook:
     def __init__(self, scene_surfaces, per_span: int, tessellation: Tessellation, surfaces: SurfaceSet):
         self._scene_surfaces, self._per_span = list(scene_surfaces), per_span
         self.tessellation, self.surfaces = tessellation, surfaces
-        self.shell, self._shell_patch = shell(tessellation, surfaces)
+        self.shell, self.shell_mesh = shell(tessellation, surfaces)
+        self._shell_patch = self.shell_mesh.face_patch
         self._reach = 2.0 * SHELL_CHORDS * float(tessellation.chord_error.max(initial=0.0))
+        # Past a shell hit by float32 rounding of the scene's largest coordinates, with margin (as `trace`'s).
+        self._skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+        self.isolated = isolated(self.shell_mesh, self._reach / GRAZING_COS + 2.0 * self._skip)
         self._lock = threading.Lock()
         self._fine: tuple[Tessellation, Accelerator] | None = None
 
@@ -122,17 +168,30 @@ class SecondLook:
                 self._fine = fine, Accelerator(fine)
             return self._fine
 
-    def suspects(self, hits: Hits, origins: np.ndarray, directions: np.ndarray, far: np.ndarray) -> np.ndarray:
-        """Indices of the rays to look at again (module doc, step 1)."""
+    def suspects(self, hits: Hits, origins: np.ndarray, directions: np.ndarray,
+                 far: np.ndarray) -> tuple[np.ndarray, MeshHits]:
+        """Indices of the rays to look at again (module doc, step 1), and per suspect the shell hit that made it
+        one, or for the others (grazing, ``aside``, blocked before the passage, still walking) its first shell hit
+        (step 3; prim −1 where there is none, and for every ray not suspected or a fallback)."""
+        n = len(origins)
+        entry = MeshHits(np.full(n, -1), np.zeros(n), np.zeros(n), np.full(n, np.nan))
         cos = np.abs(np.einsum("ij,ij->i", np.nan_to_num(hits.N), directions))
         slack = FLOAT32_SLACK * self.tessellation.extent
         with np.errstate(divide="ignore"):
             passage = np.where(hits.hit, hits.t - self._reach / np.maximum(cos, GRAZING_COS) - slack, far)
         look = hits.hit & ~hits.fallback & ((cos < GRAZING_COS) | hits.aside)
-        # Any shell before the kept hit, but the kept face's own within its passage: walk the shell's hits.
-        rays = np.flatnonzero(~look & ~hits.fallback)
-        start, end = np.zeros(len(rays)), np.where(hits.hit[rays], hits.t[rays] - slack, far[rays])
-        skip = FLOAT32_SLACK * (self.tessellation.extent + float(np.abs(self.tessellation.vertices).max(initial=0.0)))
+        ask = ~look & ~hits.fallback
+        # Any shell before the passage (for a ray that missed: anywhere) makes a suspect, whatever its face:
+        # Embree's occlusion query answers that, cheaper than the nearest hit (the entry is found below). Asked of
+        # every ray (an empty segment for the others): gathering the rays first cost more than the query saves.
+        before = np.where(ask, np.clip(np.minimum(passage, np.where(hits.hit, hits.t - slack, far)), 0.0, None), 0.0)
+        look |= ask & self.shell.occluded(origins, directions, before)
+        rays = np.flatnonzero(ask)
+        # Within the passage only another face's shell does: walk its hits, unless no other face's shell comes
+        # within the longest passage of the kept face's (`isolated`: then every hit there is its own).
+        rays = rays[~look[rays] & hits.hit[rays]]
+        rays = rays[~self.isolated[hits.patch[rays]]]
+        start, end = np.maximum(passage[rays], 0.0), hits.t[rays] - slack
         for _ in range(SHELL_STEPS):
             go = start < end
             rays, start, end = rays[go], start[go], end[go]
@@ -142,26 +201,79 @@ class SecondLook:
             mesh = self.shell.intersect(O + start[:, None] * D, D, end - start)
             met = mesh.prim >= 0
             t = mesh.t + start
-            own = met & (self._shell_patch[np.maximum(mesh.prim, 0)] == hits.patch[rays]) & (t >= passage[rays])
-            look[rays[met & ~own]] = True
-            rays, start, end = rays[own], t[own] + skip, end[own]
+            own = met & (self._shell_patch[np.maximum(mesh.prim, 0)] == hits.patch[rays])
+            other = met & ~own
+            look[rays[other]] = True
+            for have, new in zip(entry, (mesh.prim, mesh.b1, mesh.b2, t)):
+                have[rays[other]] = new[other]
+            rays, start, end = rays[own], t[own] + self._skip, end[own]
         look[rays] = True  # still walking after SHELL_STEPS: looked at again rather than passed
-        return np.flatnonzero(look)
+        # Suspects not walked (grazing, aside) or still walking: their first shell hit is refined too (step 3).
+        rays = np.flatnonzero(look & ~hits.fallback & (entry.prim < 0))
+        if len(rays):
+            end = np.where(hits.hit[rays], hits.t[rays] - slack, far[rays])
+            mesh = self.shell.intersect(origins[rays], directions[rays], end)
+            for have, new in zip(entry, mesh):
+                have[rays] = new
+        return np.flatnonzero(look), entry
 
     def apply(self, hits: Hits, origins: np.ndarray, directions: np.ndarray, far: np.ndarray,
               clock: StageClock = NULL_CLOCK) -> Hits:
         """``hits`` (from `trace` on the coarse mesh) with the suspects' nearer hits, in place (module doc)."""
         with clock.stage("second look"):
-            rays = self.suspects(hits, origins, directions, far)
+            rays, entry = self.suspects(hits, origins, directions, far)
             if len(rays) == 0:
                 return hits
             fine, accelerator = self.fine()
             kept = np.where(hits.hit[rays], hits.t[rays], far[rays])
             again = trace(accelerator, fine, self.surfaces, origins[rays], directions[rays], max_distance=kept)
             # The same root refined from another start agrees to Newton's tolerance: nearer means beyond float32 rounding.
-            nearer = again.hit & ~again.fallback & (again.t < kept - FLOAT32_SLACK * self.tessellation.extent)
+            slack = FLOAT32_SLACK * self.tessellation.extent
+            nearer = again.hit & ~again.fallback & (again.t < kept - slack)
             rows = rays[nearer]
             for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside"):
                 getattr(hits, name)[rows] = getattr(again, name)[nearer]
             hits.fallback[rays[again.fallback]] = True
+            self._from_shell(hits, origins, directions, far, rays, entry)
         return hits
+
+    def _from_shell(self, hits: Hits, origins, directions, far, rays, entry: MeshHits) -> None:
+        """The suspects' shell hits refined by Newton (module doc, step 3), in place.
+
+        Any converged point on the ray, on its face, ahead of the eye and nearer than the kept hit is an exact
+        surface point before it, wherever Newton went; at grazing incidence the nearer of the sheet's two
+        crossings is sought as the tracer does (`tracing._other_root`). Where Newton fails inside the domain a
+        short miss search (`SHELL_RESCUE_STEPS`) follows; a start that leads nowhere decides nothing (no miss
+        verdict, no fallback: the finer mesh's trace has looked there too).
+        """
+        rays = rays[(entry.prim[rays] >= 0) & ~hits.fallback[rays]]
+        if len(rays) == 0:
+            return
+        O, D = origins[rays], directions[rays]
+        patch, u, v = self.shell_mesh.start_parameters(entry.prim[rays], entry.b1[rays], entry.b2[rays])
+        u0, v0 = u, v
+        u, v, derivs, converged = refine(self.surfaces, patch, u, v, O, D, entry.t[rays], self.tessellation.extent)
+        # Newton from a start far along a grazing ray can fail where the ray does meet the sheet: search there.
+        # (Not where Newton ran off the face's domain: the ray leaves the face there, as `tracing._candidates` decides.)
+        stuck = np.flatnonzero(~converged & ~_on_domain_edge(self.surfaces, patch, u, v))
+        if len(stuck):
+            tol = NEWTON_TOLERANCE * np.maximum(entry.t[rays][stuck], self.tessellation.extent)
+            u2, v2, d2, ok2, _, _ = _rescue(self.surfaces, patch[stuck], u0[stuck], v0[stuck], O[stuck], D[stuck], tol,
+                                            SHELL_RESCUE_STEPS)
+            u[stuck], v[stuck], converged[stuck] = u2, v2, ok2
+            for have, new in zip(derivs[:3], d2[:3]):
+                have[stuck] = new
+        t = np.einsum("ij,ij->i", derivs.S - O, D)
+        kept = np.where(hits.hit[rays], hits.t[rays], far[rays])
+        slack = FLOAT32_SLACK * self.tessellation.extent
+        ok = converged & (t > 0) & (t < kept - slack)
+        ok[ok] = self.surfaces.on_face(patch[ok], u[ok], v[ok])
+        rays, O, D, patch, u, v, t = (x[ok] for x in (rays, O, D, patch, u, v, t))
+        if len(rays) == 0:
+            return
+        derivs = SurfaceDerivatives(derivs.S[ok], derivs.Su[ok], derivs.Sv[ok])
+        _other_root(self.tessellation, self.surfaces, O, D, np.full(len(rays), VALID), patch, u, v, t, derivs,
+                    np.zeros(len(rays), dtype=bool))
+        hits.hit[rays], hits.patch[rays], hits.u[rays], hits.v[rays], hits.t[rays] = True, patch, u, v, t
+        hits.P[rays], hits.aside[rays] = derivs.S, True
+        hits.N[rays] = facing(self.surfaces.normals(patch, u, v, derivs), D)
