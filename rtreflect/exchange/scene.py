@@ -50,6 +50,9 @@ MAX_MESH_VERTICES = 1 << 23
 MAX_NAME_BYTES = 200
 #: Largest s (s×s samples per pixel); 256 samples per pixel is far past visible gains.
 MAX_SAMPLES = 16
+#: `[image] samples` of the analytic anti-aliasing (integrator/analytic.py): one exact sample per pixel, the
+#: stripes' coverage in closed form, edge pixels supersampled. The default.
+ANALYTIC = "analytic"
 #: Largest tessellation per knot span; hits are refined by Newton, so more buys nothing.
 MAX_TESSELLATION = 256
 #: |c·m| above this means the tube direction is not in the light plane.

@@ -24,15 +24,16 @@ import numpy as np
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
+from .analytic import EDGE_SAMPLES, TRUSTED_SPAN, edge_pixels, neighbour_index, stripe_coverage, uv_footprint
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect
 from ..modes.profile import stripe_reach, stripe_weight
 from ..modes.shading import shade_factor
-from ..modes.base import SurfacePoints
+from ..modes.base import SurfacePoints, level_offset, neighbour_levels
 from ..modes.reflection import ReflectionMode
 from ..modes.registry import mode_of
 from ..trace.meshnormals import trace_mesh, vertex_normals
-from ..exchange.scene import ImageSpec, Scene
+from ..exchange.scene import ANALYTIC, ImageSpec, Scene
 from ..geometry.curvature import curvatures
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
@@ -41,6 +42,10 @@ from ..trace.tracing import Hits, occluded, trace
 
 #: Most rays per tile (about 1.2 kB each in flight, see `tiling`): larger tiles buy no speed over numpy's overhead.
 RAYS_PER_TILE = 1 << 16
+#: samples = "analytic", map modes: a neighbour whose surface colour differs by more than this (linear RGB, any
+#: channel) marks a band edge or the undercut flag's edge, and the pixel is supersampled; a curvature map's
+#: smooth colours change by far less from one pixel to the next.
+MAP_STEP = 0.05
 
 
 @dataclass
@@ -60,13 +65,16 @@ class Shading:
     # Another mode's distance to its nearest level (`Stripes.level_dist`) where `[render] blur` softens its stripes
     # (`Renderer.soft_stripes`), else None.
     stripe_dist: np.ndarray | None = None
+    # The mode's nearest level (`Stripes.level_id`, −1 where none is or no hit), for the analytic path.
+    level: np.ndarray | None = None
 
     def take(self, rows: np.ndarray) -> "Shading":
         hits = Hits(**{k: getattr(self.hits, k)[rows] for k in Hits.__dataclass_fields__})
         return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
                        self.line_dist[rows], self.lit[rows],
                        None if self.surface_rgb is None else self.surface_rgb[rows],
-                       None if self.stripe_dist is None else self.stripe_dist[rows])
+                       None if self.stripe_dist is None else self.stripe_dist[rows],
+                       None if self.level is None else self.level[rows])
 
 
 @dataclass
@@ -77,6 +85,7 @@ class RenderStats:
     rays: int = 0
     fallbacks: int = 0  # samples whose nearest exact hit could not be decided (tracing.py)
     fallback_pixels: int = 0  # pixels with at least one such sample
+    supersampled: int = 0  # samples = "analytic": edge pixels rendered with s×s samples instead (analytic.py)
     tiles: int = 0
     seconds: float = 0.0
     stages: dict[str, float] = field(default_factory=dict)
@@ -96,6 +105,7 @@ class Tile:
     rays: int
     fallbacks: int
     fallback_pixels: int
+    supersampled: int = 0
 
 
 @dataclass
@@ -118,6 +128,18 @@ class RenderResult:
         if name not in CHANNELS:
             raise ValueError(f"no channel {name!r}; the channels are {', '.join(CHANNELS)} (and P, N as vectors)")
         return self.film.channel(name)
+
+
+@dataclass
+class CentreStripes:
+    """Per centre ray of the analytic path (`Renderer.centre_stripes`); NaN and False where no level is near."""
+
+    sigma: np.ndarray  # signed offset σ from the nearest level's centre (`modes.base.level_offset`)
+    grad: np.ndarray  # (N, 2) its gradient per pixel, (∂σ/∂x, ∂σ/∂y), x along a row, y down a column
+    coverage: np.ndarray  # the stripe's weighted share of the box pixel (`analytic.stripe_coverage`)
+    near: np.ndarray  # the footprint reaches the stripe (within the profile's reach)
+    blocked: np.ndarray  # near, and the reflected ray occluded before the level (modes seen along a ray)
+    untrusted: np.ndarray  # near, and the linear model is not (footprint ≥ `TRUSTED_SPAN` level spacings, or no g)
 
 
 def default_threads() -> int:
@@ -155,6 +177,11 @@ class Renderer:
         # lit out to the profile's reach, weighted by `stripe_weight` of their distance to the nearest level.
         self.soft_stripes = (scene.render.blur > 0 and not isinstance(self.mode, ReflectionMode)
                              and not getattr(self.mode, "along_ray", False))
+        # The analytic path's stripe (`analytic`): half width (the tubes' own radius, not the profile's reach) and blur
+        # (circles seen along the reflected ray stay hard, as in `line_weight`).
+        self.half_width = self.lights.radius if isinstance(self.mode, ReflectionMode) else getattr(self.mode, "half_width", 0.0)
+        self.blur = scene.render.blur if isinstance(self.mode, ReflectionMode) or self.soft_stripes else 0.0
+        self.neighbour_level = neighbour_levels(getattr(self.mode, "levels", np.zeros(0)))
         self.clock = StageClock()
         # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
         self.vertex_normals = vertex_normals(self.tessellation, self.surfaces) if scene.render.normals == "mesh" else None
@@ -169,13 +196,14 @@ class Renderer:
         return self.second_look.apply(hits, origins, directions, np.full(len(origins), np.inf), self.clock)
 
     # -- one batch of rays ---------------------------------------------------------------
-    def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
+    def shade(self, origins: np.ndarray, directions: np.ndarray, occlude: bool = True) -> Shading:
         """Exact hits, reflected directions s, the mode's nearest level and 'lit' flags.
 
         Lit: in the mode's stripe and, for a mode seen along the reflected ray (reflection lines:
         a tube within its radius), not occluded by the surface before it. With ``[render] blur`` the
         reflection mode's radius is the stripe profile's reach (`stripe_lights`): 'lit' then means the
         sample may show some of the line, by its weight `stripe_weight` of the nearest tube's d.
+        ``occlude=False``: no occlusion test ('lit' is the stripe test alone); the analytic path tests its own.
         """
         hits = self.trace(origins, directions)
         n_rays = len(origins)
@@ -183,7 +211,7 @@ class Renderer:
         lit = np.zeros(n_rays, dtype=bool)
         line_id, line_dist = np.full(n_rays, -1), np.full(n_rays, np.nan)
         idx = np.flatnonzero(hits.hit)
-        shading = Shading(hits, origins, directions, s, line_id, line_dist, lit)
+        shading = Shading(hits, origins, directions, s, line_id, line_dist, lit, level=np.full(n_rays, -1))
         if len(idx) == 0:
             return shading
         R, n = hits.P[idx], hits.N[idx]
@@ -192,6 +220,7 @@ class Renderer:
             s[idx] = reflect(-directions[idx], n)
             points = SurfacePoints(R, n, s[idx], hits.patch[idx], hits.u[idx], hits.v[idx])
             stripes = self.mode.stripes(points)
+            shading.level[idx] = stripes.level_id
             # line.id and line.dist are the tubes' in every mode (the EXR contract): the reflection mode's stripes
             # are those; another mode's nearest level follows from its φ (channel phi) and levels.
             if isinstance(self.mode, ReflectionMode):
@@ -211,7 +240,7 @@ class Renderer:
                 with np.errstate(invalid="ignore"):
                     candidate = stripes.level_dist <= stripe_reach(self.mode.half_width, self.scene.render.blur)
             cand = np.flatnonzero(candidate)
-        if t_tube is None:  # a mode not seen along a ray: its stripes are lit where they are
+        if t_tube is None or not occlude:  # a mode not seen along a ray: its stripes are lit where they are
             lit[idx[cand]] = True
         elif len(cand):
             start = self.accelerator.surface_origins(R[cand], n[cand], hits.patch[idx[cand]])
@@ -269,29 +298,19 @@ class Renderer:
     def render_span(self, start: int, stop: int) -> Tile:
         """Pixels [start, stop) in row-major order (a tile may begin or end mid-row) as one `Tile`.
 
-        Every pixel's value depends only on its own rays, so any cut of the image into
+        Every pixel's value depends only on its own rays (and, with ``samples = "analytic"``, its
+        8 neighbours' centre rays, traced as a halo around the span), so any cut of the image into
         spans gives the same bytes.
         """
-        width, s = self.scene.image.width, self.scene.image.samples
-        settings = self.scene.render
+        s = self.scene.image.samples
+        if s == ANALYTIC:
+            return self._render_analytic(start, stop)
+        width = self.scene.image.width
         rows, cols = np.divmod(np.arange(start, stop), width)
-        offsets = sample_offsets(s)
-        ns = len(offsets)
-        with self.clock.stage("camera rays"):
-            origins, directions = self.camera.rays(np.repeat(rows, ns), np.repeat(cols, ns), np.tile(offsets, (len(rows), 1)))
-        shading = self.shade(origins, directions)
-        if shading.surface_rgb is None:
-            shade = self.surface_shade(shading)
-            rgba = coverage_color(shading.hits.hit.reshape(-1, ns), self.line_weight(shading).reshape(-1, ns),
-                                  settings.surface_color, settings.line_color, settings.background,
-                                  None if shade is None else shade.reshape(-1, ns))
-        else:  # a map mode: each sample's own surface colour
-            rgba = map_color(shading.hits.hit.reshape(-1, ns), self.line_weight(shading).reshape(-1, ns),
-                             shading.surface_rgb.reshape(-1, ns, 3), settings.line_color, settings.background)
+        rgba, shading, rays = self.supersample(rows, cols, s)
+        ns = s * s
         fallbacks = int(shading.hits.fallback.sum())
         fell_back = shading.hits.fallback.reshape(-1, ns).any(axis=1)
-        rays = len(origins)
-        del origins, directions
         if s % 2 == 1:  # the middle sample of an odd s×s grid is the pixel-centre ray
             aovs = self.aovs(shading.take(np.arange(len(rows)) * ns + ns // 2))
         else:
@@ -307,6 +326,138 @@ class Renderer:
         pixels[:, :4] = rgba
         pixels[:, 4:] = aov_planes(aovs)
         return Tile(start, stop, pixels, rays, fallbacks, fallback_pixels)
+
+    def supersample(self, rows: np.ndarray, cols: np.ndarray, s: int) -> tuple[np.ndarray, Shading, int]:
+        """(P, 4) RGBA of pixels (rows, cols) from their s×s samples, the samples' `Shading`, and the rays traced."""
+        settings = self.scene.render
+        offsets = sample_offsets(s)
+        ns = len(offsets)
+        with self.clock.stage("camera rays"):
+            origins, directions = self.camera.rays(np.repeat(rows, ns), np.repeat(cols, ns), np.tile(offsets, (len(rows), 1)))
+        shading = self.shade(origins, directions)
+        rgba = self.colour(shading, self.line_weight(shading), ns)
+        return rgba, shading, len(origins)
+
+    def colour(self, shading: Shading, weight: np.ndarray, ns: int) -> np.ndarray:
+        """(P, 4) RGBA of pixels of ``ns`` samples each: hits, line weights (`film`) and the surface's shade or map."""
+        settings = self.scene.render
+        if shading.surface_rgb is None:
+            shade = self.surface_shade(shading)
+            return coverage_color(shading.hits.hit.reshape(-1, ns), weight.reshape(-1, ns),
+                                  settings.surface_color, settings.line_color, settings.background,
+                                  None if shade is None else shade.reshape(-1, ns))
+        # a map mode: each sample's own surface colour
+        return map_color(shading.hits.hit.reshape(-1, ns), weight.reshape(-1, ns),
+                         shading.surface_rgb.reshape(-1, ns, 3), settings.line_color, settings.background)
+
+    def _render_analytic(self, start: int, stop: int) -> Tile:
+        """`render_span` for ``samples = "analytic"`` (`analytic`): centre rays with a one-row halo, the stripes'
+        coverage in closed form, and the edge pixels supersampled."""
+        image = self.scene.image
+        width, height = image.width, image.height
+        lo, hi = max(0, start - width - 1), min(width * height, stop + width + 1)
+        rows, cols = np.divmod(np.arange(lo, hi), width)
+        with self.clock.stage("camera rays"):
+            origins, directions = self.camera.rays(rows, cols)
+        shading = self.shade(origins, directions, occlude=False)
+        del origins, directions
+        centre = self.centre_stripes(shading, rows, cols)
+        own = np.arange(start - lo, stop - lo)
+        with self.clock.stage("analytic AA"):
+            index, inside = neighbour_index(start, stop, width, height, lo)
+            hits = shading.hits
+            edge = edge_pixels(index, inside, own, hits.hit, hits.patch, shading.level, centre.near, centre.blocked,
+                               centre.untrusted)
+            if shading.surface_rgb is not None:  # a map mode: where its colour jumps (a band edge), supersample
+                rgb = np.nan_to_num(shading.surface_rgb)
+                for q, ok in zip(index, inside):
+                    edge |= ok & (np.abs(rgb[q] - rgb[own]).max(axis=1) > MAP_STEP)
+        mine = shading.take(own)
+        rgba = self.colour(mine, np.where(centre.blocked[own], 0.0, centre.coverage[own]), 1)
+        fell_back = mine.hits.fallback.copy()
+        fallbacks = int(fell_back.sum())
+        rays = hi - lo
+        edges = np.flatnonzero(edge)
+        chunk = max(1, RAYS_PER_TILE // (EDGE_SAMPLES * EDGE_SAMPLES))
+        for part in np.array_split(edges, max(1, -(-len(edges) // chunk))):
+            if len(part) == 0:
+                continue
+            rgba[part], samples, traced = self.supersample(rows[own[part]], cols[own[part]], EDGE_SAMPLES)
+            rays += traced
+            fallbacks += int(samples.hits.fallback.sum())
+            fell_back[part] |= samples.hits.fallback.reshape(len(part), -1).any(axis=1)
+        aovs = self.aovs(mine)
+        pixels = np.empty((len(own), len(CHANNELS)), dtype=np.float32)
+        pixels[:, :4] = rgba
+        pixels[:, 4:] = aov_planes(aovs)
+        return Tile(start, stop, pixels, rays, fallbacks, int(fell_back.sum()), len(edges))
+
+    def centre_stripes(self, shading: Shading, rows: np.ndarray, cols: np.ndarray) -> "CentreStripes":
+        """Per centre ray: the signed offset σ to its level, its screen gradient g, the stripe's box coverage, and
+        the flags the edge test needs (`analytic`).
+
+        g is a central difference over the pixel of the real pipeline: the exact surface point and normal at
+        (u, v) ± ½ (du, dv) (the footprint of `analytic.uv_footprint`), the eye ray to it, the reflected
+        direction and the mode's `level_offset`.
+        """
+        n_rays = len(shading.hits.hit)
+        sigma, gap = np.full(n_rays, np.nan), np.full(n_rays, np.nan)
+        grad = np.full((n_rays, 2), np.nan)
+        level = shading.level
+        idx = np.flatnonzero(level >= 0)
+        hits = shading.hits
+        with self.clock.stage("analytic AA"):
+            if len(idx):
+                patch, u, v, n = hits.patch[idx], hits.u[idx], hits.v[idx], hits.N[idx]
+                k = level[idx]
+                points = SurfacePoints(hits.P[idx], n, shading.s[idx], patch, u, v)
+                sigma[idx] = level_offset(self.mode, points, k)
+                gap[idx] = np.abs(sigma[idx] - level_offset(self.mode, points, self.neighbour_level[k]))
+                derivs = self.surfaces.evaluate(patch, u, v)
+                steps = uv_footprint(self.camera, rows[idx], cols[idx], hits.P[idx], n, derivs.Su, derivs.Sv)
+                u0, u1, v0, v1 = self.surfaces.domains(patch)
+                for axis in range(2):
+                    du, dv = 0.5 * steps[:, axis, 0], 0.5 * steps[:, axis, 1]
+                    ends = []
+                    for sign in (1.0, -1.0):
+                        # The share of the half-pixel step that stays in the patch's domain (it is clamped there).
+                        with np.errstate(divide="ignore", invalid="ignore"):
+                            room = np.minimum(np.where(sign * du > 0, (u1 - u) / (sign * du), np.where(sign * du < 0, (u0 - u) / (sign * du), np.inf)),
+                                              np.where(sign * dv > 0, (v1 - v) / (sign * dv), np.where(sign * dv < 0, (v0 - v) / (sign * dv), np.inf)))
+                        lam = np.clip(np.nan_to_num(room, nan=0.0), 0.0, 1.0)
+                        ends.append((lam, self._offset_at(patch, u + sign * lam * du, v + sign * lam * dv, n, k)))
+                    (lp, sp), (lm, sm) = ends
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        grad[idx, axis] = (sp - sm) / (0.5 * (lp + lm))
+            span = np.abs(grad[:, 0]) + np.abs(grad[:, 1])
+            reach = stripe_reach(self.half_width, self.blur)
+            with np.errstate(invalid="ignore"):
+                known = np.isfinite(span)
+                near = (level >= 0) & np.where(known, np.abs(sigma) - 0.5 * span <= reach, np.abs(sigma) <= 2.0 * reach)
+                untrusted = near & (~known | (span > TRUSTED_SPAN * gap))
+            coverage = np.zeros(n_rays)
+            ok = np.flatnonzero(near & known)
+            coverage[ok] = stripe_coverage(sigma[ok], grad[ok, 0], grad[ok, 1], self.half_width, self.blur)
+        blocked = np.zeros(n_rays, dtype=bool)
+        ray_t = getattr(self.mode, "ray_t", None)
+        if ray_t is not None and getattr(self.mode, "along_ray", True):
+            test = np.flatnonzero(near)
+            if len(test):
+                R, n, s = hits.P[test], hits.N[test], shading.s[test]
+                t = ray_t(SurfacePoints(R, n, s, hits.patch[test], hits.u[test], hits.v[test]), level[test])
+                start = self.accelerator.surface_origins(R, n, hits.patch[test])
+                with self.clock.stage("occlusion (Embree)"):
+                    blocked[test] = occluded(self.accelerator, self.tessellation, self.surfaces, start, s, t)
+        return CentreStripes(sigma, grad, coverage, near, blocked, untrusted)
+
+    def _offset_at(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, n0: np.ndarray, level: np.ndarray) -> np.ndarray:
+        """σ to ``level`` at surface points (patch, u, v) seen by the camera: the exact point and normal (turned to the
+        side of the nearby normal ``n0``), the eye ray to the point, reflection (eq. 3) and the mode's offset."""
+        derivs = self.surfaces.evaluate(patch, u, v)
+        n = self.surfaces.normals(patch, u, v, derivs)
+        n[np.einsum("ij,ij->i", n, n0) < 0] *= -1.0
+        D = self.camera.directions_to(derivs.S)
+        return level_offset(self.mode, SurfacePoints(derivs.S, n, reflect(-D, n), patch, u, v), level)
 
     def spans(self, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
         return pixel_spans(self.scene.image, rays_per_tile)
@@ -324,6 +475,7 @@ class Renderer:
                 stats.rays += tile.rays
                 stats.fallbacks += tile.fallbacks
                 stats.fallback_pixels += tile.fallback_pixels
+                stats.supersampled += tile.supersampled
             yield tile
 
     def _tiles_in_order(self, threads: int, spans: list[tuple[int, int]]) -> Iterator[Tile]:
