@@ -109,32 +109,29 @@ def uv_footprint(camera, rows: np.ndarray, cols: np.ndarray, P: np.ndarray, N: n
     return steps
 
 
-def neighbour_index(start: int, stop: int, width: int, height: int, lo: int) -> tuple[np.ndarray, np.ndarray]:
-    """(8, n) indices into a halo span beginning at pixel ``lo`` of each pixel [start, stop)'s neighbours, and
-    whether each exists (inside the image)."""
-    rows, cols = np.divmod(np.arange(start, stop), width)
-    index, inside = [], []
+def neighbours(grid: np.ndarray):
+    """The 8 neighbours of every pixel of a (rows, columns) grid, as 8 shifted grids (`NEIGHBOURS` order).
+
+    Beyond the grid's border a pixel's own row or column is repeated, so there a neighbour is one the
+    pixel already has (or itself): the image border is no edge.
+    """
+    rows, cols = grid.shape
+    padded = np.pad(grid, 1, mode="edge")
     for dr, dc in NEIGHBOURS:
-        r, c = rows + dr, cols + dc
-        ok = (r >= 0) & (r < height) & (c >= 0) & (c < width)
-        index.append(np.where(ok, r * width + c - lo, stop - 1 - lo))
-        inside.append(ok)
-    return np.array(index), np.array(inside)
+        yield padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
 
 
-def edge_pixels(index: np.ndarray, inside: np.ndarray, own: np.ndarray, hit: np.ndarray, patch: np.ndarray,
-                level: np.ndarray, near: np.ndarray, blocked: np.ndarray, untrusted: np.ndarray) -> np.ndarray:
+def edge_pixels(hit: np.ndarray, patch: np.ndarray, level: np.ndarray, near: np.ndarray, blocked: np.ndarray,
+                untrusted: np.ndarray) -> np.ndarray:
     """Pixels the linear stripe model does not describe (module doc): True where any of the 8 neighbours differs.
 
-    ``own``: each pixel's index into the halo arrays; ``near``: its footprint reaches a stripe; ``blocked``: its
-    reflected ray is occluded before the stripe (False where not tested); ``untrusted``: near a stripe but its
-    footprint is too wide or its gradient unknown.
+    (rows, columns) grids of the centre rays: ``near``, the footprint reaches a stripe; ``blocked``, the
+    reflected ray is occluded before the stripe (False where not tested); ``untrusted``, near a stripe but
+    the footprint is too wide or the gradient unknown.
     """
-    h, p, k, c, o = hit[own], patch[own], level[own], near[own], blocked[own]
-    edge = untrusted[own].copy()
-    for q, ok in zip(index, inside):
-        differs = (hit[q] != h) | (h & (patch[q] != p))
-        differs |= (c | near[q]) & (level[q] != k)
-        differs |= c & near[q] & (blocked[q] != o)
-        edge |= ok & differs
+    edge = untrusted.copy()
+    for h, p, k, c, o in zip(*(neighbours(x) for x in (hit, patch, level, near, blocked))):
+        edge |= (h != hit) | (hit & (p != patch))
+        edge |= (near | c) & (k != level)
+        edge |= near & c & (o != blocked)
     return edge

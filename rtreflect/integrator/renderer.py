@@ -24,7 +24,7 @@ import numpy as np
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
-from .analytic import EDGE_SAMPLES, TRUSTED_SPAN, edge_pixels, neighbour_index, stripe_coverage, uv_footprint
+from .analytic import EDGE_SAMPLES, TRUSTED_SPAN, edge_pixels, neighbours, stripe_coverage, uv_footprint
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect
 from ..modes.profile import stripe_reach, stripe_weight
@@ -130,6 +130,13 @@ class RenderResult:
         return self.film.channel(name)
 
 
+def _room(x: np.ndarray, step: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Largest λ in [0, 1] with x + λ·step inside [low, high]."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(step > 0, (high - x) / step, np.where(step < 0, (low - x) / step, 1.0))
+    return np.clip(np.nan_to_num(room, nan=0.0), 0.0, 1.0)
+
+
 @dataclass
 class CentreStripes:
     """Per centre ray of the analytic path (`Renderer.centre_stripes`); NaN and False where no level is near."""
@@ -181,6 +188,7 @@ class Renderer:
         # (circles seen along the reflected ray stay hard, as in `line_weight`).
         self.half_width = self.lights.radius if isinstance(self.mode, ReflectionMode) else getattr(self.mode, "half_width", 0.0)
         self.blur = scene.render.blur if isinstance(self.mode, ReflectionMode) or self.soft_stripes else 0.0
+        self.stripe_reach = stripe_reach(self.half_width, self.blur)
         self.neighbour_level = neighbour_levels(getattr(self.mode, "levels", np.zeros(0)))
         self.clock = StageClock()
         # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
@@ -351,32 +359,57 @@ class Renderer:
                          shading.surface_rgb.reshape(-1, ns, 3), settings.line_color, settings.background)
 
     def _render_analytic(self, start: int, stop: int) -> Tile:
-        """`render_span` for ``samples = "analytic"`` (`analytic`): centre rays with a one-row halo, the stripes'
-        coverage in closed form, and the edge pixels supersampled."""
+        """`render_span` for ``samples = "analytic"`` (`analytic`): centre rays with a halo, the stripes' coverage in
+        closed form, and the edge pixels supersampled.
+
+        The edge test reads each pixel's 8 neighbours, and whether a pixel's footprint reaches a stripe is first
+        bounded by its own neighbours' σ (the gradient is then evaluated only where it may), so the centre rays
+        of the span's rows and two rows on either side are traced: a pixel's value depends only on the rays of
+        the pixels around it, never on where the span ends.
+        """
         image = self.scene.image
         width, height = image.width, image.height
-        lo, hi = max(0, start - width - 1), min(width * height, stop + width + 1)
-        rows, cols = np.divmod(np.arange(lo, hi), width)
+        first, last = start // width, (stop - 1) // width
+        r0, r1 = max(0, first - 2), min(height - 1, last + 2)
+        shape = (r1 - r0 + 1, width)
+        rows, cols = np.divmod(np.arange(r0 * width, (r1 + 1) * width), width)
         with self.clock.stage("camera rays"):
             origins, directions = self.camera.rays(rows, cols)
         shading = self.shade(origins, directions, occlude=False)
         del origins, directions
-        centre = self.centre_stripes(shading, rows, cols)
-        own = np.arange(start - lo, stop - lo)
+        level = shading.level
         with self.clock.stage("analytic AA"):
-            index, inside = neighbour_index(start, stop, width, height, lo)
+            sigma = self.stripe_offsets(shading)
+            # Where the footprint may reach a stripe: σ moves by at most about |g_x| + |g_y| to a neighbour's centre
+            # (a diagonal one), twice what it moves within the pixel; a pixel with no neighbour on its level is kept.
+            # Only the span's rows and one on either side need to know (the edge test's neighbours).
+            grid_level, grid_sigma = level.reshape(shape), sigma.reshape(shape)
+            move, alone = np.zeros(shape), np.ones(shape, dtype=bool)
+            for k, sg in zip(neighbours(grid_level), neighbours(grid_sigma)):
+                same = k == grid_level
+                alone &= ~same
+                with np.errstate(invalid="ignore"):
+                    move = np.where(same, np.fmax(move, np.abs(sg - grid_sigma)), move)
+            with np.errstate(invalid="ignore"):
+                want = (grid_level >= 0) & (alone | (np.abs(grid_sigma) - move <= self.stripe_reach))
+            want[:max(0, first - 1 - r0)] = False
+            want[last + 2 - r0:] = False
+        centre = self.centre_stripes(shading, rows, cols, sigma, want.ravel())
+        own = np.arange(start - r0 * width, stop - r0 * width)
+        with self.clock.stage("analytic AA"):
             hits = shading.hits
-            edge = edge_pixels(index, inside, own, hits.hit, hits.patch, shading.level, centre.near, centre.blocked,
-                               centre.untrusted)
+            grids = (x.reshape(shape) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked, centre.untrusted))
+            edge = edge_pixels(*grids)
             if shading.surface_rgb is not None:  # a map mode: where its colour jumps (a band edge), supersample
-                rgb = np.nan_to_num(shading.surface_rgb)
-                for q, ok in zip(index, inside):
-                    edge |= ok & (np.abs(rgb[q] - rgb[own]).max(axis=1) > MAP_STEP)
+                rgb = np.nan_to_num(shading.surface_rgb).reshape(*shape, 3)
+                for other in neighbours(rgb):
+                    edge |= np.abs(other - rgb).max(axis=2) > MAP_STEP
+            edge = edge.ravel()[own]
         mine = shading.take(own)
         rgba = self.colour(mine, np.where(centre.blocked[own], 0.0, centre.coverage[own]), 1)
         fell_back = mine.hits.fallback.copy()
         fallbacks = int(fell_back.sum())
-        rays = hi - lo
+        rays = len(rows)
         edges = np.flatnonzero(edge)
         chunk = max(1, RAYS_PER_TILE // (EDGE_SAMPLES * EDGE_SAMPLES))
         for part in np.array_split(edges, max(1, -(-len(edges) // chunk))):
@@ -392,26 +425,36 @@ class Renderer:
         pixels[:, 4:] = aov_planes(aovs)
         return Tile(start, stop, pixels, rays, fallbacks, int(fell_back.sum()), len(edges))
 
-    def centre_stripes(self, shading: Shading, rows: np.ndarray, cols: np.ndarray) -> "CentreStripes":
-        """Per centre ray: the signed offset σ to its level, its screen gradient g, the stripe's box coverage, and
-        the flags the edge test needs (`analytic`).
+    def stripe_offsets(self, shading: Shading) -> np.ndarray:
+        """Per ray the signed offset σ from its nearest level's centre (`modes.base.level_offset`), NaN where none is."""
+        hits, level = shading.hits, shading.level
+        sigma = np.full(len(level), np.nan)
+        idx = np.flatnonzero(level >= 0)
+        if len(idx):
+            sigma[idx] = level_offset(self.mode, SurfacePoints(hits.P[idx], hits.N[idx], shading.s[idx], hits.patch[idx],
+                                                               hits.u[idx], hits.v[idx]), level[idx])
+        return sigma
+
+    def centre_stripes(self, shading: Shading, rows: np.ndarray, cols: np.ndarray, sigma: np.ndarray,
+                       want: np.ndarray) -> "CentreStripes":
+        """Per centre ray where ``want``: the screen gradient g of its offset σ (`stripe_offsets`), the stripe's box
+        coverage, and the flags the edge test needs (`analytic`); elsewhere no stripe is near.
 
         g is a central difference over the pixel of the real pipeline: the exact surface point and normal at
         (u, v) ± ½ (du, dv) (the footprint of `analytic.uv_footprint`), the eye ray to it, the reflected
         direction and the mode's `level_offset`.
         """
         n_rays = len(shading.hits.hit)
-        sigma, gap = np.full(n_rays, np.nan), np.full(n_rays, np.nan)
+        gap = np.full(n_rays, np.nan)
         grad = np.full((n_rays, 2), np.nan)
         level = shading.level
-        idx = np.flatnonzero(level >= 0)
+        idx = np.flatnonzero(want & (level >= 0))
         hits = shading.hits
         with self.clock.stage("analytic AA"):
             if len(idx):
                 patch, u, v, n = hits.patch[idx], hits.u[idx], hits.v[idx], hits.N[idx]
                 k = level[idx]
                 points = SurfacePoints(hits.P[idx], n, shading.s[idx], patch, u, v)
-                sigma[idx] = level_offset(self.mode, points, k)
                 gap[idx] = np.abs(sigma[idx] - level_offset(self.mode, points, self.neighbour_level[k]))
                 derivs = self.surfaces.evaluate(patch, u, v)
                 steps = uv_footprint(self.camera, rows[idx], cols[idx], hits.P[idx], n, derivs.Su, derivs.Sv)
@@ -421,19 +464,16 @@ class Renderer:
                     ends = []
                     for sign in (1.0, -1.0):
                         # The share of the half-pixel step that stays in the patch's domain (it is clamped there).
-                        with np.errstate(divide="ignore", invalid="ignore"):
-                            room = np.minimum(np.where(sign * du > 0, (u1 - u) / (sign * du), np.where(sign * du < 0, (u0 - u) / (sign * du), np.inf)),
-                                              np.where(sign * dv > 0, (v1 - v) / (sign * dv), np.where(sign * dv < 0, (v0 - v) / (sign * dv), np.inf)))
-                        lam = np.clip(np.nan_to_num(room, nan=0.0), 0.0, 1.0)
+                        lam = _room(u, sign * du, u0, u1)
+                        lam = np.minimum(lam, _room(v, sign * dv, v0, v1))
                         ends.append((lam, self._offset_at(patch, u + sign * lam * du, v + sign * lam * dv, n, k)))
                     (lp, sp), (lm, sm) = ends
                     with np.errstate(divide="ignore", invalid="ignore"):
                         grad[idx, axis] = (sp - sm) / (0.5 * (lp + lm))
             span = np.abs(grad[:, 0]) + np.abs(grad[:, 1])
-            reach = stripe_reach(self.half_width, self.blur)
             with np.errstate(invalid="ignore"):
                 known = np.isfinite(span)
-                near = (level >= 0) & np.where(known, np.abs(sigma) - 0.5 * span <= reach, np.abs(sigma) <= 2.0 * reach)
+                near = want & (level >= 0) & (~known | (np.abs(sigma) - 0.5 * span <= self.stripe_reach))
                 untrusted = near & (~known | (span > TRUSTED_SPAN * gap))
             coverage = np.zeros(n_rays)
             ok = np.flatnonzero(near & known)
