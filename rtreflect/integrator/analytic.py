@@ -20,7 +20,7 @@ renderer's own pipeline (exact surface point and normal, eye ray, reflection, th
 Pixels that this linear model does not describe are not stripe edges and are supersampled
 (`edge_pixels`): where one of the 8 neighbours disagrees on hit or miss, on the patch, on the level
 (near a stripe) or on the occlusion of the reflected ray (near a stripe), and where the footprint spans
-about a level spacing or more.
+about a level spacing or more, or σ bends within it (a neighbour's σ strays from the pixel's plane).
 """
 
 from __future__ import annotations
@@ -37,6 +37,10 @@ FLAT = 1e-9
 #: Largest footprint |g_x| + |g_y| trusted, as a share of the spacing between neighbouring levels (in σ):
 #: beyond it the pixel may see two stripes, or σ bends within it; it is supersampled instead.
 TRUSTED_SPAN = 0.5
+#: Largest departure of a neighbour's σ (one pixel away, same level) from the plane σ + g·(Δx, Δy), in half
+#: widths, for the pixel's linear model to be trusted: within the pixel itself the bend is a quarter of it (σ's
+#: second-order term), so a stripe edge moves by at most w/8 there.
+BENDING = 0.5
 #: Sub-pixel samples per axis (s×s) of the pixels that are supersampled (edges): as the old default.
 EDGE_SAMPLES = 4
 #: The 8 neighbours of a pixel as (row, column) steps.
@@ -110,13 +114,13 @@ def uv_footprint(camera, rows: np.ndarray, cols: np.ndarray, P: np.ndarray, N: n
 
 
 def neighbours(grid: np.ndarray):
-    """The 8 neighbours of every pixel of a (rows, columns) grid, as 8 shifted grids (`NEIGHBOURS` order).
+    """The 8 neighbours of every pixel of a (rows, columns, ...) grid, as 8 shifted grids (`NEIGHBOURS` order).
 
     Beyond the grid's border a pixel's own row or column is repeated, so there a neighbour is one the
     pixel already has (or itself): the image border is no edge.
     """
-    rows, cols = grid.shape
-    padded = np.pad(grid, 1, mode="edge")
+    rows, cols = grid.shape[:2]
+    padded = np.pad(grid, [(1, 1), (1, 1)] + [(0, 0)] * (grid.ndim - 2), mode="edge")
     for dr, dc in NEIGHBOURS:
         yield padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
 
