@@ -69,7 +69,6 @@ from ..modes.profile import stripe_reach, stripe_weight
 from ..modes.shading import shade_factor
 from ..integrator.autorig import resolve
 from ..integrator.analytic import EDGE_SAMPLES
-from ..integrator.analytic import EDGE_SAMPLES
 from ..integrator.renderer import Renderer
 from ..exchange.scene import ANALYTIC, MAX_MESH_VERTICES, Scene
 from ..geometry.tessellation import largest_factor, tessellate
