@@ -61,7 +61,8 @@ def trapezoid_cdf(z: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         rise = t * t / (2.0 * hi * lo)
         fall = 1.0 - (hi + lo - t) ** 2 / (2.0 * hi * lo)
         middle = (t - 0.5 * lo) / hi
-    return np.where(t <= lo, np.where(lo > 0, rise, 0.0), np.where(t >= hi, np.where(lo > 0, fall, 1.0), middle))
+    cdf = np.where(t <= lo, np.where(lo > 0, rise, 0.0), np.where(t >= hi, np.where(lo > 0, fall, 1.0), middle))
+    return np.where(hi > 0, cdf, (z >= 0).astype(np.float64))  # no footprint at all: a step at 0
 
 
 def hard_coverage(sigma: np.ndarray, a: np.ndarray, b: np.ndarray, half_width: float) -> np.ndarray:
@@ -123,6 +124,13 @@ def neighbours(grid: np.ndarray):
     padded = np.pad(grid, [(1, 1), (1, 1)] + [(0, 0)] * (grid.ndim - 2), mode="edge")
     for dr, dc in NEIGHBOURS:
         yield padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
+
+
+def neighbour_inside(shape: tuple[int, int]):
+    """Per `NEIGHBOURS` step, a (rows, columns) mask of the pixels whose neighbour there lies inside the grid."""
+    padded = np.pad(np.ones(shape, dtype=bool), 1, constant_values=False)
+    for dr, dc in NEIGHBOURS:
+        yield padded[1 + dr:1 + dr + shape[0], 1 + dc:1 + dc + shape[1]]
 
 
 def edge_pixels(hit: np.ndarray, patch: np.ndarray, level: np.ndarray, near: np.ndarray, blocked: np.ndarray,

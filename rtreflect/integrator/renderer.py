@@ -24,7 +24,7 @@ import numpy as np
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
-from .analytic import BENDING, EDGE_SAMPLES, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbours, stripe_coverage, uv_footprint
+from .analytic import BENDING, EDGE_SAMPLES, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbour_inside, neighbours, stripe_coverage, uv_footprint
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect
 from ..modes.profile import stripe_reach, stripe_weight
@@ -402,9 +402,11 @@ class Renderer:
             gx, gy = (centre.grad[:, axis].reshape(shape) for axis in range(2))
             near = centre.near.reshape(shape)
             bent = np.zeros(shape, dtype=bool)
-            for (dr, dc), k, sg in zip(NEIGHBOURS, neighbours(grid_level), neighbours(grid_sigma)):
+            for (dr, dc), inside, k, sg in zip(NEIGHBOURS, neighbour_inside(shape), neighbours(grid_level),
+                                               neighbours(grid_sigma)):
                 with np.errstate(invalid="ignore"):
-                    bent |= near & (k == grid_level) & (np.abs(sg - grid_sigma - gx * dc - gy * dr) > BENDING * self.half_width)
+                    strays = np.abs(sg - grid_sigma - gx * dc - gy * dr) > BENDING * self.half_width
+                bent |= inside & near & (k == grid_level) & strays
             centre.untrusted |= bent.ravel()
             hits = shading.hits
             grids = (x.reshape(shape) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked, centre.untrusted))
