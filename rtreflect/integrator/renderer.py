@@ -422,7 +422,9 @@ class Renderer:
         fallbacks = int(fell_back.sum())
         rays = len(rows)
         edges = np.flatnonzero(edge)
-        chunk = max(1, RAYS_PER_TILE // (EDGE_SAMPLES * EDGE_SAMPLES))
+        # Edge pixels' samples in chunks of at most the span's own pixel count: no more rays at once than the tile
+        # was sized for (`tiling`, one ray per pixel).
+        chunk = max(1, len(own) // (EDGE_SAMPLES * EDGE_SAMPLES))
         for part in np.array_split(edges, max(1, -(-len(edges) // chunk))):
             if len(part) == 0:
                 continue
