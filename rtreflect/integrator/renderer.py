@@ -381,17 +381,18 @@ class Renderer:
         with self.clock.stage("analytic AA"):
             sigma = self.stripe_offsets(shading)
             # Where the footprint may reach a stripe: σ moves by at most about |g_x| + |g_y| to a neighbour's centre
-            # (a diagonal one), twice what it moves within the pixel; a pixel with no neighbour on its level is kept.
-            # Only the span's rows and one on either side need to know (the edge test's neighbours).
+            # (a diagonal one), twice what it moves within the pixel. The bound holds only where all 8 neighbours
+            # are on the pixel's level: a pixel with a neighbour on another level (between two stripes, or where
+            # the stripes crowd) is kept. Only the span's rows and one on either side need to know (the edge
+            # test's neighbours).
             grid_level, grid_sigma = level.reshape(shape), sigma.reshape(shape)
-            move, alone = np.zeros(shape), np.ones(shape, dtype=bool)
+            move, mixed = np.zeros(shape), np.zeros(shape, dtype=bool)
             for k, sg in zip(neighbours(grid_level), neighbours(grid_sigma)):
-                same = k == grid_level
-                alone &= ~same
+                mixed |= k != grid_level
                 with np.errstate(invalid="ignore"):
-                    move = np.where(same, np.fmax(move, np.abs(sg - grid_sigma)), move)
+                    move = np.fmax(move, np.abs(sg - grid_sigma))
             with np.errstate(invalid="ignore"):
-                want = (grid_level >= 0) & (alone | (np.abs(grid_sigma) - move <= self.stripe_reach))
+                want = (grid_level >= 0) & (mixed | (np.abs(grid_sigma) - move <= self.stripe_reach))
             want[:max(0, first - 1 - r0)] = False
             want[last + 2 - r0:] = False
         centre = self.centre_stripes(shading, rows, cols, sigma, want.ravel())
