@@ -469,7 +469,9 @@ class Renderer:
                 patch, u, v, n = hits.patch[idx], hits.u[idx], hits.v[idx], hits.N[idx]
                 k = level[idx]
                 points = SurfacePoints(hits.P[idx], n, shading.s[idx], patch, u, v)
-                gap[idx] = np.abs(sigma[idx] - level_offset(self.mode, points, self.neighbour_level[k]))
+                other = self.neighbour_level[k]
+                # The spacing to the next level in σ's unit (none: a single level, nothing to confuse it with).
+                gap[idx] = np.where(other == k, np.inf, np.abs(sigma[idx] - level_offset(self.mode, points, other)))
                 derivs = self.surfaces.evaluate(patch, u, v)
                 steps = uv_footprint(self.camera, rows[idx], cols[idx], hits.P[idx], n, derivs.Su, derivs.Sv)
                 u0, u1, v0, v1 = self.surfaces.domains(patch)
