@@ -2,7 +2,9 @@
 
 Per tile (a span of pixels in row-major order): camera rays for the s×s samples →
 exact hits → reflected directions → light tubes and the occlusion test → coverage
-colour; plus the pixel-centre rays → AOVs. Tiles are independent, so two threads
+colour; plus the pixel-centre rays → AOVs. With ``samples = "analytic"`` (the default,
+`analytic`) only the centre rays are traced, the stripes' coverage follows in closed form,
+and the edge pixels are supersampled 4×4. Tiles are independent, so two threads
 (Embree and most numpy kernels release the GIL) render them side by side,
 deterministically, and a pixel's value does not depend on the tile it falls in.
 `Renderer.stream` hands tiles over in image order (to `streaming`, which writes them
@@ -337,7 +339,6 @@ class Renderer:
 
     def supersample(self, rows: np.ndarray, cols: np.ndarray, s: int) -> tuple[np.ndarray, Shading, int]:
         """(P, 4) RGBA of pixels (rows, cols) from their s×s samples, the samples' `Shading`, and the rays traced."""
-        settings = self.scene.render
         offsets = sample_offsets(s)
         ns = len(offsets)
         with self.clock.stage("camera rays"):
