@@ -386,37 +386,47 @@ class Renderer:
             # are on the pixel's level: a pixel with a neighbour on another level (between two stripes, or where
             # the stripes crowd) is kept. Only the span's rows and one on either side need to know (the edge
             # test's neighbours).
-            grid_level, grid_sigma = level.reshape(shape), sigma.reshape(shape)
-            move, mixed = np.zeros(shape), np.zeros(shape, dtype=bool)
-            for k, sg in zip(neighbours(grid_level), neighbours(grid_sigma)):
-                mixed |= k != grid_level
+            # Only the columns around the surface can hold a stripe or an edge: the neighbour tests run there alone.
+            hit_cols = np.flatnonzero(shading.hits.hit.reshape(shape).any(axis=0))
+            cs = slice(max(0, hit_cols[0] - 1), min(width, hit_cols[-1] + 2)) if len(hit_cols) else slice(0, 0)
+            crop = (shape[0], cs.stop - cs.start)
+            grid = lambda x: x.reshape(shape + x.shape[1:])[:, cs]  # noqa: E731 (a (rows, columns) view of the crop)
+            grid_level, grid_sigma = grid(level), grid(sigma)
+            want = np.zeros(shape, dtype=bool)
+            if crop[1]:
+                move, mixed = np.zeros(crop), np.zeros(crop, dtype=bool)
+                for k, sg in zip(neighbours(grid_level), neighbours(grid_sigma)):
+                    mixed |= k != grid_level
+                    with np.errstate(invalid="ignore"):
+                        move = np.fmax(move, np.abs(sg - grid_sigma))
                 with np.errstate(invalid="ignore"):
-                    move = np.fmax(move, np.abs(sg - grid_sigma))
-            with np.errstate(invalid="ignore"):
-                want = (grid_level >= 0) & (mixed | (np.abs(grid_sigma) - move <= self.stripe_reach))
+                    want[:, cs] = (grid_level >= 0) & (mixed | (np.abs(grid_sigma) - move <= self.stripe_reach))
             want[:max(0, first - 1 - r0)] = False
             want[last + 2 - r0:] = False
         centre = self.centre_stripes(shading, rows, cols, sigma, want.ravel())
         own = np.arange(start - r0 * width, stop - r0 * width)
+        edge = np.zeros(shape, dtype=bool)
         with self.clock.stage("analytic AA"):
-            # σ bending within the pixel (a fold of φ, a tight turn of the line) is not linear: where a neighbour's
-            # σ on the same level strays from the plane σ + g·(Δx, Δy) by `BENDING` half widths, supersample.
-            gx, gy = (centre.grad[:, axis].reshape(shape) for axis in range(2))
-            near = centre.near.reshape(shape)
-            bent = np.zeros(shape, dtype=bool)
-            for (dr, dc), inside, k, sg in zip(NEIGHBOURS, neighbour_inside(shape), neighbours(grid_level),
-                                               neighbours(grid_sigma)):
-                with np.errstate(invalid="ignore"):
-                    strays = np.abs(sg - grid_sigma - gx * dc - gy * dr) > BENDING * self.half_width
-                bent |= inside & near & (k == grid_level) & strays
-            centre.untrusted |= bent.ravel()
-            hits = shading.hits
-            grids = (x.reshape(shape) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked, centre.untrusted))
-            edge = edge_pixels(*grids)
-            if shading.surface_rgb is not None:  # a map mode: where its colour jumps (a band edge), supersample
-                rgb = np.nan_to_num(shading.surface_rgb).reshape(*shape, 3)
-                for other in neighbours(rgb):
-                    edge |= np.abs(other - rgb).max(axis=2) > MAP_STEP
+            if crop[1]:
+                # σ bending within the pixel (a fold of φ, a tight turn of the line) is not linear: where a
+                # neighbour's σ on the same level strays from the plane σ + g·(Δx, Δy) by `BENDING` half widths,
+                # supersample.
+                gx, gy = grid(centre.grad[:, 0]), grid(centre.grad[:, 1])
+                near = grid(centre.near)
+                bent = np.zeros(crop, dtype=bool)
+                for (dr, dc), inside, k, sg in zip(NEIGHBOURS, neighbour_inside(crop), neighbours(grid_level),
+                                                   neighbours(grid_sigma)):
+                    with np.errstate(invalid="ignore"):
+                        strays = np.abs(sg - grid_sigma - gx * dc - gy * dr) > BENDING * self.half_width
+                    bent |= inside & near & (k == grid_level) & strays
+                grid(centre.untrusted)[...] |= bent
+                hits = shading.hits
+                edge[:, cs] = edge_pixels(*(grid(x) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked,
+                                                               centre.untrusted)))
+                if shading.surface_rgb is not None:  # a map mode: where its colour jumps (a band edge), supersample
+                    rgb = grid(np.nan_to_num(shading.surface_rgb))
+                    for other in neighbours(rgb):
+                        edge[:, cs] |= np.abs(other - rgb).max(axis=2) > MAP_STEP
             edge = edge.ravel()[own]
         mine = shading.take(own)
         rgba = self.colour(mine, np.where(centre.blocked[own], 0.0, centre.coverage[own]), 1)
