@@ -42,12 +42,12 @@ def _overridden(scene: Scene, width: int | None, height: int | None, samples: in
     return resolve(scene.with_image(width, height, samples).with_render(overlay, normals))
 
 
-def render(scene: Scene | str | Path, width: int | None = None, height: int | None = None, samples: int | None = None, *,
+def render(scene: Scene | str | Path, width: int | None = None, height: int | None = None, samples: int | str | None = None, *,
            normals: str | None = None, overlay: bool | str | None = None, threads: int | None = None,
            progress: Callable[[int], None] | None = None) -> RenderResult:
     """Render ``scene`` (or the scene file at that path) into an in-memory film, as `rtreflect render` would.
 
-    ``width``, ``height``, ``samples`` (s: s×s samples per pixel), ``normals`` and ``overlay``
+    ``width``, ``height``, ``samples`` (``"analytic"``, or s: s×s samples per pixel), ``normals`` and ``overlay``
     override the scene's values (None keeps them; ``overlay="side"`` as ``--overlay=side``). The result has ``rgba`` (H, W, 4 linear
     float32), ``aov(name)`` (an EXR channel such as ``"f"``, or ``"P"``/``"N"`` as (H, W, 3)),
     ``stats`` (rays, seconds, Newton fallbacks) and the ``scene`` rendered. The film holds
@@ -66,7 +66,7 @@ def save(result: RenderResult, outdir: str | Path = "out") -> list[Path]:
 
 
 def validate(scene: Scene | str | Path, tolerance: float = DEFAULT_TOLERANCE_PX, width: int | None = None,
-             height: int | None = None, samples: int | None = None, *, normals: str | None = None,
+             height: int | None = None, samples: int | str | None = None, *, normals: str | None = None,
              threads: int | None = None, progress: Callable[[int], None] | None = None) -> SceneReport:
     """Check the scene's render against Ulmet's analytic reflection lines, as `rtreflect validate` does.
 

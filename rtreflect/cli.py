@@ -31,7 +31,7 @@ from .interrupts import Interrupted, signals_as_exceptions  # noqa: E402
 from .analysis.overlay import contours_file_name  # noqa: E402
 from .exchange.load import load_scene  # noqa: E402
 from .integrator.autorig import resolve  # noqa: E402
-from .exchange.scene import MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, OVERLAY_SIDE  # noqa: E402
+from .exchange.scene import ANALYTIC, MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, OVERLAY_SIDE  # noqa: E402
 from .output.streaming import render_to_files  # noqa: E402
 from .integrator.tiling import parse_size  # noqa: E402
 from .analysis.validate import DEFAULT_TOLERANCE_PX, validate_scene  # noqa: E402
@@ -55,9 +55,31 @@ def fail(message: str | RtreflectError) -> "NoReturn":  # noqa: F821
     sys.exit(EXIT_BAD_INPUT)
 
 
-def samples_text(s: int) -> str:
-    """Samples per pixel as the s×s grid they are: "4×4 = 16 samples/px", "1×1 = 1 sample/px"."""
+def samples_text(s: int | str) -> str:
+    """Samples per pixel as the s×s grid they are: "4×4 = 16 samples/px", "1×1 = 1 sample/px"; or "analytic AA"."""
+    if s == ANALYTIC:
+        return "analytic AA"
     return f"{s}×{s} = {s * s} sample{'' if s == 1 else 's'}/px"
+
+
+class SamplesType(click.ParamType):
+    """``--samples``: ``analytic`` (one exact sample per pixel, stripes anti-aliased in closed form) or s in 1..16."""
+
+    name = "analytic|S"
+
+    def convert(self, value, param, ctx):
+        if value == ANALYTIC or isinstance(value, int):
+            return value
+        try:
+            s = int(value)
+        except ValueError:
+            self.fail(f"{value!r} is not {ANALYTIC!r} nor an integer from 1 to {MAX_SAMPLES}.", param, ctx)
+        if not 1 <= s <= MAX_SAMPLES:
+            self.fail(f"{s} is not in the range 1<=x<={MAX_SAMPLES}.", param, ctx)
+        return s
+
+
+SAMPLES = SamplesType()
 
 
 def unique_scenes(paths: tuple[Path, ...]) -> list[Path]:
@@ -134,8 +156,9 @@ class OverlayValueCommand(click.Command):
               help="Folder for NAME.exr and NAME.png (created if missing).")
 @click.option("--width", type=click.IntRange(1, MAX_SIDE), help="Image width in pixels (overrides [image] width).")
 @click.option("--height", type=click.IntRange(1, MAX_SIDE), help="Image height in pixels (overrides [image] height).")
-@click.option("--samples", type=click.IntRange(1, MAX_SAMPLES),
-              help="s: s×s stratified samples per pixel for anti-aliasing (overrides [image] samples).")
+@click.option("--samples", type=SAMPLES,
+              help="analytic: stripes anti-aliased in closed form from one exact sample per pixel, edge pixels "
+                   "4×4 (the default); or s: s×s stratified samples per pixel (overrides [image] samples).")
 @click.option("--threads", type=click.IntRange(1, 64), default=None, help="Render threads (default: up to 2).")
 @click.option("--max-memory", "max_memory", metavar="SIZE", default=None,
               help="Working memory for tiles in flight, e.g. 512M or 2G (default: a quarter of RAM). "
@@ -334,8 +357,8 @@ def _fmt(value: float | None) -> str:
               help="Largest allowed deviation in pixels between traced and analytic line centres.")
 @click.option("--width", type=click.IntRange(1, MAX_SIDE), help="Image width in pixels (overrides [image] width).")
 @click.option("--height", type=click.IntRange(1, MAX_SIDE), help="Image height in pixels (overrides [image] height).")
-@click.option("--samples", type=click.IntRange(1, MAX_SAMPLES),
-              help="s: s×s samples per pixel of the checked colour image (overrides [image] samples).")
+@click.option("--samples", type=SAMPLES,
+              help="analytic or s (s×s samples per pixel) of the checked colour image (overrides [image] samples).")
 @click.option("--normals", type=click.Choice(NORMALS_MODES), default=None,
               help="Validate the exact renderer or the analysis-mesh one (overrides [render] normals).")
 @click.option("--threads", type=click.IntRange(1, 64), default=None, help="Render threads (default: up to 2).")
@@ -452,7 +475,7 @@ def validate(scenes: tuple[Path, ...], report_path: Path | None, tolerance: floa
                    "and tubes).")
 @click.option("--width", type=click.IntRange(1, MAX_SIDE), help="Width of the --png render (overrides [image] width).")
 @click.option("--height", type=click.IntRange(1, MAX_SIDE), help="Height of the --png render (overrides [image] height).")
-@click.option("--samples", type=click.IntRange(1, MAX_SAMPLES), help="s: s×s samples per pixel of the --png render.")
+@click.option("--samples", type=SAMPLES, help="analytic or s (s×s samples per pixel) of the --png render.")
 @click.option("--skip-bad-faces", "skip_bad_faces", is_flag=True,
               help="CAD input: leave out faces that cannot be used (listed) instead of refusing the part.")
 def continuity_command(scenes, report_path, png_path, g0, g1, g2, require, lines, width, height, samples,

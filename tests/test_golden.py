@@ -112,8 +112,12 @@ def test_render_is_deterministic(golden_renders, tmp_path, stem):
         assert first_exr.with_suffix(suffix).read_bytes() == again.with_suffix(suffix).read_bytes()
 
 
-def test_golden_scene_overrides_size_samples_and_name():
+def test_golden_scene_overrides_size_samples_and_name(tmp_path):
+    # hood.toml says samples = "analytic" (the default since issue 14): the goldens keep it; an integer s is capped at 4.
     scene = golden_scene(HOOD)
+    assert (scene.image.width, scene.image.height, scene.image.samples) == (GOLDEN_WIDTH, GOLDEN_HEIGHT, "analytic")
+    assert (scene.output.name, scene.output.exr, scene.output.png) == ("hood", True, True)
+    scene = golden_scene(hood_variant(tmp_path, lambda doc: doc["image"].update(samples=16)))
     assert (scene.image.width, scene.image.height, scene.image.samples) == (GOLDEN_WIDTH, GOLDEN_HEIGHT, 4)
     assert (scene.output.name, scene.output.exr, scene.output.png) == ("hood", True, True)
 

@@ -331,6 +331,8 @@ CASES = [
     Case("samples zero", put("image.samples", 0), "image.samples"),
     Case("samples negative", put("image.samples", -2), "image.samples"),
     Case("samples absurd", put("image.samples", 1000), "image.samples"),
+    Case("samples a misspelt word", put("image.samples", "analytc"),
+         'image.samples: must be "analytic" or an integer from 1 to 16, got \'analytc\''),
     # lights
     Case("normal zero", put("lights.normal", [0.0, 0.0, 0.0]), "lights.normal"),
     Case("direction zero", put("lights.direction", [0.0, 0.0, 0.0]), "lights.direction"),
@@ -547,6 +549,7 @@ def test_valid_base_scene_renders(geometry: str | None, tmp_path: Path) -> None:
 BAD_COMMAND_LINES = [
     (["render", "{scene}", "--width", "0"], "--width"),
     (["render", "{scene}", "--samples", "many"], "--samples"),
+    (["render", "{scene}", "--samples", "17"], "--samples"),
     (["render"], "SCENES"),
     (["rendr", "{scene}"], "rendr"),
     (["render", "{scene}", "--colour", "red"], "--colour"),

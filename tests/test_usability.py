@@ -113,8 +113,9 @@ def test_a_short_row_of_two_is_blamed_against_the_first(tmp_path: Path) -> None:
     assert "surface[0].points[1]: must have 4 entries like surface[0].points[0], got 3" in result.stderr
 
 
-@pytest.mark.parametrize("samples, text", [(1, "1×1 = 1 sample/px"), (3, "3×3 = 9 samples/px")])
-def test_summary_says_the_sample_grid(samples: int, text: str, tmp_path: Path) -> None:
+@pytest.mark.parametrize("samples, text", [(1, "1×1 = 1 sample/px"), (3, "3×3 = 9 samples/px"),
+                                           ("analytic", "analytic AA")])
+def test_summary_says_the_sample_grid(samples: int | str, text: str, tmp_path: Path) -> None:
     scene = write(tmp_path / "a.toml", valid_scene())
     result = CliRunner().invoke(cli, ["render", str(scene), "-o", str(tmp_path / "out"), "--width", "32", "--height",
                                       "18", "--samples", str(samples)])

@@ -7,7 +7,7 @@ Run from the project folder:
     python tools/make_goldens.py hood plate_step  # only scenes/hood.toml and parts/plate.step
 
 Golden size is `rtreflect.testing.GOLDEN_WIDTH` × `GOLDEN_HEIGHT` (320×180) with the scene's own
-samples s, capped at `GOLDEN_MAX_SAMPLES` (4). Renders are deterministic, so running this twice on
+samples s, capped at `GOLDEN_MAX_SAMPLES` (4); `"analytic"` (the default) stays analytic. Renders are deterministic, so running this twice on
 one machine writes the same pixels; review the images (and the diff images the failing tests wrote)
 before committing them: see the README, "Golden images".
 """

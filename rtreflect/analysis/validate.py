@@ -68,8 +68,9 @@ from ..modes.reflection import ReflectionMode
 from ..modes.profile import stripe_reach, stripe_weight
 from ..modes.shading import shade_factor
 from ..integrator.autorig import resolve
+from ..integrator.analytic import EDGE_SAMPLES
 from ..integrator.renderer import Renderer
-from ..exchange.scene import MAX_MESH_VERTICES, Scene
+from ..exchange.scene import ANALYTIC, MAX_MESH_VERTICES, Scene
 from ..geometry.tessellation import largest_factor, tessellate
 from ..trace.accelerator import Accelerator
 from ..trace.tracing import occluded, refine
@@ -658,7 +659,8 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
     known = (high == 0.0) | (uniform & ~blocked) | dark
     checked &= known & (high - low <= COLOUR_CHECK_SPAN)
     samples = renderer.scene.image.samples
-    tolerance = 0.5 / samples**2
+    # Half a sample; analytic AA (continuous coverage): half a sample of its edge pixels' s×s grid.
+    tolerance = 0.5 / (EDGE_SAMPLES if samples == ANALYTIC else samples)**2
     L = aovs.line_coverage.ravel()
     wrong = checked & ~((L >= low - tolerance) & (L <= high + tolerance))
     return checked.reshape(height, width), wrong.reshape(height, width)

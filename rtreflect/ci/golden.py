@@ -35,7 +35,7 @@ __all__ = ["GOLDEN_WIDTH", "GOLDEN_HEIGHT", "GOLDEN_MAX_SAMPLES", "GOLDEN_CHECKS
 
 #: Golden images are rendered at this size (small: the folder stays a few MB, a render takes a second).
 GOLDEN_WIDTH, GOLDEN_HEIGHT = 320, 180
-#: At most s = 4 (16 samples per pixel): the scene's own s if smaller.
+#: At most s = 4 (16 samples per pixel): the scene's own s if smaller (``"analytic"`` stays analytic).
 GOLDEN_MAX_SAMPLES = 4
 
 
@@ -49,7 +49,9 @@ def golden_name(path: str | Path) -> str:
 def golden_scene(path: str | Path) -> Scene:
     """The scene file (or CAD part) at golden size, writing ``NAME.exr`` and ``NAME.png`` (NAME: `golden_name`)."""
     scene = load_scene(path)
-    scene = scene.with_image(GOLDEN_WIDTH, GOLDEN_HEIGHT, min(scene.image.samples, GOLDEN_MAX_SAMPLES))
+    samples = scene.image.samples
+    samples = min(samples, GOLDEN_MAX_SAMPLES) if isinstance(samples, int) else samples
+    scene = scene.with_image(GOLDEN_WIDTH, GOLDEN_HEIGHT, samples)
     return resolve(replace(scene, output=replace(scene.output, name=golden_name(path), exr=True, png=True)))
 
 

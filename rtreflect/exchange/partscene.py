@@ -15,14 +15,15 @@ import numpy as np
 from ..geometry.surfaces import NurbsSurface
 from .cad import model_summary, read_cad
 from .occt import CadModel
-from .scene import CameraSpec, ImageSpec, LightSpec, OutputSpec, RenderSettings, Scene, _hash_files
+from .scene import ANALYTIC, CameraSpec, ImageSpec, LightSpec, OutputSpec, RenderSettings, Scene, _hash_files
 
 #: Bumped when the default scene changes, so resumable outputs of CAD files given as scenes re-render.
 #: 2: the automatic camera and light rig (`integrator.autorig`) replace the bounding-box fit.
 DEFAULT_SCENE_VERSION = 2
-#: Image: the scenes' default long side; 3×3 samples a pixel keeps a few-hundred-face part's render short.
+#: Image: the scenes' default long side; analytic anti-aliasing (one sample a pixel, face edges 4×4) keeps a
+#: few-hundred-face part's render short.
 LONG_SIDE = 960
-SAMPLES = 3
+SAMPLES = ANALYTIC
 #: Image aspects (width / height) the default scene chooses between, to fit the part's outline in the 3/4 view:
 #: from the scenes' 16:9 down to 3:4 (a tall part, a vase, in a 16:9 frame covers a fifth of it).
 ASPECTS = (16 / 9, 3 / 4)

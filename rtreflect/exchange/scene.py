@@ -50,6 +50,9 @@ MAX_MESH_VERTICES = 1 << 23
 MAX_NAME_BYTES = 200
 #: Largest s (s×s samples per pixel); 256 samples per pixel is far past visible gains.
 MAX_SAMPLES = 16
+#: `[image] samples` of the analytic anti-aliasing (integrator/analytic.py): one exact sample per pixel, the
+#: stripes' coverage in closed form, edge pixels supersampled. The default.
+ANALYTIC = "analytic"
 #: Largest tessellation per knot span; hits are refined by Newton, so more buys nothing.
 MAX_TESSELLATION = 256
 #: |c·m| above this means the tube direction is not in the light plane.
@@ -92,7 +95,9 @@ MAX_BANDS = 64
 class ImageSpec:
     width: int = 960
     height: int = 540
-    samples: int = 4  # s: s×s stratified samples per pixel
+    # "analytic" (`ANALYTIC`): one exact sample per pixel, the stripes' coverage in closed form, edge pixels
+    # supersampled 4×4; or s, an int: s×s stratified samples per pixel.
+    samples: int | str = "analytic"
 
 
 @dataclass(frozen=True)
@@ -304,7 +309,7 @@ class Scene:
             changed = replace(changed, inputs_sha256=digest.hexdigest())
         return changed
 
-    def with_image(self, width: int | None = None, height: int | None = None, samples: int | None = None) -> "Scene":
+    def with_image(self, width: int | None = None, height: int | None = None, samples: int | str | None = None) -> "Scene":
         """The same scene with some `[image]` values overridden (command-line options), validated alike."""
         values = {"width": width, "height": height, "samples": samples}
         return self.replace(image={k: v for k, v in values.items() if v is not None})
@@ -490,6 +495,16 @@ def _array(table: _Table, key: str, value: Any, shape: tuple[int | None, ...]) -
     return np.asarray(value, dtype=np.float64)
 
 
+def parse_samples(t: _Table, key: str) -> int | str:
+    """``[image] samples``: ``"analytic"`` (the default) or an integer s from 1 to `MAX_SAMPLES`."""
+    value = t.raw(key, ImageSpec.samples)
+    if isinstance(value, str):
+        if value != ANALYTIC:
+            raise t.error(key, f'must be "{ANALYTIC}" or an integer from 1 to {MAX_SAMPLES}, got {value!r}')
+        return value
+    return t.number(key, ImageSpec.samples, low=1, high=MAX_SAMPLES, integer=True)
+
+
 def _parse_image(t: _Table) -> ImageSpec:
     sides = {}
     for key, default in (("width", ImageSpec.width), ("height", ImageSpec.height)):
@@ -497,7 +512,7 @@ def _parse_image(t: _Table) -> ImageSpec:
         if sides[key] > MAX_SIDE:
             raise t.error(key, f"must be at most {MAX_SIDE} pixels ({FILM_LIMIT_REASON}), got {sides[key]}")
     width, height = sides["width"], sides["height"]
-    samples = t.number("samples", ImageSpec.samples, low=1, high=MAX_SAMPLES, integer=True)
+    samples = parse_samples(t, "samples")
     t.finish()
     if width * height > MAX_PIXELS:
         raise t.error("width", f"{width}×{height} pixels is more than the maximum {MAX_PIXELS} ({FILM_LIMIT_REASON})")

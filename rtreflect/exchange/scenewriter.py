@@ -27,7 +27,7 @@ COMMENTS = {
     "image": {
         "width": "pixels",
         "height": "pixels",
-        "samples": "s: s×s stratified samples per pixel",
+        "samples": '"analytic": stripes anti-aliased in closed form, edges 4×4; or s: s×s stratified samples per pixel',
     },
     "camera": {
         "projection": '"perspective" or "orthographic"',

@@ -4,8 +4,9 @@
 ``line_color`` with its stripe weight w (1 or 0 for the hard tube, `modes.profile`)
 over the surface colour scaled by its shading factor k (`modes.shading`), i.e.
 w·line_color + (1 − w)·k·surface_color; a sample that hits nothing shows ``background``.
-The pixel is their mean (so with a black background RGB is premultiplied by A). The
-AOVs come from the ray through the pixel centre.
+The pixel is their mean (so with a black background RGB is premultiplied by A). With
+``samples = "analytic"`` a pixel is its centre sample alone, w the stripe's covered share of the
+pixel (`analytic`). The AOVs come from the ray through the pixel centre.
 """
 
 from __future__ import annotations

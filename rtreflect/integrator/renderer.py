@@ -2,7 +2,9 @@
 
 Per tile (a span of pixels in row-major order): camera rays for the s×s samples →
 exact hits → reflected directions → light tubes and the occlusion test → coverage
-colour; plus the pixel-centre rays → AOVs. Tiles are independent, so two threads
+colour; plus the pixel-centre rays → AOVs. With ``samples = "analytic"`` (the default,
+`analytic`) only the centre rays are traced, the stripes' coverage follows in closed form,
+and the edge pixels are supersampled 4×4. Tiles are independent, so two threads
 (Embree and most numpy kernels release the GIL) render them side by side,
 deterministically, and a pixel's value does not depend on the tile it falls in.
 `Renderer.stream` hands tiles over in image order (to `streaming`, which writes them
@@ -24,15 +26,16 @@ import numpy as np
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
+from .analytic import BENDING, EDGE_SAMPLES, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbour_inside, neighbours, stripe_coverage, uv_footprint
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect
 from ..modes.profile import stripe_reach, stripe_weight
 from ..modes.shading import shade_factor
-from ..modes.base import SurfacePoints
+from ..modes.base import SurfacePoints, level_offset, neighbour_levels
 from ..modes.reflection import ReflectionMode
 from ..modes.registry import mode_of
 from ..trace.meshnormals import trace_mesh, vertex_normals
-from ..exchange.scene import ImageSpec, Scene
+from ..exchange.scene import ANALYTIC, ImageSpec, Scene
 from ..geometry.curvature import curvatures_at
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
@@ -41,6 +44,10 @@ from ..trace.tracing import Hits, occluded, trace
 
 #: Most rays per tile (about 1.2 kB each in flight, see `tiling`): larger tiles buy no speed over numpy's overhead.
 RAYS_PER_TILE = 1 << 16
+#: samples = "analytic", map modes: a neighbour whose surface colour differs by more than this (linear RGB, any
+#: channel) marks a band edge or the undercut flag's edge, and the pixel is supersampled; a curvature map's
+#: smooth colours change by far less from one pixel to the next.
+MAP_STEP = 0.05
 
 
 @dataclass
@@ -60,13 +67,16 @@ class Shading:
     # Another mode's distance to its nearest level (`Stripes.level_dist`) where `[render] blur` softens its stripes
     # (`Renderer.soft_stripes`), else None.
     stripe_dist: np.ndarray | None = None
+    # The mode's nearest level (`Stripes.level_id`, −1 where none is or no hit), for the analytic path.
+    level: np.ndarray | None = None
 
     def take(self, rows: np.ndarray) -> "Shading":
         hits = Hits(**{k: getattr(self.hits, k)[rows] for k in Hits.__dataclass_fields__})
         return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
                        self.line_dist[rows], self.lit[rows],
                        None if self.surface_rgb is None else self.surface_rgb[rows],
-                       None if self.stripe_dist is None else self.stripe_dist[rows])
+                       None if self.stripe_dist is None else self.stripe_dist[rows],
+                       None if self.level is None else self.level[rows])
 
 
 @dataclass
@@ -77,6 +87,7 @@ class RenderStats:
     rays: int = 0
     fallbacks: int = 0  # samples whose nearest exact hit could not be decided (tracing.py)
     fallback_pixels: int = 0  # pixels with at least one such sample
+    supersampled: int = 0  # samples = "analytic": edge pixels rendered with s×s samples instead (analytic.py)
     tiles: int = 0
     seconds: float = 0.0
     stages: dict[str, float] = field(default_factory=dict)
@@ -96,6 +107,7 @@ class Tile:
     rays: int
     fallbacks: int
     fallback_pixels: int
+    supersampled: int = 0
 
 
 @dataclass
@@ -118,6 +130,25 @@ class RenderResult:
         if name not in CHANNELS:
             raise ValueError(f"no channel {name!r}; the channels are {', '.join(CHANNELS)} (and P, N as vectors)")
         return self.film.channel(name)
+
+
+def _room(x: np.ndarray, step: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Largest λ in [0, 1] with x + λ·step inside [low, high]."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(step > 0, (high - x) / step, np.where(step < 0, (low - x) / step, 1.0))
+    return np.clip(np.nan_to_num(room, nan=0.0), 0.0, 1.0)
+
+
+@dataclass
+class CentreStripes:
+    """Per centre ray of the analytic path (`Renderer.centre_stripes`); NaN and False where no level is near."""
+
+    sigma: np.ndarray  # signed offset σ from the nearest level's centre (`modes.base.level_offset`)
+    grad: np.ndarray  # (N, 2) its gradient per pixel, (∂σ/∂x, ∂σ/∂y), x along a row, y down a column
+    coverage: np.ndarray  # the stripe's weighted share of the box pixel (`analytic.stripe_coverage`)
+    near: np.ndarray  # the footprint reaches the stripe (within the profile's reach)
+    blocked: np.ndarray  # near, and the reflected ray occluded before the level (modes seen along a ray)
+    untrusted: np.ndarray  # near, and the linear model is not (footprint ≥ `TRUSTED_SPAN` level spacings, or no g)
 
 
 def default_threads() -> int:
@@ -155,6 +186,12 @@ class Renderer:
         # lit out to the profile's reach, weighted by `stripe_weight` of their distance to the nearest level.
         self.soft_stripes = (scene.render.blur > 0 and not isinstance(self.mode, ReflectionMode)
                              and not getattr(self.mode, "along_ray", False))
+        # The analytic path's stripe (`analytic`): half width (the tubes' own radius, not the profile's reach) and blur
+        # (circles seen along the reflected ray stay hard, as in `line_weight`).
+        self.half_width = self.lights.radius if isinstance(self.mode, ReflectionMode) else getattr(self.mode, "half_width", 0.0)
+        self.blur = scene.render.blur if isinstance(self.mode, ReflectionMode) or self.soft_stripes else 0.0
+        self.stripe_reach = stripe_reach(self.half_width, self.blur)
+        self.neighbour_level = neighbour_levels(getattr(self.mode, "levels", np.zeros(0)))
         self.clock = StageClock()
         # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
         self.vertex_normals = vertex_normals(self.tessellation, self.surfaces) if scene.render.normals == "mesh" else None
@@ -169,13 +206,14 @@ class Renderer:
         return self.second_look.apply(hits, origins, directions, np.full(len(origins), np.inf), self.clock)
 
     # -- one batch of rays ---------------------------------------------------------------
-    def shade(self, origins: np.ndarray, directions: np.ndarray) -> Shading:
+    def shade(self, origins: np.ndarray, directions: np.ndarray, occlude: bool = True) -> Shading:
         """Exact hits, reflected directions s, the mode's nearest level and 'lit' flags.
 
         Lit: in the mode's stripe and, for a mode seen along the reflected ray (reflection lines:
         a tube within its radius), not occluded by the surface before it. With ``[render] blur`` the
         reflection mode's radius is the stripe profile's reach (`stripe_lights`): 'lit' then means the
         sample may show some of the line, by its weight `stripe_weight` of the nearest tube's d.
+        ``occlude=False``: no occlusion test ('lit' is the stripe test alone); the analytic path tests its own.
         """
         hits = self.trace(origins, directions)
         n_rays = len(origins)
@@ -183,7 +221,7 @@ class Renderer:
         lit = np.zeros(n_rays, dtype=bool)
         line_id, line_dist = np.full(n_rays, -1), np.full(n_rays, np.nan)
         idx = np.flatnonzero(hits.hit)
-        shading = Shading(hits, origins, directions, s, line_id, line_dist, lit)
+        shading = Shading(hits, origins, directions, s, line_id, line_dist, lit, level=np.full(n_rays, -1))
         if len(idx) == 0:
             return shading
         R, n = hits.P[idx], hits.N[idx]
@@ -192,6 +230,7 @@ class Renderer:
             s[idx] = reflect(-directions[idx], n)
             points = SurfacePoints(R, n, s[idx], hits.patch[idx], hits.u[idx], hits.v[idx])
             stripes = self.mode.stripes(points)
+            shading.level[idx] = stripes.level_id
             # line.id and line.dist are the tubes' in every mode (the EXR contract): the reflection mode's stripes
             # are those; another mode's nearest level follows from its φ (channel phi) and levels.
             if isinstance(self.mode, ReflectionMode):
@@ -211,7 +250,7 @@ class Renderer:
                 with np.errstate(invalid="ignore"):
                     candidate = stripes.level_dist <= stripe_reach(self.mode.half_width, self.scene.render.blur)
             cand = np.flatnonzero(candidate)
-        if t_tube is None:  # a mode not seen along a ray: its stripes are lit where they are
+        if t_tube is None or not occlude:  # a mode not seen along a ray: its stripes are lit where they are
             lit[idx[cand]] = True
         elif len(cand):
             start = self.accelerator.surface_origins(R[cand], n[cand], hits.patch[idx[cand]])
@@ -270,29 +309,19 @@ class Renderer:
     def render_span(self, start: int, stop: int) -> Tile:
         """Pixels [start, stop) in row-major order (a tile may begin or end mid-row) as one `Tile`.
 
-        Every pixel's value depends only on its own rays, so any cut of the image into
+        Every pixel's value depends only on its own rays (and, with ``samples = "analytic"``, its
+        8 neighbours' centre rays, traced as a halo around the span), so any cut of the image into
         spans gives the same bytes.
         """
-        width, s = self.scene.image.width, self.scene.image.samples
-        settings = self.scene.render
+        s = self.scene.image.samples
+        if s == ANALYTIC:
+            return self._render_analytic(start, stop)
+        width = self.scene.image.width
         rows, cols = np.divmod(np.arange(start, stop), width)
-        offsets = sample_offsets(s)
-        ns = len(offsets)
-        with self.clock.stage("camera rays"):
-            origins, directions = self.camera.rays(np.repeat(rows, ns), np.repeat(cols, ns), np.tile(offsets, (len(rows), 1)))
-        shading = self.shade(origins, directions)
-        if shading.surface_rgb is None:
-            shade = self.surface_shade(shading)
-            rgba = coverage_color(shading.hits.hit.reshape(-1, ns), self.line_weight(shading).reshape(-1, ns),
-                                  settings.surface_color, settings.line_color, settings.background,
-                                  None if shade is None else shade.reshape(-1, ns))
-        else:  # a map mode: each sample's own surface colour
-            rgba = map_color(shading.hits.hit.reshape(-1, ns), self.line_weight(shading).reshape(-1, ns),
-                             shading.surface_rgb.reshape(-1, ns, 3), settings.line_color, settings.background)
+        rgba, shading, rays = self.supersample(rows, cols, s)
+        ns = s * s
         fallbacks = int(shading.hits.fallback.sum())
         fell_back = shading.hits.fallback.reshape(-1, ns).any(axis=1)
-        rays = len(origins)
-        del origins, directions
         if s % 2 == 1:  # the middle sample of an odd s×s grid is the pixel-centre ray
             aovs = self.aovs(shading.take(np.arange(len(rows)) * ns + ns // 2))
         else:
@@ -308,6 +337,195 @@ class Renderer:
         pixels[:, :4] = rgba
         pixels[:, 4:] = aov_planes(aovs)
         return Tile(start, stop, pixels, rays, fallbacks, fallback_pixels)
+
+    def supersample(self, rows: np.ndarray, cols: np.ndarray, s: int) -> tuple[np.ndarray, Shading, int]:
+        """(P, 4) RGBA of pixels (rows, cols) from their s×s samples, the samples' `Shading`, and the rays traced."""
+        offsets = sample_offsets(s)
+        ns = len(offsets)
+        with self.clock.stage("camera rays"):
+            origins, directions = self.camera.rays(np.repeat(rows, ns), np.repeat(cols, ns), np.tile(offsets, (len(rows), 1)))
+        shading = self.shade(origins, directions)
+        rgba = self.colour(shading, self.line_weight(shading), ns)
+        return rgba, shading, len(origins)
+
+    def colour(self, shading: Shading, weight: np.ndarray, ns: int) -> np.ndarray:
+        """(P, 4) RGBA of pixels of ``ns`` samples each: hits, line weights (`film`) and the surface's shade or map."""
+        settings = self.scene.render
+        if shading.surface_rgb is None:
+            shade = self.surface_shade(shading)
+            return coverage_color(shading.hits.hit.reshape(-1, ns), weight.reshape(-1, ns),
+                                  settings.surface_color, settings.line_color, settings.background,
+                                  None if shade is None else shade.reshape(-1, ns))
+        # a map mode: each sample's own surface colour
+        return map_color(shading.hits.hit.reshape(-1, ns), weight.reshape(-1, ns),
+                         shading.surface_rgb.reshape(-1, ns, 3), settings.line_color, settings.background)
+
+    def _render_analytic(self, start: int, stop: int) -> Tile:
+        """`render_span` for ``samples = "analytic"`` (`analytic`): centre rays with a halo, the stripes' coverage in
+        closed form, and the edge pixels supersampled.
+
+        The edge test reads each pixel's 8 neighbours, and whether a pixel's footprint reaches a stripe is first
+        bounded by its own neighbours' σ (the gradient is then evaluated only where it may), so the centre rays
+        of the span's rows and two rows on either side are traced: a pixel's value depends only on the rays of
+        the pixels around it, never on where the span ends.
+        """
+        image = self.scene.image
+        width, height = image.width, image.height
+        first, last = start // width, (stop - 1) // width
+        r0, r1 = max(0, first - 2), min(height - 1, last + 2)
+        shape = (r1 - r0 + 1, width)
+        rows, cols = np.divmod(np.arange(r0 * width, (r1 + 1) * width), width)
+        with self.clock.stage("camera rays"):
+            origins, directions = self.camera.rays(rows, cols)
+        shading = self.shade(origins, directions, occlude=False)
+        del origins, directions
+        level = shading.level
+        with self.clock.stage("analytic AA"):
+            sigma = self.stripe_offsets(shading)
+            # Where the footprint may reach a stripe: σ moves by at most about |g_x| + |g_y| to a neighbour's centre
+            # (a diagonal one), twice what it moves within the pixel. The bound holds only where all 8 neighbours
+            # are on the pixel's level: a pixel with a neighbour on another level (between two stripes, or where
+            # the stripes crowd) is kept. Only the span's rows and one on either side need to know (the edge
+            # test's neighbours).
+            # Only the columns around the surface can hold a stripe or an edge: the neighbour tests run there alone.
+            hit_cols = np.flatnonzero(shading.hits.hit.reshape(shape).any(axis=0))
+            cs = slice(max(0, hit_cols[0] - 1), min(width, hit_cols[-1] + 2)) if len(hit_cols) else slice(0, 0)
+            crop = (shape[0], cs.stop - cs.start)
+            grid = lambda x: x.reshape(shape + x.shape[1:])[:, cs]  # noqa: E731 (a (rows, columns) view of the crop)
+            grid_level, grid_sigma = grid(level), grid(sigma)
+            want = np.zeros(shape, dtype=bool)
+            if crop[1]:
+                move, mixed = np.zeros(crop), np.zeros(crop, dtype=bool)
+                for k, sg in zip(neighbours(grid_level), neighbours(grid_sigma)):
+                    mixed |= k != grid_level
+                    with np.errstate(invalid="ignore"):
+                        move = np.fmax(move, np.abs(sg - grid_sigma))
+                with np.errstate(invalid="ignore"):
+                    want[:, cs] = (grid_level >= 0) & (mixed | (np.abs(grid_sigma) - move <= self.stripe_reach))
+            want[:max(0, first - 1 - r0)] = False
+            want[last + 2 - r0:] = False
+        centre = self.centre_stripes(shading, rows, cols, sigma, want.ravel())
+        own = np.arange(start - r0 * width, stop - r0 * width)
+        edge = np.zeros(shape, dtype=bool)
+        with self.clock.stage("analytic AA"):
+            if crop[1]:
+                # σ bending within the pixel (a fold of φ, a tight turn of the line) is not linear: where a
+                # neighbour's σ on the same level strays from the plane σ + g·(Δx, Δy) by `BENDING` half widths,
+                # supersample.
+                gx, gy = grid(centre.grad[:, 0]), grid(centre.grad[:, 1])
+                near = grid(centre.near)
+                bent = np.zeros(crop, dtype=bool)
+                for (dr, dc), inside, k, sg in zip(NEIGHBOURS, neighbour_inside(crop), neighbours(grid_level),
+                                                   neighbours(grid_sigma)):
+                    with np.errstate(invalid="ignore"):
+                        strays = np.abs(sg - grid_sigma - gx * dc - gy * dr) > BENDING * self.half_width
+                    bent |= inside & near & (k == grid_level) & strays
+                grid(centre.untrusted)[...] |= bent
+                hits = shading.hits
+                edge[:, cs] = edge_pixels(*(grid(x) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked,
+                                                               centre.untrusted)))
+                if shading.surface_rgb is not None:  # a map mode: where its colour jumps (a band edge), supersample
+                    rgb = grid(np.nan_to_num(shading.surface_rgb))
+                    for other in neighbours(rgb):
+                        edge[:, cs] |= np.abs(other - rgb).max(axis=2) > MAP_STEP
+            edge = edge.ravel()[own]
+        mine = shading.take(own)
+        rgba = self.colour(mine, np.where(centre.blocked[own], 0.0, centre.coverage[own]), 1)
+        fell_back = mine.hits.fallback.copy()
+        fallbacks = int(fell_back.sum())
+        rays = len(rows)
+        edges = np.flatnonzero(edge)
+        # Edge pixels' samples in chunks of at most the span's own pixel count: no more rays at once than the tile
+        # was sized for (`tiling`, one ray per pixel).
+        chunk = max(1, len(own) // (EDGE_SAMPLES * EDGE_SAMPLES))
+        for part in np.array_split(edges, max(1, -(-len(edges) // chunk))):
+            if len(part) == 0:
+                continue
+            rgba[part], samples, traced = self.supersample(rows[own[part]], cols[own[part]], EDGE_SAMPLES)
+            rays += traced
+            fallbacks += int(samples.hits.fallback.sum())
+            fell_back[part] |= samples.hits.fallback.reshape(len(part), -1).any(axis=1)
+        aovs = self.aovs(mine)
+        pixels = np.empty((len(own), len(CHANNELS)), dtype=np.float32)
+        pixels[:, :4] = rgba
+        pixels[:, 4:] = aov_planes(aovs)
+        return Tile(start, stop, pixels, rays, fallbacks, int(fell_back.sum()), len(edges))
+
+    def stripe_offsets(self, shading: Shading) -> np.ndarray:
+        """Per ray the signed offset σ from its nearest level's centre (`modes.base.level_offset`), NaN where none is."""
+        hits, level = shading.hits, shading.level
+        sigma = np.full(len(level), np.nan)
+        idx = np.flatnonzero(level >= 0)
+        if len(idx):
+            sigma[idx] = level_offset(self.mode, SurfacePoints(hits.P[idx], hits.N[idx], shading.s[idx], hits.patch[idx],
+                                                               hits.u[idx], hits.v[idx]), level[idx])
+        return sigma
+
+    def centre_stripes(self, shading: Shading, rows: np.ndarray, cols: np.ndarray, sigma: np.ndarray,
+                       want: np.ndarray) -> "CentreStripes":
+        """Per centre ray where ``want``: the screen gradient g of its offset σ (`stripe_offsets`), the stripe's box
+        coverage, and the flags the edge test needs (`analytic`); elsewhere no stripe is near.
+
+        g is a central difference over the pixel of the real pipeline: the exact surface point and normal at
+        (u, v) ± ½ (du, dv) (the footprint of `analytic.uv_footprint`), the eye ray to it, the reflected
+        direction and the mode's `level_offset`.
+        """
+        n_rays = len(shading.hits.hit)
+        gap = np.full(n_rays, np.nan)
+        grad = np.full((n_rays, 2), np.nan)
+        level = shading.level
+        idx = np.flatnonzero(want & (level >= 0))
+        hits = shading.hits
+        with self.clock.stage("analytic AA"):
+            if len(idx):
+                patch, u, v, n = hits.patch[idx], hits.u[idx], hits.v[idx], hits.N[idx]
+                k = level[idx]
+                points = SurfacePoints(hits.P[idx], n, shading.s[idx], patch, u, v)
+                other = self.neighbour_level[k]
+                # The spacing to the next level in σ's unit (none: a single level, nothing to confuse it with).
+                gap[idx] = np.where(other == k, np.inf, np.abs(sigma[idx] - level_offset(self.mode, points, other)))
+                derivs = self.surfaces.evaluate(patch, u, v)
+                steps = uv_footprint(self.camera, rows[idx], cols[idx], hits.P[idx], n, derivs.Su, derivs.Sv)
+                u0, u1, v0, v1 = self.surfaces.domains(patch)
+                for axis in range(2):
+                    du, dv = 0.5 * steps[:, axis, 0], 0.5 * steps[:, axis, 1]
+                    ends = []
+                    for sign in (1.0, -1.0):
+                        # The share of the half-pixel step that stays in the patch's domain (it is clamped there).
+                        lam = _room(u, sign * du, u0, u1)
+                        lam = np.minimum(lam, _room(v, sign * dv, v0, v1))
+                        ends.append((lam, self._offset_at(patch, u + sign * lam * du, v + sign * lam * dv, n, k)))
+                    (lp, sp), (lm, sm) = ends
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        grad[idx, axis] = (sp - sm) / (0.5 * (lp + lm))
+            span = np.abs(grad[:, 0]) + np.abs(grad[:, 1])
+            with np.errstate(invalid="ignore"):
+                known = np.isfinite(span)
+                near = want & (level >= 0) & (~known | (np.abs(sigma) - 0.5 * span <= self.stripe_reach))
+                untrusted = near & (~known | (span > TRUSTED_SPAN * gap))
+            coverage = np.zeros(n_rays)
+            ok = np.flatnonzero(near & known)
+            coverage[ok] = stripe_coverage(sigma[ok], grad[ok, 0], grad[ok, 1], self.half_width, self.blur)
+        blocked = np.zeros(n_rays, dtype=bool)
+        ray_t = getattr(self.mode, "ray_t", None)
+        if ray_t is not None and getattr(self.mode, "along_ray", True):
+            test = np.flatnonzero(near)
+            if len(test):
+                R, n, s = hits.P[test], hits.N[test], shading.s[test]
+                t = ray_t(SurfacePoints(R, n, s, hits.patch[test], hits.u[test], hits.v[test]), level[test])
+                start = self.accelerator.surface_origins(R, n, hits.patch[test])
+                with self.clock.stage("occlusion (Embree)"):
+                    blocked[test] = occluded(self.accelerator, self.tessellation, self.surfaces, start, s, t)
+        return CentreStripes(sigma, grad, coverage, near, blocked, untrusted)
+
+    def _offset_at(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, n0: np.ndarray, level: np.ndarray) -> np.ndarray:
+        """σ to ``level`` at surface points (patch, u, v) seen by the camera: the exact point and normal (turned to the
+        side of the nearby normal ``n0``), the eye ray to the point, reflection (eq. 3) and the mode's offset."""
+        derivs = self.surfaces.evaluate(patch, u, v)
+        n = self.surfaces.normals(patch, u, v, derivs)
+        n[np.einsum("ij,ij->i", n, n0) < 0] *= -1.0
+        D = self.camera.directions_to(derivs.S)
+        return level_offset(self.mode, SurfacePoints(derivs.S, n, reflect(-D, n), patch, u, v), level)
 
     def spans(self, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
         return pixel_spans(self.scene.image, rays_per_tile)
@@ -325,6 +543,7 @@ class Renderer:
                 stats.rays += tile.rays
                 stats.fallbacks += tile.fallbacks
                 stats.fallback_pixels += tile.fallback_pixels
+                stats.supersampled += tile.supersampled
             yield tile
 
     def _tiles_in_order(self, threads: int, spans: list[tuple[int, int]]) -> Iterator[Tile]:

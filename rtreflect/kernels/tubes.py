@@ -91,3 +91,16 @@ def reach(Q, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, can
         line_dist[i] = best_d if best >= 0 else np.nan
         candidate[i] = hit
         t_candidate[i] = t_hit
+
+
+@njit(**JIT)
+def signed(Q, c, e, c_k, R, s, tube, out):
+    """Signed skew-line distance (g − c_k h)/|s × c| of point i's ray to tube[i] (eq. 4 without the absolute
+    value: continuous across the tube's axis, so a stripe is |σ| ≤ r); where s ∥ c, the unsigned |b × c|."""
+    for i in range(R.shape[0]):
+        pre = _prepare(Q, c, e, R, s, i)
+        ck = c_k[tube[i]]
+        if not pre[0]:
+            out[i] = (pre[1] - ck * pre[2]) * pre[3]
+        else:
+            out[i] = _pair(Q, c, e, R, i, ck, np.inf, pre)[0]

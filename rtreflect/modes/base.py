@@ -61,6 +61,28 @@ def even_stripes(phi: np.ndarray, levels: np.ndarray, half_width: float) -> Stri
     return Stripes(np.where(found, pick, -1), np.where(found, dist, np.nan), found & (dist <= half_width))
 
 
+def level_offset(mode, p: SurfacePoints, level: np.ndarray) -> np.ndarray:
+    """Signed offset σ of each point from the centre of its level ``level[i]``: the stripe is |σ| ≤ half width.
+
+    A mode whose stripe is measured otherwise than in φ (tubes: the skew-line distance of eq. 4) names it by
+    an ``offset(p, level)`` method; for the rest σ = φ − c_k. Unlike `Stripes.level_dist` (|σ|), σ is smooth
+    across the level, so its gradient is defined there (`integrator.analytic`).
+    """
+    own = getattr(mode, "offset", None)
+    if own is not None:
+        return own(p, level)
+    return mode.phi(p) - np.asarray(mode.levels, dtype=np.float64)[level]
+
+
+def neighbour_levels(levels: np.ndarray) -> np.ndarray:
+    """Per level, the index of the nearest level at another position (itself where there is none)."""
+    levels = np.asarray(levels, dtype=np.float64)
+    gaps = np.abs(levels[:, None] - levels[None, :])
+    gaps[gaps == 0.0] = np.inf
+    other = np.argmin(gaps, axis=1) if len(levels) else np.zeros(0, dtype=int)
+    return np.where(np.isfinite(gaps.min(axis=1, initial=np.inf)), other, np.arange(len(levels)))
+
+
 class Mode(Protocol):
     """What the renderer, the EXR and the contours need of an interrogation mode."""
 

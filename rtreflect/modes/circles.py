@@ -53,6 +53,10 @@ class CircleMode:
         X, _ = self.plane_point(p)
         return np.linalg.norm(X - self.centre, axis=1)
 
+    def ray_t(self, p: SurfacePoints, level: np.ndarray) -> np.ndarray:
+        """Along the reflected ray, where it meets the light plane: how far to test for occlusion."""
+        return self.plane_point(p)[1]
+
     def stripes(self, p: SurfacePoints) -> Stripes:
         X, t = self.plane_point(p)
         found = even_stripes(np.linalg.norm(X - self.centre, axis=1), self.levels, self.half_width)

@@ -41,6 +41,10 @@ class HighlightMode:
             f = _dot(p.R + lam[:, None] * p.n - self.lights.Q, self.lights.e)
         return np.where(np.isfinite(lam), f, np.nan)
 
+    def offset(self, p: SurfacePoints, level: np.ndarray) -> np.ndarray:
+        """Signed skew-line distance of the normal line to tube ``level[i]`` (`base.level_offset`; the same for ±n)."""
+        return self.lights.signed_distance(p.R, p.n, level)
+
     def stripes(self, p: SurfacePoints) -> Stripes:
         # Both halves of the normal line: `reach` looks ahead only, so ask along n and along −n.
         front, back = self.lights.reach(p.R, p.n), self.lights.reach(p.R, -p.n)

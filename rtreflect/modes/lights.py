@@ -125,6 +125,18 @@ class TubeLights:
         t_hit = np.where(within, dist.t, np.inf).min(axis=1)
         return within.any(axis=1), t_hit
 
+    def signed_distance(self, R: np.ndarray, s: np.ndarray, tube: np.ndarray) -> np.ndarray:
+        """Signed skew-line distance σ of each ray R + t s to the axis of tube ``tube[i]`` (`kernels.tubes.signed`).
+
+        |σ| is eq. (4)'s d; the sign tells the two sides of the axis apart, so σ is smooth across a
+        stripe and the stripe is |σ| ≤ r (`integrator.analytic` needs it and its gradient).
+        """
+        Q, c, e, c_k, _ = self._kernel_args()
+        out = np.empty(len(R))
+        tubes_kernel.signed(Q, c, e, c_k, np.ascontiguousarray(R, dtype=np.float64),
+                            np.ascontiguousarray(s, dtype=np.float64), np.ascontiguousarray(tube, dtype=np.int64), out)
+        return out
+
     def reach(self, R: np.ndarray, s: np.ndarray, tube: np.ndarray | None = None) -> TubeReach:
         """`nearest` and `candidates` of eq. (4)'s distances, per point by the kernel `kernels.tubes.reach`.
 

@@ -23,8 +23,21 @@ class ReflectionMode:
     name: str = "reflection"
     stage: str = "tubes (eq. 3, 4)"
 
+    @property
+    def levels(self) -> np.ndarray:
+        """The tube positions c_k (`Stripes.level_id` indexes them)."""
+        return self.lights.c_k
+
     def phi(self, p: SurfacePoints) -> np.ndarray:
         return self.lights.ulmet_f(p.R, p.s)
+
+    def offset(self, p: SurfacePoints, level: np.ndarray) -> np.ndarray:
+        """Signed skew-line distance of the reflected ray to tube ``level[i]`` (`base.level_offset`)."""
+        return self.lights.signed_distance(p.R, p.s, level)
+
+    def ray_t(self, p: SurfacePoints, level: np.ndarray) -> np.ndarray:
+        """Ray parameter along s of the closest approach to tube ``level[i]``: how far to test for occlusion."""
+        return self.lights.reach(p.R, p.s, tube=level).t_of
 
     def stripes(self, p: SurfacePoints) -> Stripes:
         tubes = self.lights.reach(p.R, p.s)

@@ -12,15 +12,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..exchange.scene import CameraSpec
+from ..exchange.scene import ANALYTIC, CameraSpec
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def rays_per_pixel(samples: int) -> int:
-    """Rays traced per pixel: s² samples, plus the pixel-centre ray for the AOVs when s is even (no sample is central)."""
+def rays_per_pixel(samples: int | str) -> int:
+    """Rays traced per pixel: s² samples, plus the pixel-centre ray for the AOVs when s is even (no sample is central).
+
+    ``"analytic"`` (`integrator.analytic`): the centre ray, the edge pixels' few samples not counted (their
+    share of the image is small, and they are traced in chunks of their own).
+    """
+    if samples == ANALYTIC:
+        return 1
     return samples * samples + (1 if samples % 2 == 0 else 0)
 
 
@@ -85,6 +91,14 @@ class Camera:
             directions /= np.linalg.norm(directions, axis=1, keepdims=True)
             origins = np.broadcast_to(self.spec.eye, directions.shape).copy()
         return origins, directions
+
+    def directions_to(self, points: np.ndarray) -> np.ndarray:
+        """Unit directions (N, 3) of the camera rays through 3D points: from the eye (perspective), or w."""
+        w = self.basis[0]
+        if self.orthographic:
+            return np.broadcast_to(w, np.shape(points)).copy()
+        rel = np.asarray(points, dtype=np.float64) - self.spec.eye
+        return rel / np.linalg.norm(rel, axis=1, keepdims=True)
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Image coordinates (column, row) in pixels of 3D points — the inverse of `rays` at the centre convention.
