@@ -125,8 +125,7 @@ class Tessellation:
                 np.ascontiguousarray(self.face_patch, dtype=np.int64))
 
     def across_seam(self, points: np.ndarray, patch: np.ndarray, tried: np.ndarray | None = None,
-                    uv: np.ndarray | None = None,
-                    reach: float = np.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For points on the boundary of ``patch``: the nearest boundary vertex of another patch.
 
         ``tried`` (N, m) lists patches to pass over as well (neighbours already tried: where
@@ -138,9 +137,7 @@ class Tessellation:
         Returns (patch, u, v) of that vertex, where a hit that ran off one face's edge
         can restart on its neighbour, and the distance to it (patch −1 and inf where there
         is no other patch). A k-d tree over the boundary vertices: the SEAM_NEIGHBOURS nearest,
-        then more for the points whose nearest all belong to their own patch. With ``reach``, only
-        vertices within that distance count (patch −1 beyond): a caller that accepts no farther
-        neighbour spares the search through ever more vertices of the point's own face.
+        then more for the points whose nearest all belong to their own patch.
         """
         patch_out = np.full(len(points), -1)
         uv_out = np.full((len(points), 2), np.nan)
@@ -152,15 +149,12 @@ class Tessellation:
         k = SEAM_NEIGHBOURS
         while len(todo):
             k = min(k, len(self.boundary))
-            dist, nearest = tree.query(points[todo], k=k, distance_upper_bound=reach)
+            dist, nearest = tree.query(points[todo], k=k)
             dist, nearest = dist.reshape(len(todo), k), nearest.reshape(len(todo), k)
-            within = np.isfinite(dist)  # beyond ``reach`` the tree gives index len(boundary), distance inf
-            nearest = np.where(within, nearest, 0)
             other = cand_patch[nearest] != patch[todo, None]
             if uv is not None:
                 far_side = np.abs(self.vertex_uv[self.boundary[nearest]] - uv[todo, None, :]) > 0.5 * self._domain_span[patch[todo], None, :]
                 other |= np.any(far_side, axis=2)
-            other &= within
             if tried is not None:
                 other &= ~np.any(cand_patch[nearest][:, :, None] == tried[todo, None, :], axis=2)
             first = np.argmax(other, axis=1)
@@ -171,8 +165,7 @@ class Tessellation:
             dist_out[rows] = dist[found, first[found]]
             if k == len(self.boundary):
                 break
-            more = ~found & within[:, -1]  # fewer than k vertices within reach: none farther counts
-            todo, k = todo[more], 8 * k
+            todo, k = todo[~found], 8 * k
         return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
 
     @cached_property

@@ -263,12 +263,9 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     for _ in range(SEAM_TRIES):
         if len(seam) == 0:
             break
-        # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point (no farther one
-        # is looked for).
-        reach = 2.0 * tessellation.edge_length[pk[seam]]
-        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]),
-                                                   float(np.nextafter(reach.max(), np.inf)))
-        close = (pn >= 0) & (gap <= reach)
+        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]))
+        # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
+        close = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[pk[seam]])
         seam, at, tried, pn, un, vn = (x[close] for x in (seam, at, tried, pn, un, vn))
         u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
         near3, t3 = _near_mesh_hit(d3, pn, O[seam], D[seam], tm[seam], band)
