@@ -462,7 +462,7 @@ def newton_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_of
         r0, r1, r2 = d[0, 0] - O[i, 0], d[0, 1] - O[i, 1], d[0, 2] - O[i, 2]
         f1 = e[0, 0] * r0 + e[0, 1] * r1 + e[0, 2] * r2
         f2 = e[1, 0] * r0 + e[1, 1] * r1 + e[1, 2] * r2
-        if math.hypot(f1, f2) <= tol:
+        if f1 * f1 + f2 * f2 <= tol * tol:  # |(r1, r2)| <= tol, squared: math.hypot costs ~120 ns here, this ~1 ns
             ok = True
             break
         if step == max_steps:
