@@ -10,7 +10,10 @@ point by point, in registers, with no (N, …) temporaries:
   with τ the local parameter in [0, 1]: no divisions, about 3× fewer operations than A2.3;
 * the rational derivatives by Piegl & Tiller eq. 4.20 (algorithm A4.4), for k + l <= 2;
 * the unit normal (S_u × S_v)/|S_u × S_v| and its degenerate test, and Newton's iteration onto
-  the exact ray–surface hit (`newton`).
+  the exact ray–surface hit (`newton`);
+* the exact hit's common case fused per ray (`refine_mesh_hits`: the start from a mesh hit's
+  barycentrics, Newton, the near-mesh-hit test, t, the unit normal), and the Levenberg–Marquardt
+  search where Newton fails (`rescue`): `trace.tracing` keeps only the rare paths in numpy.
 
 The patches of a scene live in one flat table (`PatchTable`): degrees, control-point counts,
 knot vectors and homogeneous control points concatenated, so one kernel call serves points on
@@ -361,14 +364,10 @@ def across_at(D, i, e):
     e[1, 0], e[1, 1], e[1, 2] = y * c2 - z * c1, z * c0 - x * c2, x * c1 - y * c0
 
 
-@njit(**JIT)
-def across(D, e1, e2):
-    """`across_at` for every row of D."""
-    e = np.empty((2, 3))
-    for i in range(D.shape[0]):
-        across_at(D, i, e)
-        for c in range(3):
-            e1[i, c], e2[i, c] = e[0, c], e[1, c]
+@njit(inline="always", **JIT)
+def dot3(a0, a1, a2, b0, b1, b2):
+    """a·b of two 3-vectors, summed in coordinate order."""
+    return a0 * b0 + a1 * b1 + a2 * b2
 
 
 @njit(inline="always", **JIT)
@@ -499,12 +498,6 @@ def newton(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offse
         converged[i] = ok
         for c in range(3):
             S[i, c], Su[i, c], Sv[i, c] = d[0, c], d[1, c], d[2, c]
-
-
-@njit(inline="always", **JIT)
-def dot3(a0, a1, a2, b0, b1, b2):
-    """a·b of two 3-vectors, summed in coordinate order."""
-    return a0 * b0 + a1 * b1 + a2 * b2
 
 
 @njit(inline="always", **JIT)

@@ -371,11 +371,13 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     triangle's hit) and nearer than the kept one by more than float32 rounding replaces it (the same point
     on the shared edge does not: pixels there keep their face).
     """
+    patch_of, uv_of, gap_of = tessellation.rim_neighbour
+    if not (patch_of >= 0).any():  # no face has a neighbour (a single patch): nothing across any rim
+        return
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
     skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
     edge_dist, corner = _rim_corner(tessellation, prim[rays], O[rays] + tm[rays, None] * D[rays])
-    patch_of, uv_of, gap_of = tessellation.rim_neighbour
     pn, un, vn, gap = patch_of[corner], uv_of[corner, 0], uv_of[corner, 1], gap_of[corner]
     chord = tessellation.chord_error
     # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the corner; and the mesh hit
