@@ -461,7 +461,9 @@ def newton_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_of
         r0, r1, r2 = d[0, 0] - O[i, 0], d[0, 1] - O[i, 1], d[0, 2] - O[i, 2]
         f1 = e[0, 0] * r0 + e[0, 1] * r1 + e[0, 2] * r2
         f2 = e[1, 0] * r0 + e[1, 1] * r1 + e[1, 2] * r2
-        if f1 * f1 + f2 * f2 <= tol * tol:  # |(r1, r2)| <= tol, squared: math.hypot costs ~120 ns here, this ~1 ns
+        # |(r1, r2)| <= tol, squared: math.hypot is a libm call; without it the fused pass takes 4–10 % less CPU
+        # (the verdict differs only within an ulp of tol)
+        if f1 * f1 + f2 * f2 <= tol * tol:
             ok = True
             break
         if step == max_steps:
