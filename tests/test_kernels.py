@@ -210,7 +210,7 @@ refine(surfaces, k, u, u, np.zeros((2, 3)), np.eye(3)[:2], np.ones(2), 1.0)
 c, m = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
 lights = TubeLights(np.zeros(3), m, c, np.cross(c, m), np.array([0.0, 1.0]), 0.1, 4.0)
 lights.reach(np.ones((2, 3)), np.eye(3)[:2]); lights.distances(np.ones((2, 3)), np.eye(3)[:2])
-used = [nurbs.evaluate, nurbs.unit_normals, nurbs.newton, tubes.reach, tubes.distances]
+used = [nurbs.evaluate, nurbs.unit_normals, nurbs.refine_mesh_hits, tubes.reach, tubes.distances]
 print(sum(sum(f.stats.cache_misses.values()) for f in used), sum(sum(f.stats.cache_hits.values()) for f in used))
 """
     runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT,

@@ -430,7 +430,7 @@ def start_parameters(faces, vertex_uv, prim, b1, b2, u, v):
         u[i], v[i] = barycentric_uv(faces, vertex_uv, prim[i], b1[i], b2[i])
 
 
-# -- Newton onto the exact hit (`trace.tracing.refine`) ---------------------------------------------
+# -- Newton onto the exact hit (`trace.tracing`) ---------------------------------------------
 # In this file, not one of its own: numba's cache watches only the file that defines a kernel, and a
 # cached caller of a changed callee in another file ran stale machine code (a segmentation fault).
 
@@ -486,22 +486,6 @@ def newton_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_of
     return ui, vi, ok
 
 
-@njit(**JIT)
-def newton(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
-           patch, u, v, O, D, tol, max_steps, S, Su, Sv, converged):
-    """`newton_at` for each ray, in place on (u, v); S, S_u, S_v at the final (u, v); converged."""
-    scratch = new_scratch(max_degree)
-    d = np.empty((6, 3))
-    e = np.empty((2, 3))
-    for i in range(patch.shape[0]):
-        ui, vi, ok = newton_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, patch[i],
-                               u[i], v[i], O, D, i, tol[i], max_steps, d, e, scratch)
-        u[i], v[i] = ui, vi
-        converged[i] = ok
-        for c in range(3):
-            S[i, c], Su[i, c], Sv[i, c] = d[0, c], d[1, c], d[2, c]
-
-
 @njit(inline="always", **JIT)
 def near_at(S, Su, Sv, O, D, i, t_mesh, chord, jump_limit, grazing_allowance):
     """Whether the refined hit of ray i lies ahead and within reach of its mesh hit at t_mesh, and t = (S − O)·D.
@@ -550,7 +534,9 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
     """The common case of the exact hit, fused per ray (`trace.tracing._candidates`): no (N, 3) temporaries.
 
     For each mesh hit (triangle prim, Embree's barycentrics b1, b2, distance t_mesh): the start
-    (u, v) on the triangle's patch (`barycentric_uv`); Newton (`newton_at`) to the tolerance
+    (u, v) on the triangle's patch (`barycentric_uv`), written to patch, u_start, v_start; where
+    prim < 0, the start is read from them instead (`trace.tracing.refine`: Newton from a given
+    (u, v), the one compiled copy of Newton). Then Newton (`newton_at`) to the tolerance
     tolerance · max(t_mesh, extent, |mesh point|_∞) (S's coordinates are not computed more finely);
     whether the hit is ahead and near its mesh hit, and its t (`near_at`); whether an unconverged
     Newton stopped on the domain's edge (`on_domain_edge`); the unit normal n = (S_u × S_v)/|S_u × S_v|
@@ -561,8 +547,11 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
     e = np.empty((2, 3))
     for i in range(prim.shape[0]):
         f = prim[i]
-        k = face_patch[f]
-        us, vs = barycentric_uv(faces, vertex_uv, f, b1[i], b2[i])
+        if f >= 0:
+            k = face_patch[f]
+            us, vs = barycentric_uv(faces, vertex_uv, f, b1[i], b2[i])
+        else:
+            k, us, vs = patch[i], u_start[i], v_start[i]
         tm = t_mesh[i]
         magnitude = max(abs(O[i, 0] + tm * D[i, 0]), abs(O[i, 1] + tm * D[i, 1]), abs(O[i, 2] + tm * D[i, 2]))
         tol = tolerance * max(max(tm, extent), magnitude)
@@ -599,47 +588,57 @@ def rescue(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offse
         across_at(D, i, e)
         u0, u1, v0, v1 = domain[k, 0], domain[k, 1], domain[k, 2], domain[k, 3]
         ui, vi = u[i], v[i]
-        point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, ui, vi, 1, d,
-                 scratch)
         lam = 1e-3
         ok = flat = False
-        for _ in range(steps):
-            r0, r1_, r2_ = d[0, 0] - O[i, 0], d[0, 1] - O[i, 1], d[0, 2] - O[i, 2]
-            r1 = dot3(e[0, 0], e[0, 1], e[0, 2], r0, r1_, r2_)
-            r2 = dot3(e[1, 0], e[1, 1], e[1, 2], r0, r1_, r2_)
-            a = dot3(e[0, 0], e[0, 1], e[0, 2], d[1, 0], d[1, 1], d[1, 2])
-            b = dot3(e[0, 0], e[0, 1], e[0, 2], d[2, 0], d[2, 1], d[2, 2])
-            c = dot3(e[1, 0], e[1, 1], e[1, 2], d[1, 0], d[1, 1], d[1, 2])
-            dd = dot3(e[1, 0], e[1, 1], e[1, 2], d[2, 0], d[2, 1], d[2, 2])
-            rn = math.hypot(r1, r2)
-            if rn <= tol[i]:
-                ok = True
-                break
-            g1, g2 = a * r1 + c * r2, b * r1 + dd * r2  # Jᵀ r
-            cosine = math.hypot(g1, g2) / (math.sqrt(a * a + b * b + c * c + dd * dd) * rn)
-            if not (cosine > stationary_cosine) or lam > stalled_damping:
-                flat = True
-                break
-            A11, A12, A22 = a * a + c * c, a * b + c * dd, b * b + dd * dd
-            M11, M22 = A11 * (1.0 + lam), A22 * (1.0 + lam)
-            det = M11 * M22 - A12 * A12
-            du = -(M22 * g1 - A12 * g2) / det
-            dv = -(M11 * g2 - A12 * g1) / det
-            better = False
-            if math.isfinite(du) and math.isfinite(dv):
-                tu = min(max(ui + du, u0), u1)
-                tv = min(max(vi + dv, v0), v1)
-                point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, tu, tv, 1,
-                         trial, scratch)
+        tu, tv, rn = ui, vi, 0.0
+        step, start = 0, True
+        while True:  # one evaluation site (the start, then each trial point): each copy of point_at costs seconds to compile
+            point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, tu, tv, 1, trial,
+                     scratch)
+            if start:
+                better, start = True, False
+            else:
                 q0, q1, q2 = trial[0, 0] - O[i, 0], trial[0, 1] - O[i, 1], trial[0, 2] - O[i, 2]
-                trial_r = math.hypot(dot3(e[0, 0], e[0, 1], e[0, 2], q0, q1, q2), dot3(e[1, 0], e[1, 1], e[1, 2], q0, q1, q2))
-                if trial_r < rn:
-                    better = True
-                    ui, vi = tu, tv
-                    for r in range(3):
-                        for c in range(3):
-                            d[r, c] = trial[r, c]
-            lam = lam / 3.0 if better else lam * 4.0
+                trial_r = math.hypot(dot3(e[0, 0], e[0, 1], e[0, 2], q0, q1, q2),
+                                     dot3(e[1, 0], e[1, 1], e[1, 2], q0, q1, q2))
+                better = trial_r < rn
+                lam = lam / 3.0 if better else lam * 4.0
+            if better:
+                ui, vi = tu, tv
+                for r in range(3):
+                    for c in range(3):
+                        d[r, c] = trial[r, c]
+            evaluate = False
+            while step < steps and not evaluate:  # steps from (ui, vi) until a trial point is to be evaluated
+                step += 1
+                r0, r1_, r2_ = d[0, 0] - O[i, 0], d[0, 1] - O[i, 1], d[0, 2] - O[i, 2]
+                r1 = dot3(e[0, 0], e[0, 1], e[0, 2], r0, r1_, r2_)
+                r2 = dot3(e[1, 0], e[1, 1], e[1, 2], r0, r1_, r2_)
+                a = dot3(e[0, 0], e[0, 1], e[0, 2], d[1, 0], d[1, 1], d[1, 2])
+                b = dot3(e[0, 0], e[0, 1], e[0, 2], d[2, 0], d[2, 1], d[2, 2])
+                c = dot3(e[1, 0], e[1, 1], e[1, 2], d[1, 0], d[1, 1], d[1, 2])
+                dd = dot3(e[1, 0], e[1, 1], e[1, 2], d[2, 0], d[2, 1], d[2, 2])
+                rn = math.hypot(r1, r2)
+                if rn <= tol[i]:
+                    ok = True
+                    break
+                g1, g2 = a * r1 + c * r2, b * r1 + dd * r2  # Jᵀ r
+                cosine = math.hypot(g1, g2) / (math.sqrt(a * a + b * b + c * c + dd * dd) * rn)
+                if not (cosine > stationary_cosine) or lam > stalled_damping:
+                    flat = True
+                    break
+                A11, A12, A22 = a * a + c * c, a * b + c * dd, b * b + dd * dd
+                M11, M22 = A11 * (1.0 + lam), A22 * (1.0 + lam)
+                det = M11 * M22 - A12 * A12
+                du = -(M22 * g1 - A12 * g2) / det
+                dv = -(M11 * g2 - A12 * g1) / det
+                if math.isfinite(du) and math.isfinite(dv):
+                    tu, tv = min(max(ui + du, u0), u1), min(max(vi + dv, v0), v1)
+                    evaluate = True
+                else:  # no step: as one that does not lower |r|
+                    lam = lam * 4.0
+            if not evaluate:
+                break
         u[i], v[i], converged[i] = ui, vi, ok
         on_edge = (not ok) and on_domain_edge(domain, k, ui, vi)
         edge[i], stationary[i] = on_edge, flat and not on_edge

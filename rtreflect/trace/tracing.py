@@ -127,21 +127,30 @@ def facing(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
 
 
 def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, tolerance_distance):
-    """Newton on S(u, v) = O + tD from the mesh hit, by the compiled kernel `kernels.nurbs.newton`.
+    """Newton on S(u, v) = O + tD from given (u, v), by the compiled kernel `kernels.nurbs.refine_mesh_hits`.
 
     Returns (u, v, derivatives at the final (u, v), converged); the derivatives serve the normals.
+    The tolerance as for a mesh hit: `NEWTON_TOLERANCE` × max(t_mesh, tolerance_distance, |O + t_mesh D|).
     """
     n = len(u)
-    u = np.array(u, dtype=np.float64)
-    v = np.array(v, dtype=np.float64)
-    magnitude = np.abs(origins + t_mesh[:, None] * directions).max(axis=1)  # |S| near the mesh hit
-    tol = NEWTON_TOLERANCE * np.maximum(np.maximum(t_mesh, tolerance_distance), magnitude)
-    S, Su, Sv = (np.empty((n, 3)) for _ in range(3))
-    converged = np.zeros(n, dtype=bool)
-    contiguous = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
-    nurbs_kernel.newton(*surfaces.table.args, np.ascontiguousarray(patch, dtype=np.int64), u, v, contiguous(origins),
-           contiguous(directions), contiguous(tol), NEWTON_MAX_STEPS, S, Su, Sv, converged)
-    return u, v, SurfaceDerivatives(S, Su, Sv), converged
+    table = surfaces.table
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    pk = np.array(patch, dtype=np.int64)
+    us, vs = np.array(u, dtype=np.float64), np.array(v, dtype=np.float64)
+    ur, vr, t, cosine = (np.empty(n) for _ in range(4))
+    S, Su, Sv, normal = (np.empty((n, 3)) for _ in range(4))
+    converged, near, edge, degenerate = (np.empty(n, dtype=bool) for _ in range(4))
+    no_mesh = np.full(n, -1, dtype=np.int64)  # prim < 0: start from (patch, u, v) as given
+    nurbs_kernel.refine_mesh_hits(
+        *table.args, table.scale, *_NO_TRIANGLES, np.zeros(len(table.domain)), no_mesh, np.zeros(n), np.zeros(n),
+        f64(origins), f64(directions), f64(t_mesh), float(tolerance_distance), NEWTON_TOLERANCE, NEWTON_MAX_STEPS,
+        JUMP_LIMIT, GRAZING_ALLOWANCE, surface_module.DEGENERATE_SINE, surface_module.VANISHING_PARTIAL,
+        pk, us, vs, ur, vr, S, Su, Sv, t, normal, cosine, converged, near, edge, degenerate)
+    return ur, vr, SurfaceDerivatives(S, Su, Sv), converged
+
+
+#: `refine`'s stand-in for the tessellation's (faces, vertex_uv, face_patch): no mesh hit to start from.
+_NO_TRIANGLES = (np.zeros((0, 3), dtype=np.int64), np.zeros((0, 2)), np.zeros(0, dtype=np.int64))
 
 
 def _near_mesh_hit(derivs: SurfaceDerivatives, patch, O, D, t_mesh, band) -> tuple[np.ndarray, np.ndarray]:
