@@ -52,3 +52,63 @@ def closest_line_distance(R: np.ndarray, s: np.ndarray, B: np.ndarray, c: np.nda
     A = np.column_stack([s, -c])
     (t, tau), *_ = np.linalg.lstsq(A, B - R, rcond=None)
     return float(np.linalg.norm(R + t * s - (B + tau * c))), float(t)
+
+
+def levenberg_marquardt(surfaces, patch, u, v, origins, directions, tol, steps, stationary_cosine, stalled_damping):
+    """The ray–surface distance search of `trace.tracing._rescue`, in numpy over all rays (its implementation before
+    it was compiled), as the reference of the kernel `kernels.nurbs.rescue`.
+
+    Levenberg–Marquardt on r = (e1·(S − O), e2·(S − O)), Marquardt's scaling (JᵀJ + λ diag JᵀJ), λ from
+    1e-3, /3 on a step that lowers |r|, ×4 otherwise. Returns (u, v, S, converged, stationary, edge).
+    Dot products summed in coordinate order, as the kernel's.
+    """
+    def dot(a, b):
+        return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+
+    n = len(u)
+    u, v = u.copy(), v.copy()
+    dom = np.array([[*p.domain[0], *p.domain[1]] for p in surfaces.patches])[patch]
+    u0, u1, v0, v1 = dom.T
+    helper = np.eye(3)[np.argmin(np.abs(directions), axis=1)]  # the axis along D's smallest component
+    e1 = np.cross(directions, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(directions, e1)
+    lam = np.full(n, 1e-3)
+    d = surfaces.evaluate(patch, u, v)
+    S, Su, Sv = d.S.copy(), d.Su.copy(), d.Sv.copy()
+    converged, stationary = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    active = np.arange(n)
+    for _ in range(steps):
+        rel = S[active] - origins[active]
+        r1, r2 = dot(e1[active], rel), dot(e2[active], rel)
+        a, b = dot(e1[active], Su[active]), dot(e1[active], Sv[active])
+        c, dd = dot(e2[active], Su[active]), dot(e2[active], Sv[active])
+        rn = np.hypot(r1, r2)
+        done = rn <= tol[active]
+        converged[active[done]] = True
+        g1, g2 = a * r1 + c * r2, b * r1 + dd * r2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cosine = np.hypot(g1, g2) / (np.sqrt(a * a + b * b + c * c + dd * dd) * rn)
+        flat = ~done & (~(cosine > stationary_cosine) | (lam[active] > stalled_damping))
+        stationary[active[flat]] = True
+        keep = ~done & ~flat
+        active, a, b, c, dd, g1, g2, rn = (x[keep] for x in (active, a, b, c, dd, g1, g2, rn))
+        if len(active) == 0:
+            break
+        A11, A12, A22 = a * a + c * c, a * b + c * dd, b * b + dd * dd
+        M11, M22 = A11 * (1.0 + lam[active]), A22 * (1.0 + lam[active])
+        det = M11 * M22 - A12 * A12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            du, dv = -(M22 * g1 - A12 * g2) / det, -(M11 * g2 - A12 * g1) / det
+        good = np.isfinite(du) & np.isfinite(dv)
+        tu = np.clip(u[active] + np.where(good, du, 0.0), u0[active], u1[active])
+        tv = np.clip(v[active] + np.where(good, dv, 0.0), v0[active], v1[active])
+        trial = surfaces.evaluate(patch[active], tu, tv)
+        rel = trial.S - origins[active]
+        better = good & (np.hypot(dot(e1[active], rel), dot(e2[active], rel)) < rn)
+        take = active[better]
+        u[take], v[take] = tu[better], tv[better]
+        S[take], Su[take], Sv[take] = trial.S[better], trial.Su[better], trial.Sv[better]
+        lam[active] = np.where(better, lam[active] / 3.0, lam[active] * 4.0)
+    edge = ~converged & ((u == u0) | (u == u1) | (v == v0) | (v == v1))
+    return u, v, S, converged, stationary & ~edge, edge

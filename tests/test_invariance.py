@@ -171,15 +171,13 @@ def test_validate_passes_the_translated_scene_and_fails_mesh_hits_kept_there(mon
     at 1e5 on a 2.85-unit part) and passed it. Relative to the part's size it sees them. (The
     correct render used to fail on misses instead: validate's checks ran on float32 P, 1/128
     coarse at 1e5.) The tracer no longer keeps an unrefined mesh point, so the old behaviour is
-    simulated by a "Newton" that stops at the mesh hit's interpolated (u, v) and calls it converged.
+    simulated by a "Newton" that stops at the mesh hit's interpolated (u, v) and calls it converged
+    (an infinite tolerance: the compiled Newton accepts its first evaluation, there).
     """
     far = hood(offset=OFFSET, samples=1)
     assert validate_scene(far, threads=1).passed
 
-    def stops_at_mesh_hit(surfaces, patch, u, v, *args):
-        return u.copy(), v.copy(), surfaces.evaluate(patch, u, v), np.ones(len(u), dtype=bool)
-
-    monkeypatch.setattr(tracing_module, "refine", stops_at_mesh_hit)
+    monkeypatch.setattr(tracing_module, "NEWTON_TOLERANCE", np.inf)
     monkeypatch.setattr(accelerator_module, "bvh_centre", lambda vertices: np.zeros(3))
     report = validate_scene(far, threads=1)
     assert not report.passed, report.reasons

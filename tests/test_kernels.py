@@ -5,6 +5,9 @@
 * a scene's patches evaluated in one kernel call, bit for bit each patch's own evaluation,
   whatever the mix or order of patches (what makes tiles independent of each other);
 * Newton's converged hits lie on their rays and on the surface (rhino3dm's evaluator);
+* the fused first refinement of mesh hits (start, Newton, near test, t, normal) against its steps
+  done separately: the triangle's barycentric (u, v), rhino3dm's points and normals, the numpy tests;
+* the compiled Levenberg–Marquardt search, answer for answer its numpy implementation (tests/reference.py);
 * a second process finds every kernel in numba's cache (no compilation).
 """
 
@@ -17,10 +20,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reference import closest_line_distance, to_rhino, xyz
+from reference import angle_between, closest_line_distance, levenberg_marquardt, to_rhino, xyz
 from rtreflect.exchange.bpt import read_bpt
+from rtreflect.exchange.load import load_scene
 from rtreflect.geometry.surfaces import SurfaceSet
+from rtreflect.integrator.renderer import Renderer
 from rtreflect.modes.lights import TubeLights
+from rtreflect.trace import tracing
 from rtreflect.trace.tracing import refine
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -121,6 +127,73 @@ def test_newton_lands_on_the_ray_and_on_rhinos_surface():
         np.testing.assert_allclose(xyz(rhino.PointAt(u[row], v[row])), derivs.S[row], rtol=0, atol=1e-12)
 
 
+def test_fused_refinement_of_mesh_hits_against_its_steps():
+    """`_candidates`' compiled pass (`refine_mesh_hits`) on the teapot's mesh hits, grazing rims included.
+
+    The start is the triangle's barycentric combination of its vertices' (u, v) (closed form); converged
+    hits lie on their rays and on rhino3dm's surface at (u, v); t = (S − O)·D; 'near' is the numpy test of
+    `JUMP_LIMIT` (grown as 1/cos θ); normals are rhino3dm's up to orientation, cosine = n·D.
+    """
+    renderer = Renderer(load_scene(ROOT / "scenes" / "teapot.toml").with_image(200, 112, 1))
+    w, h = renderer.scene.image.width, renderer.scene.image.height
+    O, D = renderer.camera.rays(*np.divmod(np.arange(w * h), w))
+    mesh = renderer.accelerator.intersect(O, D)
+    found = mesh.prim >= 0
+    O, D, prim, b1, b2, tm = O[found], D[found], mesh.prim[found], mesh.b1[found], mesh.b2[found], mesh.t[found]
+    tess, surfaces = renderer.tessellation, renderer.surfaces
+    c = tracing._candidates(tess, surfaces, O, D, prim, b1, b2, tm)
+    corners = tess.vertex_uv[tess.faces[prim]]
+    start = (1.0 - b1 - b2)[:, None] * corners[:, 0] + b1[:, None] * corners[:, 1] + b2[:, None] * corners[:, 2]
+    np.testing.assert_allclose(np.column_stack([c.start_u, c.start_v]), start, rtol=0, atol=1e-15)
+    first = ~c.aside  # the mesh hit's own refinement
+    valid = np.flatnonzero(first & (c.status == tracing.VALID))
+    assert len(valid) > 0.9 * len(prim)
+    S = c.derivs.S[valid]
+    np.testing.assert_allclose(c.t[valid], np.einsum("ij,ij->i", S - O[valid], D[valid]), rtol=1e-15, atol=0)
+    assert np.linalg.norm(np.cross(S - O[valid], D[valid]), axis=1).max() < 1e-10
+    jump = np.linalg.norm(S - (O[valid] + tm[valid, None] * D[valid]), axis=1)
+    cos = np.abs(np.einsum("ij,ij->i", c.normal[valid], D[valid]))
+    allowance = np.clip(1.0 / cos, 1.0, tracing.GRAZING_ALLOWANCE)
+    band = tess.chord_error[c.patch[valid]] + 1e-6 * tess.extent
+    assert (jump <= tracing.JUMP_LIMIT * band * allowance * (1 + 1e-12)).all()
+    np.testing.assert_allclose(c.cosine[valid], np.einsum("ij,ij->i", c.normal[valid], D[valid]), rtol=0, atol=1e-15)
+    sample = valid[np.linspace(0, len(valid) - 1, 80).astype(int)]
+    for row in sample:
+        rhino = to_rhino(surfaces.patches[c.patch[row]])
+        np.testing.assert_allclose(xyz(rhino.PointAt(c.u[row], c.v[row])), c.derivs.S[row], rtol=0, atol=1e-12)
+        n_rhino = xyz(rhino.NormalAt(c.u[row], c.v[row]))
+        angle = angle_between(c.normal[row][None], n_rhino[None] * np.sign(n_rhino @ c.normal[row]))
+        assert angle[0] < 1e-9, (row, angle)
+    # Grazing hits are screened for the other root by the kernel's cosine; at least some exist here.
+    assert (np.abs(c.cosine[valid]) < tracing.OTHER_ROOT_COS).any()
+
+
+def test_compiled_rescue_answers_as_the_numpy_search():
+    """Rays passing just above and below the teapot's surface at grazing incidence, the search started off the
+    answer: the kernel's Levenberg–Marquardt reaches the same (u, v), S and verdicts (converged, stationary, on
+    the domain edge) as its numpy implementation, ray for ray."""
+    surfaces = SurfaceSet(read_bpt(TEAPOT))
+    rng = np.random.default_rng(11)
+    n = 600
+    k = rng.integers(0, len(surfaces.patches), n)
+    u0, v0 = rng.uniform(0.05, 0.95, n), rng.uniform(0.05, 0.95, n)
+    d = surfaces.evaluate(k, u0, v0)
+    normal = surfaces.normals(k, u0, v0, d)
+    tangent = d.Su / np.linalg.norm(d.Su, axis=1, keepdims=True)
+    D = tangent + rng.uniform(-0.05, 0.05, (n, 1)) * normal
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    O = d.S + rng.uniform(-0.02, 0.02, (n, 1)) * normal - 3.0 * D
+    us, vs = np.clip(u0 + rng.uniform(-0.1, 0.1, n), 0, 1), np.clip(v0 + rng.uniform(-0.1, 0.1, n), 0, 1)
+    tol = np.full(n, tracing.NEWTON_TOLERANCE * 3.0)
+    got = tracing._rescue(surfaces, k, us, vs, O, D, tol)
+    want = levenberg_marquardt(surfaces, k, us, vs, O, D, tol, tracing.RESCUE_STEPS, tracing.STATIONARY_COSINE,
+                               tracing.STALLED_DAMPING)
+    for name, a, b in (("u", got[0], want[0]), ("v", got[1], want[1]), ("S", got[2].S, want[2]),
+                       ("converged", got[3], want[3]), ("stationary", got[4], want[4]), ("edge", got[5], want[5])):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    assert got[3].sum() > 100 and got[4].sum() > 10, (got[3].sum(), got[4].sum())  # both verdicts exercised
+
+
 def test_second_process_loads_every_kernel_from_the_cache():
     code = """
 import numpy as np
@@ -137,7 +210,7 @@ refine(surfaces, k, u, u, np.zeros((2, 3)), np.eye(3)[:2], np.ones(2), 1.0)
 c, m = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
 lights = TubeLights(np.zeros(3), m, c, np.cross(c, m), np.array([0.0, 1.0]), 0.1, 4.0)
 lights.reach(np.ones((2, 3)), np.eye(3)[:2]); lights.distances(np.ones((2, 3)), np.eye(3)[:2])
-used = [nurbs.evaluate, nurbs.unit_normals, nurbs.newton, tubes.reach, tubes.distances]
+used = [nurbs.evaluate, nurbs.unit_normals, nurbs.refine_mesh_hits, tubes.reach, tubes.distances]
 print(sum(sum(f.stats.cache_misses.values()) for f in used), sum(sum(f.stats.cache_hits.values()) for f in used))
 """
     runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT,

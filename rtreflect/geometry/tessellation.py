@@ -18,6 +18,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ..kernels import nurbs as kernel
 from .surfaces import NurbsSurface
 
 
@@ -145,10 +146,19 @@ class Tessellation:
         return float(np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)))
 
     def start_parameters(self, prim: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(patch, u, v) interpolated from a triangle's vertices with Embree's barycentrics."""
-        corners = self.vertex_uv[self.faces[prim]]  # (N, 3, 2)
-        uv = (1.0 - b1 - b2)[:, None] * corners[:, 0] + b1[:, None] * corners[:, 1] + b2[:, None] * corners[:, 2]
-        return self.face_patch[prim], uv[:, 0], uv[:, 1]
+        """(patch, u, v) interpolated from a triangle's vertices with Embree's barycentrics (`kernels.nurbs.barycentric_uv`)."""
+        faces, vertex_uv, face_patch = self.start_arrays
+        prim = np.ascontiguousarray(prim, dtype=np.int64)
+        u, v = np.empty(len(prim)), np.empty(len(prim))
+        kernel.start_parameters(faces, vertex_uv, prim, np.ascontiguousarray(b1, dtype=np.float64),
+                                np.ascontiguousarray(b2, dtype=np.float64), u, v)
+        return face_patch[prim], u, v
+
+    @cached_property
+    def start_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(faces, vertex_uv, face_patch) as the kernels take them (int64, float64, contiguous)."""
+        return (np.ascontiguousarray(self.faces, dtype=np.int64), np.ascontiguousarray(self.vertex_uv, dtype=np.float64),
+                np.ascontiguousarray(self.face_patch, dtype=np.int64))
 
     def across_seam(self, points: np.ndarray, patch: np.ndarray, tried: np.ndarray | None = None,
                     uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -48,8 +48,8 @@ from dataclasses import replace
 import numpy as np
 
 from .accelerator import Accelerator, MeshHits
-from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _on_domain_edge, _other_root, _rescue, facing,
-                      refine, trace)
+from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _normals, _other_root, _rescue, facing,
+                      refine_all, trace)
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
@@ -252,10 +252,11 @@ class SecondLook:
         O, D = origins[rays], directions[rays]
         patch, u, v = self.shell_mesh.start_parameters(entry.prim[rays], entry.b1[rays], entry.b2[rays])
         u0, v0 = u, v
-        u, v, derivs, converged = refine(self.surfaces, patch, u, v, O, D, entry.t[rays], self.tessellation.extent)
+        u, v, derivs, converged, edge, normal, cosine = refine_all(self.surfaces, patch, u, v, O, D, entry.t[rays],
+                                                                   self.tessellation.extent)
         # Newton from a start far along a grazing ray can fail where the ray does meet the sheet: search there.
         # (Not where Newton ran off the face's domain: the ray leaves the face there, as `tracing._candidates` decides.)
-        stuck = np.flatnonzero(~converged & ~_on_domain_edge(self.surfaces, patch, u, v))
+        stuck = np.flatnonzero(~converged & ~edge)
         if len(stuck):
             tol = NEWTON_TOLERANCE * np.maximum(entry.t[rays][stuck], self.tessellation.extent)
             u2, v2, d2, ok2, _, _ = _rescue(self.surfaces, patch[stuck], u0[stuck], v0[stuck], O[stuck], D[stuck], tol,
@@ -263,17 +264,18 @@ class SecondLook:
             u[stuck], v[stuck], converged[stuck] = u2, v2, ok2
             for have, new in zip(derivs[:3], d2[:3]):
                 have[stuck] = new
+            _normals(self.surfaces, patch, derivs, D, stuck, normal, cosine, np.zeros(len(rays), dtype=bool))
         t = np.einsum("ij,ij->i", derivs.S - O, D)
         kept = np.where(hits.hit[rays], hits.t[rays], far[rays])
         slack = FLOAT32_SLACK * self.tessellation.extent
         ok = converged & (t > 0) & (t < kept - slack)
         ok[ok] = self.surfaces.on_face(patch[ok], u[ok], v[ok])
-        rays, O, D, patch, u, v, t = (x[ok] for x in (rays, O, D, patch, u, v, t))
+        rays, O, D, patch, u, v, t, normal, cosine = (x[ok] for x in (rays, O, D, patch, u, v, t, normal, cosine))
         if len(rays) == 0:
             return
         derivs = SurfaceDerivatives(derivs.S[ok], derivs.Su[ok], derivs.Sv[ok])
         _other_root(self.tessellation, self.surfaces, O, D, np.full(len(rays), VALID), patch, u, v, t, derivs,
-                    np.zeros(len(rays), dtype=bool))
+                    normal, cosine, np.zeros(len(rays), dtype=bool))
         hits.hit[rays], hits.patch[rays], hits.u[rays], hits.v[rays], hits.t[rays] = True, patch, u, v, t
         hits.P[rays], hits.aside[rays] = derivs.S, True
         hits.N[rays] = facing(self.surfaces.normals(patch, u, v, derivs), D)

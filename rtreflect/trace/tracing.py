@@ -47,6 +47,7 @@ import numpy as np
 
 from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
+from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation
 from ..kernels import nurbs as nurbs_kernel
@@ -125,52 +126,51 @@ def facing(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
     return normals
 
 
-def _across(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors e1, e2 spanning the plane normal to each direction (`kernels.nurbs.across_at`)."""
-    e1, e2 = np.empty_like(directions), np.empty_like(directions)
-    nurbs_kernel.across(np.ascontiguousarray(directions, dtype=np.float64), e1, e2)
-    return e1, e2
-
-
 def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, tolerance_distance):
-    """Newton on S(u, v) = O + tD from the mesh hit, by the compiled kernel `kernels.nurbs.newton`.
+    """Newton on S(u, v) = O + tD from given (u, v), by the compiled kernel `kernels.nurbs.refine_mesh_hits`.
 
     Returns (u, v, derivatives at the final (u, v), converged); the derivatives serve the normals.
+    The tolerance as for a mesh hit: `NEWTON_TOLERANCE` × max(t_mesh, tolerance_distance, |O + t_mesh D|).
     """
+    return refine_all(surfaces, patch, u, v, origins, directions, t_mesh, tolerance_distance)[:4]
+
+
+def refine_all(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, tolerance_distance):
+    """`refine`, with what the kernel also tells: (u, v, derivatives, converged, on the domain's edge (Newton
+    ran off it), unit normal n (not turned), n·D)."""
     n = len(u)
-    u = np.array(u, dtype=np.float64)
-    v = np.array(v, dtype=np.float64)
-    magnitude = np.abs(origins + t_mesh[:, None] * directions).max(axis=1)  # |S| near the mesh hit
-    tol = NEWTON_TOLERANCE * np.maximum(np.maximum(t_mesh, tolerance_distance), magnitude)
-    S, Su, Sv = (np.empty((n, 3)) for _ in range(3))
-    converged = np.zeros(n, dtype=bool)
-    contiguous = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
-    nurbs_kernel.newton(*surfaces.table.args, np.ascontiguousarray(patch, dtype=np.int64), u, v, contiguous(origins),
-           contiguous(directions), contiguous(tol), NEWTON_MAX_STEPS, S, Su, Sv, converged)
-    return u, v, SurfaceDerivatives(S, Su, Sv), converged
+    table = surfaces.table
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    pk = np.array(patch, dtype=np.int64)
+    us, vs = np.array(u, dtype=np.float64), np.array(v, dtype=np.float64)
+    ur, vr, t, cosine = (np.empty(n) for _ in range(4))
+    S, Su, Sv, normal = (np.empty((n, 3)) for _ in range(4))
+    converged, near, edge, degenerate = (np.empty(n, dtype=bool) for _ in range(4))
+    no_mesh = np.full(n, -1, dtype=np.int64)  # prim < 0: start from (patch, u, v) as given
+    nurbs_kernel.refine_mesh_hits(
+        *table.args, table.scale, *_NO_TRIANGLES, np.zeros(len(table.domain)), no_mesh, np.zeros(n), np.zeros(n),
+        f64(origins), f64(directions), f64(t_mesh), float(tolerance_distance), NEWTON_TOLERANCE, NEWTON_MAX_STEPS,
+        JUMP_LIMIT, GRAZING_ALLOWANCE, surface_module.DEGENERATE_SINE, surface_module.VANISHING_PARTIAL,
+        pk, us, vs, ur, vr, S, Su, Sv, t, normal, cosine, converged, near, edge, degenerate)
+    return ur, vr, SurfaceDerivatives(S, Su, Sv), converged, edge, normal, cosine
 
 
-def _near_mesh_hit(derivs: SurfaceDerivatives, O, D, mesh_point, chord) -> tuple[np.ndarray, np.ndarray]:
-    """Whether refined hits lie ahead and within reach of the mesh hit (not on another sheet), and their t = (S − O)·D."""
-    S = derivs.S
-    t = np.einsum("ij,ij->i", S - O, D)
-    jump = np.linalg.norm(S - mesh_point, axis=1)
-    near = jump <= JUMP_LIMIT * chord
-    # The grazing allowance (≥ 1) only matters for the few hits beyond the plain limit: the normal only for those.
-    far = np.flatnonzero(~near)
-    if len(far):
-        cross = np.cross(derivs.Su[far], derivs.Sv[far])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cos = np.abs(np.einsum("ij,ij->i", cross, D[far])) / np.linalg.norm(cross, axis=1)
-        allowance = np.clip(np.nan_to_num(1.0 / cos, nan=1.0), 1.0, GRAZING_ALLOWANCE)
-        near[far] = jump[far] <= JUMP_LIMIT * chord[far] * allowance
-    return (t > 0) & near, t
+#: `refine`'s stand-in for the tessellation's (faces, vertex_uv, face_patch): no mesh hit to start from.
+_NO_TRIANGLES = (np.zeros((0, 3), dtype=np.int64), np.zeros((0, 2)), np.zeros(0, dtype=np.int64))
 
 
-def _on_domain_edge(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
-    u0, u1, v0, v1 = surfaces.domains(patch)
-    return (u == u0) | (u == u1) | (v == v0) | (v == v1)
+def _near_mesh_hit(derivs: SurfaceDerivatives, patch, O, D, t_mesh, band) -> tuple[np.ndarray, np.ndarray]:
+    """Whether refined hits lie ahead and within reach of the mesh hit (not on another sheet), and their t = (S − O)·D.
 
+    By the kernel `kernels.nurbs.near_at` (the fused `refine_mesh_hits` applies it to the first refinement);
+    ``band`` per patch: the reach of `JUMP_LIMIT` chord errors.
+    """
+    n = len(patch)
+    near, t = np.empty(n, dtype=bool), np.empty(n)
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    nurbs_kernel.near_mesh_hits(np.ascontiguousarray(patch, dtype=np.int64), f64(derivs.S), f64(derivs.Su),
+                                f64(derivs.Sv), f64(O), f64(D), f64(t_mesh), band, JUMP_LIMIT, GRAZING_ALLOWANCE, near, t)
+    return near, t
 
 
 def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol, steps: int | None = None):
@@ -180,60 +180,38 @@ def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol, steps: 
     (JᵀJ + λ diag JᵀJ), which makes it invariant under rescaling u or v. It either reaches
     |r| ≤ tol (the ray meets the surface: Newton's answer), or stalls where r is normal to the
     surface's tangent plane, or where no step lowers |r| (`STALLED_DAMPING`), with |r| > tol: a
-    positive local minimum of the distance, the ray passes the surface. Returns (u, v, derivatives, converged, stationary, on the domain edge).
-    ``steps``: at most that many steps (default `RESCUE_STEPS`; the second look's shell starts take fewer).
+    positive local minimum of the distance, the ray passes the surface. By the compiled kernel
+    `kernels.nurbs.rescue`, per ray. Returns (u, v, derivatives, converged, stationary, on the domain edge).
+    ``steps``: at most that many steps (default `RESCUE_STEPS`, read when called: tests switch the search off;
+    the second look's shell starts take fewer).
     """
     n = len(u)
-    u, v = u.copy(), v.copy()
-    u0, u1, v0, v1 = surfaces.domains(patch)
-    e1, e2 = _across(directions)
-    lam = np.full(n, 1e-3)
-    d = surfaces.evaluate(patch, u, v)
-    S, Su, Sv = d.S.copy(), d.Su.copy(), d.Sv.copy()
-    converged = np.zeros(n, dtype=bool)
-    stationary = np.zeros(n, dtype=bool)
-    active = np.arange(n)
-    for _ in range(RESCUE_STEPS if steps is None else steps):  # read when called: tests switch the search off
-        rel = S[active] - origins[active]
-        r1 = np.einsum("ij,ij->i", e1[active], rel)
-        r2 = np.einsum("ij,ij->i", e2[active], rel)
-        a = np.einsum("ij,ij->i", e1[active], Su[active])
-        b = np.einsum("ij,ij->i", e1[active], Sv[active])
-        c = np.einsum("ij,ij->i", e2[active], Su[active])
-        dd = np.einsum("ij,ij->i", e2[active], Sv[active])
-        rn = np.hypot(r1, r2)
-        done = rn <= tol[active]
-        converged[active[done]] = True
-        g1, g2 = a * r1 + c * r2, b * r1 + dd * r2  # Jᵀ r
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cosine = np.hypot(g1, g2) / (np.sqrt(a * a + b * b + c * c + dd * dd) * rn)
-        # Stationary: r ⊥ the tangent plane, or no step along the damped gradient lowers |r| any more.
-        flat = ~done & (~(cosine > STATIONARY_COSINE) | (lam[active] > STALLED_DAMPING))
-        stationary[active[flat]] = True
-        keep = ~done & ~flat
-        active, r1, r2, a, b, c, dd, g1, g2, rn = (x[keep] for x in (active, r1, r2, a, b, c, dd, g1, g2, rn))
-        if len(active) == 0:
-            break
-        A11, A12, A22 = a * a + c * c, a * b + c * dd, b * b + dd * dd
-        l = lam[active]
-        M11, M22 = A11 * (1.0 + l), A22 * (1.0 + l)
-        det = M11 * M22 - A12 * A12
-        with np.errstate(divide="ignore", invalid="ignore"):
-            du = -(M22 * g1 - A12 * g2) / det
-            dv = -(M11 * g2 - A12 * g1) / det
-        good = np.isfinite(du) & np.isfinite(dv)
-        tu = np.clip(u[active] + np.where(good, du, 0.0), u0[active], u1[active])
-        tv = np.clip(v[active] + np.where(good, dv, 0.0), v0[active], v1[active])
-        trial = surfaces.evaluate(patch[active], tu, tv)
-        rel = trial.S - origins[active]
-        trial_r = np.hypot(np.einsum("ij,ij->i", e1[active], rel), np.einsum("ij,ij->i", e2[active], rel))
-        better = good & (trial_r < rn)
-        take = active[better]
-        u[take], v[take] = tu[better], tv[better]
-        S[take], Su[take], Sv[take] = trial.S[better], trial.Su[better], trial.Sv[better]
-        lam[active] = np.where(better, lam[active] / 3.0, lam[active] * 4.0)
-    edge = ~converged & _on_domain_edge(surfaces, patch, u, v)
-    return u, v, SurfaceDerivatives(S, Su, Sv), converged, stationary & ~edge, edge
+    u, v = np.array(u, dtype=np.float64), np.array(v, dtype=np.float64)
+    S, Su, Sv = (np.empty((n, 3)) for _ in range(3))
+    converged, stationary, edge = (np.empty(n, dtype=bool) for _ in range(3))
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    nurbs_kernel.rescue(*surfaces.table.args, np.ascontiguousarray(patch, dtype=np.int64), u, v, f64(origins),
+                        f64(directions), f64(tol), RESCUE_STEPS if steps is None else steps, STATIONARY_COSINE, STALLED_DAMPING, S, Su, Sv,
+                        converged, stationary, edge)
+    return u, v, SurfaceDerivatives(S, Su, Sv), converged, stationary, edge
+
+
+def _normals(surfaces: SurfaceSet, patch, derivs: SurfaceDerivatives, D, rows, normal, cosine, degenerate) -> None:
+    """Unit normals n = (S_u × S_v)/|S_u × S_v| (not turned), n·D and the degenerate flag of ``rows``, in place.
+
+    For the rows whose hit a rare path (rescue, seam restart, `_other_root`, `_rim_neighbours`) replaced:
+    the same kernel formula (`kernels.nurbs.normal_at`) as the fused first refinement.
+    """
+    if len(rows) == 0:
+        return
+    n = len(rows)
+    out, cos, bad = np.empty((n, 3)), np.empty(n), np.empty(n, dtype=bool)
+    table = surfaces.table
+    nurbs_kernel.normals_and_cosines(table.domain, table.scale, np.ascontiguousarray(patch[rows], dtype=np.int64),
+                                     np.ascontiguousarray(derivs.Su[rows]), np.ascontiguousarray(derivs.Sv[rows]),
+                                     np.ascontiguousarray(D[rows]), surface_module.DEGENERATE_SINE,
+                                     surface_module.VANISHING_PARTIAL, out, cos, bad)
+    normal[rows], cosine[rows], degenerate[rows] = out, cos, bad
 
 
 @dataclass
@@ -246,21 +224,36 @@ class _Candidates:
     v: np.ndarray
     t: np.ndarray  # exact t where VALID, the mesh hit's t otherwise
     derivs: SurfaceDerivatives
+    normal: np.ndarray  # (S_u × S_v)/|S_u × S_v|, not turned to the ray (`kernels.nurbs.normal_at`)
+    cosine: np.ndarray  # normal·D
+    degenerate: np.ndarray  # bool: normal undefined there (the limit is taken: `SurfaceSet.normals`)
     start_u: np.ndarray  # the mesh hit's interpolated (u, v): kept by an unresolved candidate
     start_v: np.ndarray
-    mesh_point: np.ndarray
     aside: np.ndarray  # bool: VALID by `_other_root` or `_rim_neighbours`, not the mesh hit's own refinement
 
 
 def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1, b2, tm) -> _Candidates:
-    """Refine and classify one mesh hit per ray (module doc): Newton, then the seam restart and the rescue."""
-    mesh_point = O + tm[:, None] * D
-    band_of = lambda p: tessellation.chord_error[p] + 1e-6 * tessellation.extent  # noqa: E731
-    pk, us, vs = tessellation.start_parameters(prim, b1, b2)
-    ur, vr, derivs, conv = refine(surfaces, pk, us, vs, O, D, tm, tessellation.extent)
-    near, tr = _near_mesh_hit(derivs, O, D, mesh_point, band_of(pk))
-    status = np.full(len(pk), UNRESOLVED)
-    edge = ~conv & _on_domain_edge(surfaces, pk, ur, vr)
+    """Refine and classify one mesh hit per ray (module doc): Newton, then the seam restart and the rescue.
+
+    The common case in one compiled pass per ray (`kernels.nurbs.refine_mesh_hits`: start, Newton, the
+    near-mesh-hit test, t, the domain-edge test, the unit normal and n·D); the rare paths (rescue, seam
+    restart, `_other_root`, `_rim_neighbours`) in numpy on the rays that need them.
+    """
+    n = len(prim)
+    band = tessellation.chord_error + 1e-6 * tessellation.extent  # per patch: `JUMP_LIMIT`'s chord error
+    pk = np.empty(n, dtype=np.int64)
+    us, vs, ur, vr, tr, cosine = (np.empty(n) for _ in range(6))
+    S, Su, Sv, normal = (np.empty((n, 3)) for _ in range(4))
+    conv, near, edge, degenerate = (np.empty(n, dtype=bool) for _ in range(4))
+    table = surfaces.table
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    nurbs_kernel.refine_mesh_hits(
+        *table.args, table.scale, *tessellation.start_arrays, band, np.ascontiguousarray(prim, dtype=np.int64),
+        f64(b1), f64(b2), f64(O), f64(D), f64(tm), tessellation.extent, NEWTON_TOLERANCE, NEWTON_MAX_STEPS,
+        JUMP_LIMIT, GRAZING_ALLOWANCE, surface_module.DEGENERATE_SINE, surface_module.VANISHING_PARTIAL,
+        pk, us, vs, ur, vr, S, Su, Sv, tr, normal, cosine, conv, near, edge, degenerate)
+    derivs = SurfaceDerivatives(S, Su, Sv)
+    status = np.full(n, UNRESOLVED)
     inside = surfaces.on_face(pk, ur, vr)
     status[conv & near & inside] = VALID
     left = edge | (conv & near & ~inside)  # ran off the face: the ray may go on on a neighbour, else it misses
@@ -269,7 +262,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     if len(stuck):
         tol = NEWTON_TOLERANCE * np.maximum(tm[stuck], tessellation.extent)
         u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
-        near2, t2 = _near_mesh_hit(d2, O[stuck], D[stuck], mesh_point[stuck], band_of(pk[stuck]))
+        near2, t2 = _near_mesh_hit(d2, pk[stuck], O[stuck], D[stuck], tm[stuck], band)
         in2 = surfaces.on_face(pk[stuck], u2, v2)
         ur[stuck], vr[stuck], tr[stuck] = u2, v2, t2
         for have, new in zip(derivs[:3], d2[:3]):
@@ -281,8 +274,9 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     status[seam] = MISS
     # From the edge point Newton stopped at (a domain edge), or the mesh hit (a trim edge, where the
     # converged point lies on the surface's extension beyond the face).
-    at = np.where(edge[seam, None], derivs.S[seam], mesh_point[seam])
+    at = np.where(edge[seam, None], derivs.S[seam], O[seam] + tm[seam, None] * D[seam])
     tried = np.zeros((len(seam), 0), dtype=int)  # neighbours tried so far (the patch itself: by `across_seam`)
+    restarted = [stuck]
     for _ in range(SEAM_TRIES):
         if len(seam) == 0:
             break
@@ -291,21 +285,25 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         close = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[pk[seam]])
         seam, at, tried, pn, un, vn = (x[close] for x in (seam, at, tried, pn, un, vn))
         u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
-        near3, t3 = _near_mesh_hit(d3, O[seam], D[seam], mesh_point[seam], band_of(pn))
+        near3, t3 = _near_mesh_hit(d3, pn, O[seam], D[seam], tm[seam], band)
         ok3 &= near3 & surfaces.on_face(pn, u3, v3)
         won = seam[ok3]
         pk[won], ur[won], vr[won], tr[won], status[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], VALID
         for have, new in zip(derivs[:3], d3[:3]):
             have[won] = new[ok3]
+        restarted.append(won)
         seam, at, tried = seam[~ok3], at[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
-    aside = np.zeros(len(pk), dtype=bool)
-    _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, aside)
-    _rim_neighbours(tessellation, surfaces, O, D, prim, tm, mesh_point, status, pk, ur, vr, tr, derivs, band_of, aside)
+    _normals(surfaces, pk, derivs, D, np.concatenate(restarted), normal, cosine, degenerate)
+    aside = np.zeros(n, dtype=bool)
+    _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside)
+    _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band, aside)
+    _normals(surfaces, pk, derivs, D, np.flatnonzero(aside), normal, cosine, degenerate)
     t = np.where(status == VALID, tr, tm)
-    return _Candidates(status, pk, ur, vr, t, derivs, us, vs, mesh_point, aside)
+    return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside)
 
 
-def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs, aside) -> None:
+def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs, normal, cosine,
+                aside) -> None:
     """Grazing valid hits: the nearer of the ray's two crossings of the same sheet, in place.
 
     A ray meeting a sheet at grazing incidence crosses it twice, close together; where the mesh
@@ -316,17 +314,13 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     leaves the ray as g(s) = ½ κ s² − (n·D) s along the normal n, κ = n·S''(δ, δ) with δ the
     parameter step per unit length of D's tangential part: the other crossing lies at s = 2(n·D)/κ.
     Where that is before the hit, Newton starts there on the same face; a valid point nearer than
-    t₁ by more than float32 rounding replaces it.
+    t₁ by more than float32 rounding replaces it. ``normal`` and ``cosine`` (n·D) as the kernel gives them.
     """
-    cross = np.cross(derivs.Su, derivs.Sv)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        n = cross / np.linalg.norm(cross, axis=1, keepdims=True)
-        cos = np.einsum("ij,ij->i", n, D)
-    rays = np.flatnonzero((status == VALID) & (np.abs(cos) < OTHER_ROOT_COS))
+    rays = np.flatnonzero((status == VALID) & (np.abs(cosine) < OTHER_ROOT_COS))
     if len(rays) == 0:
         return
     d2 = surfaces.evaluate(pk[rays], ur[rays], vr[rays], order=2)
-    nr, cr, Dr = n[rays], cos[rays], D[rays]
+    nr, cr, Dr = normal[rays], cosine[rays], D[rays]
     tangential = Dr - cr[:, None] * nr
     # δ = (du, dv): least squares of [S_u S_v] δ = D_T (the 2×2 normal equations).
     a, b, c = (np.einsum("ij,ij->i", x, y) for x, y in ((d2.Su, d2.Su), (d2.Su, d2.Sv), (d2.Sv, d2.Sv)))
@@ -378,8 +372,8 @@ def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray
     return best, corner
 
 
-def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, mesh_point, status, pk, ur, vr,
-                    tr, derivs, band_of, aside) -> None:
+def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, status, pk, ur, vr, tr, derivs,
+                    band, aside) -> None:
     """Valid hits on a triangle at its face's rim: the neighbouring face across the rim refined too, in place.
 
     Another face's triangle can meet the ray at the mesh hit's own distance, to float32 rounding: where
@@ -394,11 +388,13 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     triangle's hit) and nearer than the kept one by more than float32 rounding replaces it (the same point
     on the shared edge does not: pixels there keep their face).
     """
+    patch_of, uv_of, gap_of = tessellation.rim_neighbour
+    if not (patch_of >= 0).any():  # no face has a neighbour (a single patch): nothing across any rim
+        return
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
     skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
-    edge_dist, corner = _rim_corner(tessellation, prim[rays], mesh_point[rays])
-    patch_of, uv_of, gap_of = tessellation.rim_neighbour
+    edge_dist, corner = _rim_corner(tessellation, prim[rays], O[rays] + tm[rays, None] * D[rays])
     pn, un, vn, gap = patch_of[corner], uv_of[corner, 0], uv_of[corner, 1], gap_of[corner]
     chord = tessellation.chord_error
     # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the corner; and the mesh hit
@@ -417,7 +413,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     with np.errstate(divide="ignore", invalid="ignore"):
         cos = np.abs(np.einsum("ij,ij->i", cross, D[rays])) / np.linalg.norm(cross, axis=1)
     allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
-    reach = BAND_CHORDS * band_of(pn) * allowance + skip
+    reach = BAND_CHORDS * band[pn] * allowance + skip
     ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
     won = rays[ok3]
     pk[won], ur[won], vr[won], tr[won], aside[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], True
@@ -483,10 +479,16 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             odd = np.flatnonzero((c.status == UNRESOLVED) & (mesh.t < doubt[rays]))
             doubt[rays[odd]] = mesh.t[odd]
         with clock.stage("exact normals"):
-            kept = SurfaceDerivatives(c.derivs.S[take], c.derivs.Su[take], c.derivs.Sv[take])
-            normal = facing(surfaces.normals(c.patch[take], c.u[take], c.v[take], kept), D[take])
+            normal, cosine = c.normal[take], c.cosine[take]
+            bad = np.flatnonzero(c.degenerate[take])
+            if len(bad):  # the limit from the interior (`SurfaceSet.normals`)
+                kept = SurfaceDerivatives(*(x[take][bad] for x in c.derivs[:3]))
+                normal[bad] = surfaces.normals(c.patch[take][bad], c.u[take][bad], c.v[take][bad], kept)
+                cosine[bad] = np.einsum("ij,ij->i", normal[bad], D[take][bad])
+            flip = cosine > 0  # turned to face the incoming ray (`facing`)
+            normal[flip] *= -1.0
             hits.N[rows] = normal
-            cos[rows] = np.abs(np.einsum("ij,ij->i", normal, D[take]))
+            cos[rows] = np.abs(cosine)
         # Go on where a mesh hit behind this one could still carry a nearer exact hit.
         # An unresolved candidate does not stop the search: the exact hit may lie behind it.
         limit = np.minimum(far[rays], best[rays] + _band(tessellation, cos[rays]))
