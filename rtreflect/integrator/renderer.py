@@ -70,7 +70,8 @@ class Shading:
     # The mode's nearest level (`Stripes.level_id`, −1 where none is or no hit), for the analytic path.
     level: np.ndarray | None = None
 
-    def take(self, rows: np.ndarray) -> "Shading":
+    def take(self, rows: np.ndarray | slice) -> "Shading":
+        """The rays ``rows`` (indices: copies; a slice: views)."""
         hits = Hits(**{k: getattr(self.hits, k)[rows] for k in Hits.__dataclass_fields__})
         return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
                        self.line_dist[rows], self.lit[rows],
@@ -335,7 +336,7 @@ class Renderer:
         fallback_pixels = int(fell_back.sum())
         pixels = np.empty((len(rows), len(CHANNELS)), dtype=np.float32)
         pixels[:, :4] = rgba
-        pixels[:, 4:] = aov_planes(aovs)
+        aov_planes(aovs, pixels[:, 4:])
         return Tile(start, stop, pixels, rays, fallbacks, fallback_pixels)
 
     def supersample(self, rows: np.ndarray, cols: np.ndarray, s: int) -> tuple[np.ndarray, Shading, int]:
@@ -405,7 +406,9 @@ class Renderer:
             want[:max(0, first - 1 - r0)] = False
             want[last + 2 - r0:] = False
         centre = self.centre_stripes(shading, rows, cols, sigma, want.ravel())
-        own = np.arange(start - r0 * width, stop - r0 * width)
+        # The span's own rays are one run of the halo's: a slice, so their shading is taken as views, not copies.
+        first_own = start - r0 * width
+        own = slice(first_own, stop - r0 * width)
         edge = np.zeros(shape, dtype=bool)
         with self.clock.stage("analytic AA"):
             if crop[1]:
@@ -437,18 +440,18 @@ class Renderer:
         edges = np.flatnonzero(edge)
         # Edge pixels' samples in chunks of at most the span's own pixel count: no more rays at once than the tile
         # was sized for (`tiling`, one ray per pixel).
-        chunk = max(1, len(own) // (EDGE_SAMPLES * EDGE_SAMPLES))
+        chunk = max(1, (stop - start) // (EDGE_SAMPLES * EDGE_SAMPLES))
         for part in np.array_split(edges, max(1, -(-len(edges) // chunk))):
             if len(part) == 0:
                 continue
-            rgba[part], samples, traced = self.supersample(rows[own[part]], cols[own[part]], EDGE_SAMPLES)
+            rgba[part], samples, traced = self.supersample(rows[first_own + part], cols[first_own + part], EDGE_SAMPLES)
             rays += traced
             fallbacks += int(samples.hits.fallback.sum())
             fell_back[part] |= samples.hits.fallback.reshape(len(part), -1).any(axis=1)
         aovs = self.aovs(mine)
-        pixels = np.empty((len(own), len(CHANNELS)), dtype=np.float32)
+        pixels = np.empty((stop - start, len(CHANNELS)), dtype=np.float32)
         pixels[:, :4] = rgba
-        pixels[:, 4:] = aov_planes(aovs)
+        aov_planes(aovs, pixels[:, 4:])
         return Tile(start, stop, pixels, rays, fallbacks, int(fell_back.sum()), len(edges))
 
     def stripe_offsets(self, shading: Shading) -> np.ndarray:
