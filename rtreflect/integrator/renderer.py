@@ -324,7 +324,7 @@ class Renderer:
         fallbacks = int(shading.hits.fallback.sum())
         fell_back = shading.hits.fallback.reshape(-1, ns).any(axis=1)
         if s % 2 == 1:  # the middle sample of an odd s×s grid is the pixel-centre ray
-            aovs = self.aovs(shading.take(np.arange(len(rows)) * ns + ns // 2))
+            aovs = self.aovs(shading.take(slice(ns // 2, None, ns)))  # every ns-th sample: views, not copies
         else:
             del shading  # free the samples' shading before tracing the centre rays
             aovs = self.pixel_aovs(rows, cols)
