@@ -388,11 +388,16 @@ class Renderer:
             # are on the pixel's level: a pixel with a neighbour on another level (between two stripes, or where
             # the stripes crowd) is kept. Only the span's rows and one on either side need to know (the edge
             # test's neighbours).
-            # Only the columns around the surface can hold a stripe or an edge: the neighbour tests run there alone.
-            hit_cols = np.flatnonzero(shading.hits.hit.reshape(shape).any(axis=0))
+            # Only the rows and columns around the surface can hold a stripe or an edge: the neighbour tests run
+            # there alone. (The crop's border rows and columns see no surface, nor do the pixels beyond them, so the
+            # edge-repeating pad of `neighbours` stands for those outer neighbours exactly.)
+            hit_grid = shading.hits.hit.reshape(shape)
+            hit_cols = np.flatnonzero(hit_grid.any(axis=0))
+            hit_rows = np.flatnonzero(hit_grid.any(axis=1))
             cs = slice(max(0, hit_cols[0] - 1), min(width, hit_cols[-1] + 2)) if len(hit_cols) else slice(0, 0)
-            crop = (shape[0], cs.stop - cs.start)
-            grid = lambda x: x.reshape(shape + x.shape[1:])[:, cs]  # noqa: E731 (a (rows, columns) view of the crop)
+            rs = slice(max(0, hit_rows[0] - 1), min(shape[0], hit_rows[-1] + 2)) if len(hit_rows) else slice(0, 0)
+            crop = (rs.stop - rs.start, cs.stop - cs.start)
+            grid = lambda x: x.reshape(shape + x.shape[1:])[rs, cs]  # noqa: E731 (a (rows, columns) view of the crop)
             grid_level, grid_sigma = grid(level), grid(sigma)
             want = np.zeros(shape, dtype=bool)
             if crop[1]:
@@ -402,7 +407,7 @@ class Renderer:
                     with np.errstate(invalid="ignore"):
                         move = np.fmax(move, np.abs(sg - grid_sigma))
                 with np.errstate(invalid="ignore"):
-                    want[:, cs] = (grid_level >= 0) & (mixed | (np.abs(grid_sigma) - move <= self.stripe_reach))
+                    want[rs, cs] = (grid_level >= 0) & (mixed | (np.abs(grid_sigma) - move <= self.stripe_reach))
             want[:max(0, first - 1 - r0)] = False
             want[last + 2 - r0:] = False
         centre = self.centre_stripes(shading, rows, cols, sigma, want.ravel())
@@ -425,12 +430,12 @@ class Renderer:
                     bent |= inside & near & (k == grid_level) & strays
                 grid(centre.untrusted)[...] |= bent
                 hits = shading.hits
-                edge[:, cs] = edge_pixels(*(grid(x) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked,
+                edge[rs, cs] = edge_pixels(*(grid(x) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked,
                                                                centre.untrusted)))
                 if shading.surface_rgb is not None:  # a map mode: where its colour jumps (a band edge), supersample
                     rgb = grid(np.nan_to_num(shading.surface_rgb))
                     for other in neighbours(rgb):
-                        edge[:, cs] |= np.abs(other - rgb).max(axis=2) > MAP_STEP
+                        edge[rs, cs] |= np.abs(other - rgb).max(axis=2) > MAP_STEP
             edge = edge.ravel()[own]
         mine = shading.take(own)
         rgba = self.colour(mine, np.where(centre.blocked[own], 0.0, centre.coverage[own]), 1)
