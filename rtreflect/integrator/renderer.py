@@ -27,6 +27,7 @@ from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
 from .analytic import BENDING, EDGE_SAMPLES, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbour_inside, neighbours, stripe_coverage, uv_footprint
+from .cull import RayBox
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect
 from ..modes.profile import stripe_reach, stripe_weight
@@ -199,8 +200,25 @@ class Renderer:
         # Rays that run close to a sheet are traced again on a finer mesh (secondlook.py): the nearest exact hit.
         self.second_look = None if self.vertex_normals is not None else SecondLook(
             scene.surfaces, scene.render.tessellation, self.tessellation, self.surfaces)
+        # Camera rays are asked of the coarse mesh and the second look's shell (its finer mesh only for rays one of
+        # those met): a ray missing both meshes' box is a miss without asking Embree (`cull`).
+        self.ray_box = RayBox(self.tessellation.vertices,
+                              *(() if self.second_look is None else (self.second_look.shell_mesh.vertices,)))
 
     def trace(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
+        """Exact first hits of camera rays; rays that miss every mesh's box (`cull`) are not traced: miss values."""
+        with self.clock.stage("camera rays"):
+            rays = self.ray_box.may_hit(origins, directions)
+        if len(rays) == len(origins):
+            return self._trace(origins, directions)
+        hits = Hits.blank(len(origins), np.zeros(len(origins), dtype=bool))
+        if len(rays):
+            traced = self._trace(origins[rays], directions[rays])
+            for name in Hits.__dataclass_fields__:
+                getattr(hits, name)[rays] = getattr(traced, name)
+        return hits
+
+    def _trace(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
         if self.vertex_normals is not None:
             return trace_mesh(self.accelerator, self.tessellation, self.vertex_normals, origins, directions, self.clock)
         hits = trace(self.accelerator, self.tessellation, self.surfaces, origins, directions, self.clock)
