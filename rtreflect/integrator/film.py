@@ -21,11 +21,27 @@ AOV_CHANNELS = ("P.X", "P.Y", "P.Z", "N.X", "N.Y", "N.Z", "u", "v", "patch", "Z"
 CHANNELS = COLOR_CHANNELS + AOV_CHANNELS
 
 
-def aov_planes(aovs: dict[str, np.ndarray]) -> np.ndarray:
-    """(N, 18) AOV values in channel order from the named per-pixel arrays (P and N are (N, 3))."""
-    return np.column_stack([aovs["P"], aovs["N"], aovs["u"], aovs["v"], aovs["patch"], aovs["Z"], aovs["f"],
-                            aovs["line.id"], aovs["line.dist"], aovs["phi"], aovs["K"], aovs["H"], aovs["k1"],
-                            aovs["k2"]])
+#: The per-pixel arrays behind `AOV_CHANNELS`, in order, with their widths (P and N are (N, 3)).
+AOV_ARRAYS = (("P", 3), ("N", 3), ("u", 1), ("v", 1), ("patch", 1), ("Z", 1), ("f", 1), ("line.id", 1),
+              ("line.dist", 1), ("phi", 1), ("K", 1), ("H", 1), ("k1", 1), ("k2", 1))
+
+
+def aov_planes(aovs: dict[str, np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
+    """(N, 18) AOV values in channel order from the named per-pixel arrays (P and N are (N, 3)).
+
+    ``out``: the (N, 18) block to fill (a tile's float32 AOV columns), written array by array with no
+    float64 (N, 18) temporary in between; each value is rounded to out's type once, as before.
+    """
+    if out is None:
+        out = np.empty((len(aovs["u"]), len(AOV_CHANNELS)))
+    column = 0
+    for name, width in AOV_ARRAYS:
+        if width == 1:
+            out[:, column] = aovs[name]
+        else:
+            out[:, column:column + width] = aovs[name]
+        column += width
+    return out
 
 
 def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, background,
@@ -34,7 +50,26 @@ def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, 
 
     ``shade``: per-sample (P, s²) factors k of the surface colour (None: flat, k = 1).
     With flags and no shade the sums are whole sample counts, as they always were.
+    Pixels none of whose samples hit all get the one value the sums give for them (the background, A = 0),
+    computed once: the sums run over the pixels that see the surface only.
     """
+    seen = np.flatnonzero(hit.any(axis=1))
+    if len(seen) == len(hit):
+        return _coverage_sums(hit, lit, surface_color, line_color, background, shade)
+    # The same sums over one all-miss pixel: every miss row's value, bit for bit.
+    empty = np.zeros((1, hit.shape[1]), dtype=bool)
+    out = np.empty((len(hit), 4))
+    out[:] = _coverage_sums(empty, np.zeros((1, hit.shape[1]), dtype=np.asarray(lit).dtype), surface_color,
+                            line_color, background, None if shade is None else np.ones((1, hit.shape[1])))
+    if len(seen):
+        out[seen] = _coverage_sums(hit[seen], lit[seen], surface_color, line_color, background,
+                                   None if shade is None else shade[seen])
+    return out
+
+
+def _coverage_sums(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, background,
+                   shade: np.ndarray | None) -> np.ndarray:
+    """`coverage_color`'s sums over every pixel given."""
     samples = hit.shape[1]
     n_hit = hit.sum(axis=1)
     weight = np.where(hit, lit, 0)

@@ -27,6 +27,7 @@ from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
 from .analytic import BENDING, EDGE_SAMPLES, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbour_inside, neighbours, stripe_coverage, uv_footprint
+from .cull import RayBox
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect
 from ..modes.profile import stripe_reach, stripe_weight
@@ -70,7 +71,8 @@ class Shading:
     # The mode's nearest level (`Stripes.level_id`, −1 where none is or no hit), for the analytic path.
     level: np.ndarray | None = None
 
-    def take(self, rows: np.ndarray) -> "Shading":
+    def take(self, rows: np.ndarray | slice) -> "Shading":
+        """The rays ``rows`` (indices: copies; a slice: views)."""
         hits = Hits(**{k: getattr(self.hits, k)[rows] for k in Hits.__dataclass_fields__})
         return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
                        self.line_dist[rows], self.lit[rows],
@@ -198,8 +200,25 @@ class Renderer:
         # Rays that run close to a sheet are traced again on a finer mesh (secondlook.py): the nearest exact hit.
         self.second_look = None if self.vertex_normals is not None else SecondLook(
             scene.surfaces, scene.render.tessellation, self.tessellation, self.surfaces)
+        # Camera rays are asked of the coarse mesh and the second look's shell (its finer mesh only for rays one of
+        # those met): a ray missing both meshes' box is a miss without asking Embree (`cull`).
+        self.ray_box = RayBox(self.tessellation.vertices,
+                              *(() if self.second_look is None else (self.second_look.shell_mesh.vertices,)))
 
     def trace(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
+        """Exact first hits of camera rays; rays that miss every mesh's box (`cull`) are not traced: miss values."""
+        with self.clock.stage("camera rays"):
+            rays = self.ray_box.may_hit(origins, directions)
+        if len(rays) == len(origins):
+            return self._trace(origins, directions)
+        hits = Hits.blank(len(origins), np.zeros(len(origins), dtype=bool))
+        if len(rays):
+            traced = self._trace(origins[rays], directions[rays])
+            for name in Hits.__dataclass_fields__:
+                getattr(hits, name)[rays] = getattr(traced, name)
+        return hits
+
+    def _trace(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
         if self.vertex_normals is not None:
             return trace_mesh(self.accelerator, self.tessellation, self.vertex_normals, origins, directions, self.clock)
         hits = trace(self.accelerator, self.tessellation, self.surfaces, origins, directions, self.clock)
@@ -323,7 +342,7 @@ class Renderer:
         fallbacks = int(shading.hits.fallback.sum())
         fell_back = shading.hits.fallback.reshape(-1, ns).any(axis=1)
         if s % 2 == 1:  # the middle sample of an odd s×s grid is the pixel-centre ray
-            aovs = self.aovs(shading.take(np.arange(len(rows)) * ns + ns // 2))
+            aovs = self.aovs(shading.take(slice(ns // 2, None, ns)))  # every ns-th sample: views, not copies
         else:
             del shading  # free the samples' shading before tracing the centre rays
             aovs = self.pixel_aovs(rows, cols)
@@ -335,7 +354,7 @@ class Renderer:
         fallback_pixels = int(fell_back.sum())
         pixels = np.empty((len(rows), len(CHANNELS)), dtype=np.float32)
         pixels[:, :4] = rgba
-        pixels[:, 4:] = aov_planes(aovs)
+        aov_planes(aovs, pixels[:, 4:])
         return Tile(start, stop, pixels, rays, fallbacks, fallback_pixels)
 
     def supersample(self, rows: np.ndarray, cols: np.ndarray, s: int) -> tuple[np.ndarray, Shading, int]:
@@ -387,11 +406,16 @@ class Renderer:
             # are on the pixel's level: a pixel with a neighbour on another level (between two stripes, or where
             # the stripes crowd) is kept. Only the span's rows and one on either side need to know (the edge
             # test's neighbours).
-            # Only the columns around the surface can hold a stripe or an edge: the neighbour tests run there alone.
-            hit_cols = np.flatnonzero(shading.hits.hit.reshape(shape).any(axis=0))
+            # Only the rows and columns around the surface can hold a stripe or an edge: the neighbour tests run
+            # there alone. (The crop's border rows and columns see no surface, nor do the pixels beyond them, so the
+            # edge-repeating pad of `neighbours` stands for those outer neighbours exactly.)
+            hit_grid = shading.hits.hit.reshape(shape)
+            hit_cols = np.flatnonzero(hit_grid.any(axis=0))
+            hit_rows = np.flatnonzero(hit_grid.any(axis=1))
             cs = slice(max(0, hit_cols[0] - 1), min(width, hit_cols[-1] + 2)) if len(hit_cols) else slice(0, 0)
-            crop = (shape[0], cs.stop - cs.start)
-            grid = lambda x: x.reshape(shape + x.shape[1:])[:, cs]  # noqa: E731 (a (rows, columns) view of the crop)
+            rs = slice(max(0, hit_rows[0] - 1), min(shape[0], hit_rows[-1] + 2)) if len(hit_rows) else slice(0, 0)
+            crop = (rs.stop - rs.start, cs.stop - cs.start)
+            grid = lambda x: x.reshape(shape + x.shape[1:])[rs, cs]  # noqa: E731 (a (rows, columns) view of the crop)
             grid_level, grid_sigma = grid(level), grid(sigma)
             want = np.zeros(shape, dtype=bool)
             if crop[1]:
@@ -401,11 +425,13 @@ class Renderer:
                     with np.errstate(invalid="ignore"):
                         move = np.fmax(move, np.abs(sg - grid_sigma))
                 with np.errstate(invalid="ignore"):
-                    want[:, cs] = (grid_level >= 0) & (mixed | (np.abs(grid_sigma) - move <= self.stripe_reach))
+                    want[rs, cs] = (grid_level >= 0) & (mixed | (np.abs(grid_sigma) - move <= self.stripe_reach))
             want[:max(0, first - 1 - r0)] = False
             want[last + 2 - r0:] = False
         centre = self.centre_stripes(shading, rows, cols, sigma, want.ravel())
-        own = np.arange(start - r0 * width, stop - r0 * width)
+        # The span's own rays are one run of the halo's: a slice, so their shading is taken as views, not copies.
+        first_own = start - r0 * width
+        own = slice(first_own, stop - r0 * width)
         edge = np.zeros(shape, dtype=bool)
         with self.clock.stage("analytic AA"):
             if crop[1]:
@@ -422,12 +448,12 @@ class Renderer:
                     bent |= inside & near & (k == grid_level) & strays
                 grid(centre.untrusted)[...] |= bent
                 hits = shading.hits
-                edge[:, cs] = edge_pixels(*(grid(x) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked,
+                edge[rs, cs] = edge_pixels(*(grid(x) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked,
                                                                centre.untrusted)))
                 if shading.surface_rgb is not None:  # a map mode: where its colour jumps (a band edge), supersample
                     rgb = grid(np.nan_to_num(shading.surface_rgb))
                     for other in neighbours(rgb):
-                        edge[:, cs] |= np.abs(other - rgb).max(axis=2) > MAP_STEP
+                        edge[rs, cs] |= np.abs(other - rgb).max(axis=2) > MAP_STEP
             edge = edge.ravel()[own]
         mine = shading.take(own)
         rgba = self.colour(mine, np.where(centre.blocked[own], 0.0, centre.coverage[own]), 1)
@@ -437,18 +463,18 @@ class Renderer:
         edges = np.flatnonzero(edge)
         # Edge pixels' samples in chunks of at most the span's own pixel count: no more rays at once than the tile
         # was sized for (`tiling`, one ray per pixel).
-        chunk = max(1, len(own) // (EDGE_SAMPLES * EDGE_SAMPLES))
+        chunk = max(1, (stop - start) // (EDGE_SAMPLES * EDGE_SAMPLES))
         for part in np.array_split(edges, max(1, -(-len(edges) // chunk))):
             if len(part) == 0:
                 continue
-            rgba[part], samples, traced = self.supersample(rows[own[part]], cols[own[part]], EDGE_SAMPLES)
+            rgba[part], samples, traced = self.supersample(rows[first_own + part], cols[first_own + part], EDGE_SAMPLES)
             rays += traced
             fallbacks += int(samples.hits.fallback.sum())
             fell_back[part] |= samples.hits.fallback.reshape(len(part), -1).any(axis=1)
         aovs = self.aovs(mine)
-        pixels = np.empty((len(own), len(CHANNELS)), dtype=np.float32)
+        pixels = np.empty((stop - start, len(CHANNELS)), dtype=np.float32)
         pixels[:, :4] = rgba
-        pixels[:, 4:] = aov_planes(aovs)
+        aov_planes(aovs, pixels[:, 4:])
         return Tile(start, stop, pixels, rays, fallbacks, int(fell_back.sum()), len(edges))
 
     def stripe_offsets(self, shading: Shading) -> np.ndarray:

@@ -87,9 +87,16 @@ class Camera:
             origins = self.spec.eye + (x * half_w)[:, None] * r + (y * half_h)[:, None] * q
             directions = np.broadcast_to(w, origins.shape).copy()
         else:
-            directions = w + (x * half_w)[:, None] * r + (y * half_h)[:, None] * q
-            directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-            origins = np.broadcast_to(self.spec.eye, directions.shape).copy()
+            # w + x·half_w·r + y·half_h·q normalised, one coordinate at a time: the same operations in the same
+            # order as on (N, 3) rows (so the same bits), without (N, 3) temporaries or a strided norm.
+            a, b = x * half_w, y * half_h
+            c = [w[k] + a * r[k] + b * q[k] for k in range(3)]
+            length = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+            directions = np.empty((len(a), 3))
+            for k in range(3):
+                np.divide(c[k], length, out=directions[:, k])
+            origins = np.empty((len(a), 3))
+            origins[:] = self.spec.eye
         return origins, directions
 
     def directions_to(self, points: np.ndarray) -> np.ndarray:

@@ -452,7 +452,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     for _ in range(MAX_CANDIDATES):
         if len(rays) == 0:
             break
-        O, D = origins[rays], directions[rays]
+        # The first query is of every ray (rays = 0..n−1): the given arrays themselves, not gathered copies.
+        O, D = (origins, directions) if start is None else (origins[rays], directions[rays])
         with clock.stage("intersect (Embree)"):
             if start is None:
                 mesh = accelerator.intersect(O, D, max_distance)
