@@ -276,13 +276,20 @@ def test_tiled_cluster_render_equals_untiled_local_render(cluster, tmp_path):
     assert folder_bytes(tmp_path / "out") == expected
 
 
-def test_overlay_through_the_cluster_equals_a_local_render(cluster, tmp_path):
-    """The client draws the analytic contours over the PNG and writes NAME.contours.json, as `render` does."""
+def overlaid_scene_rendered_locally(tmp_path, overlay: str):
+    """A small g1_join scene ``g.toml`` with ``[render] overlay = OVERLAY``, rendered by `rtreflect render` into
+    tmp_path/local (the bytes a batch must reproduce)."""
     scene_path = small_scene("g1_join", tmp_path / "scenes" / "g.toml")
-    scene_path.write_text(scene_path.read_text().replace("[render]\n", "[render]\noverlay = true\n", 1))
+    scene_path.write_text(scene_path.read_text().replace("[render]\n", f"[render]\noverlay = {overlay}\n", 1))
     local = subprocess.run([str(RTREFLECT), "render", str(scene_path), "-o", str(tmp_path / "local")],
                            capture_output=True, text=True)
     assert local.returncode == 0, local.stderr
+    return scene_path
+
+
+def test_overlay_through_the_cluster_equals_a_local_render(cluster, tmp_path):
+    """The client draws the analytic contours over the PNG and writes NAME.contours.json, as `render` does."""
+    scene_path = overlaid_scene_rendered_locally(tmp_path, "true")
     code, output, _ = run_batch(scene_path, "-o", tmp_path / "out", "--scheduler", cluster)
     assert code == 0, output
     names = ["g.contours.json", "g.exr", "g.png"]
@@ -297,11 +304,7 @@ def test_overlay_through_the_cluster_equals_a_local_render(cluster, tmp_path):
 
 def test_side_overlay_through_the_cluster_and_locally_equals_render(cluster, tmp_path):
     """`overlay = "side"`: NAME.png plain and NAME.side.png, the same bytes from `render`, a local and a Dask batch."""
-    scene_path = small_scene("g1_join", tmp_path / "scenes" / "g.toml")
-    scene_path.write_text(scene_path.read_text().replace("[render]\n", '[render]\noverlay = "side"\n', 1))
-    local = subprocess.run([str(RTREFLECT), "render", str(scene_path), "-o", str(tmp_path / "local")],
-                           capture_output=True, text=True)
-    assert local.returncode == 0, local.stderr
+    scene_path = overlaid_scene_rendered_locally(tmp_path, '"side"')
     names = ["g.contours.json", "g.exr", "g.png", "g.side.png"]
     for where in ([], ["--scheduler", cluster]):
         out = tmp_path / ("cluster" if where else "pool")
