@@ -20,24 +20,24 @@ from pathlib import Path
 # collector's passes over them are pure cost (~0.1 s of a small render). Paused while they run only.
 _COLLECTING = gc.isenabled()
 gc.disable()
+try:  # the collector back on even where an import fails (a caller importing cli goes on)
+    import click  # noqa: E402
+    from tqdm import tqdm  # noqa: E402
 
-import click  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-from . import __version__  # noqa: E402
-from .errors import RtreflectError, error_lines, one_line  # noqa: E402
-from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, removed_note, write_json  # noqa: E402,E501
-from .interrupts import Interrupted, signals_as_exceptions  # noqa: E402
-from .analysis.overlay import contours_file_name  # noqa: E402
-from .exchange.load import load_scene  # noqa: E402
-from .integrator.autorig import resolve  # noqa: E402
-from .exchange.scene import ANALYTIC, MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, OVERLAY_SIDE  # noqa: E402
-from .output.streaming import render_to_files  # noqa: E402
-from .integrator.tiling import parse_size  # noqa: E402
-from .analysis.validate import DEFAULT_TOLERANCE_PX, validate_scene  # noqa: E402
-
-if _COLLECTING:
-    gc.enable()
+    from . import __version__  # noqa: E402
+    from .errors import RtreflectError, error_lines, one_line  # noqa: E402
+    from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, removed_note, write_json  # noqa: E402,E501
+    from .interrupts import Interrupted, signals_as_exceptions  # noqa: E402
+    from .analysis.overlay import contours_file_name  # noqa: E402
+    from .exchange.load import load_scene  # noqa: E402
+    from .integrator.autorig import resolve  # noqa: E402
+    from .exchange.scene import ANALYTIC, MAX_SAMPLES, MAX_SIDE, NORMALS_MODES, OVERLAY_SIDE  # noqa: E402
+    from .output.streaming import render_to_files  # noqa: E402
+    from .integrator.tiling import parse_size  # noqa: E402
+    from .analysis.validate import DEFAULT_TOLERANCE_PX, validate_scene  # noqa: E402
+finally:
+    if _COLLECTING:
+        gc.enable()
 
 EXIT_BAD_INPUT = 2
 EXIT_CHECK_FAILED = 1

@@ -97,7 +97,7 @@ class ImageSpec:
     height: int = 540
     # "analytic" (`ANALYTIC`): one exact sample per pixel, the stripes' coverage in closed form, edge pixels
     # supersampled 4×4; or s, an int: s×s stratified samples per pixel.
-    samples: int | str = "analytic"
+    samples: int | str = ANALYTIC
 
 
 @dataclass(frozen=True)

@@ -180,7 +180,7 @@ class Tessellation:
         dist_out = np.full(len(points), np.inf)
         # One patch and no far side of its own seam to look for: no other vertex can qualify, and the tree
         # (scipy.spatial: ~0.1 s to import) is not built.
-        if len(self.boundary) == 0 or len(points) == 0 or (uv is None and np.all(self.vertex_patch == self.vertex_patch[0])):
+        if len(self.boundary) == 0 or len(points) == 0 or (uv is None and self.single_patch):
             return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
         tree, cand_patch = self._boundary_tree
         todo = np.arange(len(points))
@@ -205,6 +205,16 @@ class Tessellation:
                 break
             todo, k = todo[~found], 8 * k
         return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
+
+    @cached_property
+    def single_patch(self) -> bool:
+        """Every vertex on one patch (no other face to look across to)."""
+        return bool(len(self.vertex_patch) == 0 or np.all(self.vertex_patch == self.vertex_patch[0]))
+
+    @cached_property
+    def has_rim_neighbours(self) -> bool:
+        """Some boundary vertex has another face's boundary vertex across its rim (`rim_neighbour`)."""
+        return bool((self.rim_neighbour[0] >= 0).any())
 
     @cached_property
     def rim_face(self) -> np.ndarray:

@@ -149,7 +149,6 @@ class SecondLook:
         self._scene_surfaces, self._per_span = list(scene_surfaces), per_span
         self.tessellation, self.surfaces = tessellation, surfaces
         self.shell, self.shell_mesh = shell(tessellation, surfaces)
-        self._shell_patch = self.shell_mesh.face_patch
         self._reach = 2.0 * SHELL_CHORDS * float(tessellation.chord_error.max(initial=0.0))
         # Past a shell hit by float32 rounding of the scene's largest coordinates, with margin (as `trace`'s).
         self._skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
@@ -201,7 +200,7 @@ class SecondLook:
             mesh = self.shell.intersect(O + start[:, None] * D, D, end - start)
             met = mesh.prim >= 0
             t = mesh.t + start
-            own = met & (self._shell_patch[np.maximum(mesh.prim, 0)] == hits.patch[rays])
+            own = met & (self.shell_mesh.face_patch[np.maximum(mesh.prim, 0)] == hits.patch[rays])
             other = met & ~own
             look[rays[other]] = True
             for have, new in zip(entry, (mesh.prim, mesh.b1, mesh.b2, t)):

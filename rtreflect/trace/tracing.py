@@ -120,9 +120,14 @@ class Hits:
                    np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
 
 
-def facing(normals: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """The normals turned to face the incoming rays, in place: the surface is a two-sided mirror."""
-    normals[np.einsum("ij,ij->i", normals, directions) > 0] *= -1.0
+def facing(normals: np.ndarray, directions: np.ndarray, cosine: np.ndarray | None = None) -> np.ndarray:
+    """The normals turned to face the incoming rays, in place: the surface is a two-sided mirror.
+
+    ``cosine``: n·D where already known (the tracer's kernel gives it), else computed.
+    """
+    if cosine is None:
+        cosine = np.einsum("ij,ij->i", normals, directions)
+    normals[cosine > 0] *= -1.0
     return normals
 
 
@@ -388,9 +393,9 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     triangle's hit) and nearer than the kept one by more than float32 rounding replaces it (the same point
     on the shared edge does not: pixels there keep their face).
     """
-    patch_of, uv_of, gap_of = tessellation.rim_neighbour
-    if not (patch_of >= 0).any():  # no face has a neighbour (a single patch): nothing across any rim
+    if not tessellation.has_rim_neighbours:  # no face has a neighbour (a single patch): nothing across any rim
         return
+    patch_of, uv_of, gap_of = tessellation.rim_neighbour
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
     skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
@@ -486,9 +491,7 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 kept = SurfaceDerivatives(*(x[take][bad] for x in c.derivs[:3]))
                 normal[bad] = surfaces.normals(c.patch[take][bad], c.u[take][bad], c.v[take][bad], kept)
                 cosine[bad] = np.einsum("ij,ij->i", normal[bad], D[take][bad])
-            flip = cosine > 0  # turned to face the incoming ray (`facing`)
-            normal[flip] *= -1.0
-            hits.N[rows] = normal
+            hits.N[rows] = facing(normal, D[take], cosine)
             cos[rows] = np.abs(cosine)
         # Go on where a mesh hit behind this one could still carry a nearer exact hit.
         # An unresolved candidate does not stop the search: the exact hit may lie behind it.
