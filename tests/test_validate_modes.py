@@ -116,3 +116,20 @@ def test_blur_softens_every_modes_stripes_and_validate_checks_it(mode):
     np.testing.assert_allclose(share, expected, atol=1e-3)  # float32 colour
     report = compare(renderer, aovs, analytic_contours(field_of(renderer)), DEFAULT_TOLERANCE_PX)
     assert report.passed and report.colour_checked > 1000, report.reasons
+
+
+def test_colour_check_takes_the_slope_of_the_signed_offset_across_a_crease():
+    """The hood's mean curvature has a crease along each inner knot line (a bicubic is C² there: H is C⁰).
+    At 480×270 a level of H runs beside the crease, where the pixels on either side of the level's centre
+    have nearly equal |σ| but far apart σ: the colour check must take the pixel's slope from σ, or it
+    expects a full line where the crease's own sliver leaves part of the pixel unlit (4 pixels failed)."""
+    scene = resolve(load_scene(SCENES / "hood_curvature.toml").with_image(480, 270, "analytic"))
+    renderer = Renderer(scene)
+    film = renderer.render().film
+    aovs = mode_aovs(renderer, film, film_aovs(renderer, film))
+    hit = aovs.line_id >= 0
+    # line.dist is |σ| of the same level, and σ changes sign between some neighbours (the folds the check meets)
+    np.testing.assert_allclose(np.abs(aovs.line_offset[hit]), aovs.line_dist[hit], rtol=0, atol=1e-12)
+    assert np.any(np.sign(aovs.line_offset[:, 1:]) * np.sign(aovs.line_offset[:, :-1]) < 0)
+    report = compare(renderer, aovs, analytic_contours(field_of(renderer)), DEFAULT_TOLERANCE_PX)
+    assert report.colour_mismatches == 0 and report.passed

@@ -53,7 +53,7 @@ notes: unchecked, not failed, and not silently dropped.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Callable
 
 import numpy as np
@@ -62,7 +62,7 @@ from .contours import ContourLines, UlmetField, analytic_contours, field_of, rea
 from .nearest import nearest_segment
 from .parallax import zebra_parallax
 from ..integrator.film import Film
-from ..modes.base import SurfacePoints
+from ..modes.base import SurfacePoints, level_offset
 from ..modes.lights import reflect
 from ..modes.reflection import ReflectionMode
 from ..modes.profile import stripe_reach, stripe_weight
@@ -204,6 +204,20 @@ class PixelAOVs:
     incidence: np.ndarray | None = None
     normal_error: np.ndarray | None = None
     nearer: np.ndarray | None = None  # exact hits with an exact surface point before them on the ray (`nearer_surface`)
+    # Signed offset σ from the centre of line.id's level (`modes.base.level_offset`; line.dist = |σ|), NaN where
+    # none is: the colour check's slopes are taken of σ, since |σ| folds at a line's centre and understates them.
+    line_offset: np.ndarray | None = None
+
+
+def line_offsets(renderer: Renderer, points: SurfacePoints, level: np.ndarray, size: int,
+                 hit: np.ndarray) -> np.ndarray:
+    """Per pixel σ of the hits ``hit`` (their ``points``) to their level ``level`` (−1: none; σ NaN there)."""
+    sigma = np.full(size, np.nan)
+    has = np.flatnonzero(level >= 0)
+    if len(has):
+        sigma[hit[has]] = level_offset(renderer.mode, SurfacePoints(*(getattr(points, f.name)[has] for f in fields(points))),
+                                       level[has].astype(int))
+    return sigma
 
 
 def line_coverage(rgba: np.ndarray, surface_color, line_color, background) -> np.ndarray:
@@ -254,18 +268,24 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
         on = ~fallback[hit]
         nearer[exact] = nearer_surface(renderer, patch.ravel()[exact].astype(int), channel("Z").ravel()[exact],
                                        origins[on], directions[on])
+    line_id = channel("line.id")
+    line_offset = None
+    if isinstance(renderer.mode, ReflectionMode):  # another mode's σ is its own (`mode_aovs`)
+        points = SurfacePoints(P.reshape(-1, 3)[hit], N.reshape(-1, 3)[hit], s[hit], patch.ravel()[hit].astype(int),
+                               channel("u").ravel()[hit], channel("v").ravel()[hit])
+        line_offset = line_offsets(renderer, points, line_id.ravel()[hit], height * width, hit).reshape(height, width)
     render = renderer.scene.render
     # The surface colour as the renderer shaded it at the pixel centre (its samples' shade differs to second order).
     surface = np.broadcast_to(render.surface_color, (height * width, 3)).copy()
     surface[hit] *= shade_factor(N.reshape(-1, 3)[hit], directions, render.shading)[:, None]
     return PixelAOVs(
         f=channel("f"), patch=patch, P=P, N=N, s=s.reshape(height, width, 3), Z=channel("Z"),
-        line_id=channel("line.id"), line_dist=channel("line.dist"), fallback=fallback.reshape(height, width),
+        line_id=line_id, line_dist=channel("line.dist"), fallback=fallback.reshape(height, width),
         coverage=channel("A"),
         line_coverage=line_coverage(film.pixels[..., :4], surface.reshape(height, width, 3), render.line_color,
                                     render.background),
         incidence=incidence.reshape(height, width), normal_error=normal_error.reshape(height, width),
-        nearer=nearer.reshape(height, width),
+        nearer=nearer.reshape(height, width), line_offset=line_offset,
     )
 
 
@@ -294,7 +314,8 @@ def mode_aovs(renderer: Renderer, film: Film, aovs: PixelAOVs) -> PixelAOVs:
         coverage = line_coverage(film.pixels[..., :4], surface.reshape(height, width, 3), render.line_color,
                                  render.background)
     return replace(aovs, f=film.channel("phi").astype(np.float64), line_id=line_id.reshape(height, width),
-                   line_dist=line_dist.reshape(height, width), line_coverage=coverage)
+                   line_dist=line_dist.reshape(height, width), line_coverage=coverage,
+                   line_offset=line_offsets(renderer, points, stripes.level_id, size, hit).reshape(height, width))
 
 
 def _stored_hit_errors(renderer: Renderer, patch: np.ndarray, u: np.ndarray, v: np.ndarray, P: np.ndarray,
@@ -583,8 +604,9 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
 
     A pixel is checked where it and its four neighbours hit one smooth piece of one patch
     (`_smooth_pairs`), all with the same nearest tube ahead (line.id), every sample hits
-    (A = 1), and the colours tell lines from surface. With d the pixel-centre line.dist and
-    g = |∇d| from one-sided differences to those neighbours (the larger per axis), d moves by at
+    (A = 1), and the colours tell lines from surface. With d = |σ| the pixel-centre line.dist (σ the
+    signed offset, `line_offset`) and g = |∇σ| from one-sided differences to those neighbours (the
+    larger per axis; differences of d would understate g where σ changes sign), d moves by at
     most 0.71·g (= g·√2/2) to a sample inside the pixel, to first order. The stripe profile
     w(d) (`modes.profile`, falling in d) then bounds the line's share L of the pixel's colour:
     w(d + 0.71·g) ≤ L ≤ w(d − 0.71·g) where the reflected rays of the pixel and its neighbours
@@ -600,6 +622,9 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
     height, width = aovs.f.shape
     size = height * width
     line_id, d = aovs.line_id.ravel(), aovs.line_dist.ravel()
+    # The slopes are of the signed σ where known: |σ| folds where a pixel's neighbours lie on either side of the
+    # line's centre, and its differences there understate how far σ moves within the pixel.
+    sigma = d if aovs.line_offset is None else aovs.line_offset.ravel()
     checked = (aovs.patch.ravel() >= 0) & (aovs.coverage.ravel() >= 1.0 - 1e-6) & np.isfinite(aovs.line_coverage.ravel())
     slope = np.zeros((2, size))
     for i, axis in enumerate((1, 0)):
@@ -608,7 +633,7 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
         a, b = a[same], b[same]
         step = np.zeros(size)
         with np.errstate(invalid="ignore"):
-            diff = np.abs(d[b] - d[a])
+            diff = np.abs(sigma[b] - sigma[a])
         diff = np.where(np.isfinite(diff), diff, 0.0)  # no tube ahead on either side: d is NaN, no slope
         np.maximum.at(step, a, diff)
         np.maximum.at(step, b, diff)
@@ -625,7 +650,7 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
     # d_yy y²/2 with |x|, |y| ≤ ½ is at most (|d_xx| + |d_yy|)/8.
     move = 0.71 * g
     if not spec.along_ray:
-        grid = np.nan_to_num(d.reshape(height, width))
+        grid = np.nan_to_num(sigma.reshape(height, width))
         bend = np.zeros((height, width))
         bend[:, 1:-1] += np.abs(grid[:, :-2] - 2.0 * grid[:, 1:-1] + grid[:, 2:])
         bend[1:-1, :] += np.abs(grid[:-2, :] - 2.0 * grid[1:-1, :] + grid[2:, :])
