@@ -110,6 +110,66 @@ def _write_step(shape, path: Path) -> Path:
     return path
 
 
+def _box_file(tmp_path: Path, suffix: str) -> Path:
+    """A 10 × 20 × 30 box written by Open CASCADE as STEP or IGES (B-rep mode)."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.IGESControl import IGESControl_Writer
+
+    box = BRepPrimAPI_MakeBox(10, 20, 30).Shape()
+    if suffix == ".step":
+        return _write_step(box, tmp_path / "box.step")
+    occt.silence_messages()
+    writer = IGESControl_Writer("MM", 1)
+    writer.AddShape(box)
+    writer.ComputeModel()
+    writer.Write(str(tmp_path / "box.igs"))
+    return tmp_path / "box.igs"
+
+
+def _dangling_vector(text: str) -> str:
+    """The first VECTOR entity renumbered: the LINE that references it points at nothing."""
+    import re
+
+    out = re.sub(r"^#\d+( ?= ?VECTOR\()", r"#999999\1", text, count=1, flags=re.M)
+    assert out != text
+    return out
+
+
+def _no_directory(text: str) -> str:
+    """The IGES directory entry section (column 73 'D') removed: the parameter lines point at no entity."""
+    out = "".join(line for line in text.splitlines(True) if line[72:73] != "D")
+    assert out != text
+    return out
+
+
+@pytest.mark.parametrize("suffix, corrupt", [(".step", _dangling_vector), (".igs", _no_directory)])
+def test_file_that_crashes_open_cascade_is_one_line_exit_2(tmp_path, suffix, corrupt):
+    """Open CASCADE dies with SIGSEGV on these (STEP: in TransferRoots; IGES: in ReadFile), which killed rtreflect
+    with no message; the read runs in a child process (exchange/isolation.py), so it is one line, exit 2."""
+    path = _box_file(tmp_path, suffix)
+    path.write_text(corrupt(path.read_text()))
+    outdir = tmp_path / "out"
+    code, output, _ = run("render", path, "-o", outdir, *TINY)
+    line = assert_bad_input(code, output, str(path), outdir)
+    assert "Open CASCADE crashed reading it (SIGSEGV)" in line
+
+
+def test_step_read_through_the_child_keeps_the_geometry(tmp_path, monkeypatch):
+    """The shape handed back by the child (BinTools) is the one read in-process (the path where the platform
+    has no fork): the same faces, control points, weights, knots, trims and mesh, bit for bit."""
+    import os
+
+    path = _box_file(tmp_path, ".step")
+    model = read_cad(path)
+    monkeypatch.delattr(os, "fork")
+    direct = read_cad(path)
+    assert len(model.surfaces) == len(direct.surfaces) == 6
+    for a, b in zip(model.surfaces, direct.surfaces):
+        for x, y in ((a.points, b.points), (a.weights, b.weights), (a.knots_u, b.knots_u), (a.knots_v, b.knots_v),
+                     (a.trim.outer, b.trim.outer), (a.mesh_uv[0], b.mesh_uv[0]), (a.mesh_uv[1], b.mesh_uv[1])):
+            assert np.array_equal(x, y)
+
+
 def test_step_with_only_curves_says_so(tmp_path):
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
     from OCP.gp import gp_Pnt
