@@ -465,3 +465,36 @@ def test_batch_skip_bad_faces_lists_them(tmp_path, monkeypatch):
     assert code == 0, output
     assert "skipped 1 of 26 faces (--skip-bad-faces): face 1: its surface cannot be converted" in output
     assert (tmp_path / "out" / "block.png").is_file()
+
+
+def _revolved_3dm(path: Path) -> Path:
+    """Two Rhino revolved faces, each closed by a seam edge (not periodic): a cone from a line (a pole at its apex)
+    and a profile curve meeting the axis at both ends (two poles). Neither is trimmed inside its domain."""
+    r = pytest.importorskip("rhino3dm")
+    model = r.File3dm()
+    model.Settings.ModelUnitSystem = r.UnitSystem.Millimeters
+    line = r.Curve.CreateControlPointCurve([r.Point3d(10, 0, 0), r.Point3d(0, 0, 25)], 1)
+    profile = r.Curve.CreateControlPointCurve([r.Point3d(30, 0, 0), r.Point3d(38, 0, 2), r.Point3d(40, 0, 10),
+                                               r.Point3d(35, 0, 16), r.Point3d(30, 0, 18)], 3)
+    for curve, axis in ((line, r.Line(r.Point3d(0, 0, 0), r.Point3d(0, 0, 25))),
+                        (profile, r.Line(r.Point3d(30, 0, 0), r.Point3d(30, 0, 18)))):
+        model.Objects.AddBrep(r.Brep.CreateFromRevSurface(r.RevSurface.Create(curve, axis, 0.0, 2 * math.pi), False, False))
+    assert model.Write(str(path), 7)
+    return path
+
+
+def test_several_closed_faces_keep_their_seams(tmp_path):
+    """Open CASCADE's NURBS conversion of a shape with several closed (seamed, not periodic) B-spline faces put
+    the second face's seam pcurves on one side of its seam: its trim folded to no area ("its trim loops enclose
+    no area"), and a pipe's face came out with a trim cutting the wrong region. Each such face is converted on
+    its own (occt.seam_lost). Reference: the faces are untrimmed, so each trim is Rhino's whole (u, v) domain."""
+    rhino3dm = pytest.importorskip("rhino3dm")
+    path = _revolved_3dm(tmp_path / "revolved.3dm")
+    model = read_cad(path)
+    faces = [face for obj in rhino3dm.File3dm.Read(str(path)).Objects for face in obj.Geometry.Faces]
+    assert len(model.surfaces) == len(faces) == 2 and not model.skipped
+    for surface, face in zip(model.surfaces, faces):
+        u, v = face.Domain(0), face.Domain(1)
+        assert surface.trim._polygon.area == pytest.approx((u.T1 - u.T0) * (v.T1 - v.T0), rel=1e-9)
+        (u0, u1), (v0, v1) = surface.domain
+        assert (u0, u1, v0, v1) == pytest.approx((u.T0, u.T1, v.T0, v.T1), abs=1e-12)
