@@ -154,6 +154,23 @@ def test_file_that_crashes_open_cascade_is_one_line_exit_2(tmp_path, suffix, cor
     assert "Open CASCADE crashed reading it (SIGSEGV)" in line
 
 
+def test_crash_report_stays_one_line_with_the_fault_handler_on(tmp_path):
+    """With Python's fault handler on (PYTHONFAULTHANDLER, pytest's default), the crashing child printed
+    "Fatal Python error: Segmentation fault" and its stack to the terminal's stderr before the parent's line."""
+    import os
+    import subprocess
+    import sys
+
+    path = _box_file(tmp_path, ".step")
+    path.write_text(_dangling_vector(path.read_text()))
+    result = subprocess.run([sys.executable, "-c", "from rtreflect.cli import main; main()", "render", str(path), "-o",
+                             str(tmp_path / "out"), *TINY], capture_output=True, text=True, timeout=300,
+                            cwd=Path(__file__).resolve().parents[1], env={**os.environ, "PYTHONFAULTHANDLER": "1"})
+    assert result.returncode == EXIT_BAD_INPUT and result.stdout == ""
+    assert result.stderr.splitlines() == [f"rtreflect: error: {path}: Open CASCADE crashed reading it (SIGSEGV): the STEP "
+                                          "file is corrupt (broken references or sections), or uses entities it cannot read"]
+
+
 def test_step_read_through_the_child_keeps_the_geometry(tmp_path, monkeypatch):
     """The shape handed back by the child (BinTools) is the one read in-process (the path where the platform
     has no fork): the same faces, control points, weights, knots, trims and mesh, bit for bit."""

@@ -13,10 +13,12 @@ in the parent. Where ``os.fork`` does not exist (Windows) the read runs in-proce
 
 from __future__ import annotations
 
+import faulthandler
 import json
 import os
 import shutil
 import signal
+import sys
 import tempfile
 from pathlib import Path
 from typing import Callable
@@ -41,11 +43,18 @@ def read_isolated(path: Path, what: str, read: Callable[[], tuple[object, dict]]
     folder = Path(tempfile.mkdtemp(prefix="rtreflect-occt-"))
     try:
         shape_file, info_file = folder / "shape.brep", folder / "info.json"
+        # Text still buffered would be copied into the child and written twice once the child flushes (quiet_stdout).
+        sys.stdout.flush()
+        sys.stderr.flush()
         pid = os.fork()
         if pid == 0:  # the child: read, write the answer, leave without running the parent's exit handlers
             status = _FAILED
             try:
                 signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C ends the child at once; the parent handles it
+                # A crash is reported by the parent in one line: no fault handler's traceback, no OCCT text on stderr.
+                faulthandler.disable()
+                with open(os.devnull, "wb") as null:
+                    os.dup2(null.fileno(), 2)
                 shape, info = read()
                 info = dict(info, null=shape is None or shape.IsNull())
                 if not info["null"] and not BinTools.Write_s(shape, str(shape_file)):
