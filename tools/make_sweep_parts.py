@@ -15,6 +15,7 @@ Each part stresses one thing real exports contain (Open CASCADE through OCP; rhi
   two_solids.step      a compound of two disjoint solids (a box and a sphere)
   reversed_face.step   one B-spline face stored with reversed orientation
   sliver.step          a box with a 1e-4-thin sliver face left by a cut
+  small_fillet.step    a box with a 0.01 and a 2 fillet, beside a free edge and vertex (no surface)
   brep.igs, faces.igs  the shelled box through IGESControl_Writer, B-rep mode and faces mode
   sphere.3dm           a Rhino sphere (periodic, two poles)
   rhino_mix.3dm        rhino3dm's builders: a bare rational surface, a capped cone, a revolved profile (seam and
@@ -286,6 +287,30 @@ def sliver():
     return BRepAlgoAPI_Cut(body, step).Shape()
 
 
+def small_fillet():
+    """A 100 × 60 × 40 box with one edge filleted at 0.01 (a face 10⁴ times narrower than the part) and one at 2,
+    in a compound with a free edge and a free vertex (entities with no surface, to be passed over)."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeVertex
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Pnt
+
+    box = BRepPrimAPI_MakeBox(100.0, 60.0, 40.0).Shape()
+    fillet = BRepFilletAPI_MakeFillet(box)
+    edges = list(_edges(box))
+    fillet.Add(0.01, edges[0])
+    fillet.Add(2.0, edges[5])
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, fillet.Shape())
+    builder.Add(compound, BRepBuilderAPI_MakeEdge(gp_Pnt(0, 0, 50), gp_Pnt(100, 60, 50)).Edge())
+    builder.Add(compound, BRepBuilderAPI_MakeVertex(gp_Pnt(50, 50, 50)).Vertex())
+    return compound
+
+
 def write_step_in(shape, path: Path, unit: str) -> None:
     """A STEP file whose length unit is ``unit`` (Open CASCADE's ``write.step.unit``), e.g. "INCH"."""
     from OCP.Interface import Interface_Static
@@ -367,6 +392,7 @@ PARTS = {
     "two_solids.step": lambda p: write_step(two_solids(), p),
     "reversed_face.step": lambda p: write_step(reversed_face(), p),
     "sliver.step": lambda p: write_step(sliver(), p),
+    "small_fillet.step": lambda p: write_step(small_fillet(), p),
     "brep.igs": lambda p: write_iges(shelled_box(), p),
     "faces.igs": lambda p: write_iges_faces(shelled_box(), p),
     "sphere.3dm": write_sphere_3dm,
