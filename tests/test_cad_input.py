@@ -110,6 +110,83 @@ def _write_step(shape, path: Path) -> Path:
     return path
 
 
+def _box_file(tmp_path: Path, suffix: str) -> Path:
+    """A 10 × 20 × 30 box written by Open CASCADE as STEP or IGES (B-rep mode)."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.IGESControl import IGESControl_Writer
+
+    box = BRepPrimAPI_MakeBox(10, 20, 30).Shape()
+    if suffix == ".step":
+        return _write_step(box, tmp_path / "box.step")
+    occt.silence_messages()
+    writer = IGESControl_Writer("MM", 1)
+    writer.AddShape(box)
+    writer.ComputeModel()
+    writer.Write(str(tmp_path / "box.igs"))
+    return tmp_path / "box.igs"
+
+
+def _dangling_vector(text: str) -> str:
+    """The first VECTOR entity renumbered: the LINE that references it points at nothing."""
+    import re
+
+    out = re.sub(r"^#\d+( ?= ?VECTOR\()", r"#999999\1", text, count=1, flags=re.M)
+    assert out != text
+    return out
+
+
+def _no_directory(text: str) -> str:
+    """The IGES directory entry section (column 73 'D') removed: the parameter lines point at no entity."""
+    out = "".join(line for line in text.splitlines(True) if line[72:73] != "D")
+    assert out != text
+    return out
+
+
+@pytest.mark.parametrize("suffix, corrupt", [(".step", _dangling_vector), (".igs", _no_directory)])
+def test_file_that_crashes_open_cascade_is_one_line_exit_2(tmp_path, suffix, corrupt):
+    """Open CASCADE dies with SIGSEGV on these (STEP: in TransferRoots; IGES: in ReadFile), which killed rtreflect
+    with no message; the read runs in a child process (exchange/isolation.py), so it is one line, exit 2."""
+    path = _box_file(tmp_path, suffix)
+    path.write_text(corrupt(path.read_text()))
+    outdir = tmp_path / "out"
+    code, output, _ = run("render", path, "-o", outdir, *TINY)
+    line = assert_bad_input(code, output, str(path), outdir)
+    assert "Open CASCADE crashed reading it (SIGSEGV)" in line
+
+
+def test_crash_report_stays_one_line_with_the_fault_handler_on(tmp_path):
+    """With Python's fault handler on (PYTHONFAULTHANDLER, pytest's default), the crashing child printed
+    "Fatal Python error: Segmentation fault" and its stack to the terminal's stderr before the parent's line."""
+    import os
+    import subprocess
+    import sys
+
+    path = _box_file(tmp_path, ".step")
+    path.write_text(_dangling_vector(path.read_text()))
+    result = subprocess.run([sys.executable, "-c", "from rtreflect.cli import main; main()", "render", str(path), "-o",
+                             str(tmp_path / "out"), *TINY], capture_output=True, text=True, timeout=300,
+                            cwd=Path(__file__).resolve().parents[1], env={**os.environ, "PYTHONFAULTHANDLER": "1"})
+    assert result.returncode == EXIT_BAD_INPUT and result.stdout == ""
+    assert result.stderr.splitlines() == [f"rtreflect: error: {path}: Open CASCADE crashed reading it (SIGSEGV): the STEP "
+                                          "file is corrupt (broken references or sections), or uses entities it cannot read"]
+
+
+def test_step_read_through_the_child_keeps_the_geometry(tmp_path, monkeypatch):
+    """The shape handed back by the child (BinTools) is the one read in-process (the path where the platform
+    has no fork): the same faces, control points, weights, knots, trims and mesh, bit for bit."""
+    import os
+
+    path = _box_file(tmp_path, ".step")
+    model = read_cad(path)
+    monkeypatch.delattr(os, "fork")
+    direct = read_cad(path)
+    assert len(model.surfaces) == len(direct.surfaces) == 6
+    for a, b in zip(model.surfaces, direct.surfaces):
+        for x, y in ((a.points, b.points), (a.weights, b.weights), (a.knots_u, b.knots_u), (a.knots_v, b.knots_v),
+                     (a.trim.outer, b.trim.outer), (a.mesh_uv[0], b.mesh_uv[0]), (a.mesh_uv[1], b.mesh_uv[1])):
+            assert np.array_equal(x, y)
+
+
 def test_step_with_only_curves_says_so(tmp_path):
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
     from OCP.gp import gp_Pnt
@@ -405,3 +482,36 @@ def test_batch_skip_bad_faces_lists_them(tmp_path, monkeypatch):
     assert code == 0, output
     assert "skipped 1 of 26 faces (--skip-bad-faces): face 1: its surface cannot be converted" in output
     assert (tmp_path / "out" / "block.png").is_file()
+
+
+def _revolved_3dm(path: Path) -> Path:
+    """Two Rhino revolved faces, each closed by a seam edge (not periodic): a cone from a line (a pole at its apex)
+    and a profile curve meeting the axis at both ends (two poles). Neither is trimmed inside its domain."""
+    r = pytest.importorskip("rhino3dm")
+    model = r.File3dm()
+    model.Settings.ModelUnitSystem = r.UnitSystem.Millimeters
+    line = r.Curve.CreateControlPointCurve([r.Point3d(10, 0, 0), r.Point3d(0, 0, 25)], 1)
+    profile = r.Curve.CreateControlPointCurve([r.Point3d(30, 0, 0), r.Point3d(38, 0, 2), r.Point3d(40, 0, 10),
+                                               r.Point3d(35, 0, 16), r.Point3d(30, 0, 18)], 3)
+    for curve, axis in ((line, r.Line(r.Point3d(0, 0, 0), r.Point3d(0, 0, 25))),
+                        (profile, r.Line(r.Point3d(30, 0, 0), r.Point3d(30, 0, 18)))):
+        model.Objects.AddBrep(r.Brep.CreateFromRevSurface(r.RevSurface.Create(curve, axis, 0.0, 2 * math.pi), False, False))
+    assert model.Write(str(path), 7)
+    return path
+
+
+def test_several_closed_faces_keep_their_seams(tmp_path):
+    """Open CASCADE's NURBS conversion of a shape with several closed (seamed, not periodic) B-spline faces put
+    the second face's seam pcurves on one side of its seam: its trim folded to no area ("its trim loops enclose
+    no area"), and a pipe's face came out with a trim cutting the wrong region. Each such face is converted on
+    its own (occt.seam_lost). Reference: the faces are untrimmed, so each trim is Rhino's whole (u, v) domain."""
+    rhino3dm = pytest.importorskip("rhino3dm")
+    path = _revolved_3dm(tmp_path / "revolved.3dm")
+    model = read_cad(path)
+    faces = [face for obj in rhino3dm.File3dm.Read(str(path)).Objects for face in obj.Geometry.Faces]
+    assert len(model.surfaces) == len(faces) == 2 and not model.skipped
+    for surface, face in zip(model.surfaces, faces):
+        u, v = face.Domain(0), face.Domain(1)
+        assert surface.trim._polygon.area == pytest.approx((u.T1 - u.T0) * (v.T1 - v.T0), rel=1e-9)
+        (u0, u1), (v0, v1) = surface.domain
+        assert (u0, u1, v0, v1) == pytest.approx((u.T0, u.T1, v.T0, v.T1), abs=1e-12)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .isolation import read_isolated
 from .occt import CadModel, import_ocp, read_faces, read_xstep, transferred_shape
 
 #: What Open CASCADE converts every IGES length to.
@@ -20,15 +21,18 @@ def read_iges(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMo
     import_ocp(path, "IGES files")
     from OCP.IGESControl import IGESControl_Reader
 
-    reader = IGESControl_Reader()
-    read_xstep(reader, path, "IGES")
-    note = ""
-    try:
-        unit = str(reader.IGESModel().GlobalSection().UnitName().ToCString()).strip().lower()
-    except Exception:  # a global section without a unit name: nothing to report
-        unit = ""
+    def read():  # in a child process (isolation.py): OCCT crashes on some corrupt files
+        reader = IGESControl_Reader()
+        read_xstep(reader, path, "IGES")
+        try:
+            unit = str(reader.IGESModel().GlobalSection().UnitName().ToCString()).strip().lower()
+        except Exception:  # a global section without a unit name: nothing to report
+            unit = ""
+        return transferred_shape(reader), {"unit": unit}
+
+    # The reader's model of the file's entities (hundreds of MB for a large file) ends with the child.
+    shape, info = read_isolated(path, "IGES file", read)
+    unit, note = info["unit"], ""
     if unit and unit not in ("mm", "millimeter", "millimetre"):
         note = f"file in {unit}, read in {READ_UNIT}"
-    shape = transferred_shape(reader)
-    reader = None  # its model of the file's entities (hundreds of MB for a large file) is not needed any more
     return read_faces(path, shape, name, unit=READ_UNIT, unit_note=note, what="IGES file", skip_bad_faces=skip_bad_faces)

@@ -491,6 +491,83 @@ def mesh_of_face(face, reversed_face: bool) -> tuple[np.ndarray, np.ndarray] | N
     return nodes, np.ascontiguousarray(triangles)
 
 
+#: A pcurve whose image strays farther than this many times its edge's tolerance from the edge's 3D curve (at the
+#: edge's quarter points) is not the edge's: OCCT's own tolerance already covers a valid pcurve's error.
+PCURVE_OFF = 10.0
+#: A seam edge's two pcurves closer than this fraction of the face's (u, v) range are one curve: the seam was lost.
+SEAM_LOST = 1e-9
+
+
+def _edges_of(face) -> list:
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    out, explorer = [], TopExp_Explorer(face, TopAbs_EDGE)
+    while explorer.More():
+        out.append(TopoDS.Edge(explorer.Current()))
+        explorer.Next()
+    return out
+
+
+def seam_lost(face) -> bool:
+    """True when a seam edge of the converted ``face`` has a pcurve that is not on its edge.
+
+    ``BRepBuilderAPI_NurbsConvert`` of a shape holding several faces whose B-spline surfaces are closed
+    (a seam edge, not periodic: what Rhino and other modellers export for revolved faces and pipes) gives the
+    seams of every such face after the first a pcurve on the wrong side of the seam, or off the face (OCCT
+    8.0.1, measured on a .3dm with a revolved face and a pipe, read directly and through STEP and IGES): the trim
+    loop then folds onto one side (no area) or cuts a wrong region. Each face converted alone keeps its seam.
+    Checked for both pcurves of each seam edge: S(γ(t)) against the 3D curve C(t) at the edge's quarter points,
+    and the two pcurves apart (on one side, S(γ(t)) = C(t) still holds on a closed surface).
+    """
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d, BRepAdaptor_Surface
+    from OCP.TopAbs import TopAbs_FORWARD, TopAbs_REVERSED
+    from OCP.TopoDS import TopoDS
+
+    surface = None
+    for edge in _edges_of(face):
+        if not BRep_Tool.IsClosed_s(edge, face) or BRep_Tool.Degenerated_s(edge):
+            continue
+        if surface is None:
+            surface = BRepAdaptor_Surface(face)
+            span = max(surface.LastUParameter() - surface.FirstUParameter(), surface.LastVParameter() - surface.FirstVParameter())
+        curve3d = BRepAdaptor_Curve(edge)
+        reach = PCURVE_OFF * BRep_Tool.Tolerance_s(edge)
+        sides = []
+        for orientation in (TopAbs_FORWARD, TopAbs_REVERSED):
+            curve = BRepAdaptor_Curve2d(TopoDS.Edge(edge.Oriented(orientation)), face)
+            t0, t1 = curve.FirstParameter(), curve.LastParameter()
+            for t in (t0 + 0.25 * (t1 - t0), 0.5 * (t0 + t1), t0 + 0.75 * (t1 - t0)):
+                uv = curve.Value(t)
+                if surface.Value(uv.X(), uv.Y()).Distance(curve3d.Value(t)) > reach:
+                    return True
+            sides.append((uv.X(), uv.Y()))
+        if np.hypot(*np.subtract(*sides)) <= SEAM_LOST * span:  # both on one side: S is the same there
+            return True
+    return False
+
+
+def converted_alone(original, face, key_of):
+    """``original`` (an unconverted face) converted on its own (`seam_lost`), with the key maker of its edges:
+    each edge keeps the key of its counterpart in the whole shape's conversion ``face`` (the modifier keeps the
+    edges' order), so the seam finder still pairs it with its neighbours."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    with quiet_stdout():
+        alone = BRepBuilderAPI_NurbsConvert(original, True).Shape()
+    alone = TopoDS.Face(TopExp_Explorer(alone, TopAbs_FACE).Current())
+    mine, theirs = _edges_of(alone), _edges_of(face)
+    if len(mine) != len(theirs) or seam_lost(alone):
+        raise FaceError("Open CASCADE's conversion to NURBS lost the seam of its closed surface")
+    keys = [key_of(edge) for edge in theirs]
+    return alone, lambda edge: next(key for e, key in zip(mine, keys) if e.IsSame(edge))
+
+
 def convert_shape(shape, path: Path):
     """Every face as a B-spline face (``BRepBuilderAPI_NurbsConvert``), or a `SceneError` naming the file."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
@@ -551,11 +628,12 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     if not (np.isfinite(diagonal) and diagonal > 0):
         raise SceneError(path, "", f"the model's bounding box is empty or not finite ({lo.tolist()} .. {hi.tolist()})")
 
-    faces = []
-    explorer = TopExp_Explorer(converted, TopAbs_FACE)
-    while explorer.More():
-        faces.append(TopoDS.Face(explorer.Current()))
-        explorer.Next()
+    faces, originals = [], []
+    for whole, out in ((converted, faces), (shape, originals)):
+        explorer = TopExp_Explorer(whole, TopAbs_FACE)
+        while explorer.More():
+            out.append(TopoDS.Face(explorer.Current()))
+            explorer.Next()
     stem = name or path.stem
     # Keys unique per read: a scene that reads one file twice must not join the two copies' faces.
     _, key_of = edge_keys(converted, f"{path}|{stem}|{next(_READS)}")
@@ -565,8 +643,11 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
         for index, face in enumerate(bar):
             try:
                 reversed_face = (face.Orientation() == TopAbs_REVERSED) if reversed_faces is None else reversed_faces[index]
+                face_key_of = key_of
+                if len(originals) == len(faces) and seam_lost(face):
+                    face, face_key_of = converted_alone(originals[index], face, key_of)
                 surface = bspline_of_face(face)
-                edges = face_edges(face, surface, key_of, trims_onto_edges) if topology else ()
+                edges = face_edges(face, surface, face_key_of, trims_onto_edges) if topology else ()
                 trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal, trims_onto_edges, edges)
                 # Meshed face by face, its triangulation dropped once read: memory stays that of one face's
                 # mesh (the whole shape's at once took 560 MB on a 2000-face plate).

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .isolation import read_isolated
 from .occt import CadModel, import_ocp, read_faces, read_xstep, transferred_shape
 
 #: What Open CASCADE converts every STEP length to.
@@ -22,13 +23,16 @@ def read_step(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMo
     from OCP.STEPControl import STEPControl_Reader
     from OCP.collections import Sequence_TCollection_AsciiString as Names
 
-    reader = STEPControl_Reader()
-    read_xstep(reader, path, "STEP")
-    lengths, angles, solid_angles = Names(), Names(), Names()
-    reader.FileUnits(lengths, angles, solid_angles)
-    file_units = sorted({str(n.ToCString()).lower() for n in lengths})
-    shape = transferred_shape(reader)
-    reader = None  # its model of the file's entities (hundreds of MB for a large file) is not needed any more
+    def read():  # in a child process (isolation.py): OCCT crashes on some corrupt files
+        reader = STEPControl_Reader()
+        read_xstep(reader, path, "STEP")
+        lengths, angles, solid_angles = Names(), Names(), Names()
+        reader.FileUnits(lengths, angles, solid_angles)
+        return transferred_shape(reader), {"units": sorted({str(n.ToCString()).lower() for n in lengths})}
+
+    # The reader's model of the file's entities (hundreds of MB for a large file) ends with the child.
+    shape, info = read_isolated(path, "STEP file", read)
+    file_units = info["units"]
     note = ""
     if file_units and file_units != ["millimetre"]:
         note = f"file in {', '.join(file_units)}, read in {READ_UNIT}"

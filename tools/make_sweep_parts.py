@@ -1,0 +1,426 @@
+"""Write a varied set of CAD parts nobody shipped, for the robustness sweep of the CAD readers (issue 12).
+
+    python tools/make_sweep_parts.py OUTDIR        # every part below into OUTDIR (not parts/: not shipped)
+
+Each part stresses one thing real exports contain (Open CASCADE through OCP; rhino3dm for the .3dm):
+  sphere_hole.step     a sphere drilled through along x: poles, a periodic seam, two trimmed holes
+  torus.step           a full torus: periodic in u and v, no trim edge at all
+  cone.step            a cone with its apex (a pole at the apex) and a planar base
+  shelled_box.step     a box with rounded corners shelled with BRepOffsetAPI_MakeThickSolid, its top face removed
+  bottle.step          Open CASCADE's MakeBottle tutorial: fillets, a neck, threads on a cylindrical surface
+  loft_hole.step       a freeform lofted face (BRepOffsetAPI_ThruSections) with a hole cut through it
+  bspline_prism.step   a closed B-spline curve extruded (BRepPrimAPI_MakePrism)
+  tiny_inch.step       the filleted block scaled to 0.01 mm across, written in inches
+  huge_inch.step       the filleted block scaled to 10 m across, written in inches
+  two_solids.step      a compound of two disjoint solids (a box and a sphere)
+  reversed_face.step   one B-spline face stored with reversed orientation
+  sliver.step          a box with a 1e-4-thin sliver face left by a cut
+  small_fillet.step    a box with a 0.01 and a 2 fillet, beside a free edge and vertex (no surface)
+  brep.igs, faces.igs  the shelled box through IGESControl_Writer, B-rep mode and faces mode
+  sphere.3dm           a Rhino sphere (periodic, two poles)
+  rhino_mix.3dm        rhino3dm's builders: a bare rational surface, a capped cone, a revolved profile (seam and
+                       poles), a pipe extrusion with a hole, a trimmed plane
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tools"))
+
+from make_parts import _edges, filleted_block, write_iges, write_step  # noqa: E402
+
+
+def _faces(shape):
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    explorer = TopExp_Explorer(shape, TopAbs_FACE)
+    while explorer.More():
+        yield TopoDS.Face(explorer.Current())
+        explorer.Next()
+
+
+def _cylinder(x, y, z, direction, radius, height):
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    return BRepPrimAPI_MakeCylinder(gp_Ax2(gp_Pnt(x, y, z), gp_Dir(*direction)), radius, height).Shape()
+
+
+def sphere_hole():
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeSphere
+
+    sphere = BRepPrimAPI_MakeSphere(20.0).Shape()
+    return BRepAlgoAPI_Cut(sphere, _cylinder(-30, 0, 0, (1, 0, 0), 6.0, 60)).Shape()
+
+
+def torus():
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeTorus
+
+    return BRepPrimAPI_MakeTorus(30.0, 8.0).Shape()
+
+
+def cone():
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCone
+
+    return BRepPrimAPI_MakeCone(15.0, 0.0, 30.0).Shape()
+
+
+def shelled_box():
+    """A 40 × 30 × 20 box, vertical edges filleted at 5, shelled 2 inwards with its top face removed (19 faces).
+
+    Filleting every edge first makes OCCT's shell invalid (BRepCheck: two coincident top faces, one of
+    negative area): only the vertical edges are rounded, and the result is checked.
+    """
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepOffsetAPI import BRepOffsetAPI_MakeThickSolid
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.collections import List_TopoDS_Shape
+
+    box = BRepPrimAPI_MakeBox(40.0, 30.0, 20.0).Shape()
+    fillet = BRepFilletAPI_MakeFillet(box)
+    for edge in _edges(box):
+        first, last = BRep_Tool.Range_s(edge)
+        curve = BRep_Tool.Curve_s(edge, first, last)
+        if abs(curve.Value(first).Z() - curve.Value(last).Z()) > 1.0:
+            fillet.Add(5.0, edge)
+    box = fillet.Shape()
+    top = max(_faces(box), key=lambda f: _centre(f)[2])
+    removed = List_TopoDS_Shape()
+    removed.Append(top)
+    maker = BRepOffsetAPI_MakeThickSolid()
+    maker.MakeThickSolidByJoin(box, removed, -2.0, 1e-3)
+    shell = maker.Shape()
+    if not BRepCheck_Analyzer(shell).IsValid():
+        raise RuntimeError("Open CASCADE's shell is not a valid solid")
+    return shell
+
+
+def _centre(face):
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    props = GProp_GProps()
+    BRepGProp.SurfaceProperties_s(face, props)
+    c = props.CentreOfMass()
+    return c.X(), c.Y(), c.Z()
+
+
+def bottle(width=50.0, height=70.0, thickness=30.0):
+    """Open CASCADE's MakeBottle tutorial, step by step (profile, prism, fillets, neck, shell, threads)."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Fuse
+    from OCP.BRepBuilderAPI import (BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire,
+                                    BRepBuilderAPI_Transform)
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepLib import BRepLib
+    from OCP.BRepOffsetAPI import BRepOffsetAPI_MakeThickSolid, BRepOffsetAPI_ThruSections
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder, BRepPrimAPI_MakePrism
+    from OCP.GC import GC_MakeArcOfCircle, GC_MakeSegment, GC_MakeSegment2d
+    from OCP.Geom import Geom_CylindricalSurface, Geom_Plane
+    from OCP.Geom2d import Geom2d_Ellipse, Geom2d_TrimmedCurve
+    from OCP.TopoDS import TopoDS, TopoDS_Compound
+    from OCP.collections import List_TopoDS_Shape
+    from OCP.gp import gp_Ax1, gp_Ax2, gp_Ax2d, gp_Ax3, gp_Dir, gp_Dir2d, gp_Pnt, gp_Pnt2d, gp_Trsf, gp_Vec
+
+    p1, p2, p3 = gp_Pnt(-width / 2, 0, 0), gp_Pnt(-width / 2, -thickness / 4, 0), gp_Pnt(0, -thickness / 2, 0)
+    p4, p5 = gp_Pnt(width / 2, -thickness / 4, 0), gp_Pnt(width / 2, 0, 0)
+    arc = GC_MakeArcOfCircle(p2, p3, p4).Value()
+    e1 = BRepBuilderAPI_MakeEdge(GC_MakeSegment(p1, p2).Value()).Edge()
+    e2 = BRepBuilderAPI_MakeEdge(arc).Edge()
+    e3 = BRepBuilderAPI_MakeEdge(GC_MakeSegment(p4, p5).Value()).Edge()
+    half = BRepBuilderAPI_MakeWire(e1, e2, e3).Wire()
+    mirror = gp_Trsf()
+    mirror.SetMirror(gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(1, 0, 0)))
+    mirrored = TopoDS.Wire(BRepBuilderAPI_Transform(half, mirror).Shape())
+    wire = BRepBuilderAPI_MakeWire()
+    wire.Add(half)
+    wire.Add(mirrored)
+    face = BRepBuilderAPI_MakeFace(wire.Wire()).Face()
+    body = BRepPrimAPI_MakePrism(face, gp_Vec(0, 0, height)).Shape()
+    fillet = BRepFilletAPI_MakeFillet(body)
+    for edge in _edges(body):
+        fillet.Add(thickness / 12, edge)
+    body = fillet.Shape()
+    neck_radius, neck_height = thickness / 4, height / 10
+    neck = BRepPrimAPI_MakeCylinder(gp_Ax2(gp_Pnt(0, 0, height), gp_Dir(0, 0, 1)), neck_radius, neck_height).Shape()
+    body = BRepAlgoAPI_Fuse(body, neck).Shape()
+    top = max(_faces(body), key=lambda f: _centre(f)[2])
+    removed = List_TopoDS_Shape()
+    removed.Append(top)
+    maker = BRepOffsetAPI_MakeThickSolid()
+    maker.MakeThickSolidByJoin(body, removed, -thickness / 50, 1e-3)
+    body = maker.Shape()
+    # Threads: two ellipse arcs on two coaxial cylinders, lofted into a solid.
+    axis = gp_Ax3(gp_Pnt(0, 0, height), gp_Dir(0, 0, 1))
+    cyl1, cyl2 = Geom_CylindricalSurface(axis, neck_radius * 0.99), Geom_CylindricalSurface(axis, neck_radius * 1.05)
+    centre, direction = gp_Pnt2d(2 * math.pi, neck_height / 2), gp_Dir2d(2 * math.pi, neck_height / 4)
+    ax = gp_Ax2d(centre, direction)
+    major, minor = 2 * math.pi, neck_height / 10
+    ellipse1, ellipse2 = Geom2d_Ellipse(ax, major, minor), Geom2d_Ellipse(ax, major, minor / 4)
+    arc1, arc2 = Geom2d_TrimmedCurve(ellipse1, 0, math.pi), Geom2d_TrimmedCurve(ellipse2, 0, math.pi)
+    a, b = ellipse1.Value(0), ellipse1.Value(math.pi)
+    segment = GC_MakeSegment2d(a, b).Value()
+    wires = []
+    for arc2d, surface in ((arc1, cyl1), (arc2, cyl2)):
+        edge_arc = BRepBuilderAPI_MakeEdge(arc2d, surface).Edge()
+        edge_seg = BRepBuilderAPI_MakeEdge(segment, surface).Edge()
+        w = BRepBuilderAPI_MakeWire(edge_arc, edge_seg).Wire()
+        BRepLib.BuildCurves3d_s(w)
+        wires.append(w)
+    loft = BRepOffsetAPI_ThruSections(True)
+    for w in wires:
+        loft.AddWire(w)
+    loft.CheckCompatibility(False)
+    threading = loft.Shape()
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, body)
+    builder.Add(compound, threading)
+    return compound
+
+
+def loft_hole():
+    """A freeform face lofted through three wavy B-spline sections, then a hole cut through it."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeWire
+    from OCP.BRepOffsetAPI import BRepOffsetAPI_ThruSections
+    from OCP.GeomAPI import GeomAPI_PointsToBSpline
+    from OCP.collections import Array1_gp_Pnt
+    from OCP.gp import gp_Pnt
+
+    loft = BRepOffsetAPI_ThruSections(False, False)
+    for k, y in enumerate((0.0, 25.0, 50.0)):
+        points = Array1_gp_Pnt(1, 7)
+        for i in range(7):
+            x = 10.0 * i
+            points.SetValue(i + 1, gp_Pnt(x, y, 5.0 * math.sin(0.8 * i + k)))
+        curve = GeomAPI_PointsToBSpline(points).Curve()
+        loft.AddWire(BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(curve).Edge()).Wire())
+    loft.Build()
+    return BRepAlgoAPI_Cut(loft.Shape(), _cylinder(30, 25, -50, (0, 0, 1), 8.0, 100)).Shape()
+
+
+def bspline_prism():
+    """A closed periodic B-spline curve (an interpolated blob) extruded 20 along z, with its caps."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism
+    from OCP.GeomAPI import GeomAPI_Interpolate
+    from OCP.collections import HArray1_gp_Pnt as TColgp_HArray1OfPnt
+    from OCP.gp import gp_Pnt, gp_Vec
+
+    n = 9
+    points = TColgp_HArray1OfPnt(1, n)
+    for k in range(n):
+        t = 2 * math.pi * k / n
+        r = 20.0 * (1 + 0.25 * math.cos(3 * t))
+        points.SetValue(k + 1, gp_Pnt(r * math.cos(t), r * math.sin(t), 0))
+    interpolate = GeomAPI_Interpolate(points, True, 1e-7)
+    interpolate.Perform()
+    curve = interpolate.Curve()
+    wire = BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(curve).Edge()).Wire()
+    return BRepPrimAPI_MakePrism(BRepBuilderAPI_MakeFace(wire).Face(), gp_Vec(0, 0, 20)).Shape()
+
+
+def scaled_block(size: float):
+    """The filleted block (40 mm long) scaled so its long side is ``size`` mm."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.gp import gp_Pnt, gp_Trsf
+
+    trsf = gp_Trsf()
+    trsf.SetScale(gp_Pnt(0, 0, 0), size / 40.0)
+    return BRepBuilderAPI_Transform(filleted_block(), trsf, True).Shape()
+
+
+def two_solids():
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox, BRepPrimAPI_MakeSphere
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Pnt
+
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, BRepPrimAPI_MakeBox(20.0, 20.0, 20.0).Shape())
+    builder.Add(compound, BRepPrimAPI_MakeSphere(gp_Pnt(50, 10, 10), 10.0).Shape())
+    return compound
+
+
+def reversed_face():
+    """A bicubic dome as one face, stored reversed (its normal is -S_u × S_v)."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.collections import Array1_double, Array1_int, Array2_gp_Pnt
+    from OCP.gp import gp_Pnt
+
+    poles = Array2_gp_Pnt(1, 4, 1, 4)
+    for i in range(4):
+        for j in range(4):
+            z = 12.0 if (i in (1, 2) and j in (1, 2)) else 0.0
+            poles.SetValue(i + 1, j + 1, gp_Pnt(15.0 * i, 15.0 * j, z))
+    knots, mults = Array1_double(1, 2), Array1_int(1, 2)
+    for k, value in enumerate((0.0, 1.0)):
+        knots.SetValue(k + 1, value)
+        mults.SetValue(k + 1, 4)
+    surface = Geom_BSplineSurface(poles, knots, knots, mults, mults, 3, 3)
+    return BRepBuilderAPI_MakeFace(surface, 1e-7).Face().Reversed()
+
+
+def sliver():
+    """A box cut by a second box offset 1e-4 from its side: a face 1e-4 wide along one edge."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.gp import gp_Pnt
+
+    body = BRepPrimAPI_MakeBox(30.0, 20.0, 10.0).Shape()
+    step = BRepPrimAPI_MakeBox(gp_Pnt(1e-4, -1, 5.0), 40.0, 30.0, 10.0).Shape()
+    return BRepAlgoAPI_Cut(body, step).Shape()
+
+
+def small_fillet():
+    """A 100 × 60 × 40 box with one edge filleted at 0.01 (a face 10⁴ times narrower than the part) and one at 2,
+    in a compound with a free edge and a free vertex (entities with no surface, to be passed over)."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeVertex
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Pnt
+
+    box = BRepPrimAPI_MakeBox(100.0, 60.0, 40.0).Shape()
+    fillet = BRepFilletAPI_MakeFillet(box)
+    edges = list(_edges(box))
+    fillet.Add(0.01, edges[0])
+    fillet.Add(2.0, edges[5])
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, fillet.Shape())
+    builder.Add(compound, BRepBuilderAPI_MakeEdge(gp_Pnt(0, 0, 50), gp_Pnt(100, 60, 50)).Edge())
+    builder.Add(compound, BRepBuilderAPI_MakeVertex(gp_Pnt(50, 50, 50)).Vertex())
+    return compound
+
+
+def write_step_in(shape, path: Path, unit: str) -> None:
+    """A STEP file whose length unit is ``unit`` (Open CASCADE's ``write.step.unit``), e.g. "INCH"."""
+    from OCP.Interface import Interface_Static
+
+    Interface_Static.SetCVal_s("write.step.unit", unit)
+    try:
+        write_step(shape, path)
+    finally:
+        Interface_Static.SetCVal_s("write.step.unit", "MM")
+
+
+def write_iges_faces(shape, path: Path) -> None:
+    from OCP.IGESControl import IGESControl_Writer
+
+    writer = IGESControl_Writer("MM", 0)  # 0: faces mode (trimmed surfaces, entity 144)
+    writer.AddShape(shape)
+    writer.ComputeModel()
+    if not writer.Write(str(path)):
+        raise SystemExit(f"could not write {path}")
+
+
+def write_sphere_3dm(path: Path) -> None:
+    import rhino3dm as r
+
+    model = r.File3dm()
+    model.Settings.ModelUnitSystem = r.UnitSystem.Millimeters
+    model.Objects.AddBrep(r.Brep.CreateFromSphere(r.Sphere(r.Point3d(0, 0, 0), 15.0)))
+    if not model.Write(str(path), 7):
+        raise SystemExit(f"could not write {path}")
+
+
+def write_rhino_mix_3dm(path: Path) -> None:
+    """rhino3dm has no general trimmed-surface builder (no CreateTrimmedSurface): what it can make that a
+    modeller exports: a bare rational freeform surface, a cone revolved from a line (apex pole, capped), a revolved profile a full turn
+    (seam and a pole), a capped pipe extrusion with a hole (Extrusion: inner profile), and a trimmed plane."""
+    import rhino3dm as r
+
+    model = r.File3dm()
+    model.Settings.ModelUnitSystem = r.UnitSystem.Millimeters
+    n = 5
+    surface = r.NurbsSurface.Create(3, True, 4, 4, n, n)
+    for i in range(n):
+        for j in range(n):
+            w = 1.0 + 0.5 * ((i + j) % 2)
+            x, y, z = 10.0 * i, 10.0 * j, 6.0 * math.sin(i + 0.5 * j)
+            surface.Points[i, j] = r.Point4d(x * w, y * w, z * w, w)  # homogeneous
+    for knots in (surface.KnotsU, surface.KnotsV):  # rhino's list omits one end knot each side
+        for k, value in enumerate([0, 0, 0, 0.3, 1, 1, 1]):
+            knots[k] = value
+    model.Objects.AddSurface(surface)
+    line = r.Curve.CreateControlPointCurve([r.Point3d(80, 0, 0), r.Point3d(70, 0, 25)], 1)  # rhino3dm's Cone has no constructor
+    model.Objects.AddBrep(r.Brep.CreateFromRevSurface(r.RevSurface.Create(line, r.Line(r.Point3d(70, 0, 0), r.Point3d(70, 0, 25)),
+                                                                          0.0, 2 * math.pi), True, False))
+    profile = r.Curve.CreateControlPointCurve([r.Point3d(0, 0, 0), r.Point3d(8, 0, 2), r.Point3d(10, 0, 10),
+                                               r.Point3d(5, 0, 16), r.Point3d(0, 0, 18)], 3)
+    profile.Translate(r.Vector3d(0, 50, 0))
+    axis = r.Line(r.Point3d(0, 50, 0), r.Point3d(0, 50, 18))
+    model.Objects.AddBrep(r.Brep.CreateFromRevSurface(r.RevSurface.Create(profile, axis, 0.0, 2 * math.pi), False, False))
+    pipe = r.Extrusion.CreatePipeExtrusion(r.Cylinder(r.Circle(r.Point3d(70, 50, 0), 8.0), 12.0), 4.0, 8.0, True)
+    model.Objects.AddExtrusion(pipe)
+    outline = [r.Point3d(-30 + 12 * math.cos(t), 20 * math.sin(t) * (1 + 0.2 * math.cos(3 * t)), 0)
+               for t in [2 * math.pi * k / 30 for k in range(30)]]
+    outline.append(outline[0])
+    model.Objects.AddBrep(r.Brep.CreateTrimmedPlane(r.Plane.WorldXY(), r.Curve.CreateControlPointCurve(outline, 3)))
+    if not model.Write(str(path), 7):
+        raise SystemExit(f"could not write {path}")
+
+
+PARTS = {
+    "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
+    "torus.step": lambda p: write_step(torus(), p),
+    "cone.step": lambda p: write_step(cone(), p),
+    "shelled_box.step": lambda p: write_step(shelled_box(), p),
+    "bottle.step": lambda p: write_step(bottle(), p),
+    "loft_hole.step": lambda p: write_step(loft_hole(), p),
+    "bspline_prism.step": lambda p: write_step(bspline_prism(), p),
+    "tiny_inch.step": lambda p: write_step_in(scaled_block(0.01), p, "INCH"),
+    "huge_inch.step": lambda p: write_step_in(scaled_block(10000.0), p, "INCH"),
+    "two_solids.step": lambda p: write_step(two_solids(), p),
+    "reversed_face.step": lambda p: write_step(reversed_face(), p),
+    "sliver.step": lambda p: write_step(sliver(), p),
+    "small_fillet.step": lambda p: write_step(small_fillet(), p),
+    "brep.igs": lambda p: write_iges(shelled_box(), p),
+    "faces.igs": lambda p: write_iges_faces(shelled_box(), p),
+    "sphere.3dm": write_sphere_3dm,
+    "rhino_mix.3dm": write_rhino_mix_3dm,
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("out", type=Path)
+    parser.add_argument("names", nargs="*", help="only these parts")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    sys.path.insert(0, str(ROOT))
+    from rtreflect.exchange.occt import silence_messages
+
+    silence_messages()
+    for name, make in PARTS.items():
+        if args.names and name not in args.names:
+            continue
+        path = args.out / name
+        try:
+            make(path)
+        except Exception as exc:  # report and go on: the sweep wants every part it can make
+            print(f"{name}: FAILED to make ({type(exc).__name__}: {exc})")
+            continue
+        print(f"{name}: {path.stat().st_size / 1024:.0f} kB")
+
+
+if __name__ == "__main__":
+    main()
