@@ -508,7 +508,6 @@ class Renderer:
         direction and the mode's `level_offset`.
         """
         n_rays = len(shading.hits.hit)
-        gap = np.full(n_rays, np.nan)
         grad = np.full((n_rays, 2), np.nan)
         level = shading.level
         idx = np.flatnonzero(want & (level >= 0))
@@ -517,33 +516,44 @@ class Renderer:
             if len(idx):
                 patch, u, v, n = hits.patch[idx], hits.u[idx], hits.v[idx], hits.N[idx]
                 k = level[idx]
-                points = SurfacePoints(hits.P[idx], n, shading.s[idx], patch, u, v)
-                other = self.neighbour_level[k]
-                # The spacing to the next level in σ's unit (none: a single level, nothing to confuse it with).
-                gap[idx] = np.where(other == k, np.inf, np.abs(sigma[idx] - level_offset(self.mode, points, other)))
                 # S_u, S_v as the tracer had them at the hit; the mesh-normals path has none (its P is on the mesh).
                 Su, Sv = (hits.Su[idx], hits.Sv[idx]) if self.vertex_normals is None else \
                     self.surfaces.evaluate(patch, u, v)[1:3]
                 steps = uv_footprint(self.camera, rows[idx], cols[idx], hits.P[idx], n, Su, Sv)
                 u0, u1, v0, v1 = self.surfaces.domains(patch)
+                # The four ends (u, v) ± ½ (du, dv)/dx and /dy, σ at all of them in one pass (rows are independent).
+                shares, ends_u, ends_v = [], [], []
                 for axis in range(2):
                     du, dv = 0.5 * steps[:, axis, 0], 0.5 * steps[:, axis, 1]
-                    ends = []
                     for sign in (1.0, -1.0):
                         # The share of the half-pixel step that stays in the patch's domain (it is clamped there).
                         lam = _room(u, sign * du, u0, u1)
                         lam = np.minimum(lam, _room(v, sign * dv, v0, v1))
-                        ends.append((lam, self._offset_at(patch, u + sign * lam * du, v + sign * lam * dv, n, k)))
-                    (lp, sp), (lm, sm) = ends
-                    with np.errstate(divide="ignore", invalid="ignore"):
-                        grad[idx, axis] = (sp - sm) / (0.5 * (lp + lm))
+                        shares.append(lam)
+                        ends_u.append(u + sign * lam * du)
+                        ends_v.append(v + sign * lam * dv)
+                ends = self._offset_at(np.tile(patch, 4), np.concatenate(ends_u), np.concatenate(ends_v),
+                                       np.tile(n, (4, 1)), np.tile(k, 4)).reshape(4, -1)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    for axis in range(2):
+                        grad[idx, axis] = (ends[2 * axis] - ends[2 * axis + 1]) / \
+                            (0.5 * (shares[2 * axis] + shares[2 * axis + 1]))
             span = np.abs(grad[:, 0]) + np.abs(grad[:, 1])
             with np.errstate(invalid="ignore"):
                 known = np.isfinite(span)
                 near = want & (level >= 0) & (~known | (np.abs(sigma) - 0.5 * span <= self.stripe_reach))
-                untrusted = near & (~known | (span > TRUSTED_SPAN * gap))
-            coverage = np.zeros(n_rays)
+                untrusted = near & ~known
+            # The spacing to the next level in σ's unit where a trusted stripe is near (none: a single level, nothing
+            # to confuse it with); `untrusted` reads it nowhere else.
             ok = np.flatnonzero(near & known)
+            if len(ok):
+                k = level[ok]
+                other = self.neighbour_level[k]
+                points = SurfacePoints(hits.P[ok], hits.N[ok], shading.s[ok], hits.patch[ok], hits.u[ok], hits.v[ok])
+                gap = np.where(other == k, np.inf, np.abs(sigma[ok] - level_offset(self.mode, points, other)))
+                with np.errstate(invalid="ignore"):
+                    untrusted[ok] = span[ok] > TRUSTED_SPAN * gap
+            coverage = np.zeros(n_rays)
             coverage[ok] = stripe_coverage(sigma[ok], grad[ok, 0], grad[ok, 1], self.half_width, self.blur)
         blocked = np.zeros(n_rays, dtype=bool)
         if self.mode.along_ray:  # up to the nearest level along s (`Stripes.level_t`)
