@@ -169,3 +169,104 @@ def test_crowded_stripes_are_supersampled_not_dropped():
     grid = Renderer(scene.with_image(samples=4)).render_span(start, stop).pixels[:, 0]
     assert np.abs(analytic - grid).max() < 0.2
     assert np.sqrt(np.mean((analytic - grid) ** 2)) < 0.01
+
+
+# -- the quantities the analytic path reads rather than computes again (one implementation of each) ----------------
+
+
+def test_reach_gives_the_nearest_tubes_signed_distance_and_ray_parameter():
+    """`TubeLights.reach`'s line_sigma and line_t against the closest approach by least squares: |σ| = d, σ's sign
+    the side of the tube's axis, (R + t s − B)·(s × c) / |s × c| (tests/reference.py); and σ bit for bit as
+    `signed_distance`, the offset the gradient's ends are evaluated with."""
+    from reference import closest_line_distance
+
+    from rtreflect.modes.lights import TubeLights
+
+    rng = np.random.default_rng(11)
+    c, m = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    tubes = TubeLights(np.array([0.0, 0.0, 5.0]), m, c, np.cross(c, m), np.array([-2.0, -0.5, 0.0, 1.0, 3.0]), 0.4, 30.0)
+    R = rng.uniform(-2, 2, (60, 3))
+    s = rng.normal(size=(60, 3))
+    s /= np.linalg.norm(s, axis=1, keepdims=True)
+    reach = tubes.reach(R, s)
+    found = np.flatnonzero(reach.line_id >= 0)
+    assert 20 < len(found) < len(R)
+    assert np.isnan(reach.line_sigma[reach.line_id < 0]).all() and np.isnan(reach.line_t[reach.line_id < 0]).all()
+    for row in found:
+        B = tubes.points[reach.line_id[row]]
+        d, t = closest_line_distance(R[row], s[row], B, c)
+        x = np.cross(s[row], c)
+        side = np.dot(R[row] - B, x) / np.linalg.norm(x)  # signed distance of the line R + t s to the axis
+        assert reach.line_sigma[row] == pytest.approx(side, abs=1e-9) and abs(side) == pytest.approx(d, abs=1e-9)
+        assert reach.line_t[row] == pytest.approx(t, rel=1e-9, abs=1e-9)
+    signed = tubes.signed_distance(R[found], s[found], reach.line_id[found])
+    assert signed.tobytes() == reach.line_sigma[found].tobytes()
+
+
+def test_level_sets_give_their_signed_offset_with_the_stripes():
+    """`even_stripes`: σ = φ − c_k of the nearest level, |σ| the distance it reports, NaN where φ is."""
+    from rtreflect.modes.base import even_stripes
+
+    levels = np.array([-1.0, 0.0, 2.5])
+    phi = np.array([-3.0, -0.6, -0.4, 0.2, 1.1, 9.0, np.nan])
+    stripes = even_stripes(phi, levels, 0.25)
+    assert stripes.level_id.tolist() == [0, 0, 1, 1, 1, 2, -1]
+    np.testing.assert_array_equal(stripes.offset, phi - np.append(levels, np.nan)[stripes.level_id])
+    np.testing.assert_array_equal(np.abs(stripes.offset), stripes.level_dist)
+
+
+@pytest.mark.parametrize("scene_name", ["peer", "hood_zebra", "cylinder_highlight", "hood_curvature", "circles"])
+def test_every_mode_declares_whether_it_is_seen_along_the_ray(scene_name):
+    """`Mode.along_ray` (one declaration, no duck typing): True exactly where the mode's stripes name an occlusion
+    distance along s, for the occlusion test (`Stripes.occlusion_t`) and the analytic path's (`Stripes.level_t`)."""
+    if scene_name == "peer":
+        scene = load_scene(ROOT / "bench" / "peer.toml")
+    elif scene_name == "circles":
+        scene = load_scene(ROOT / "scenes" / "hood.toml")
+        scene = dataclasses.replace(scene, lights=dataclasses.replace(scene.lights, shape="circles"))
+    else:
+        scene = load_scene(ROOT / "scenes" / f"{scene_name}.toml")
+    renderer = Renderer(scene.with_image(48, 27))
+    shading = renderer.shade(*renderer.camera.rays(*np.divmod(np.arange(48 * 27), 48)))
+    assert isinstance(renderer.mode.along_ray, bool)
+    assert renderer.mode.along_ray == (shading.level_t is not None)
+    expect = {"peer": True, "hood_zebra": False, "cylinder_highlight": False, "hood_curvature": False, "circles": True}
+    assert renderer.mode.along_ray is expect[scene_name]
+
+
+def test_parameter_steps_are_the_least_squares_tangent_step():
+    """`parameter_steps` against numpy's least squares of [S_u S_v] (du, dv) = w."""
+    from rtreflect.geometry.surfaces import parameter_steps
+
+    rng = np.random.default_rng(3)
+    Su, Sv, w = (rng.normal(size=(50, 3)) for _ in range(3))
+    du, dv = parameter_steps(Su, Sv, w)
+    for i in range(50):
+        expected = np.linalg.lstsq(np.column_stack([Su[i], Sv[i]]), w[i], rcond=None)[0]
+        np.testing.assert_allclose([du[i], dv[i]], expected, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_eye_vectors_reverse_the_camera_rays(projection):
+    """`Camera.eye_vectors` at points on the pixel-centre rays: −D, the unit vector back along the ray to the eye."""
+    scene = load_scene(ROOT / "scenes" / "hood.toml").with_image(40, 30)
+    scene = dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, projection=projection))
+    camera = Renderer(scene).camera
+    origins, directions = camera.rays(*np.divmod(np.arange(40 * 30), 40))
+    points = origins + np.linspace(0.5, 20.0, len(origins))[:, None] * directions
+    np.testing.assert_allclose(camera.eye_vectors(points), -directions, atol=1e-12)
+
+
+def test_hits_carry_the_derivatives_the_footprint_needs():
+    """`Hits.Su`, `Hits.Sv` are S_u, S_v at the stored (patch, u, v), bit for bit as `SurfaceSet.evaluate` gives
+    them, also where the second look replaced a hit (teapot rows 50–112 at 480×270: it does there)."""
+    scene = load_scene(ROOT / "scenes" / "teapot.toml").with_image(480, 270)
+    renderer = Renderer(scene)
+    rows, cols = np.divmod(np.arange(50 * 480, 112 * 480), 480)
+    origins, directions = renderer.camera.rays(rows, cols)
+    hits = renderer.trace(origins, directions)
+    idx = np.flatnonzero(hits.hit)
+    assert hits.aside[idx].sum() > 0  # the second look (or a hit beside its mesh hit) is exercised
+    derivs = renderer.surfaces.evaluate(hits.patch[idx], hits.u[idx], hits.v[idx])
+    assert hits.Su[idx].tobytes() == derivs.Su.tobytes() and hits.Sv[idx].tobytes() == derivs.Sv.tobytes()
+    assert np.isnan(hits.Su[~hits.hit]).all()

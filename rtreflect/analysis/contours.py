@@ -30,8 +30,8 @@ import numpy as np
 
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera
-from ..modes.base import SurfacePoints
-from ..modes.lights import TubeLights, reflect
+from ..modes.base import SurfacePoints, seen_at
+from ..modes.lights import TubeLights
 from ..modes.reflection import ReflectionMode
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import Tessellation
@@ -118,19 +118,9 @@ class UlmetField:
         return max(scale, 1e-9 * (self.tessellation.extent + float(np.abs(self.lights.c_k).max())))
 
     # -- the function ----------------------------------------------------------------------
-    def eye_vectors(self, R: np.ndarray) -> np.ndarray:
-        """a: unit vectors from R towards the eye A (the reversed view direction for an orthographic camera)."""
-        if self.camera.orthographic:
-            return np.broadcast_to(-self.camera.basis[0], R.shape).copy()
-        a = self.camera.spec.eye - R
-        return a / np.linalg.norm(a, axis=1, keepdims=True)
-
     def geometry(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray):
-        """R = S(u, v), the exact unit normal n, a and s = 2(a·n)n − a (paper eq. 3)."""
-        derivs = self.surfaces.evaluate(patch, u, v)
-        n = self.surfaces.normals(patch, u, v, derivs)
-        a = self.eye_vectors(derivs.S)
-        return derivs.S, n, a, reflect(a, n)
+        """R = S(u, v), the exact unit normal n, a and s = 2(a·n)n − a (paper eq. 3): `modes.base.seen_at`."""
+        return seen_at(self.surfaces, self.camera, patch, u, v)
 
     def f(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Ulmet's f at (patch, u, v), paper eq. (5) in the general form; NaN where t ≤ 0."""
@@ -284,7 +274,7 @@ class ModeField(UlmetField):
             to_eye = np.linalg.norm(self.camera.spec.eye - origin, axis=1)
         idx = np.flatnonzero(good)
         good[idx] &= ~occluded(self.accelerator, self.tessellation, self.surfaces, origin[idx], a[idx], to_eye[idx])
-        if getattr(self.mode, "along_ray", False):  # circular reflection lines: the reflected ray reaches the plane
+        if self.mode.along_ray:  # circular reflection lines: the reflected ray reaches the plane
             idx = np.flatnonzero(good)
             good[idx] &= reaches_light_plane(self, lights, R[idx], n[idx], patch[idx], s[idx])
         return good

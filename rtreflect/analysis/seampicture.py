@@ -48,7 +48,7 @@ def _seen_from_eye(field: UlmetField, patches: tuple[int, int], P: np.ndarray, n
     triangles then hide it. The occlusion is trim-aware, as the contours' visibility (`tracing.occluded`).
     """
     cam = field.camera
-    a = field.eye_vectors(P)
+    a = cam.eye_vectors(P)
     turned = [np.where((np.sum(n * a, axis=1) >= 0)[:, None], n, -n) for n in (n_a, n_b)]
     bisector = turned[0] + turned[1]
     length = np.linalg.norm(bisector, axis=1, keepdims=True)

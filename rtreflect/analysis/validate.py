@@ -173,7 +173,7 @@ def line_spec(renderer: Renderer) -> LineSpec:
     mode = renderer.mode
     blur = renderer.scene.render.blur if renderer.soft_stripes else 0.0
     return LineSpec(np.asarray(mode.levels, dtype=np.float64), float(mode.half_width), blur,
-                    bool(getattr(mode, "along_ray", False)), stripe_reach(float(mode.half_width), blur), tubes=False)
+                    mode.along_ray, stripe_reach(float(mode.half_width), blur), tubes=False)
 
 
 @dataclass

@@ -47,6 +47,19 @@ class SurfaceDerivatives(NamedTuple):
     Svv: np.ndarray | None = None
 
 
+def parameter_steps(Su: np.ndarray, Sv: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(du, dv) per point whose tangent step du S_u + dv S_v is nearest the vector w (N, 3), in least squares.
+
+    The normal equations are those of the first fundamental form, [[E, F], [F, G]] (du, dv) = (S_u·w, S_v·w)
+    with E = S_u·S_u, F = S_u·S_v, G = S_v·S_v, solved by Cramer's rule: inf or NaN where EG − F² = 0.
+    """
+    E, F, G = (np.einsum("ij,ij->i", x, y) for x, y in ((Su, Su), (Su, Sv), (Sv, Sv)))
+    a, b = np.einsum("ij,ij->i", Su, w), np.einsum("ij,ij->i", Sv, w)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        det = E * G - F * F
+        return (G * a - F * b) / det, (E * b - F * a) / det
+
+
 def find_span(knots: np.ndarray, degree: int, n_ctrl: int, t: np.ndarray) -> np.ndarray:
     """Knot span index i with knots[i] <= t < knots[i+1] (Piegl & Tiller A2.1), for an array t.
 

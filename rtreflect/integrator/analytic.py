@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.surfaces import parameter_steps
 from ..modes.profile import stripe_weight
 
 #: Cells of the blur ramp [r(1 − b), r(1 + b)] over which the soft profile's coverage is summed: the midpoint
@@ -98,19 +99,15 @@ def uv_footprint(camera, rows: np.ndarray, cols: np.ndarray, P: np.ndarray, N: n
 
     The camera's rays through the next pixel's centre, right and down (`Camera.rays`), meet the tangent
     plane of the hit (P, N) at P + dP/dx and P + dP/dy (Igehy's transfer); (du, dv) solve
-    [S_u S_v] (du, dv) = dP in least squares (the normal equations of the 2×2 first fundamental form).
+    [S_u S_v] (du, dv) = dP in least squares (`geometry.surfaces.parameter_steps`).
     """
-    E, F, G = (np.einsum("ij,ij->i", x, y) for x, y in ((Su, Su), (Su, Sv), (Sv, Sv)))
-    det = E * G - F * F
     steps = np.empty((len(P), 2, 2))
     for axis, offset in enumerate(((0.5, 1.5), (1.5, 0.5))):  # (dy, dx): one column right, one row down
         origins, directions = camera.rays(rows, cols, np.asarray(offset))
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.einsum("ij,ij->i", P - origins, N) / np.einsum("ij,ij->i", directions, N)
             dP = origins + t[:, None] * directions - P
-            a, b = np.einsum("ij,ij->i", dP, Su), np.einsum("ij,ij->i", dP, Sv)
-            steps[:, axis, 0] = (G * a - F * b) / det
-            steps[:, axis, 1] = (E * b - F * a) / det
+        steps[:, axis, 0], steps[:, axis, 1] = parameter_steps(Su, Sv, dP)
     return steps
 
 

@@ -32,7 +32,7 @@ from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, ma
 from ..modes.lights import TubeLights, reflect
 from ..modes.profile import stripe_reach, stripe_weight
 from ..modes.shading import shade_factor
-from ..modes.base import SurfacePoints, level_offset, neighbour_levels
+from ..modes.base import SurfacePoints, level_offset, neighbour_levels, seen_at
 from ..modes.reflection import ReflectionMode
 from ..modes.registry import mode_of
 from ..trace.meshnormals import trace_mesh, vertex_normals
@@ -70,15 +70,19 @@ class Shading:
     stripe_dist: np.ndarray | None = None
     # The mode's nearest level (`Stripes.level_id`, −1 where none is or no hit), for the analytic path.
     level: np.ndarray | None = None
+    # For the analytic path too, where the mode gives them with its stripes (NaN where no hit or no level), else
+    # None: the signed offset σ from the nearest level (`Stripes.offset`) and the occlusion distance along s
+    # (`Stripes.level_t`).
+    offset: np.ndarray | None = None
+    level_t: np.ndarray | None = None
 
     def take(self, rows: np.ndarray | slice) -> "Shading":
         """The rays ``rows`` (indices: copies; a slice: views)."""
         hits = Hits(**{k: getattr(self.hits, k)[rows] for k in Hits.__dataclass_fields__})
+        some = lambda x: None if x is None else x[rows]  # noqa: E731
         return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
-                       self.line_dist[rows], self.lit[rows],
-                       None if self.surface_rgb is None else self.surface_rgb[rows],
-                       None if self.stripe_dist is None else self.stripe_dist[rows],
-                       None if self.level is None else self.level[rows])
+                       self.line_dist[rows], self.lit[rows], some(self.surface_rgb), some(self.stripe_dist),
+                       some(self.level), some(self.offset), some(self.level_t))
 
 
 @dataclass
@@ -187,7 +191,7 @@ class Renderer:
         # Another mode's stripes seen where they are (not along a ray) are softened by `blur` about their half width:
         # lit out to the profile's reach, weighted by `stripe_weight` of their distance to the nearest level.
         self.soft_stripes = (scene.render.blur > 0 and not isinstance(self.mode, ReflectionMode)
-                             and not getattr(self.mode, "along_ray", False))
+                             and not self.mode.along_ray)
         # The analytic path's stripe (`analytic`): half width (the tubes' own radius, not the profile's reach) and blur
         # (circles seen along the reflected ray stay hard, as in `line_weight`).
         self.half_width = self.lights.radius if isinstance(self.mode, ReflectionMode) else getattr(self.mode, "half_width", 0.0)
@@ -250,6 +254,10 @@ class Renderer:
             points = SurfacePoints(R, n, s[idx], hits.patch[idx], hits.u[idx], hits.v[idx])
             stripes = self.mode.stripes(points)
             shading.level[idx] = stripes.level_id
+            for name in ("offset", "level_t"):
+                if getattr(stripes, name) is not None:
+                    setattr(shading, name, np.full(n_rays, np.nan))
+                    getattr(shading, name)[idx] = getattr(stripes, name)
             # line.id and line.dist are the tubes' in every mode (the EXR contract): the reflection mode's stripes
             # are those; another mode's nearest level follows from its φ (channel phi) and levels.
             if isinstance(self.mode, ReflectionMode):
@@ -478,7 +486,10 @@ class Renderer:
         return Tile(start, stop, pixels, rays, fallbacks, int(fell_back.sum()), len(edges))
 
     def stripe_offsets(self, shading: Shading) -> np.ndarray:
-        """Per ray the signed offset σ from its nearest level's centre (`modes.base.level_offset`), NaN where none is."""
+        """Per ray the signed offset σ from its nearest level's centre (`modes.base.level_offset`), NaN where none is:
+        as the mode's stripes gave it (`Stripes.offset`), else evaluated."""
+        if shading.offset is not None:
+            return shading.offset
         hits, level = shading.hits, shading.level
         sigma = np.full(len(level), np.nan)
         idx = np.flatnonzero(level >= 0)
@@ -497,7 +508,6 @@ class Renderer:
         direction and the mode's `level_offset`.
         """
         n_rays = len(shading.hits.hit)
-        gap = np.full(n_rays, np.nan)
         grad = np.full((n_rays, 2), np.nan)
         level = shading.level
         idx = np.flatnonzero(want & (level >= 0))
@@ -506,52 +516,62 @@ class Renderer:
             if len(idx):
                 patch, u, v, n = hits.patch[idx], hits.u[idx], hits.v[idx], hits.N[idx]
                 k = level[idx]
-                points = SurfacePoints(hits.P[idx], n, shading.s[idx], patch, u, v)
-                other = self.neighbour_level[k]
-                # The spacing to the next level in σ's unit (none: a single level, nothing to confuse it with).
-                gap[idx] = np.where(other == k, np.inf, np.abs(sigma[idx] - level_offset(self.mode, points, other)))
-                derivs = self.surfaces.evaluate(patch, u, v)
-                steps = uv_footprint(self.camera, rows[idx], cols[idx], hits.P[idx], n, derivs.Su, derivs.Sv)
+                # S_u, S_v as the tracer had them at the hit; the mesh-normals path has none (its P is on the mesh).
+                Su, Sv = (hits.Su[idx], hits.Sv[idx]) if self.vertex_normals is None else \
+                    self.surfaces.evaluate(patch, u, v)[1:3]
+                steps = uv_footprint(self.camera, rows[idx], cols[idx], hits.P[idx], n, Su, Sv)
                 u0, u1, v0, v1 = self.surfaces.domains(patch)
+                # The four ends (u, v) ± ½ (du, dv)/dx and /dy, σ at all of them in one pass (rows are independent).
+                shares, ends_u, ends_v = [], [], []
                 for axis in range(2):
                     du, dv = 0.5 * steps[:, axis, 0], 0.5 * steps[:, axis, 1]
-                    ends = []
                     for sign in (1.0, -1.0):
                         # The share of the half-pixel step that stays in the patch's domain (it is clamped there).
                         lam = _room(u, sign * du, u0, u1)
                         lam = np.minimum(lam, _room(v, sign * dv, v0, v1))
-                        ends.append((lam, self._offset_at(patch, u + sign * lam * du, v + sign * lam * dv, n, k)))
-                    (lp, sp), (lm, sm) = ends
-                    with np.errstate(divide="ignore", invalid="ignore"):
-                        grad[idx, axis] = (sp - sm) / (0.5 * (lp + lm))
+                        shares.append(lam)
+                        ends_u.append(u + sign * lam * du)
+                        ends_v.append(v + sign * lam * dv)
+                ends = self._offset_at(np.tile(patch, 4), np.concatenate(ends_u), np.concatenate(ends_v),
+                                       np.tile(n, (4, 1)), np.tile(k, 4)).reshape(4, -1)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    for axis in range(2):
+                        grad[idx, axis] = (ends[2 * axis] - ends[2 * axis + 1]) / \
+                            (0.5 * (shares[2 * axis] + shares[2 * axis + 1]))
             span = np.abs(grad[:, 0]) + np.abs(grad[:, 1])
             with np.errstate(invalid="ignore"):
                 known = np.isfinite(span)
                 near = want & (level >= 0) & (~known | (np.abs(sigma) - 0.5 * span <= self.stripe_reach))
-                untrusted = near & (~known | (span > TRUSTED_SPAN * gap))
-            coverage = np.zeros(n_rays)
+                untrusted = near & ~known
+            # The spacing to the next level in σ's unit where a trusted stripe is near (none: a single level, nothing
+            # to confuse it with); `untrusted` reads it nowhere else.
             ok = np.flatnonzero(near & known)
+            if len(ok):
+                k = level[ok]
+                other = self.neighbour_level[k]
+                points = SurfacePoints(hits.P[ok], hits.N[ok], shading.s[ok], hits.patch[ok], hits.u[ok], hits.v[ok])
+                gap = np.where(other == k, np.inf, np.abs(sigma[ok] - level_offset(self.mode, points, other)))
+                with np.errstate(invalid="ignore"):
+                    untrusted[ok] = span[ok] > TRUSTED_SPAN * gap
+            coverage = np.zeros(n_rays)
             coverage[ok] = stripe_coverage(sigma[ok], grad[ok, 0], grad[ok, 1], self.half_width, self.blur)
         blocked = np.zeros(n_rays, dtype=bool)
-        ray_t = getattr(self.mode, "ray_t", None)
-        if ray_t is not None and getattr(self.mode, "along_ray", True):
+        if self.mode.along_ray:  # up to the nearest level along s (`Stripes.level_t`)
             test = np.flatnonzero(near)
             if len(test):
                 R, n, s = hits.P[test], hits.N[test], shading.s[test]
-                t = ray_t(SurfacePoints(R, n, s, hits.patch[test], hits.u[test], hits.v[test]), level[test])
                 start = self.accelerator.surface_origins(R, n, hits.patch[test])
                 with self.clock.stage("occlusion (Embree)"):
-                    blocked[test] = occluded(self.accelerator, self.tessellation, self.surfaces, start, s, t)
+                    blocked[test] = occluded(self.accelerator, self.tessellation, self.surfaces, start, s,
+                                             shading.level_t[test])
         return CentreStripes(sigma, grad, coverage, near, blocked, untrusted)
 
     def _offset_at(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray, n0: np.ndarray, level: np.ndarray) -> np.ndarray:
         """σ to ``level`` at surface points (patch, u, v) seen by the camera: the exact point and normal (turned to the
         side of the nearby normal ``n0``), the eye ray to the point, reflection (eq. 3) and the mode's offset."""
-        derivs = self.surfaces.evaluate(patch, u, v)
-        n = self.surfaces.normals(patch, u, v, derivs)
+        R, n, _, s = seen_at(self.surfaces, self.camera, patch, u, v)
         n[np.einsum("ij,ij->i", n, n0) < 0] *= -1.0
-        D = self.camera.directions_to(derivs.S)
-        return level_offset(self.mode, SurfacePoints(derivs.S, n, reflect(-D, n), patch, u, v), level)
+        return level_offset(self.mode, SurfacePoints(R, n, s, patch, u, v), level)
 
     def spans(self, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
         return pixel_spans(self.scene.image, rays_per_tile)

@@ -67,14 +67,15 @@ def distances(Q, c, e, c_k, half_length, R, s, d, t, ahead):
 
 
 @njit(**JIT)
-def reach(Q, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, candidate, t_candidate, t_of):
-    """Per point, without the (N, K) tables: the nearest tube ahead (index, d; first of equals; −1, NaN where
-    none is), whether a tube ahead lies within the radius and the t of the nearest such (∞ where none),
-    and where tube.shape[0] > 0 the t of tube[i]."""
+def reach(Q, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, line_sigma, line_t, candidate, t_candidate,
+          t_of):
+    """Per point, without the (N, K) tables: the nearest tube ahead (index, d, the signed distance as `signed`
+    and its t; first of equals; −1 and NaN where none is), whether a tube ahead lies within the radius and
+    the t of the nearest such (∞ where none), and where tube.shape[0] > 0 the t of tube[i]."""
     want = tube.shape[0] > 0
     for i in range(R.shape[0]):
         pre = _prepare(Q, c, e, R, s, i)
-        best, best_d, hit, t_hit = -1, np.inf, False, np.inf
+        best, best_d, best_t, hit, t_hit = -1, np.inf, np.nan, False, np.inf
         for k in range(c_k.shape[0]):
             dk, tk, ahead = _pair(Q, c, e, R, i, c_k[k], half_length, pre)
             if want and k == tube[i]:
@@ -82,13 +83,16 @@ def reach(Q, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, can
             if not ahead:
                 continue
             if dk < best_d:
-                best, best_d = k, dk
+                best, best_d, best_t = k, dk, tk
             if dk <= radius:
                 hit = True
                 if tk < t_hit:
                     t_hit = tk
         line_id[i] = best
         line_dist[i] = best_d if best >= 0 else np.nan
+        # The sign as `signed` gives it (the same expression, so the same bits); s ∥ c: the unsigned d.
+        line_sigma[i] = np.nan if best < 0 else (best_d if pre[0] else (pre[1] - c_k[best] * pre[2]) * pre[3])
+        line_t[i] = best_t
         candidate[i] = hit
         t_candidate[i] = t_hit
 

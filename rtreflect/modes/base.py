@@ -15,9 +15,11 @@ where the distance says so. A map mode (curvature, draft) also colours the surfa
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 import numpy as np
+
+from .lights import reflect
 
 #: Share of each level step a stripe covers when φ's levels are evenly spaced (isophotes, zebra,
 #: curvature bands): as the automatic rig's tubes, whose radius is a tenth of their spacing.
@@ -46,19 +48,40 @@ class Stripes:
     # Ray parameter along s to test for occlusion before a candidate counts as lit (reflection lines:
     # the nearest tube within its radius); None when the mode's stripes are not seen along a ray.
     occlusion_t: np.ndarray | None = None
+    # The signed offset σ from the nearest level's centre (`level_offset`), NaN where none is; None where the
+    # mode does not find it with its stripes (the analytic path then asks `level_offset`).
+    offset: np.ndarray | None = None
+    # Along the ray (`Mode.along_ray`): the ray parameter along s of the nearest level (its tube's closest
+    # approach, or the light plane): how far the analytic path tests for occlusion near a stripe; else None.
+    level_t: np.ndarray | None = None
 
 
 def even_stripes(phi: np.ndarray, levels: np.ndarray, half_width: float) -> Stripes:
-    """Nearest of sorted ``levels`` to each φ, |φ − c_k|, and the stripe test |φ − c_k| ≤ half_width (NaN φ: none)."""
+    """Nearest of sorted ``levels`` to each φ, |φ − c_k|, the stripe test |φ − c_k| ≤ half_width and the signed
+    offset σ = φ − c_k (NaN φ: none)."""
     levels = np.asarray(levels, dtype=np.float64)
     found = np.isfinite(phi)
     if len(levels) == 0:
-        return Stripes(np.full(len(phi), -1), np.full(len(phi), np.nan), np.zeros(len(phi), dtype=bool))
+        return Stripes(np.full(len(phi), -1), np.full(len(phi), np.nan), np.zeros(len(phi), dtype=bool),
+                       offset=np.full(len(phi), np.nan))
     right = np.clip(np.searchsorted(levels, np.where(found, phi, 0.0)), 0, len(levels) - 1)
     left = np.clip(right - 1, 0, len(levels) - 1)
     pick = np.where(np.abs(phi - levels[left]) <= np.abs(phi - levels[right]), left, right)
-    dist = np.abs(phi - levels[pick])
-    return Stripes(np.where(found, pick, -1), np.where(found, dist, np.nan), found & (dist <= half_width))
+    sigma = np.where(found, phi - levels[pick], np.nan)
+    dist = np.abs(sigma)
+    return Stripes(np.where(found, pick, -1), dist, found & (dist <= half_width), offset=sigma)
+
+
+def seen_at(surfaces, camera, patch: np.ndarray, u: np.ndarray, v: np.ndarray):
+    """What the camera sees at surface points (patch, u, v): R = S(u, v), the exact unit normal n (not turned),
+    a towards the eye (`Camera.eye_vectors`) and the reflected direction s = 2(a·n)n − a (paper eq. 3).
+
+    s does not depend on n's orientation (n → −n leaves it unchanged, bit for bit), so callers may turn n after.
+    """
+    derivs = surfaces.evaluate(patch, u, v)
+    n = surfaces.normals(patch, u, v, derivs)
+    a = camera.eye_vectors(derivs.S)
+    return derivs.S, n, a, reflect(a, n)
 
 
 def level_offset(mode, p: SurfacePoints, level: np.ndarray) -> np.ndarray:
@@ -84,11 +107,14 @@ def neighbour_levels(levels: np.ndarray) -> np.ndarray:
 
 
 class Mode(Protocol):
-    """What the renderer, the EXR and the contours need of an interrogation mode."""
+    """What the renderer, the EXR and the contours need of an interrogation mode (each mode subclasses it)."""
 
     name: str
     #: Stage name under which the renderer's clock counts the mode's time.
     stage: str
+    #: Whether the stripes are seen along the reflected ray s (reflection lines of tubes or circles), so the
+    #: surface may occlude them on the way (`Stripes.occlusion_t`); the others are lit where they are.
+    along_ray: ClassVar[bool] = False
 
     def phi(self, p: SurfacePoints) -> np.ndarray:
         """φ at the points (NaN where undefined)."""

@@ -17,12 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Stripes, SurfacePoints, even_stripes
+from .base import Mode, Stripes, SurfacePoints, even_stripes
 from .lights import TubeLights
 
 
 @dataclass(frozen=True)
-class CircleMode:
+class CircleMode(Mode):
     lights: TubeLights  # the light plane (Q, m), the radii as c_k and the ring's half width as radius
     centre: np.ndarray  # C
     name: str  # "reflection" (along s) or "highlight" (along the normal line)
@@ -53,16 +53,14 @@ class CircleMode:
         X, _ = self.plane_point(p)
         return np.linalg.norm(X - self.centre, axis=1)
 
-    def ray_t(self, p: SurfacePoints, level: np.ndarray) -> np.ndarray:
-        """Along the reflected ray, where it meets the light plane: how far to test for occlusion."""
-        return self.plane_point(p)[1]
-
     def stripes(self, p: SurfacePoints) -> Stripes:
         X, t = self.plane_point(p)
         found = even_stripes(np.linalg.norm(X - self.centre, axis=1), self.levels, self.half_width)
         if not self.along_ray:
             return found
-        return Stripes(found.level_id, found.level_dist, found.candidate, np.where(found.candidate, t, np.inf))
+        # Along the reflected ray the occlusion test runs to where it meets the light plane.
+        return Stripes(found.level_id, found.level_dist, found.candidate, np.where(found.candidate, t, np.inf),
+                       found.offset, t)
 
     def surface_rgb(self, p: SurfacePoints) -> None:
         return None

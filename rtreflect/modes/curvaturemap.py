@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.curvature import curvatures
-from .base import STRIPE_SHARE, Stripes, SurfacePoints, even_stripes
+from .base import STRIPE_SHARE, Mode, Stripes, SurfacePoints, even_stripes
 from .colormaps import DIVERGING, SEQUENTIAL, linear_rgb
 from .lights import TubeLights
 
@@ -75,7 +75,7 @@ def auto_range(name: str, surfaces) -> tuple[float, float, float]:
 
 
 @dataclass(frozen=True)
-class CurvatureMode:
+class CurvatureMode(Mode):
     surfaces: object  # SurfaceSet
     quantity: str
     low: float

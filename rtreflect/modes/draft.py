@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Stripes, SurfacePoints, even_stripes
+from .base import Mode, Stripes, SurfacePoints, even_stripes
 from .colormaps import linear_rgb
 from .isophote import angle_to
 from .lights import TubeLights
@@ -32,7 +32,7 @@ EDGE_WIDTH = 0.1
 
 
 @dataclass(frozen=True)
-class DraftMode:
+class DraftMode(Mode):
     pull: np.ndarray
     thresholds: tuple
     name: str = "draft"

@@ -14,13 +14,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Stripes, SurfacePoints
+from .base import Mode, Stripes, SurfacePoints
 from .circles import circle_mode
 from .lights import TubeLights, _dot
 
 
 @dataclass(frozen=True)
-class HighlightMode:
+class HighlightMode(Mode):
     lights: TubeLights
     name: str = "highlight"
     stage: str = "highlight lines (normal line, eq. 4)"

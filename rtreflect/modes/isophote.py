@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import STRIPE_SHARE, Stripes, SurfacePoints, even_stripes
+from .base import STRIPE_SHARE, Mode, Stripes, SurfacePoints, even_stripes
 from .lights import TubeLights
 
 
@@ -23,7 +23,7 @@ def angle_to(n: np.ndarray, direction: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class IsophoteMode:
+class IsophoteMode(Mode):
     L: np.ndarray
     step: float
     name: str = "isophote"

@@ -44,6 +44,8 @@ class TubeReach:
 
     line_id: np.ndarray  # nearest tube ahead, −1 where none is
     line_dist: np.ndarray  # its distance d, NaN where none is
+    line_sigma: np.ndarray  # its signed distance σ (`signed_distance`), NaN where none is
+    line_t: np.ndarray  # the ray parameter t of its closest approach, NaN where none is
     candidate: np.ndarray  # some tube ahead lies within the radius
     t_candidate: np.ndarray  # ray parameter t of the nearest such (inf where none)
     t_of: np.ndarray | None  # t of the tube asked for per point (`reach`'s ``tube``), else None
@@ -141,16 +143,17 @@ class TubeLights:
         """`nearest` and `candidates` of eq. (4)'s distances, per point by the kernel `kernels.tubes.reach`.
 
         No (points, tubes) table is built, so memory does not grow with the number of tubes; each
-        point's values depend on its own row only. With ``tube`` (one tube index per point), also
+        point's values depend on its own row only. The nearest tube's signed distance and t come in the
+        same pass (the analytic path's σ and occlusion distance, `modes.base.Stripes`). With ``tube`` (one tube index per point), also
         the ray parameter t of closest approach to that tube.
         """
         Q, c, e, c_k, half = self._kernel_args()
         n = len(R)
-        line_id, line_dist = np.empty(n, dtype=np.int64), np.empty(n)
+        line_id, line_dist, line_sigma, line_t = np.empty(n, dtype=np.int64), np.empty(n), np.empty(n), np.empty(n)
         candidate, t_candidate = np.empty(n, dtype=bool), np.empty(n)
         t_of = np.full(n, np.nan)
         which = np.zeros(0, dtype=np.int64) if tube is None else np.ascontiguousarray(tube, dtype=np.int64)
         tubes_kernel.reach(Q, c, e, c_k, float(self.radius), half, np.ascontiguousarray(R, dtype=np.float64),
-                           np.ascontiguousarray(s, dtype=np.float64), which, line_id, line_dist, candidate,
-                           t_candidate, t_of)
-        return TubeReach(line_id, line_dist, candidate, t_candidate, None if tube is None else t_of)
+                           np.ascontiguousarray(s, dtype=np.float64), which, line_id, line_dist, line_sigma, line_t,
+                           candidate, t_candidate, t_of)
+        return TubeReach(line_id, line_dist, line_sigma, line_t, candidate, t_candidate, None if tube is None else t_of)

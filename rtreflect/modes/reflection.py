@@ -9,19 +9,21 @@ ray before the tube (the renderer's Embree test along s up to `Stripes.occlusion
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
-from .base import Stripes, SurfacePoints
+from .base import Mode, Stripes, SurfacePoints
 from .circles import circle_mode
 from .lights import TubeLights
 
 
 @dataclass(frozen=True)
-class ReflectionMode:
+class ReflectionMode(Mode):
     lights: TubeLights
     name: str = "reflection"
     stage: str = "tubes (eq. 3, 4)"
+    along_ray: ClassVar[bool] = True
 
     @property
     def levels(self) -> np.ndarray:
@@ -35,13 +37,9 @@ class ReflectionMode:
         """Signed skew-line distance of the reflected ray to tube ``level[i]`` (`base.level_offset`)."""
         return self.lights.signed_distance(p.R, p.s, level)
 
-    def ray_t(self, p: SurfacePoints, level: np.ndarray) -> np.ndarray:
-        """Ray parameter along s of the closest approach to tube ``level[i]``: how far to test for occlusion."""
-        return self.lights.reach(p.R, p.s, tube=level).t_of
-
     def stripes(self, p: SurfacePoints) -> Stripes:
         tubes = self.lights.reach(p.R, p.s)
-        return Stripes(tubes.line_id, tubes.line_dist, tubes.candidate, tubes.t_candidate)
+        return Stripes(tubes.line_id, tubes.line_dist, tubes.candidate, tubes.t_candidate, tubes.line_sigma, tubes.line_t)
 
     def surface_rgb(self, p: SurfacePoints) -> None:
         return None

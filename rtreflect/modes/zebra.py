@@ -15,12 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import STRIPE_SHARE, Stripes, SurfacePoints, even_stripes
+from .base import STRIPE_SHARE, Mode, Stripes, SurfacePoints, even_stripes
 from .lights import TubeLights
 
 
 @dataclass(frozen=True)
-class ZebraMode:
+class ZebraMode(Mode):
     m: np.ndarray  # ψ = 0 direction: the light plane's normal
     e: np.ndarray  # ψ = 90°: across the tubes
     step: float

@@ -99,13 +99,13 @@ class Camera:
             origins[:] = self.spec.eye
         return origins, directions
 
-    def directions_to(self, points: np.ndarray) -> np.ndarray:
-        """Unit directions (N, 3) of the camera rays through 3D points: from the eye (perspective), or w."""
-        w = self.basis[0]
+    def eye_vectors(self, points: np.ndarray) -> np.ndarray:
+        """a: unit vectors (N, 3) from 3D points towards the eye A (paper eq. 3), the reversed direction of the camera
+        ray through each point; −w for an orthographic camera."""
         if self.orthographic:
-            return np.broadcast_to(w, np.shape(points)).copy()
-        rel = np.asarray(points, dtype=np.float64) - self.spec.eye
-        return rel / np.linalg.norm(rel, axis=1, keepdims=True)
+            return np.broadcast_to(-self.basis[0], np.shape(points)).copy()
+        a = self.spec.eye - np.asarray(points, dtype=np.float64)
+        return a / np.linalg.norm(a, axis=1, keepdims=True)
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Image coordinates (column, row) in pixels of 3D points — the inverse of `rays` at the centre convention.

@@ -230,7 +230,7 @@ class SecondLook:
             slack = FLOAT32_SLACK * self.tessellation.extent
             nearer = again.hit & ~again.fallback & (again.t < kept - slack)
             rows = rays[nearer]
-            for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside"):
+            for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside", "Su", "Sv"):
                 getattr(hits, name)[rows] = getattr(again, name)[nearer]
             hits.fallback[rays[again.fallback]] = True
             self._from_shell(hits, origins, directions, far, rays, entry)
@@ -277,4 +277,5 @@ class SecondLook:
                     normal, cosine, np.zeros(len(rays), dtype=bool))
         hits.hit[rays], hits.patch[rays], hits.u[rays], hits.v[rays], hits.t[rays] = True, patch, u, v, t
         hits.P[rays], hits.aside[rays] = derivs.S, True
+        hits.Su[rays], hits.Sv[rays] = derivs.Su, derivs.Sv
         hits.N[rays] = facing(self.surfaces.normals(patch, u, v, derivs), D)

@@ -48,7 +48,7 @@ import numpy as np
 from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
-from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
+from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
 from ..kernels import nurbs as nurbs_kernel
 
@@ -112,12 +112,16 @@ class Hits:
     #: bool: the stored hit was not the refinement of a mesh hit but found beside it (`_other_root`,
     #: `_rim_neighbours`): the mesh did not lead there, so the second look (secondlook.py) traces the ray again.
     aside: np.ndarray
+    #: (N, 3) S_u and S_v at (u, v), as the kernel that found the hit had them (NaN on the mesh-normals path).
+    Su: np.ndarray
+    Sv: np.ndarray
 
     @classmethod
     def blank(cls, n: int, hit: np.ndarray) -> "Hits":
         """Rows for n rays flagged ``hit``, every value still that of a miss: to be filled in where hit."""
         return cls(hit, np.full(n, -1), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan),
-                   np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
+                   np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
+                   np.full((n, 3), np.nan), np.full((n, 3), np.nan))
 
 
 def facing(normals: np.ndarray, directions: np.ndarray, cosine: np.ndarray | None = None) -> np.ndarray:
@@ -328,11 +332,8 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     nr, cr, Dr = normal[rays], cosine[rays], D[rays]
     tangential = Dr - cr[:, None] * nr
     # δ = (du, dv): least squares of [S_u S_v] δ = D_T (the 2×2 normal equations).
-    a, b, c = (np.einsum("ij,ij->i", x, y) for x, y in ((d2.Su, d2.Su), (d2.Su, d2.Sv), (d2.Sv, d2.Sv)))
-    p, q = np.einsum("ij,ij->i", d2.Su, tangential), np.einsum("ij,ij->i", d2.Sv, tangential)
+    du, dv = parameter_steps(d2.Su, d2.Sv, tangential)
     with np.errstate(divide="ignore", invalid="ignore"):
-        det = a * c - b * b
-        du, dv = (c * p - b * q) / det, (a * q - b * p) / det
         kappa = np.einsum("ij,ij->i", nr, d2.Suu * (du * du)[:, None] + 2.0 * d2.Suv * (du * dv)[:, None]
                           + d2.Svv * (dv * dv)[:, None])
         step = 2.0 * cr / kappa
@@ -482,6 +483,7 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             rows = rays[take]
             best[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = c.t[take], c.patch[take], c.u[take], c.v[take]
             hits.P[rows], hits.aside[rows] = c.derivs.S[take], c.aside[take]
+            hits.Su[rows], hits.Sv[rows] = c.derivs.Su[take], c.derivs.Sv[take]
             odd = np.flatnonzero((c.status == UNRESOLVED) & (mesh.t < doubt[rays]))
             doubt[rays[odd]] = mesh.t[odd]
         with clock.stage("exact normals"):
