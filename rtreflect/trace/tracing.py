@@ -51,6 +51,7 @@ from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISH
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation
 from ..kernels import nurbs as nurbs_kernel
+from ..kernels import rims as rims_kernel
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance (or the part's size),
 #: and at least to the hit's distance from the origin: S's coordinates cannot be computed more finely than
@@ -85,6 +86,11 @@ STALLED_DAMPING = 1e9
 #: Neighbouring faces tried in turn for a hit that ran off its face: where several faces meet at a
 #: corner their boundary vertices coincide, and the nearest need not be the one the ray goes on to.
 SEAM_TRIES = 3
+#: Reach of the second and third tries beyond the first neighbour's vertex, in its longest mesh edges: the faces
+#: meeting at a corner share its vertex, their meshes' nearest vertices to it lie within an edge of it. Without it
+#: the third try on parts/plate.step's top face (longest edge 100) searched 4 units away, for 11,600 rays at
+#: 960×540 and no win.
+SEAM_CORNER_EDGES = 1.0
 
 #: `_rim_neighbours` looks across the rim where the mesh hit lies within this many times the two faces' summed
 #: chord errors of a rim edge: each mesh lies within its chord error of the shared edge, ×2 as `BAND_CHORDS`
@@ -281,14 +287,19 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     # converged point lies on the surface's extension beyond the face).
     at = np.where(edge[seam, None], derivs.S[seam], O[seam] + tm[seam, None] * D[seam])
     tried = np.zeros((len(seam), 0), dtype=int)  # neighbours tried so far (the patch itself: by `across_seam`)
+    # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
+    reach = 2.0 * tessellation.edge_length[pk[seam]]
     restarted = [stuck]
-    for _ in range(SEAM_TRIES):
+    for attempt in range(SEAM_TRIES):
         if len(seam) == 0:
             break
-        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]))
-        # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
-        close = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[pk[seam]])
-        seam, at, tried, pn, un, vn = (x[close] for x in (seam, at, tried, pn, un, vn))
+        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]), reach)
+        close = pn >= 0
+        seam, at, tried, reach, pn, un, vn, gap = (x[close] for x in (seam, at, tried, reach, pn, un, vn, gap))
+        if attempt == 0:
+            # The faces meeting at a corner have their boundary vertices there within a mesh edge of each other: a
+            # later try's lies within the first neighbour's edge length of its vertex (`SEAM_CORNER_EDGES`).
+            reach = np.minimum(reach, gap + SEAM_CORNER_EDGES * tessellation.edge_length[pn])
         u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
         near3, t3 = _near_mesh_hit(d3, pn, O[seam], D[seam], tm[seam], band)
         ok3 &= near3 & surfaces.on_face(pn, u3, v3)
@@ -297,7 +308,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         for have, new in zip(derivs[:3], d3[:3]):
             have[won] = new[ok3]
         restarted.append(won)
-        seam, at, tried = seam[~ok3], at[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
+        seam, at, reach, tried = seam[~ok3], at[~ok3], reach[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
     _normals(surfaces, pk, derivs, D, np.concatenate(restarted), normal, cosine, degenerate)
     aside = np.zeros(n, dtype=bool)
     _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside)
@@ -353,28 +364,23 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
 
 
 def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For each point on its triangle ``prim``: the distance to the nearest of the triangle's edges from a vertex of
-    its face's mesh boundary (inf where it has none), and that edge's boundary vertex nearest the point (−1: none).
+    """For each point on its triangle ``prim``: the distance to its face's mesh boundary near the triangle (the
+    boundary edges from the triangle's corners on it, `Tessellation.rim_path`; inf where it has none), and the
+    triangle's boundary vertex nearest the point (−1: none).
 
-    One boundary end suffices: a reader's mesh may run a row of slivers from its boundary nodes to
-    interior nodes a float64 rounding away in (u, v), which `_enclosing` moves off the edge.
+    The face's real boundary, not the triangle's edges: every triangle of a planar face's reader mesh has its
+    corners on the boundary, its inner edges far from it (parts/plate.step at 960×540: 143,000 rays were within
+    reach of such an edge, 2 % of them of the boundary). The boundary edges at a corner, not only the triangle's
+    own: a reader's mesh may run a row of slivers from its boundary nodes to interior nodes a float64 rounding away
+    in (u, v), which `_enclosing` moves off the edge: such a sliver touches the boundary at one corner and runs
+    along the boundary edge from it. By the compiled kernel `kernels.rims.rim_distances`.
     """
-    corners = tessellation.faces[prim]
-    on_rim = np.zeros(len(tessellation.vertices), dtype=bool)
-    on_rim[tessellation.boundary] = True
-    best, corner, corner_dist = np.full(len(prim), np.inf), np.full(len(prim), -1), np.full(len(prim), np.inf)
-    for i, j in ((0, 1), (1, 2), (2, 0)):
-        a, b = tessellation.vertices[corners[:, i]], tessellation.vertices[corners[:, j]]
-        ab = b - a
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.clip(np.nan_to_num(np.einsum("ij,ij->i", points - a, ab) / np.einsum("ij,ij->i", ab, ab)), 0.0, 1.0)
-        dist = np.linalg.norm(points - a - s[:, None] * ab, axis=1)
-        best = np.where(on_rim[corners[:, i]] | on_rim[corners[:, j]], np.minimum(best, dist), best)
-    for i in range(3):
-        dist = np.where(on_rim[corners[:, i]], np.linalg.norm(points - tessellation.vertices[corners[:, i]], axis=1), np.inf)
-        closer = dist < corner_dist
-        corner, corner_dist = np.where(closer, corners[:, i], corner), np.where(closer, dist, corner_dist)
-    return best, corner
+    n = len(prim)
+    dist, corner = np.empty(n), np.empty(n, dtype=np.int64)
+    rims_kernel.rim_distances(tessellation.start_arrays[0], tessellation.vertices, tessellation.on_rim,
+                              tessellation.rim_path, np.ascontiguousarray(prim, dtype=np.int64),
+                              np.ascontiguousarray(points, dtype=np.float64), dist, corner)
+    return dist, corner
 
 
 def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, status, pk, ur, vr, tr, derivs,
@@ -403,9 +409,10 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     pn, un, vn, gap = patch_of[corner], uv_of[corner, 0], uv_of[corner, 1], gap_of[corner]
     chord = tessellation.chord_error
     # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the corner; and the mesh hit
-    # lies within both meshes' chord errors of the edge (`RIM_REACH_CHORDS`), where the other mesh can be.
+    # lies within both meshes' chord errors of the edge (`RIM_REACH_CHORDS`), where the other mesh can be. Not the
+    # face the hit is already on (a seam restart's, from another face's triangle): Newton found its root there.
     pn_ = np.maximum(pn, 0)
-    close = (pn >= 0) & (gap <= tessellation.edge_length[pn_]) \
+    close = (pn >= 0) & (pn != pk[rays]) & (gap <= tessellation.edge_length[pn_]) \
         & (edge_dist <= RIM_REACH_CHORDS * (chord[pk[rays]] + chord[pn_]) + skip)
     rays, pn, un, vn = rays[close], pn[close], un[close], vn[close]
     if len(rays) == 0:
