@@ -47,6 +47,7 @@ import numpy as np
 
 from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
+from ..geometry.curvature import curvatures
 from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation
@@ -363,24 +364,26 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
         have[won] = new[ok3]
 
 
-def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For each point on its triangle ``prim``: the distance to its face's mesh boundary near the triangle (the
-    boundary edges from the triangle's corners on it, `Tessellation.rim_path`; inf where it has none), and the
+def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each point on its triangle ``prim``: the distance to its face's mesh boundary near the triangle (inf where
+    it has none), the distance to its triangle's chords between two boundary vertices (inf: none), and the
     triangle's boundary vertex nearest the point (−1: none).
 
-    The face's real boundary, not the triangle's edges: every triangle of a planar face's reader mesh has its
-    corners on the boundary, its inner edges far from it (parts/plate.step at 960×540: 143,000 rays were within
-    reach of such an edge, 2 % of them of the boundary). The boundary edges at a corner, not only the triangle's
-    own: a reader's mesh may run a row of slivers from its boundary nodes to interior nodes a float64 rounding away
-    in (u, v), which `_enclosing` moves off the edge: such a sliver touches the boundary at one corner and runs
-    along the boundary edge from it. By the compiled kernel `kernels.rims.rim_distances`.
+    Near the boundary: the face's boundary edges from the triangle's corners on it (`Tessellation.rim_path`), and the
+    triangle's edges from a boundary vertex into the face (a reader's mesh may run a row of slivers from its
+    boundary nodes to interior nodes a float64 rounding away in (u, v), which `_enclosing` moves off the edge; a
+    coarse grid's triangles reach in from the boundary too). Not a chord between two boundary vertices across
+    the face: a planar face's reader mesh is all such chords, every triangle's corners on the boundary, so
+    measured to the triangle's edges nearly every ray of parts/plate.step (143,000 first candidates at
+    960×540) was refined across the rim, and 2 % of them lie near the face's boundary. By the compiled kernel
+    `kernels.rims.rim_distances`.
     """
     n = len(prim)
-    dist, corner = np.empty(n), np.empty(n, dtype=np.int64)
+    dist, chords, corner = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
     rims_kernel.rim_distances(tessellation.start_arrays[0], tessellation.vertices, tessellation.on_rim,
                               tessellation.rim_path, np.ascontiguousarray(prim, dtype=np.int64),
-                              np.ascontiguousarray(points, dtype=np.float64), dist, corner)
-    return dist, corner
+                              np.ascontiguousarray(points, dtype=np.float64), dist, chords, corner)
+    return dist, chords, corner
 
 
 def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, status, pk, ur, vr, tr, derivs,
@@ -405,15 +408,20 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
     skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
-    edge_dist, corner = _rim_corner(tessellation, prim[rays], O[rays] + tm[rays, None] * D[rays])
+    points = O[rays] + tm[rays, None] * D[rays]
+    edge_dist, chord_dist, corner = _rim_corner(tessellation, prim[rays], points)
     pn, un, vn, gap = patch_of[corner], uv_of[corner, 0], uv_of[corner, 1], gap_of[corner]
     chord = tessellation.chord_error
     # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the corner; and the mesh hit
     # lies within both meshes' chord errors of the edge (`RIM_REACH_CHORDS`), where the other mesh can be. Not the
     # face the hit is already on (a seam restart's, from another face's triangle): Newton found its root there.
     pn_ = np.maximum(pn, 0)
-    close = (pn >= 0) & (pn != pk[rays]) & (gap <= tessellation.edge_length[pn_]) \
-        & (edge_dist <= RIM_REACH_CHORDS * (chord[pk[rays]] + chord[pn_]) + skip)
+    reach = RIM_REACH_CHORDS * (chord[pk[rays]] + chord[pn_]) + skip
+    close = (pn >= 0) & (pn != pk[rays]) & (gap <= tessellation.edge_length[pn_])
+    # Near a chord across the face (not its boundary) only where the neighbour's surface passes within that reach too.
+    across = np.flatnonzero(close & (edge_dist > reach) & (chord_dist <= reach))
+    close &= edge_dist <= reach
+    close[across] = _passes(tessellation, surfaces, corner[across], points[across], reach[across])
     rays, pn, un, vn = rays[close], pn[close], un[close], vn[close]
     if len(rays) == 0:
         return
@@ -431,6 +439,36 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     pk[won], ur[won], vr[won], tr[won], aside[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], True
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[ok3]
+
+
+def _passes(tessellation: Tessellation, surfaces: SurfaceSet, corner, points, reach) -> np.ndarray:
+    """Whether the face across the rim at boundary vertex ``corner`` (`Tessellation.rim_neighbour`) passes within
+    ``reach`` of ``points``: to second order about its point X there, with unit normal n and largest principal
+    curvature |κ|, the surface lies within |n·(P − X)| + ½ |κ| |P − X|² of P. As where two faces meet at a shallow
+    angle and one's mesh lies in the other's plane over its whole width (tests/test_exact_hits.py), not only near
+    their edge.
+    """
+    X, n, kappa = _rim_planes(tessellation, surfaces)
+    d = points - X[corner]
+    return np.abs(np.einsum("ij,ij->i", d, n[corner])) + 0.5 * kappa[corner] * np.einsum("ij,ij->i", d, d) <= reach
+
+
+def _rim_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per vertex: the point (V, 3), unit normal (V, 3) and largest |principal curvature| (V,) of the face across
+    the rim at its `Tessellation.rim_neighbour` (NaN off the rim; curvature 0 where undefined, at a pole: the
+    test `_passes` then looks at more rays, not fewer). Built once per tessellation, on first use (kept in its
+    ``__dict__``, as its cached properties are)."""
+    cached = tessellation.__dict__.get("_rim_planes")
+    if cached is None:
+        patch, uv, _ = tessellation.rim_neighbour
+        X, n, kappa = np.full((len(patch), 3), np.nan), np.full((len(patch), 3), np.nan), np.full(len(patch), np.nan)
+        rows = np.flatnonzero(patch >= 0)
+        derivs = surfaces.evaluate(patch[rows], uv[rows, 0], uv[rows, 1], order=2)
+        X[rows], n[rows] = derivs.S, surfaces.normals(patch[rows], uv[rows, 0], uv[rows, 1], derivs)
+        k = curvatures(derivs, n[rows])
+        kappa[rows] = np.nan_to_num(np.maximum(np.abs(k.k1), np.abs(k.k2)), nan=0.0)
+        cached = tessellation.__dict__["_rim_planes"] = (X, n, kappa)
+    return cached
 
 
 def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
