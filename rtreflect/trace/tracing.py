@@ -419,8 +419,8 @@ def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray
     coarse grid's triangles reach in from the boundary too). Not a chord between two boundary vertices across
     the face: a planar face's reader mesh is all such chords, every triangle's corners on the boundary, so
     measured to the triangle's edges nearly every ray of parts/plate.step (143,000 first candidates at
-    960×540) was refined across the rim, and 2 % of them lie near the face's boundary. By the compiled kernel
-    `kernels.rims.rim_distances`.
+    960×540) was refined across the rim. Near such a chord the face across the rim is looked at only where its
+    surface passes the point (`_neighbour_passes`). By the compiled kernel `kernels.rims.rim_distances`.
     """
     n = len(prim)
     dist, chords, corner = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
@@ -440,7 +440,8 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     (`trace`), so the other's candidate is never examined, though its exact hit may be the nearer (on
     trimmed.3dm at 480×270, 7 pixels: a boss's top and bottom caps behind its wall's slivers). The
     other face's mesh lies there only near the edge the faces share, so where the mesh hit lies within
-    `RIM_REACH_CHORDS` times both faces' chord errors of a rim edge of its triangle, the face across the rim (the nearest
+    `RIM_REACH_CHORDS` times both faces' chord errors of its face's boundary (`_rim_corner`; near a chord across
+    the face only where the other face's surface passes that close, `_neighbour_passes`), the face across the rim (the nearest
     boundary vertex of another face to the triangle's nearest boundary vertex, `Tessellation.rim_neighbour`)
     is refined from that vertex. Its valid hit within its band of the mesh hit's distance (the skipped
     triangle's hit) and nearer than the kept one by more than float32 rounding replaces it (the same point
@@ -465,7 +466,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     # Near a chord across the face (not its boundary) only where the neighbour's surface passes within that reach too.
     across = np.flatnonzero(close & (edge_dist > reach) & (chord_dist <= reach))
     close &= edge_dist <= reach
-    close[across] = _passes(tessellation, surfaces, corner[across], points[across], reach[across])
+    close[across] = _neighbour_passes(tessellation, surfaces, corner[across], points[across], reach[across])
     rays, pn, un, vn = rays[close], pn[close], un[close], vn[close]
     if len(rays) == 0:
         return
@@ -485,7 +486,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
         have[won] = new[ok3]
 
 
-def _passes(tessellation: Tessellation, surfaces: SurfaceSet, corner, points, reach) -> np.ndarray:
+def _neighbour_passes(tessellation: Tessellation, surfaces: SurfaceSet, corner, points, reach) -> np.ndarray:
     """Whether the face across the rim at boundary vertex ``corner`` (`Tessellation.rim_neighbour`) passes within
     ``reach`` of ``points``: to second order about its point X there, with unit normal n and largest principal
     curvature |κ|, the surface lies within |n·(P − X)| + ½ |κ| |P − X|² of P. As where two faces meet at a shallow
@@ -500,7 +501,7 @@ def _passes(tessellation: Tessellation, surfaces: SurfaceSet, corner, points, re
 def _rim_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per vertex: the point (V, 3), unit normal (V, 3) and largest |principal curvature| (V,) of the face across
     the rim at its `Tessellation.rim_neighbour` (NaN off the rim; curvature 0 where undefined, at a pole: the
-    test `_passes` then looks at more rays, not fewer). Built once per tessellation, on first use (kept in its
+    test `_neighbour_passes` then looks at more rays, not fewer). Built once per tessellation, on first use (kept in its
     ``__dict__``, as its cached properties are)."""
     cached = tessellation.__dict__.get("_rim_planes")
     if cached is None:
