@@ -309,7 +309,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     status[conv & near & inside] = VALID
     left = edge | (conv & near & ~inside)  # ran off the face: the ray may go on on a neighbour, else it misses
     # Newton failed inside the face: search for the ray's distance to the surface instead.
-    stuck = np.flatnonzero(~conv & ~edge)
+    stuck = np.flatnonzero(~(conv & near) & ~edge)
     if len(stuck):
         tol = NEWTON_TOLERANCE * np.maximum(tm[stuck], tessellation.extent)
         u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
