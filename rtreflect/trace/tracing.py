@@ -23,7 +23,7 @@ Embree from just beyond the previous one (vectorised over the rays still open, a
   for the ray–surface distance stalls at a positive minimum (the ray passes the surface's
   silhouette; Newton on the distance decides where the search runs out of steps, `_passes_by`);
 - *unresolved*: neither could be shown (Newton and the search failed in the face's interior, or
-  Newton converged on another sheet far from its mesh hit).
+  the search, run too where Newton converged on another sheet, converged on it far from its mesh hit).
 
 Two places beside a valid candidate's mesh hit are refined too (`_rim_neighbours`: the faces across
 its triangle's rim, whose coincident triangle the next query skips; `_other_root`: the nearer of two
@@ -308,7 +308,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     inside = surfaces.on_face(pk, ur, vr)
     status[conv & near & inside] = VALID
     left = edge | (conv & near & ~inside)  # ran off the face: the ray may go on on a neighbour, else it misses
-    # Newton failed inside the face: search for the ray's distance to the surface instead.
+    # Newton failed inside the face, or went to another sheet: search for the ray's distance to the surface instead.
     stuck = np.flatnonzero(~(conv & near) & ~edge)
     if len(stuck):
         tol = NEWTON_TOLERANCE * np.maximum(tm[stuck], tessellation.extent)
