@@ -13,7 +13,7 @@ tests each refined hit against the trim (tracing.py).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -24,7 +24,9 @@ from .surfaces import NurbsSurface
 
 @dataclass(frozen=True)
 class PatchMesh:
-    """One patch's triangles: vertices (V, 3), faces (F, 3) and per vertex its (u, v), patch index and rim flag.
+    """One patch's triangles: vertices (V, 3), faces (F, 3) and per vertex its (u, v), patch index and rim flag;
+    ``rim_edges`` (B, 2): the vertex pairs of the face's mesh boundary edges (before a reader's skirt), whose
+    polyline the rim flags lie on.
 
     Plain arrays (trimesh's `Trimesh` served only as this container and cost every process ~0.5 s of
     imports, scipy included).
@@ -35,6 +37,7 @@ class PatchMesh:
     uv: np.ndarray
     patch: np.ndarray
     rim: np.ndarray
+    rim_edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))
 
     @cached_property
     def edges_unique(self) -> np.ndarray:
@@ -101,7 +104,8 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enc
     if surface.mesh_uv is not None:
         nodes, triangles = surface.mesh_uv
         uv, faces = np.asarray(nodes, dtype=np.float64).reshape(-1, 2), np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-        rim = np.unique(_boundary_edges(faces))  # on the trim: where a neighbouring face joins
+        rim_edges = _boundary_edges(faces)  # on the trim: where a neighbouring face joins
+        rim = np.unique(rim_edges)
         uv, faces = _with_skirt(uv, faces, surface.domain)
     else:
         breaks_u, breaks_v = surface.span_breaks()
@@ -111,7 +115,8 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enc
         faces = grid_faces(len(us), len(vs))
         if surface.trim is not None:
             uv, faces = _clip_to_trim(uv, faces, surface.trim)
-        rim = np.unique(_boundary_edges(faces)) if surface.trim is not None else _domain_boundary(uv)
+        rim_edges = _boundary_edges(faces)
+        rim = np.unique(rim_edges) if surface.trim is not None else _domain_boundary(uv)
     points = surface.evaluate(uv[:, 0], uv[:, 1]).S
     if enclose:
         points = _enclosing(surface, uv, points, faces, rim)
@@ -119,7 +124,7 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enc
         points = _widened(surface, uv, points, faces, rim)
     # The grid as built, never merged: merging would mix vertices of different (u, v).
     return PatchMesh(np.ascontiguousarray(points, dtype=np.float64), np.asarray(faces, dtype=np.int64), uv,
-                     np.full(len(uv), patch_index), np.isin(np.arange(len(uv)), rim))
+                     np.full(len(uv), patch_index), np.isin(np.arange(len(uv)), rim), np.asarray(rim_edges, dtype=np.int64))
 
 
 #: Boundary vertices the seam restart asks the k-d tree for at first (more for points whose nearest all lie on their own face).
@@ -161,7 +166,8 @@ class Tessellation:
                 np.ascontiguousarray(self.face_patch, dtype=np.int64))
 
     def across_seam(self, points: np.ndarray, patch: np.ndarray, tried: np.ndarray | None = None,
-                    uv: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    uv: np.ndarray | None = None, reach: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For points on the boundary of ``patch``: the nearest boundary vertex of another patch.
 
         ``tried`` (N, m) lists patches to pass over as well (neighbours already tried: where
@@ -169,6 +175,10 @@ class Tessellation:
         ``uv`` (N, 2), a boundary vertex of the same patch counts too when its (u, v) lies more
         than half the patch's domain away: the other side of a closed face's seam (a revolved
         face's u = 0 and u = 2π), where the ray goes on on the same face.
+
+        ``reach`` (N,): only vertices within that distance of their point count (the search stops
+        widening for a point once its nearest reach beyond it: across a large face it would
+        otherwise walk the face's whole boundary).
 
         Returns (patch, u, v) of that vertex, where a hit that ran off one face's edge
         can restart on its neighbour, and the distance to it (patch −1 and inf where there
@@ -195,6 +205,8 @@ class Tessellation:
                 other |= np.any(far_side, axis=2)
             if tried is not None:
                 other &= ~np.any(cand_patch[nearest][:, :, None] == tried[todo, None, :], axis=2)
+            if reach is not None:
+                other &= dist <= reach[todo, None]
             first = np.argmax(other, axis=1)
             found = other[np.arange(len(todo)), first]
             rows, best = todo[found], nearest[found, first[found]]
@@ -203,7 +215,8 @@ class Tessellation:
             dist_out[rows] = dist[found, first[found]]
             if k == len(self.boundary):
                 break
-            todo, k = todo[~found], 8 * k
+            more = ~found if reach is None else ~found & (dist[:, -1] <= reach[todo])  # some within reach not seen yet
+            todo, k = todo[more], 8 * k
         return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
 
     @cached_property
@@ -219,9 +232,29 @@ class Tessellation:
     @cached_property
     def rim_face(self) -> np.ndarray:
         """(F,) bool: the triangles with a corner on their face's mesh boundary (where a neighbouring face may join)."""
+        return self.on_rim[self.faces].any(axis=1)
+
+    @cached_property
+    def on_rim(self) -> np.ndarray:
+        """(V,) bool: the vertices on their face's mesh boundary (`boundary`)."""
         on_rim = np.zeros(len(self.vertices), dtype=bool)
         on_rim[self.boundary] = True
-        return on_rim[self.faces].any(axis=1)
+        return on_rim
+
+    @cached_property
+    def rim_path(self) -> np.ndarray:
+        """(V, k): per vertex the other ends of the mesh boundary edges (`PatchMesh.rim_edges`) it is an end of,
+        −1 padded (two for a vertex on a simple loop; none off the rim): the face's boundary polyline near it."""
+        offsets = np.cumsum([0] + [len(m.vertices) for m in self.meshes])
+        edges = np.concatenate([np.zeros((0, 2), dtype=np.int64)]
+                               + [m.rim_edges + off for m, off in zip(self.meshes, offsets)])
+        ends = np.concatenate([edges, edges[:, ::-1]])
+        ends = ends[np.argsort(ends[:, 0], kind="stable")]
+        first = np.searchsorted(ends[:, 0], ends[:, 0])  # where each vertex's run of edges starts
+        rank = np.arange(len(ends)) - first
+        path = np.full((len(self.vertices), int(rank.max(initial=-1)) + 1), -1, dtype=np.int64)
+        path[ends[:, 0], rank] = ends[:, 1]
+        return path
 
     @cached_property
     def rim_neighbour(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -21,9 +21,9 @@ Embree from just beyond the previous one (vectorised over the rays still open, a
   or out of its trim) and no neighbouring face across that edge takes it (a restart on the
   nearest face sharing the edge, `Tessellation.across_seam`), or a Levenberg–Marquardt search
   for the ray–surface distance stalls at a positive minimum (the ray passes the surface's
-  silhouette);
+  silhouette; Newton on the distance decides where the search runs out of steps, `_passes_by`);
 - *unresolved*: neither could be shown (Newton and the search failed in the face's interior, or
-  Newton converged on another sheet far from its mesh hit).
+  the search, run too where Newton converged on another sheet, converged on it far from its mesh hit).
 
 Two places beside a valid candidate's mesh hit are refined too (`_rim_neighbours`: the faces across
 its triangle's rim, whose coincident triangle the next query skips; `_other_root`: the nearer of two
@@ -47,10 +47,12 @@ import numpy as np
 
 from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
+from ..geometry.curvature import curvatures
 from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
 from ..kernels import nurbs as nurbs_kernel
+from ..kernels import rims as rims_kernel
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance (or the part's size),
 #: and at least to the hit's distance from the origin: S's coordinates cannot be computed more finely than
@@ -63,8 +65,10 @@ NEWTON_MAX_STEPS = 8
 JUMP_LIMIT = 8.0
 GRAZING_ALLOWANCE = 10.0
 #: Mesh hits examined per ray: the first and those behind it within the error band (or past misses).
-#: Bounds the work on a ray through a stack of sheets; a ray still open after them is a fallback.
-MAX_CANDIDATES = 8
+#: Bounds the work on a ray through a stack of sheets; a ray still open after them is a fallback. 12, not 8:
+#: a ray grazing a fillet meets its mesh many times within the band, grown ×10 at grazing incidence
+#: (parts/plate.step at 480×270: 3 edge samples were still open after 8, their hits the same after 12).
+MAX_CANDIDATES = 12
 #: A mesh lies within its chord error of the surface along the normal (measured at edge midpoints,
 #: which can fall a little short of the true maximum): twice it bounds the mesh-to-surface gap.
 BAND_CHORDS = 2.0
@@ -82,9 +86,18 @@ STATIONARY_COSINE = 1e-6
 #: to float precision (on the 206-face plate, rays passing a fillet's silhouette 0.02 away stalled so).
 STALLED_DAMPING = 1e9
 
+#: Newton steps on the ray–surface distance where the search (`_rescue`) stops undecided (`_passes_by`): it starts
+#: close to the minimum, where Newton converges quadratically.
+SETTLE_STEPS = 8
+
 #: Neighbouring faces tried in turn for a hit that ran off its face: where several faces meet at a
 #: corner their boundary vertices coincide, and the nearest need not be the one the ray goes on to.
 SEAM_TRIES = 3
+#: Reach of the second and third tries beyond the first neighbour's vertex, in its longest mesh edges: the faces
+#: meeting at a corner share its vertex, their meshes' nearest vertices to it lie within an edge of it. Without it
+#: the third try on parts/plate.step's top face (longest edge 100) searched 3.5–4 units away, for 11,600 rays at
+#: 960×540 and no win (430 rays now).
+SEAM_CORNER_EDGES = 1.0
 
 #: `_rim_neighbours` looks across the rim where the mesh hit lies within this many times the two faces' summed
 #: chord errors of a rim edge: each mesh lies within its chord error of the shared edge, ×2 as `BAND_CHORDS`
@@ -205,6 +218,41 @@ def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol, steps: 
     return u, v, SurfaceDerivatives(S, Su, Sv), converged, stationary, edge
 
 
+def _passes_by(surfaces: SurfaceSet, patch, u, v, O, D, tol) -> np.ndarray:
+    """True where the ray passes the surface at a positive local minimum of its distance, found by Newton from
+    (u, v) where the search (`_rescue`) left off without deciding.
+
+    The search is Gauss–Newton, JᵀJ for the Hessian: at a positive minimum it converges only linearly, so
+    slowly that `RESCUE_STEPS` end short of `STATIONARY_COSINE` (parts/plate.step at 480×270: all 7 of its
+    fallbacks, rays passing a fillet's silhouette 0.014–0.06 away, stationary after 1,000–5,000 steps or not
+    at all). Newton on f = ½|r|², r = (S − O) − ((S − O)·D) D the point's offset from the ray, takes the full
+    Hessian: gradient (r·S_u, r·S_v), Hessian [[|S_u⊥|² + r·S_uu, S_u⊥·S_v⊥ + r·S_uv], [·, |S_v⊥|² + r·S_vv]]
+    with S_u⊥ = S_u − (S_u·D) D. A point where the Hessian is positive definite, |r| > tol and the cosine of
+    (r·S_u, r·S_v) against |r| (|S_u⊥|² + |S_v⊥|²)^½ at most `STATIONARY_COSINE` (as the search's test) is
+    such a minimum.
+    """
+    u, v = np.array(u, dtype=np.float64), np.array(v, dtype=np.float64)
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    dot = lambda x, y: np.einsum("ij,ij->i", x, y)  # noqa: E731
+    passes = np.zeros(len(u), dtype=bool)
+    for _ in range(SETTLE_STEPS + 1):
+        d = surfaces.evaluate(patch, u, v, order=2)
+        q = d.S - O
+        r = q - dot(q, D)[:, None] * D
+        Su, Sv = d.Su - dot(d.Su, D)[:, None] * D, d.Sv - dot(d.Sv, D)[:, None] * D
+        gu, gv = dot(r, d.Su), dot(r, d.Sv)
+        a, b, c = dot(Su, Su) + dot(r, d.Suu), dot(Su, Sv) + dot(r, d.Suv), dot(Sv, Sv) + dot(r, d.Svv)
+        det = a * c - b * b
+        rn = np.linalg.norm(r, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cosine = np.hypot(gu, gv) / (np.sqrt(dot(Su, Su) + dot(Sv, Sv)) * rn)
+            passes = (a > 0) & (det > 0) & (rn > tol) & (cosine <= STATIONARY_COSINE)
+            du, dv = (c * gu - b * gv) / det, (a * gv - b * gu) / det
+        du, dv = np.where(np.isfinite(du), du, 0.0), np.where(np.isfinite(dv), dv, 0.0)
+        u, v = np.clip(u - du, u0, u1), np.clip(v - dv, v0, v1)
+    return passes
+
+
 def _normals(surfaces: SurfaceSet, patch, derivs: SurfaceDerivatives, D, rows, normal, cosine, degenerate) -> None:
     """Unit normals n = (S_u × S_v)/|S_u × S_v| (not turned), n·D and the degenerate flag of ``rows``, in place.
 
@@ -266,8 +314,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     inside = surfaces.on_face(pk, ur, vr)
     status[conv & near & inside] = VALID
     left = edge | (conv & near & ~inside)  # ran off the face: the ray may go on on a neighbour, else it misses
-    # Newton failed inside the face: search for the ray's distance to the surface instead.
-    stuck = np.flatnonzero(~conv & ~edge)
+    # Newton failed inside the face, or went to another sheet: search for the ray's distance to the surface instead.
+    stuck = np.flatnonzero(~(conv & near) & ~edge)
     if len(stuck):
         tol = NEWTON_TOLERANCE * np.maximum(tm[stuck], tessellation.extent)
         u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
@@ -279,20 +327,30 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         status[stuck[ok2 & near2 & in2]] = VALID
         status[stuck[flat2]] = MISS
         left[stuck[edge2 | (ok2 & near2 & ~in2)]] = True
+        # The search slows to a crawl by a positive minimum (its steps ignore the surface's curvature): Newton there.
+        undecided = np.flatnonzero(~ok2 & ~flat2 & ~edge2)
+        if len(undecided):
+            rows = stuck[undecided]
+            status[rows[_passes_by(surfaces, pk[rows], u2[undecided], v2[undecided], O[rows], D[rows], tol[undecided])]] = MISS
     seam = np.flatnonzero(left)
     status[seam] = MISS
     # From the edge point Newton stopped at (a domain edge), or the mesh hit (a trim edge, where the
     # converged point lies on the surface's extension beyond the face).
     at = np.where(edge[seam, None], derivs.S[seam], O[seam] + tm[seam, None] * D[seam])
     tried = np.zeros((len(seam), 0), dtype=int)  # neighbours tried so far (the patch itself: by `across_seam`)
+    # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
+    reach = 2.0 * tessellation.edge_length[pk[seam]]
     restarted = [stuck]
-    for _ in range(SEAM_TRIES):
+    for attempt in range(SEAM_TRIES):
         if len(seam) == 0:
             break
-        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]))
-        # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
-        close = (pn >= 0) & (gap <= 2.0 * tessellation.edge_length[pk[seam]])
-        seam, at, tried, pn, un, vn = (x[close] for x in (seam, at, tried, pn, un, vn))
+        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]), reach)
+        close = pn >= 0
+        seam, at, tried, reach, pn, un, vn, gap = (x[close] for x in (seam, at, tried, reach, pn, un, vn, gap))
+        if attempt == 0:
+            # The faces meeting at a corner have their boundary vertices there within a mesh edge of each other: a
+            # later try's lies within the first neighbour's edge length of its vertex (`SEAM_CORNER_EDGES`).
+            reach = np.minimum(reach, gap + SEAM_CORNER_EDGES * tessellation.edge_length[pn])
         u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
         near3, t3 = _near_mesh_hit(d3, pn, O[seam], D[seam], tm[seam], band)
         ok3 &= near3 & surfaces.on_face(pn, u3, v3)
@@ -301,7 +359,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         for have, new in zip(derivs[:3], d3[:3]):
             have[won] = new[ok3]
         restarted.append(won)
-        seam, at, tried = seam[~ok3], at[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
+        seam, at, reach, tried = seam[~ok3], at[~ok3], reach[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
     _normals(surfaces, pk, derivs, D, np.concatenate(restarted), normal, cosine, degenerate)
     aside = np.zeros(n, dtype=bool)
     _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside)
@@ -353,29 +411,26 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
         have[won] = new[ok3]
 
 
-def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For each point on its triangle ``prim``: the distance to the nearest of the triangle's edges from a vertex of
-    its face's mesh boundary (inf where it has none), and that edge's boundary vertex nearest the point (−1: none).
+def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each point on its triangle ``prim``: the distance to its face's mesh boundary near the triangle (inf where
+    it has none), the distance to its triangle's chords between two boundary vertices (inf: none), and the
+    triangle's boundary vertex nearest the point (−1: none).
 
-    One boundary end suffices: a reader's mesh may run a row of slivers from its boundary nodes to
-    interior nodes a float64 rounding away in (u, v), which `_enclosing` moves off the edge.
+    Near the boundary: the face's boundary edges from the triangle's corners on it (`Tessellation.rim_path`), and the
+    triangle's edges from a boundary vertex into the face (a reader's mesh may run a row of slivers from its
+    boundary nodes to interior nodes a float64 rounding away in (u, v), which `_enclosing` moves off the edge; a
+    coarse grid's triangles reach in from the boundary too). Not a chord between two boundary vertices across
+    the face: a planar face's reader mesh is all such chords, every triangle's corners on the boundary, so
+    measured to the triangle's edges nearly every ray of parts/plate.step (143,000 first candidates at
+    960×540) was refined across the rim. Near such a chord the face across the rim is looked at only where its
+    surface passes the point (`_neighbour_passes`). By the compiled kernel `kernels.rims.rim_distances`.
     """
-    corners = tessellation.faces[prim]
-    on_rim = np.zeros(len(tessellation.vertices), dtype=bool)
-    on_rim[tessellation.boundary] = True
-    best, corner, corner_dist = np.full(len(prim), np.inf), np.full(len(prim), -1), np.full(len(prim), np.inf)
-    for i, j in ((0, 1), (1, 2), (2, 0)):
-        a, b = tessellation.vertices[corners[:, i]], tessellation.vertices[corners[:, j]]
-        ab = b - a
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.clip(np.nan_to_num(np.einsum("ij,ij->i", points - a, ab) / np.einsum("ij,ij->i", ab, ab)), 0.0, 1.0)
-        dist = np.linalg.norm(points - a - s[:, None] * ab, axis=1)
-        best = np.where(on_rim[corners[:, i]] | on_rim[corners[:, j]], np.minimum(best, dist), best)
-    for i in range(3):
-        dist = np.where(on_rim[corners[:, i]], np.linalg.norm(points - tessellation.vertices[corners[:, i]], axis=1), np.inf)
-        closer = dist < corner_dist
-        corner, corner_dist = np.where(closer, corners[:, i], corner), np.where(closer, dist, corner_dist)
-    return best, corner
+    n = len(prim)
+    dist, chords, corner = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
+    rims_kernel.rim_distances(tessellation.start_arrays[0], tessellation.vertices, tessellation.on_rim,
+                              tessellation.rim_path, np.ascontiguousarray(prim, dtype=np.int64),
+                              np.ascontiguousarray(points, dtype=np.float64), dist, chords, corner)
+    return dist, chords, corner
 
 
 def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, status, pk, ur, vr, tr, derivs,
@@ -388,7 +443,8 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     (`trace`), so the other's candidate is never examined, though its exact hit may be the nearer (on
     trimmed.3dm at 480×270, 7 pixels: a boss's top and bottom caps behind its wall's slivers). The
     other face's mesh lies there only near the edge the faces share, so where the mesh hit lies within
-    `RIM_REACH_CHORDS` times both faces' chord errors of a rim edge of its triangle, the face across the rim (the nearest
+    `RIM_REACH_CHORDS` times both faces' chord errors of its face's boundary (`_rim_corner`; near a chord across
+    the face only where the other face's surface passes that close, `_neighbour_passes`), the face across the rim (the nearest
     boundary vertex of another face to the triangle's nearest boundary vertex, `Tessellation.rim_neighbour`)
     is refined from that vertex. Its valid hit within its band of the mesh hit's distance (the skipped
     triangle's hit) and nearer than the kept one by more than float32 rounding replaces it (the same point
@@ -400,14 +456,20 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
     skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
-    edge_dist, corner = _rim_corner(tessellation, prim[rays], O[rays] + tm[rays, None] * D[rays])
+    points = O[rays] + tm[rays, None] * D[rays]
+    edge_dist, chord_dist, corner = _rim_corner(tessellation, prim[rays], points)
     pn, un, vn, gap = patch_of[corner], uv_of[corner, 0], uv_of[corner, 1], gap_of[corner]
     chord = tessellation.chord_error
     # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the corner; and the mesh hit
-    # lies within both meshes' chord errors of the edge (`RIM_REACH_CHORDS`), where the other mesh can be.
+    # lies within both meshes' chord errors of the edge (`RIM_REACH_CHORDS`), where the other mesh can be. Not the
+    # face the hit is already on (a seam restart's, from another face's triangle): Newton found its root there.
     pn_ = np.maximum(pn, 0)
-    close = (pn >= 0) & (gap <= tessellation.edge_length[pn_]) \
-        & (edge_dist <= RIM_REACH_CHORDS * (chord[pk[rays]] + chord[pn_]) + skip)
+    reach = RIM_REACH_CHORDS * (chord[pk[rays]] + chord[pn_]) + skip
+    close = (pn >= 0) & (pn != pk[rays]) & (gap <= tessellation.edge_length[pn_])
+    # Near a chord across the face (not its boundary) only where the neighbour's surface passes within that reach too.
+    across = np.flatnonzero(close & (edge_dist > reach) & (chord_dist <= reach))
+    close &= edge_dist <= reach
+    close[across] = _neighbour_passes(tessellation, surfaces, corner[across], points[across], reach[across])
     rays, pn, un, vn = rays[close], pn[close], un[close], vn[close]
     if len(rays) == 0:
         return
@@ -425,6 +487,36 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     pk[won], ur[won], vr[won], tr[won], aside[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], True
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[ok3]
+
+
+def _neighbour_passes(tessellation: Tessellation, surfaces: SurfaceSet, corner, points, reach) -> np.ndarray:
+    """Whether the face across the rim at boundary vertex ``corner`` (`Tessellation.rim_neighbour`) passes within
+    ``reach`` of ``points``: to second order about its point X there, with unit normal n and largest principal
+    curvature |κ|, the surface lies within |n·(P − X)| + ½ |κ| |P − X|² of P. As where two faces meet at a shallow
+    angle and one's mesh lies in the other's plane over its whole width (tests/test_exact_hits.py), not only near
+    their edge.
+    """
+    X, n, kappa = _rim_planes(tessellation, surfaces)
+    d = points - X[corner]
+    return np.abs(np.einsum("ij,ij->i", d, n[corner])) + 0.5 * kappa[corner] * np.einsum("ij,ij->i", d, d) <= reach
+
+
+def _rim_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per vertex: the point (V, 3), unit normal (V, 3) and largest |principal curvature| (V,) of the face across
+    the rim at its `Tessellation.rim_neighbour` (NaN off the rim; curvature 0 where undefined, at a pole: the
+    test `_neighbour_passes` then looks at more rays, not fewer). Built once per tessellation, on first use (kept in its
+    ``__dict__``, as its cached properties are)."""
+    cached = tessellation.__dict__.get("_rim_planes")
+    if cached is None:
+        patch, uv, _ = tessellation.rim_neighbour
+        X, n, kappa = np.full((len(patch), 3), np.nan), np.full((len(patch), 3), np.nan), np.full(len(patch), np.nan)
+        rows = np.flatnonzero(patch >= 0)
+        derivs = surfaces.evaluate(patch[rows], uv[rows, 0], uv[rows, 1], order=2)
+        X[rows], n[rows] = derivs.S, surfaces.normals(patch[rows], uv[rows, 0], uv[rows, 1], derivs)
+        k = curvatures(derivs, n[rows])
+        kappa[rows] = np.nan_to_num(np.maximum(np.abs(k.k1), np.abs(k.k2)), nan=0.0)
+        cached = tessellation.__dict__["_rim_planes"] = (X, n, kappa)
+    return cached
 
 
 def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
