@@ -117,3 +117,72 @@ def test_a_ray_clipping_a_saddles_ridge_stops_at_its_first_crossing():
     assert (hits.patch == 0).all(), f"{np.count_nonzero(hits.patch)} rays stopped on the plane"
     # Newton's tolerance across the ray (~1e-12 of the part) moves t by that over the incidence |N·D| ≈ √(2ε).
     assert np.all(np.abs(hits.t - expected) <= 1e-9 + 1e-11 / np.sqrt(2.0 * eps))
+
+
+def plate_with_hole() -> NurbsSurface:
+    """The plane z = 0.6 over [−1.2, 1.2]² (a bilinear patch), trimmed by a circular hole of radius 0.48 at its centre."""
+    from rtreflect.geometry.trims import Trim
+
+    points = np.array([[[x, y, 0.6] for y in (-1.2, 1.2)] for x in (-1.2, 1.2)])
+    theta = np.linspace(0.0, 2.0 * np.pi, 2000, endpoint=False)
+    hole = np.column_stack([0.5 + 0.2 * np.cos(theta), 0.5 + 0.2 * np.sin(theta)])
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    return replace(NurbsSurface.bezier(points, name="plate"), trim=Trim(square, (hole,)))
+
+
+def test_a_plane_whose_mesh_is_crossed_outside_its_trim_selects_no_ray():
+    """A plane's mesh lies in it, so the coarse trace's own refinement of a plane's triangle is the ray's one
+    crossing of that plane: a plane has no shell (`flat`), and rays through the hole of a trimmed plate in front
+    of the hood, which cross the plate's mesh there (its span grid keeps the triangles overlapping the trim, over
+    the hole too), are not looked at again. Before, every one of them entered the plate's shell before the hood
+    and was traced a second time. Their hits: the hood's where the plate's closed form falls in the hole (the hood
+    traced alone), the plate's closed form elsewhere."""
+    from rtreflect.trace.secondlook import flat
+    from rtreflect.trace.tracing import trace
+
+    scene = load_scene(SCENES / "hood.toml").with_image(160, 90, 1)
+    hood, plate = scene.surfaces[0], plate_with_hole()
+    scene = replace(scene, surfaces=(hood, plate), render=replace(scene.render, tessellation=4))
+    renderer = Renderer(scene)
+    assert flat(renderer.tessellation, renderer.surfaces).tolist() == [False, True]
+    rows, cols = np.divmod(np.arange(160 * 90), 160)
+    origins, directions = renderer.camera.rays(rows, cols)
+    hits = renderer.trace(origins, directions)
+    # The plate's closed form: the ray's crossing of z = 0.6 and its (u, v) on [−1.2, 1.2]².
+    t_plate = (0.6 - origins[:, 2]) / directions[:, 2]
+    X = origins + t_plate[:, None] * directions
+    u, v = (X[:, 0] + 1.2) / 2.4, (X[:, 1] + 1.2) / 2.4
+    on_square = (t_plate > 0) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
+    on_plate = on_square & plate.trim.contains(u, v)
+    behind = Renderer(replace(scene, surfaces=(hood,))).trace(origins, directions)
+    through = on_square & ~on_plate & behind.hit
+    assert through.sum() > 200  # rays through the hole onto the hood
+    expected_patch = np.where(on_plate, 1, np.where(behind.hit, 0, -1))
+    assert np.array_equal(hits.patch, expected_patch), np.flatnonzero(hits.patch != expected_patch)[:10]
+    np.testing.assert_allclose(hits.t[on_plate], t_plate[on_plate], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(hits.t[through], behind.t[through], rtol=0, atol=1e-9)
+    assert not hits.fallback.any()
+    # Those rays cross the plate's mesh before the hood (the coarse trace refined it, outside the trim) ...
+    mesh = renderer.accelerator.intersect(origins[through], directions[through])
+    assert (renderer.tessellation.face_patch[mesh.prim] == 1).all()
+    # ... and none is looked at again (each was before).
+    coarse = trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
+    suspects, _ = renderer.second_look.suspects(coarse, origins, directions, np.full(len(origins), np.inf))
+    assert not np.isin(np.flatnonzero(through), suspects).any(), np.isin(np.flatnonzero(through), suspects).sum()
+
+
+def test_flat_is_a_plane_meshed_exactly():
+    """`flat`: a tilted plane is (equal weights); a curved cap is not; nor a plane whose parameterisation is not
+    affine (its control net in a plane but unevenly spaced along u, or unequal weights: its chords leave the
+    surface within the plane)."""
+    from rtreflect.geometry.surfaces import SurfaceSet
+    from rtreflect.geometry.tessellation import tessellate
+    from rtreflect.trace.secondlook import flat
+
+    tilt = np.array([[[x, y, 0.3 * x - 0.2 * y + 1.0] for y in (0.0, 1.0)] for x in (0.0, 1.0)])
+    tilted = NurbsSurface.bezier(tilt, np.full((2, 2), 2.0), name="tilted")
+    weighted = NurbsSurface.bezier(tilt, np.array([[1.0, 2.0], [3.0, 1.0]]), name="weighted")  # a projective map
+    uneven = np.array([[[x, y, 0.0] for y in (0.0, 1.0)] for x in (0.0, 0.1, 1.0)])  # quadratic in u: x = 0.2u + 0.8u²
+    surfaces = [tilted, cylinder_cap(), NurbsSurface.bezier(uneven, name="uneven"), weighted]
+    tessellation = tessellate(surfaces, 4, enclose=True)
+    assert flat(tessellation, SurfaceSet(surfaces)).tolist() == [True, False, False, False]

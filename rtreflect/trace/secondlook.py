@@ -13,7 +13,11 @@ Three steps, each vectorised over the rays:
 1. **Which rays.** A *shell* encloses every sheet on both sides: the coarse mesh's vertices moved by
    ±`SHELL_CHORDS` chord errors along the exact normal, closed by walls along each face's mesh
    boundary, so the surface, which lies within the chord error of its mesh, lies inside it. A ray
-   that comes within reach of a sheet enters its shell. A ray is suspect when its kept hit is grazing
+   that comes within reach of a sheet enters its shell. A plane meshed exactly (`flat`: its mesh lies in
+   it to float32 rounding) has none: its shell would be its mesh, and the coarse trace has already refined
+   every triangle of it the ray meets before its kept hit onto the ray's one crossing of that plane (on the
+   face or not: nothing nearer is left there to find; on the 206-face plate its big planes' skirts over the
+   holes made two thirds of the suspects). A ray is suspect when its kept hit is grazing
    (|N·D| < `GRAZING_COS`); or when the shell has a triangle before the *passage* of that hit
    (t* − 2δ/|N·D|, the flat-sheet entry with a factor 2 for curvature), whatever its face (Embree's
    occlusion query, cheaper than the nearest hit); or another face's shell triangle within the passage:
@@ -100,21 +104,41 @@ def subdivided(nodes: np.ndarray, triangles: np.ndarray, levels: int) -> tuple[n
     return nodes, triangles
 
 
+def flat(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
+    """Per face: True where its shell would be its own mesh (a plane whose mesh lies in it, to float32 rounding).
+
+    The face's control net lies in one plane (so, weights being positive, does the surface) and its mesh
+    deviates from the surface by less than Embree's float32 rounding of the scene's coordinates (then its
+    ±`SHELL_CHORDS` chord-error sheets coincide with the mesh and its walls have no height).
+    """
+    rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+    out = np.zeros(len(surfaces), dtype=bool)
+    for k, surface in enumerate(surfaces.patches):
+        net = surface.points.reshape(-1, 3)
+        centred = net - net.mean(axis=0)
+        normal = np.linalg.svd(centred, full_matrices=False)[2][-1]  # the best-fitting plane's normal
+        out[k] = (np.abs(centred @ normal).max(initial=0.0) <= rounding
+                  and SHELL_CHORDS * tessellation.chord_error[k] <= rounding)
+    return out
+
+
 def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator, Tessellation]:
     """A BVH of the mesh moved by ±`SHELL_CHORDS` chord errors along the exact normals (module doc, step 1), and
     the shell as a `Tessellation` (each sheet's vertices keep their (u, v) and face; a wall triangle's face is that
-    of its rim edge), so a shell hit gives a starting (u, v) as a mesh hit does (`Tessellation.start_parameters`)."""
+    of its rim edge), so a shell hit gives a starting (u, v) as a mesh hit does (`Tessellation.start_parameters`).
+    The `flat` faces' triangles are left out (their vertices stay: the BVH's float32 origin does not move)."""
     normal = np.nan_to_num(surfaces.normals(tessellation.vertex_patch, tessellation.vertex_uv[:, 0],
                                             tessellation.vertex_uv[:, 1]))  # degenerate points: not moved
     delta = (SHELL_CHORDS * tessellation.chord_error[tessellation.vertex_patch])[:, None] * normal
     vertices = np.concatenate([tessellation.vertices + delta, tessellation.vertices - delta])
-    n, faces = len(tessellation.vertices), tessellation.faces
+    n = len(tessellation.vertices)
+    keep = ~flat(tessellation, surfaces)[tessellation.face_patch]
+    faces, patch = tessellation.faces[keep], tessellation.face_patch[keep]
     # Walls along each face's mesh boundary join the two sheets: a ray may enter the shell there, along a sheet.
     edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     rim = _once(edges)  # edges of one triangle only; edge i belongs to triangle i mod F
     a, b = edges[rim].T
     walls = np.concatenate([np.stack([a, b, b + n], 1), np.stack([a, b + n, a + n], 1)])
-    patch = tessellation.face_patch
     shell_patch = np.concatenate([patch, patch, np.tile(patch[rim % len(faces)], 2)])
     shelled = replace(tessellation, vertices=vertices, faces=np.concatenate([faces, faces + n, walls]),
                       vertex_uv=np.concatenate([tessellation.vertex_uv] * 2),
@@ -128,15 +152,18 @@ def isolated(shell_mesh: Tessellation, reach: float) -> np.ndarray:
 
     A ray's passage of its kept hit lies within its face's shell's box grown by the longest passage,
     so there it can meet no other face's shell: its walk is skipped (always so in a one-face scene).
+    A `flat` face has no shell: its box (its mesh's, where its hits lie) counts as its own, not as another's.
     """
     faces = int(shell_mesh.vertex_patch.max(initial=-1)) + 1
     lo, hi = np.full((faces, 3), np.inf), np.full((faces, 3), -np.inf)
     np.minimum.at(lo, shell_mesh.vertex_patch, shell_mesh.vertices)
     np.maximum.at(hi, shell_mesh.vertex_patch, shell_mesh.vertices)
+    shelled = np.bincount(shell_mesh.face_patch, minlength=faces) > 0
     alone = np.ones(faces, dtype=bool)
     for first in range(0, faces, ISOLATION_CHUNK):  # faces × faces box tests, in bounded memory
         rows = slice(first, min(first + ISOLATION_CHUNK, faces))
         overlap = np.all((lo[rows, None] - reach <= hi[None]) & (lo[None] <= hi[rows, None] + reach), axis=2)
+        overlap &= shelled[None]
         overlap[np.arange(overlap.shape[0]), np.arange(first, rows.stop)] = False  # a face and itself
         alone[rows] = ~overlap.any(axis=1)
     return alone
