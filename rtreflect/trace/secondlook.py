@@ -139,12 +139,56 @@ def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator
     rim = _once(edges)  # edges of one triangle only; edge i belongs to triangle i mod F
     a, b = edges[rim].T
     walls = np.concatenate([np.stack([a, b, b + n], 1), np.stack([a, b + n, a + n], 1)])
-    shell_patch = np.concatenate([patch, patch, np.tile(patch[rim % len(faces)], 2)])
-    shelled = replace(tessellation, vertices=vertices, faces=np.concatenate([faces, faces + n, walls]),
-                      vertex_uv=np.concatenate([tessellation.vertex_uv] * 2),
-                      vertex_patch=np.concatenate([tessellation.vertex_patch] * 2), face_patch=shell_patch,
+    rim_patch = patch[rim % max(len(faces), 1)]
+    box_vertices, box_faces, box_uv, box_patch = _rim_boxes(tessellation, surfaces, normal, a, b, rim_patch, 2 * n)
+    shell_patch = np.concatenate([patch, patch, np.tile(rim_patch, 2), box_patch])
+    shelled = replace(tessellation, vertices=np.concatenate([vertices, box_vertices]),
+                      faces=np.concatenate([faces, faces + n, walls, box_faces]),
+                      vertex_uv=np.concatenate([tessellation.vertex_uv] * 2 + [box_uv]),
+                      vertex_patch=np.concatenate([tessellation.vertex_patch] * 2 + [box_patch[::12].repeat(8)]),
+                      face_patch=shell_patch,
                       boundary=np.concatenate([tessellation.boundary, tessellation.boundary + n]))
     return Accelerator(shelled), shelled
+
+
+#: A box's 12 triangles over its 8 corners, corner index 4·(end b) + 2·(outer side) + (lower sheet).
+_BOX = np.array([[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6],  # the ends at a and at b
+                 [0, 1, 5], [0, 5, 4], [2, 6, 7], [2, 7, 3],  # the inner and the outer side
+                 [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]])  # the upper and the lower sheet
+
+
+def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndarray, a: np.ndarray, b: np.ndarray,
+               patch: np.ndarray, first: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Closed boxes around the rim edges ab that lie on their face's domain edge: (vertices, triangles numbered
+    from ``first``, their (u, v), their face).
+
+    There the mesh cannot reach past the edge (a reader's skirt is clamped to the domain, `_with_skirt`; a span
+    grid ends there), so the band between the edge's chord and the curved edge it cuts off lay outside the sheets
+    and the walls: a ray crossing the face there met neither its mesh nor its shell (on the plate, rays through a
+    hole onto a fillet's top circle, where its seam restart from the plane starts on the far side of the fillet's
+    periodic seam: 5 pixels' edge samples at 480×270, found before only because they crossed the plane's shell,
+    see `flat`). The box reaches `SHELL_CHORDS` times the chord's deviation from the edge (its sagitta, at the
+    midpoint) across the edge on either side in the tangent plane, and the sheets' ±`SHELL_CHORDS` chord errors
+    along the normals.
+    """
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    (ua, va), (ub, vb) = tessellation.vertex_uv[a].T, tessellation.vertex_uv[b].T
+    on_edge = ((ua == u0) & (ub == u0)) | ((ua == u1) & (ub == u1)) | ((va == v0) & (vb == v0)) | ((va == v1) & (vb == v1))
+    a, b, patch = a[on_edge], b[on_edge], patch[on_edge]
+    pa, pb = tessellation.vertices[a], tessellation.vertices[b]
+    mid = 0.5 * (tessellation.vertex_uv[a] + tessellation.vertex_uv[b])
+    sagitta = np.linalg.norm(surfaces.evaluate(patch, mid[:, 0], mid[:, 1]).S - 0.5 * (pa + pb), axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        across = np.cross(pb - pa, normal[a] + normal[b])
+        across = np.nan_to_num(across / np.linalg.norm(across, axis=1, keepdims=True))  # degenerate edges: none
+    width = (SHELL_CHORDS * sagitta)[:, None]
+    depth = (SHELL_CHORDS * tessellation.chord_error[patch])[:, None]
+    corners = [end + side * width * across + sheet * depth * n_end
+               for end, n_end in ((pa, normal[a]), (pb, normal[b])) for side in (-1.0, 1.0) for sheet in (1.0, -1.0)]
+    vertices = np.stack(corners, axis=1).reshape(-1, 3)
+    faces = (first + 8 * np.arange(len(a)))[:, None, None] + _BOX[None]
+    uv = np.stack([tessellation.vertex_uv[a]] * 4 + [tessellation.vertex_uv[b]] * 4, axis=1).reshape(-1, 2)
+    return vertices, faces.reshape(-1, 3), uv, np.repeat(patch, 12)
 
 
 def isolated(shell_mesh: Tessellation, reach: float) -> np.ndarray:
