@@ -15,6 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from rtreflect.exchange.load import load_scene
 from rtreflect.geometry.surfaces import NurbsSurface
@@ -186,3 +187,60 @@ def test_flat_is_a_plane_meshed_exactly():
     surfaces = [tilted, cylinder_cap(), NurbsSurface.bezier(uneven, name="uneven"), weighted]
     tessellation = tessellate(surfaces, 4, enclose=True)
     assert flat(tessellation, SurfaceSet(surfaces)).tolist() == [True, False, False, False]
+
+
+def quarter_ring() -> NurbsSurface:
+    """The flat ring ρ ∈ [0.5, 1], φ ∈ [0°, 90°] in z = 0: a rational quadratic quarter circle (u) times the radius
+    (v). A plane, but not `flat`: its parameterisation is not affine, its outer edge v = 1 an arc in its own plane."""
+    c = np.sqrt(0.5)
+    arc = np.array([[1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    points = np.array([[[r * x, r * y, 0.0] for r in (0.5, 1.0)] for x, y in arc])
+    return NurbsSurface.bezier(points, np.array([[1.0, 1.0], [c, c], [1.0, 1.0]]), name="ring")
+
+
+def test_a_ray_between_a_rim_chord_and_the_edge_curving_in_the_tangent_plane_hits():
+    """At tessellation 2 the ring's outer edge has chords over 0°–45° and 45°–90°, up to 1 − cos 22.5° = 0.076 inside
+    the arc, in the ring's own plane: the enclosing mesh keeps its rim on the edge, and the shell's sheets (moved
+    along the normal, ±z) end at walls on the chords, so a ray straight down between a chord and the arc met
+    neither mesh nor shell and missed. Boxes around the rim edges on the domain's edge (`_rim_boxes`) select it;
+    the second look's finer mesh, widened past the edge, finds it: t = 3 (the ring's closed form)."""
+    scene = load_scene(SCENES / "hood.toml").with_image(32, 18, 1)
+    scene = replace(scene, surfaces=(quarter_ring(),), render=replace(scene.render, tessellation=2))
+    renderer = Renderer(scene)
+    phi = np.deg2rad(np.concatenate([np.linspace(2.0, 43.0, 12), np.linspace(47.0, 88.0, 12)]))
+    chord = np.cos(np.deg2rad(22.5)) / np.cos(phi - np.deg2rad(np.where(phi < np.pi / 4, 22.5, 67.5)))
+    phi, fraction = np.meshgrid(phi, [0.2, 0.5, 0.8], indexing="ij")
+    rho = (chord[:, None] + fraction * (1.0 - chord[:, None])).ravel()  # between the chord and the arc
+    phi = phi.ravel()
+    origins = np.stack([rho * np.cos(phi), rho * np.sin(phi), np.full(rho.size, 3.0)], axis=1)
+    directions = np.tile([0.0, 0.0, -1.0], (rho.size, 1))
+    assert not (renderer.accelerator.intersect(origins, directions).prim >= 0).any()  # the coarse mesh misses them
+    hits = renderer.trace(origins, directions)
+    assert hits.hit.all(), f"{np.count_nonzero(~hits.hit)} of {rho.size} rays missed"
+    assert not hits.fallback.any()
+    np.testing.assert_allclose(hits.t, 3.0, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(hits.P[:, :2], axis=1), rho, rtol=0, atol=1e-9)
+
+
+def test_plate_edge_sample_keeps_open_cascades_nearer_face():
+    """parts/plate.step at 480×270, pixel (129, 148), edge sample 14 of 4×4: the ray passes the top plane's skirt over
+    a hole (outside its trim), then meets face 14 1.53 before the face 115 it stored. The shell's first hit along
+    it was the plane's, where Newton from the shell found nothing; planes now have no shell (`flat`) and the first
+    shell hit is face 14's, whose Newton start finds the crossing. OCCT's nearest intersection is the reference."""
+    pytest.importorskip("OCP")
+    import sys
+
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.trace.camera import sample_offsets
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_cad_hits import occt_nearest
+    from test_cad_reader import occt_faces
+
+    part = SCENES.parent / "parts" / "plate.step"
+    renderer = Renderer(resolve(load_scene(part).with_image(480, 270, 1)))
+    origins, directions = renderer.camera.rays(np.array([129]), np.array([148]), sample_offsets(4)[14:15])
+    hits = renderer.trace(origins, directions)
+    expected = np.einsum("ij,ij->i", occt_nearest(occt_faces(part)[0], origins, directions) - origins, directions)
+    assert hits.hit.all() and not hits.fallback.any()
+    np.testing.assert_allclose(hits.t, expected, rtol=0, atol=1e-6 * renderer.tessellation.extent)

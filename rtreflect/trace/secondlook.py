@@ -12,7 +12,9 @@ Three steps, each vectorised over the rays:
 
 1. **Which rays.** A *shell* encloses every sheet on both sides: the coarse mesh's vertices moved by
    ±`SHELL_CHORDS` chord errors along the exact normal, closed by walls along each face's mesh
-   boundary, so the surface, which lies within the chord error of its mesh, lies inside it. A ray
+   boundary, so the surface, which lies within the chord error of its mesh, lies inside it; where the
+   mesh ends on the face's domain edge, which may curve in the tangent plane past its chords, boxes
+   around those rim edges enclose the band between chord and edge too (`_rim_boxes`). A ray
    that comes within reach of a sheet enters its shell. A plane meshed exactly (`flat`: its mesh lies in
    it to float32 rounding) has none: its shell would be its mesh, and the coarse trace has already refined
    every triangle of it the ray meets before its kept hit onto the ray's one crossing of that plane (on the
@@ -167,20 +169,21 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
     and the walls: a ray crossing the face there met neither its mesh nor its shell (on the plate, rays through a
     hole onto a fillet's top circle, where its seam restart from the plane starts on the far side of the fillet's
     periodic seam: 5 pixels' edge samples at 480×270, found before only because they crossed the plane's shell,
-    see `flat`). The box reaches `SHELL_CHORDS` times the chord's deviation from the edge (its sagitta, at the
-    midpoint) across the edge on either side in the tangent plane, and the sheets' ±`SHELL_CHORDS` chord errors
-    along the normals.
+    see `flat`). The box reaches `SHELL_CHORDS` times the edge's deviation from its chord across it in the
+    tangent plane (the sagitta's component there, at the midpoint) on either side, and the sheets'
+    ±`SHELL_CHORDS` chord errors along the normals.
     """
     u0, u1, v0, v1 = surfaces.domains(patch)
     (ua, va), (ub, vb) = tessellation.vertex_uv[a].T, tessellation.vertex_uv[b].T
     on_edge = ((ua == u0) & (ub == u0)) | ((ua == u1) & (ub == u1)) | ((va == v0) & (vb == v0)) | ((va == v1) & (vb == v1))
     a, b, patch = a[on_edge], b[on_edge], patch[on_edge]
     pa, pb = tessellation.vertices[a], tessellation.vertices[b]
-    mid = 0.5 * (tessellation.vertex_uv[a] + tessellation.vertex_uv[b])
-    sagitta = np.linalg.norm(surfaces.evaluate(patch, mid[:, 0], mid[:, 1]).S - 0.5 * (pa + pb), axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         across = np.cross(pb - pa, normal[a] + normal[b])
         across = np.nan_to_num(across / np.linalg.norm(across, axis=1, keepdims=True))  # degenerate edges: none
+    # The edge's sagitta across the chord in the tangent plane (along the normal the sheets' depth covers it).
+    mid = 0.5 * (tessellation.vertex_uv[a] + tessellation.vertex_uv[b])
+    sagitta = np.abs(np.einsum("ij,ij->i", surfaces.evaluate(patch, mid[:, 0], mid[:, 1]).S - 0.5 * (pa + pb), across))
     width = (SHELL_CHORDS * sagitta)[:, None]
     depth = (SHELL_CHORDS * tessellation.chord_error[patch])[:, None]
     corners = [end + side * width * across + sheet * depth * n_end
