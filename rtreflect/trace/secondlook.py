@@ -184,6 +184,10 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
     # The edge's sagitta across the chord in the tangent plane (along the normal the sheets' depth covers it).
     mid = 0.5 * (tessellation.vertex_uv[a] + tessellation.vertex_uv[b])
     sagitta = np.abs(np.einsum("ij,ij->i", surfaces.evaluate(patch, mid[:, 0], mid[:, 1]).S - 0.5 * (pa + pb), across))
+    # An edge straight in the tangent plane (a cylinder's seam, a circle curving along the normal): its wall suffices.
+    rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+    bent = SHELL_CHORDS * sagitta > rounding
+    a, b, patch, pa, pb, across, sagitta = (x[bent] for x in (a, b, patch, pa, pb, across, sagitta))
     width = (SHELL_CHORDS * sagitta)[:, None]
     depth = (SHELL_CHORDS * tessellation.chord_error[patch])[:, None]
     corners = [end + side * width * across + sheet * depth * n_end
