@@ -128,7 +128,8 @@ def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator
     """A BVH of the mesh moved by ±`SHELL_CHORDS` chord errors along the exact normals (module doc, step 1), and
     the shell as a `Tessellation` (each sheet's vertices keep their (u, v) and face; a wall triangle's face is that
     of its rim edge), so a shell hit gives a starting (u, v) as a mesh hit does (`Tessellation.start_parameters`).
-    The `flat` faces' triangles are left out (their vertices stay: the BVH's float32 origin does not move)."""
+    The `flat` faces' triangles are left out, not their vertices (which keep the BVH's box, hence its float32
+    origin, that of the mesh); the `_rim_boxes` are added."""
     normal = np.nan_to_num(surfaces.normals(tessellation.vertex_patch, tessellation.vertex_uv[:, 0],
                                             tessellation.vertex_uv[:, 1]))  # degenerate points: not moved
     delta = (SHELL_CHORDS * tessellation.chord_error[tessellation.vertex_patch])[:, None] * normal
