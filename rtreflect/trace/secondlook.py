@@ -176,7 +176,8 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
     """
     u0, u1, v0, v1 = surfaces.domains(patch)
     (ua, va), (ub, vb) = tessellation.vertex_uv[a].T, tessellation.vertex_uv[b].T
-    on_edge = ((ua == u0) & (ub == u0)) | ((ua == u1) & (ub == u1)) | ((va == v0) & (vb == v0)) | ((va == v1) & (vb == v1))
+    on_edge = (((ua == u0) & (ub == u0)) | ((ua == u1) & (ub == u1))
+               | ((va == v0) & (vb == v0)) | ((va == v1) & (vb == v1)))
     a, b, patch = a[on_edge], b[on_edge], patch[on_edge]
     pa, pb = tessellation.vertices[a], tessellation.vertices[b]
     with np.errstate(invalid="ignore", divide="ignore"):
