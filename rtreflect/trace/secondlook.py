@@ -180,9 +180,10 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
                | ((va == v0) & (vb == v0)) | ((va == v1) & (vb == v1)))
     a, b, patch = a[on_edge], b[on_edge], patch[on_edge]
     pa, pb = tessellation.vertices[a], tessellation.vertices[b]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        across = np.cross(pb - pa, normal[a] + normal[b])
-        across = np.nan_to_num(across / np.linalg.norm(across, axis=1, keepdims=True))  # degenerate edges: none
+    across = np.cross(pb - pa, normal[a] + normal[b])
+    big = np.abs(across).max(axis=1, initial=0.0, keepdims=True)  # scaled first: tiny edges' norms do not underflow
+    across = np.divide(across, big, out=np.zeros_like(across), where=big > 0)  # degenerate edges: none
+    across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1.0)
     # The edge's sagitta across the chord in the tangent plane (along the normal the sheets' depth covers it).
     mid = 0.5 * (tessellation.vertex_uv[a] + tessellation.vertex_uv[b])
     sagitta = np.abs(np.einsum("ij,ij->i", surfaces.evaluate(patch, mid[:, 0], mid[:, 1]).S - 0.5 * (pa + pb), across))
