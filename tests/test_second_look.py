@@ -15,6 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from rtreflect.exchange.load import load_scene
 from rtreflect.geometry.surfaces import NurbsSurface
@@ -117,3 +118,129 @@ def test_a_ray_clipping_a_saddles_ridge_stops_at_its_first_crossing():
     assert (hits.patch == 0).all(), f"{np.count_nonzero(hits.patch)} rays stopped on the plane"
     # Newton's tolerance across the ray (~1e-12 of the part) moves t by that over the incidence |N·D| ≈ √(2ε).
     assert np.all(np.abs(hits.t - expected) <= 1e-9 + 1e-11 / np.sqrt(2.0 * eps))
+
+
+def plate_with_hole() -> NurbsSurface:
+    """The plane z = 0.6 over [−1.2, 1.2]² (a bilinear patch), trimmed by a circular hole of radius 0.48 at its centre."""
+    from rtreflect.geometry.trims import Trim
+
+    points = np.array([[[x, y, 0.6] for y in (-1.2, 1.2)] for x in (-1.2, 1.2)])
+    theta = np.linspace(0.0, 2.0 * np.pi, 2000, endpoint=False)
+    hole = np.column_stack([0.5 + 0.2 * np.cos(theta), 0.5 + 0.2 * np.sin(theta)])
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    return replace(NurbsSurface.bezier(points, name="plate"), trim=Trim(square, (hole,)))
+
+
+def test_a_plane_whose_mesh_is_crossed_outside_its_trim_selects_no_ray():
+    """A plane's mesh lies in it, so the coarse trace's own refinement of a plane's triangle is the ray's one
+    crossing of that plane: a plane has no shell (`flat`), and rays through the hole of a trimmed plate in front
+    of the hood, which cross the plate's mesh there (its span grid keeps the triangles overlapping the trim, over
+    the hole too), are not looked at again. Before, every one of them entered the plate's shell before the hood
+    and was traced a second time. Their hits: the hood's where the plate's closed form falls in the hole (the hood
+    traced alone), the plate's closed form elsewhere."""
+    from rtreflect.trace.secondlook import flat
+    from rtreflect.trace.tracing import trace
+
+    scene = load_scene(SCENES / "hood.toml").with_image(160, 90, 1)
+    hood, plate = scene.surfaces[0], plate_with_hole()
+    scene = replace(scene, surfaces=(hood, plate), render=replace(scene.render, tessellation=4))
+    renderer = Renderer(scene)
+    assert flat(renderer.tessellation, renderer.surfaces).tolist() == [False, True]
+    rows, cols = np.divmod(np.arange(160 * 90), 160)
+    origins, directions = renderer.camera.rays(rows, cols)
+    hits = renderer.trace(origins, directions)
+    # The plate's closed form: the ray's crossing of z = 0.6 and its (u, v) on [−1.2, 1.2]².
+    t_plate = (0.6 - origins[:, 2]) / directions[:, 2]
+    X = origins + t_plate[:, None] * directions
+    u, v = (X[:, 0] + 1.2) / 2.4, (X[:, 1] + 1.2) / 2.4
+    on_square = (t_plate > 0) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
+    on_plate = on_square & plate.trim.contains(u, v)
+    behind = Renderer(replace(scene, surfaces=(hood,))).trace(origins, directions)
+    through = on_square & ~on_plate & behind.hit
+    assert through.sum() > 200  # rays through the hole onto the hood
+    expected_patch = np.where(on_plate, 1, np.where(behind.hit, 0, -1))
+    assert np.array_equal(hits.patch, expected_patch), np.flatnonzero(hits.patch != expected_patch)[:10]
+    np.testing.assert_allclose(hits.t[on_plate], t_plate[on_plate], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(hits.t[through], behind.t[through], rtol=0, atol=1e-9)
+    assert not hits.fallback.any()
+    # Those rays cross the plate's mesh before the hood (the coarse trace refined it, outside the trim) ...
+    mesh = renderer.accelerator.intersect(origins[through], directions[through])
+    assert (renderer.tessellation.face_patch[mesh.prim] == 1).all()
+    # ... and none is looked at again (each was before).
+    coarse = trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
+    suspects, _ = renderer.second_look.suspects(coarse, origins, directions, np.full(len(origins), np.inf))
+    assert not np.isin(np.flatnonzero(through), suspects).any(), np.isin(np.flatnonzero(through), suspects).sum()
+
+
+def test_flat_is_a_plane_meshed_exactly():
+    """`flat`: a tilted plane is (equal weights); a curved cap is not; nor a plane whose parameterisation is not
+    affine (its control net in a plane but unevenly spaced along u, or unequal weights: its chords leave the
+    surface within the plane)."""
+    from rtreflect.geometry.surfaces import SurfaceSet
+    from rtreflect.geometry.tessellation import tessellate
+    from rtreflect.trace.secondlook import flat
+
+    tilt = np.array([[[x, y, 0.3 * x - 0.2 * y + 1.0] for y in (0.0, 1.0)] for x in (0.0, 1.0)])
+    tilted = NurbsSurface.bezier(tilt, np.full((2, 2), 2.0), name="tilted")
+    weighted = NurbsSurface.bezier(tilt, np.array([[1.0, 2.0], [3.0, 1.0]]), name="weighted")  # a projective map
+    uneven = np.array([[[x, y, 0.0] for y in (0.0, 1.0)] for x in (0.0, 0.1, 1.0)])  # quadratic in u: x = 0.2u + 0.8u²
+    surfaces = [tilted, cylinder_cap(), NurbsSurface.bezier(uneven, name="uneven"), weighted]
+    tessellation = tessellate(surfaces, 4, enclose=True)
+    assert flat(tessellation, SurfaceSet(surfaces)).tolist() == [True, False, False, False]
+
+
+def quarter_ring() -> NurbsSurface:
+    """The flat ring ρ ∈ [0.5, 1], φ ∈ [0°, 90°] in z = 0: a rational quadratic quarter circle (u) times the radius
+    (v). A plane, but not `flat`: its parameterisation is not affine, its outer edge v = 1 an arc in its own plane."""
+    c = np.sqrt(0.5)
+    arc = np.array([[1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    points = np.array([[[r * x, r * y, 0.0] for r in (0.5, 1.0)] for x, y in arc])
+    return NurbsSurface.bezier(points, np.array([[1.0, 1.0], [c, c], [1.0, 1.0]]), name="ring")
+
+
+def test_a_ray_between_a_rim_chord_and_the_edge_curving_in_the_tangent_plane_hits():
+    """At tessellation 2 the ring's outer edge has chords over 0°–45° and 45°–90°, up to 1 − cos 22.5° = 0.076 inside
+    the arc, in the ring's own plane: the enclosing mesh keeps its rim on the edge, and the shell's sheets (moved
+    along the normal, ±z) end at walls on the chords, so a ray straight down between a chord and the arc met
+    neither mesh nor shell and missed. Boxes around the rim edges on the domain's edge (`_rim_boxes`) select it;
+    the second look's finer mesh, widened past the edge, finds it: t = 3 (the ring's closed form)."""
+    scene = load_scene(SCENES / "hood.toml").with_image(32, 18, 1)
+    scene = replace(scene, surfaces=(quarter_ring(),), render=replace(scene.render, tessellation=2))
+    renderer = Renderer(scene)
+    phi = np.deg2rad(np.concatenate([np.linspace(2.0, 43.0, 12), np.linspace(47.0, 88.0, 12)]))
+    chord = np.cos(np.deg2rad(22.5)) / np.cos(phi - np.deg2rad(np.where(phi < np.pi / 4, 22.5, 67.5)))
+    phi, fraction = np.meshgrid(phi, [0.2, 0.5, 0.8], indexing="ij")
+    rho = (chord[:, None] + fraction * (1.0 - chord[:, None])).ravel()  # between the chord and the arc
+    phi = phi.ravel()
+    origins = np.stack([rho * np.cos(phi), rho * np.sin(phi), np.full(rho.size, 3.0)], axis=1)
+    directions = np.tile([0.0, 0.0, -1.0], (rho.size, 1))
+    assert not (renderer.accelerator.intersect(origins, directions).prim >= 0).any()  # the coarse mesh misses them
+    hits = renderer.trace(origins, directions)
+    assert hits.hit.all(), f"{np.count_nonzero(~hits.hit)} of {rho.size} rays missed"
+    assert not hits.fallback.any()
+    np.testing.assert_allclose(hits.t, 3.0, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(hits.P[:, :2], axis=1), rho, rtol=0, atol=1e-9)
+
+
+def test_plate_edge_sample_keeps_open_cascades_nearer_face():
+    """parts/plate.step at 480×270, pixel (129, 148), edge sample 14 of 4×4: the ray passes the top plane's skirt over
+    a hole (outside its trim), then meets face 14 1.53 before the face 115 it stored. The shell's first hit along
+    it was the plane's, where Newton from the shell found nothing; planes now have no shell (`flat`) and the first
+    shell hit is face 14's, whose Newton start finds the crossing. OCCT's nearest intersection is the reference."""
+    pytest.importorskip("OCP")
+    import sys
+
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.trace.camera import sample_offsets
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_cad_hits import occt_nearest
+    from test_cad_reader import occt_faces
+
+    part = SCENES.parent / "parts" / "plate.step"
+    renderer = Renderer(resolve(load_scene(part).with_image(480, 270, 1)))
+    origins, directions = renderer.camera.rays(np.array([129]), np.array([148]), sample_offsets(4)[14:15])
+    hits = renderer.trace(origins, directions)
+    expected = np.einsum("ij,ij->i", occt_nearest(occt_faces(part)[0], origins, directions) - origins, directions)
+    assert hits.hit.all() and not hits.fallback.any()
+    np.testing.assert_allclose(hits.t, expected, rtol=0, atol=1e-6 * renderer.tessellation.extent)

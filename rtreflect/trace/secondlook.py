@@ -12,8 +12,14 @@ Three steps, each vectorised over the rays:
 
 1. **Which rays.** A *shell* encloses every sheet on both sides: the coarse mesh's vertices moved by
    ±`SHELL_CHORDS` chord errors along the exact normal, closed by walls along each face's mesh
-   boundary, so the surface, which lies within the chord error of its mesh, lies inside it. A ray
-   that comes within reach of a sheet enters its shell. A ray is suspect when its kept hit is grazing
+   boundary, so the surface, which lies within the chord error of its mesh, lies inside it; where the
+   mesh ends on the face's domain edge, which may curve in the tangent plane past its chords, boxes
+   around those rim edges enclose the band between chord and edge too (`_rim_boxes`). A ray
+   that comes within reach of a sheet enters its shell. A plane meshed exactly (`flat`: its mesh lies in
+   it to float32 rounding) has none: its shell would be its mesh, and the coarse trace has already refined
+   every triangle of it the ray meets before its kept hit onto the ray's one crossing of that plane (on the
+   face or not: nothing nearer is left there to find; on the 206-face plate its big planes' skirts over the
+   holes made two thirds of the suspects). A ray is suspect when its kept hit is grazing
    (|N·D| < `GRAZING_COS`); or when the shell has a triangle before the *passage* of that hit
    (t* − 2δ/|N·D|, the flat-sheet entry with a factor 2 for curvature), whatever its face (Embree's
    occlusion query, cheaper than the nearest hit); or another face's shell triangle within the passage:
@@ -100,27 +106,99 @@ def subdivided(nodes: np.ndarray, triangles: np.ndarray, levels: int) -> tuple[n
     return nodes, triangles
 
 
+def flat(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
+    """Per face: True where its shell would be its own mesh (a plane whose mesh lies in it, to float32 rounding).
+
+    The face's control net lies in one plane (so, weights being positive, does the surface) and its mesh
+    deviates from the surface by less than Embree's float32 rounding of the scene's coordinates (then its
+    ±`SHELL_CHORDS` chord-error sheets coincide with the mesh and its walls have no height).
+    """
+    rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+    out = np.zeros(len(surfaces), dtype=bool)
+    for k, surface in enumerate(surfaces.patches):
+        net = surface.points.reshape(-1, 3)
+        centred = net - net.mean(axis=0)
+        normal = np.linalg.svd(centred, full_matrices=False)[2][-1]  # the best-fitting plane's normal
+        out[k] = (np.abs(centred @ normal).max(initial=0.0) <= rounding
+                  and SHELL_CHORDS * tessellation.chord_error[k] <= rounding)
+    return out
+
+
 def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator, Tessellation]:
     """A BVH of the mesh moved by ±`SHELL_CHORDS` chord errors along the exact normals (module doc, step 1), and
     the shell as a `Tessellation` (each sheet's vertices keep their (u, v) and face; a wall triangle's face is that
-    of its rim edge), so a shell hit gives a starting (u, v) as a mesh hit does (`Tessellation.start_parameters`)."""
+    of its rim edge), so a shell hit gives a starting (u, v) as a mesh hit does (`Tessellation.start_parameters`).
+    The `flat` faces' triangles are left out, not their vertices (which keep the BVH's box, hence its float32
+    origin, that of the mesh); the `_rim_boxes` are added."""
     normal = np.nan_to_num(surfaces.normals(tessellation.vertex_patch, tessellation.vertex_uv[:, 0],
                                             tessellation.vertex_uv[:, 1]))  # degenerate points: not moved
     delta = (SHELL_CHORDS * tessellation.chord_error[tessellation.vertex_patch])[:, None] * normal
     vertices = np.concatenate([tessellation.vertices + delta, tessellation.vertices - delta])
-    n, faces = len(tessellation.vertices), tessellation.faces
+    n = len(tessellation.vertices)
+    keep = ~flat(tessellation, surfaces)[tessellation.face_patch]
+    faces, patch = tessellation.faces[keep], tessellation.face_patch[keep]
     # Walls along each face's mesh boundary join the two sheets: a ray may enter the shell there, along a sheet.
     edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     rim = _once(edges)  # edges of one triangle only; edge i belongs to triangle i mod F
     a, b = edges[rim].T
     walls = np.concatenate([np.stack([a, b, b + n], 1), np.stack([a, b + n, a + n], 1)])
-    patch = tessellation.face_patch
-    shell_patch = np.concatenate([patch, patch, np.tile(patch[rim % len(faces)], 2)])
-    shelled = replace(tessellation, vertices=vertices, faces=np.concatenate([faces, faces + n, walls]),
-                      vertex_uv=np.concatenate([tessellation.vertex_uv] * 2),
-                      vertex_patch=np.concatenate([tessellation.vertex_patch] * 2), face_patch=shell_patch,
+    rim_patch = patch[rim % max(len(faces), 1)]
+    box_vertices, box_faces, box_uv, box_patch = _rim_boxes(tessellation, surfaces, normal, a, b, rim_patch, 2 * n)
+    shell_patch = np.concatenate([patch, patch, np.tile(rim_patch, 2), box_patch])
+    shelled = replace(tessellation, vertices=np.concatenate([vertices, box_vertices]),
+                      faces=np.concatenate([faces, faces + n, walls, box_faces]),
+                      vertex_uv=np.concatenate([tessellation.vertex_uv] * 2 + [box_uv]),
+                      vertex_patch=np.concatenate([tessellation.vertex_patch] * 2 + [box_patch[::12].repeat(8)]),
+                      face_patch=shell_patch,
                       boundary=np.concatenate([tessellation.boundary, tessellation.boundary + n]))
     return Accelerator(shelled), shelled
+
+
+#: A box's 12 triangles over its 8 corners, corner index 4·(end b) + 2·(outer side) + (lower sheet).
+_BOX = np.array([[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6],  # the ends at a and at b
+                 [0, 1, 5], [0, 5, 4], [2, 6, 7], [2, 7, 3],  # the inner and the outer side
+                 [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]])  # the upper and the lower sheet
+
+
+def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndarray, a: np.ndarray, b: np.ndarray,
+               patch: np.ndarray, first: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Closed boxes around the rim edges ab that lie on their face's domain edge: (vertices, triangles numbered
+    from ``first``, their (u, v), their face).
+
+    There the mesh cannot reach past the edge (a reader's skirt is clamped to the domain, `_with_skirt`; a span
+    grid ends there), so the band between the edge's chord and the curved edge it cuts off lay outside the sheets
+    and the walls: a ray crossing the face there met neither its mesh nor its shell (on the plate, rays through a
+    hole onto a fillet's top circle, where its seam restart from the plane starts on the far side of the fillet's
+    periodic seam: 5 pixels' edge samples at 480×270, found before only because they crossed the plane's shell,
+    see `flat`). The box reaches `SHELL_CHORDS` times the edge's deviation from its chord across it in the
+    tangent plane (the sagitta's component there, at the midpoint) on either side, and the sheets'
+    ±`SHELL_CHORDS` chord errors along the normals.
+    """
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    (ua, va), (ub, vb) = tessellation.vertex_uv[a].T, tessellation.vertex_uv[b].T
+    on_edge = (((ua == u0) & (ub == u0)) | ((ua == u1) & (ub == u1))
+               | ((va == v0) & (vb == v0)) | ((va == v1) & (vb == v1)))
+    a, b, patch = a[on_edge], b[on_edge], patch[on_edge]
+    pa, pb = tessellation.vertices[a], tessellation.vertices[b]
+    across = np.cross(pb - pa, normal[a] + normal[b])
+    big = np.abs(across).max(axis=1, initial=0.0, keepdims=True)  # scaled first: tiny edges' norms do not underflow
+    across = np.divide(across, big, out=np.zeros_like(across), where=big > 0)  # degenerate edges: none
+    across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1.0)
+    # The edge's sagitta across the chord in the tangent plane (along the normal the sheets' depth covers it).
+    mid = 0.5 * (tessellation.vertex_uv[a] + tessellation.vertex_uv[b])
+    sagitta = np.abs(np.einsum("ij,ij->i", surfaces.evaluate(patch, mid[:, 0], mid[:, 1]).S - 0.5 * (pa + pb), across))
+    # An edge straight in the tangent plane (a cylinder's seam, a circle curving along the normal): its wall suffices.
+    rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+    bent = SHELL_CHORDS * sagitta > rounding
+    a, b, patch, pa, pb, across, sagitta = (x[bent] for x in (a, b, patch, pa, pb, across, sagitta))
+    width = (SHELL_CHORDS * sagitta)[:, None]
+    depth = (SHELL_CHORDS * tessellation.chord_error[patch])[:, None]
+    corners = [end + side * width * across + sheet * depth * n_end
+               for end, n_end in ((pa, normal[a]), (pb, normal[b])) for side in (-1.0, 1.0) for sheet in (1.0, -1.0)]
+    vertices = np.stack(corners, axis=1).reshape(-1, 3)
+    faces = (first + 8 * np.arange(len(a)))[:, None, None] + _BOX[None]
+    uv = np.stack([tessellation.vertex_uv[a]] * 4 + [tessellation.vertex_uv[b]] * 4, axis=1).reshape(-1, 2)
+    return vertices, faces.reshape(-1, 3), uv, np.repeat(patch, 12)
 
 
 def isolated(shell_mesh: Tessellation, reach: float) -> np.ndarray:
@@ -128,15 +206,18 @@ def isolated(shell_mesh: Tessellation, reach: float) -> np.ndarray:
 
     A ray's passage of its kept hit lies within its face's shell's box grown by the longest passage,
     so there it can meet no other face's shell: its walk is skipped (always so in a one-face scene).
+    A `flat` face has no shell: its box (its mesh's, where its hits lie) counts as its own, not as another's.
     """
     faces = int(shell_mesh.vertex_patch.max(initial=-1)) + 1
     lo, hi = np.full((faces, 3), np.inf), np.full((faces, 3), -np.inf)
     np.minimum.at(lo, shell_mesh.vertex_patch, shell_mesh.vertices)
     np.maximum.at(hi, shell_mesh.vertex_patch, shell_mesh.vertices)
+    shelled = np.bincount(shell_mesh.face_patch, minlength=faces) > 0
     alone = np.ones(faces, dtype=bool)
     for first in range(0, faces, ISOLATION_CHUNK):  # faces × faces box tests, in bounded memory
         rows = slice(first, min(first + ISOLATION_CHUNK, faces))
         overlap = np.all((lo[rows, None] - reach <= hi[None]) & (lo[None] <= hi[rows, None] + reach), axis=2)
+        overlap &= shelled[None]
         overlap[np.arange(overlap.shape[0]), np.arange(first, rows.stop)] = False  # a face and itself
         alone[rows] = ~overlap.any(axis=1)
     return alone
