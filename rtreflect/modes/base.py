@@ -46,6 +46,9 @@ class Stripes:
     # Ray parameter along s to test for occlusion before a candidate counts as lit (reflection lines:
     # the nearest tube within its radius); None when the mode's stripes are not seen along a ray.
     occlusion_t: np.ndarray | None = None
+    # The mode's φ where finding the stripes gave it on the way (reflection lines: Ulmet's f, from the same pass
+    # over the reflected rays as the tubes), else None.
+    phi: np.ndarray | None = None
 
 
 def even_stripes(phi: np.ndarray, levels: np.ndarray, half_width: float) -> Stripes:

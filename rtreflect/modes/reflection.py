@@ -41,7 +41,7 @@ class ReflectionMode:
 
     def stripes(self, p: SurfacePoints) -> Stripes:
         tubes = self.lights.reach(p.R, p.s)
-        return Stripes(tubes.line_id, tubes.line_dist, tubes.candidate, tubes.t_candidate)
+        return Stripes(tubes.line_id, tubes.line_dist, tubes.candidate, tubes.t_candidate, phi=tubes.f)
 
     def surface_rgb(self, p: SurfacePoints) -> None:
         return None
