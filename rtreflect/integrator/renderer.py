@@ -216,7 +216,7 @@ class Renderer:
             return self._trace(origins, directions)
         hits = Hits.blank(len(origins), np.zeros(len(origins), dtype=bool))
         if len(rays):
-            traced = self._trace(origins[rays], directions[rays])
+            traced = self._trace(np.take(origins, rays, axis=0), np.take(directions, rays, axis=0))  # `shade`: np.take
             for name in Hits.__dataclass_fields__:
                 getattr(hits, name)[rays] = getattr(traced, name)
         return hits
