@@ -305,7 +305,8 @@ class Renderer:
             return None
         k = np.ones(len(shading.directions))
         idx = np.flatnonzero(shading.hits.hit)
-        k[idx] = shade_factor(shading.hits.N[idx], shading.directions[idx], self.scene.render.shading)
+        k[idx] = shade_factor(np.take(shading.hits.N, idx, axis=0), np.take(shading.directions, idx, axis=0),
+                              self.scene.render.shading)  # np.take: as in `shade`
         return k
 
     def pixel_aovs(self, rows: np.ndarray, cols: np.ndarray) -> dict[str, np.ndarray]:
