@@ -36,8 +36,9 @@ def reflect_rays(directions: np.ndarray, rows: np.ndarray, n: np.ndarray, s: np.
     """`reflect` of the rays ``directions[rows]`` (a = −D, for either camera) at their unit normals n (len(rows), 3):
     written into ``s[rows]`` and returned as an array of their own (`kernels.tubes.reflect_rays`)."""
     out = np.empty((len(rows), 3))
-    tubes_kernel.reflect_rays(np.ascontiguousarray(directions, dtype=np.float64), np.ascontiguousarray(rows, dtype=np.int64),
-                              np.ascontiguousarray(n, dtype=np.float64), out, s)
+    tubes_kernel.reflect_rays(np.ascontiguousarray(directions, dtype=np.float64),
+                              np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(n, dtype=np.float64),
+                              out, s)
     return out
 
 
@@ -120,10 +121,9 @@ class TubeLights:
         For m = k, c = j this is f = [(s × r)·j + z0 (s·i)] / (s·k). By the kernel `kernels.tubes.ulmet_f`
         (`reach` gives the same f beside the nearest tube).
         """
+        f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
         out = np.empty(len(R))
-        tubes_kernel.ulmet_f(np.ascontiguousarray(self.Q, dtype=np.float64), np.ascontiguousarray(self.m, dtype=np.float64),
-                             np.ascontiguousarray(self.e, dtype=np.float64), np.ascontiguousarray(R, dtype=np.float64),
-                             np.ascontiguousarray(s, dtype=np.float64), out)
+        tubes_kernel.ulmet_f(f64(self.Q), f64(self.m), f64(self.e), f64(R), f64(s), out)
         return out
 
     def nearest(self, dist: TubeDistances) -> tuple[np.ndarray, np.ndarray]:
