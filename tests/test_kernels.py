@@ -8,12 +8,15 @@
 * the fused first refinement of mesh hits (start, Newton, near test, t, normal) against its steps
   done separately: the triangle's barycentric (u, v), rhino3dm's points and normals, the numpy tests;
 * the compiled Levenberg–Marquardt search, answer for answer its numpy implementation (tests/reference.py);
+* the reflected direction (paper eq. 3) against the Householder matrix I − 2 n nᵀ, and Ulmet's f found in the tube
+  search's pass, bit for bit `ulmet_f` and against the brute-force plane crossing; the renderer's f AOV is that f;
 * a second process finds every kernel in numba's cache (no compilation).
 """
 
 from __future__ import annotations
 
 import subprocess
+from dataclasses import replace
 import sys
 from pathlib import Path
 
@@ -25,7 +28,7 @@ from rtreflect.exchange.bpt import read_bpt
 from rtreflect.exchange.load import load_scene
 from rtreflect.geometry.surfaces import SurfaceSet
 from rtreflect.integrator.renderer import Renderer
-from rtreflect.modes.lights import TubeLights
+from rtreflect.modes.lights import TubeLights, reflect, reflect_rays
 from rtreflect.trace import tracing
 from rtreflect.trace.tracing import refine
 
@@ -85,6 +88,64 @@ def test_rays_along_the_tubes(length):
     assert (dist.ahead == np.isinf(length)).all() and np.isinf(dist.t).all()
     reach = lights.reach(R, s)
     assert (reach.line_id >= 0).all() == np.isinf(length)
+
+
+def test_reflected_directions_are_the_householder_mirror_images():
+    """Eq. (3), s = 2 (a·n) n − a: the mirror image (I − 2 n nᵀ) D of the ray direction D = −a. `reflect_rays`
+    writes exactly the rows asked for, the same bits as `reflect`, and leaves every other row alone."""
+    rng = np.random.default_rng(11)
+    D = rng.normal(size=(400, 3))
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    n = rng.normal(size=(400, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    householder = np.eye(3) - 2.0 * n[:, :, None] * n[:, None, :]
+    s = reflect(-D, n)
+    np.testing.assert_allclose(s, np.einsum("nij,nj->ni", householder, D), rtol=0, atol=1e-14)
+    rows = rng.choice(400, 150, replace=False)
+    full = np.full((400, 3), 7.0)
+    mine = reflect_rays(D, rows, n[rows], full)
+    assert np.array_equal(mine.view(np.int64), reflect(-D[rows], n[rows]).view(np.int64))
+    assert np.array_equal(full[rows], mine)
+    assert (np.delete(full, rows, axis=0) == 7.0).all()
+
+
+def test_tube_search_gives_ulmet_f_of_the_same_ray():
+    """`reach`'s f is `ulmet_f` to the bit, and both are the plane crossing solved by brute force: R + t s =
+    Q + α e + β c, f = α where t > 0 (NaN where the ray turns away from the plane)."""
+    rng = np.random.default_rng(12)
+    lights = tubes(6.0)
+    R = rng.uniform(-3, 3, (300, 3))
+    s = rng.normal(size=(300, 3))
+    s /= np.linalg.norm(s, axis=1, keepdims=True)
+    f = lights.reach(R, s).f
+    assert np.array_equal(f.view(np.int64), lights.ulmet_f(R, s).view(np.int64))
+    ahead = 0
+    for row in range(len(R)):
+        t, alpha, _ = np.linalg.solve(np.column_stack([s[row], -lights.e, -lights.c]), lights.Q - R[row])
+        if t > 1e-9:
+            ahead += 1
+            assert f[row] == pytest.approx(alpha, rel=1e-9, abs=1e-9)
+        elif t < -1e-9:
+            assert np.isnan(f[row])
+    assert 50 < ahead < 250, "the sample must mix rays towards and away from the light plane"
+
+
+@pytest.mark.parametrize("name", ["hood", "hood_curvature"])
+def test_f_aov_is_ulmet_f_of_the_stored_hit(name):
+    """The renderer takes f from the tubes' pass: it is Ulmet's f of the pixel-centre ray's hit P and reflected
+    direction s (recomputed here from the shading's own rows), NaN where no ray hit, in any mode (reflection lines,
+    a curvature map)."""
+    scene = load_scene(ROOT / "scenes" / f"{name}.toml")
+    scene = replace(scene, image=replace(scene.image, width=48, height=27, samples=1))
+    renderer = Renderer(scene)
+    rows, cols = np.divmod(np.arange(48 * 27), 48)
+    aovs = renderer.pixel_aovs(rows, cols)
+    shading = aovs["shading"]
+    hit = shading.hits.hit
+    assert 100 < hit.sum() < len(hit)
+    expected = renderer.lights.ulmet_f(shading.hits.P[hit], reflect(-shading.directions[hit], shading.hits.N[hit]))
+    assert np.array_equal(aovs["f"][hit].view(np.int64), expected.view(np.int64))
+    assert np.isnan(aovs["f"][~hit]).all()
 
 
 def test_patch_mix_evaluates_bit_for_bit_as_each_patch():
@@ -201,7 +262,7 @@ from pathlib import Path
 from rtreflect.exchange.bpt import read_bpt
 from rtreflect.geometry.surfaces import SurfaceSet
 from rtreflect.trace.tracing import refine
-from rtreflect.modes.lights import TubeLights
+from rtreflect.modes.lights import TubeLights, reflect, reflect_rays
 from rtreflect.kernels import nurbs, tubes
 surfaces = SurfaceSet(read_bpt(Path("scenes/teapot.bpt")))
 k, u = np.array([0, 3]), np.array([0.2, 0.7])

@@ -29,7 +29,7 @@ from ..clock import StageClock
 from .analytic import BENDING, EDGE_SAMPLES, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbour_inside, neighbours, stripe_coverage, uv_footprint
 from .cull import RayBox
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
-from ..modes.lights import TubeLights, reflect
+from ..modes.lights import TubeLights, reflect, reflect_rays
 from ..modes.profile import stripe_reach, stripe_weight
 from ..modes.shading import shade_factor
 from ..modes.base import SurfacePoints, level_offset, neighbour_levels, seen_at
@@ -75,6 +75,8 @@ class Shading:
     # (`Stripes.level_t`).
     offset: np.ndarray | None = None
     level_t: np.ndarray | None = None
+    # Ulmet's f (the f AOV; NaN where no hit), from the tubes' pass over the reflected rays (`TubeReach.f`).
+    f: np.ndarray | None = None
 
     def take(self, rows: np.ndarray | slice) -> "Shading":
         """The rays ``rows`` (indices: copies; a slice: views)."""
@@ -82,7 +84,8 @@ class Shading:
         some = lambda x: None if x is None else x[rows]  # noqa: E731
         return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
                        self.line_dist[rows], self.lit[rows], some(self.surface_rgb), some(self.stripe_dist),
-                       some(self.level), some(self.offset), some(self.level_t))
+                       some(self.level), some(self.offset), some(self.level_t),
+                       some(self.f))
 
 
 @dataclass
@@ -217,7 +220,7 @@ class Renderer:
             return self._trace(origins, directions)
         hits = Hits.blank(len(origins), np.zeros(len(origins), dtype=bool))
         if len(rays):
-            traced = self._trace(origins[rays], directions[rays])
+            traced = self._trace(np.take(origins, rays, axis=0), np.take(directions, rays, axis=0))  # `shade`: np.take
             for name in Hits.__dataclass_fields__:
                 getattr(hits, name)[rays] = getattr(traced, name)
         return hits
@@ -244,14 +247,16 @@ class Renderer:
         lit = np.zeros(n_rays, dtype=bool)
         line_id, line_dist = np.full(n_rays, -1), np.full(n_rays, np.nan)
         idx = np.flatnonzero(hits.hit)
-        shading = Shading(hits, origins, directions, s, line_id, line_dist, lit, level=np.full(n_rays, -1))
+        shading = Shading(hits, origins, directions, s, line_id, line_dist, lit, level=np.full(n_rays, -1),
+                          f=np.full(n_rays, np.nan))
         if len(idx) == 0:
             return shading
-        R, n = hits.P[idx], hits.N[idx]
+        # np.take: the same rows as hits.P[idx], gathered ~4× faster (numpy's fancy indexing of (N, 3) rows is slow).
+        R, n = np.take(hits.P, idx, axis=0), np.take(hits.N, idx, axis=0)
         with self.clock.stage(self.mode.stage):
             # a, the unit vector towards the eye, is the reversed ray direction for either camera.
-            s[idx] = reflect(-directions[idx], n)
-            points = SurfacePoints(R, n, s[idx], hits.patch[idx], hits.u[idx], hits.v[idx])
+            s_hit = reflect_rays(directions, idx, n, s)  # the hits' rows of s, also kept on their own
+            points = SurfacePoints(R, n, s_hit, hits.patch[idx], hits.u[idx], hits.v[idx])
             stripes = self.mode.stripes(points)
             shading.level[idx] = stripes.level_id
             for name in ("offset", "level_t"):
@@ -259,12 +264,13 @@ class Renderer:
                     setattr(shading, name, np.full(n_rays, np.nan))
                     getattr(shading, name)[idx] = getattr(stripes, name)
             # line.id and line.dist are the tubes' in every mode (the EXR contract): the reflection mode's stripes
-            # are those; another mode's nearest level follows from its φ (channel phi) and levels.
+            # are those; another mode's nearest level follows from its φ (channel phi) and levels. Ulmet's f comes
+            # from the same pass over the reflected rays.
             if isinstance(self.mode, ReflectionMode):
-                line_id[idx], line_dist[idx] = stripes.level_id, stripes.level_dist
+                line_id[idx], line_dist[idx], shading.f[idx] = stripes.level_id, stripes.level_dist, stripes.phi
             else:
-                tubes = self.lights.reach(R, s[idx])
-                line_id[idx], line_dist[idx] = tubes.line_id, tubes.line_dist
+                tubes = self.lights.reach(R, s_hit)
+                line_id[idx], line_dist[idx], shading.f[idx] = tubes.line_id, tubes.line_dist, tubes.f
             rgb = self.mode.surface_rgb(points)
             if rgb is not None:
                 shading.surface_rgb = np.full((n_rays, 3), np.nan)
@@ -280,10 +286,11 @@ class Renderer:
         if t_tube is None or not occlude:  # a mode not seen along a ray: its stripes are lit where they are
             lit[idx[cand]] = True
         elif len(cand):
-            start = self.accelerator.surface_origins(R[cand], n[cand], hits.patch[idx[cand]])
+            rows = idx[cand]
+            start = self.accelerator.surface_origins(R[cand], n[cand], points.patch[cand])
             with self.clock.stage("occlusion (Embree)"):
-                blocked = occluded(self.accelerator, self.tessellation, self.surfaces, start, s[idx[cand]], t_tube[cand])
-            lit[idx[cand]] = ~blocked
+                blocked = occluded(self.accelerator, self.tessellation, self.surfaces, start, s_hit[cand], t_tube[cand])
+            lit[rows] = ~blocked
         return shading
 
     def line_weight(self, shading: Shading) -> np.ndarray:
@@ -306,7 +313,8 @@ class Renderer:
             return None
         k = np.ones(len(shading.directions))
         idx = np.flatnonzero(shading.hits.hit)
-        k[idx] = shade_factor(shading.hits.N[idx], shading.directions[idx], self.scene.render.shading)
+        k[idx] = shade_factor(np.take(shading.hits.N, idx, axis=0), np.take(shading.directions, idx, axis=0),
+                              self.scene.render.shading)  # np.take: as in `shade`
         return k
 
     def pixel_aovs(self, rows: np.ndarray, cols: np.ndarray) -> dict[str, np.ndarray]:
@@ -316,9 +324,12 @@ class Renderer:
     def aovs(self, shading: Shading) -> dict[str, np.ndarray]:
         hits = shading.hits
         with self.clock.stage("AOVs"):
-            f = np.full(len(hits.hit), np.nan)
             idx = np.flatnonzero(hits.hit)
-            f[idx] = self.lights.ulmet_f(hits.P[idx], shading.s[idx])
+            if shading.f is not None:  # `shade` found it with the tubes
+                f = shading.f
+            else:
+                f = np.full(len(hits.hit), np.nan)
+                f[idx] = self.lights.ulmet_f(hits.P[idx], shading.s[idx])
             if isinstance(self.mode, ReflectionMode):  # its φ is Ulmet's f itself: not computed twice
                 phi = f
             else:

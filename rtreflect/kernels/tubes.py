@@ -10,6 +10,10 @@ B_k = Q + c_k e with unit direction c. With ρ = R − Q (so b = B_k − R = c_k
 using 1 − (s·c)² = |s × c|² for unit s and c. Where s ∥ c (|s × c| <= `PARALLEL`), d_k = |b × c|,
 the point-to-line distance, and the ray runs along the tube: t = ∞, ahead only if the tube is
 infinite. A tube is *ahead* where t > 0 and |τ| <= length/2.
+
+Ulmet's function (paper eq. 5, general form) reads the same reflected ray where it meets the tubes'
+plane (through Q, unit normal m): t = m·(Q − R)/(m·s), f = e·(R + t s − Q), NaN where t <= 0.
+`reach` writes it beside the nearest tube (the renderer's f AOV), so the ray is read once.
 """
 
 from __future__ import annotations
@@ -57,6 +61,54 @@ def _pair(Q, c, e, R, i, ck, half_length, pre):
     return math.sqrt(y0 * y0 + y1 * y1 + y2 * y2), np.inf, not half_length < np.inf
 
 
+@njit(inline="always", **JIT)
+def _reflect_at(a0, a1, a2, n, i, out, j):
+    """Paper eq. (3), s = 2 (a·n) n − a, of unit a and row i of n into out[j]; a·n summed in `numpy.einsum`'s
+    order (terms 0, 2, then 1), as the former array form, so s is the same to the bit."""
+    twice = 2.0 * ((a0 * n[i, 0] + a2 * n[i, 2]) + a1 * n[i, 1])
+    out[j, 0] = twice * n[i, 0] - a0
+    out[j, 1] = twice * n[i, 1] - a1
+    out[j, 2] = twice * n[i, 2] - a2
+
+
+@njit(**JIT)
+def reflect(a, n, out):
+    """Reflected directions (`_reflect_at`) of every row a, n."""
+    for i in range(a.shape[0]):
+        _reflect_at(a[i, 0], a[i, 1], a[i, 2], n, i, out, i)
+
+
+@njit(**JIT)
+def reflect_rays(D, rows, n, s_rows, s):
+    """Reflected directions of the rays D[rows] (a = −D towards the eye) at unit normals n (one per row): into
+    s_rows and into the rows of s, without the gathered, negated and scattered (N, 3) copies."""
+    for j in range(rows.shape[0]):
+        i = rows[j]
+        _reflect_at(-D[i, 0], -D[i, 1], -D[i, 2], n, j, s_rows, j)
+        s[i, 0], s[i, 1], s[i, 2] = s_rows[j, 0], s_rows[j, 1], s_rows[j, 2]
+
+
+@njit(inline="always", **JIT)
+def _ulmet_at(Q, m, e, R, s, i):
+    """Ulmet's f of point i (module doc): the e-coordinate of R + t s in the light plane, NaN where t <= 0.
+
+    The operations in the order of the former numpy form (`numpy.einsum`'s 3-term dot sums terms 0, 2, then 1),
+    so f is the same to the bit."""
+    t = (((Q[0] - R[i, 0]) * m[0] + (Q[2] - R[i, 2]) * m[2]) + (Q[1] - R[i, 1]) * m[1]) / (
+        (s[i, 0] * m[0] + s[i, 2] * m[2]) + s[i, 1] * m[1])
+    if not t > 0:
+        return np.nan
+    return (((R[i, 0] + t * s[i, 0]) - Q[0]) * e[0] + ((R[i, 2] + t * s[i, 2]) - Q[2]) * e[2]) + (
+        (R[i, 1] + t * s[i, 1]) - Q[1]) * e[1]
+
+
+@njit(**JIT)
+def ulmet_f(Q, m, e, R, s, out):
+    """Ulmet's f (eq. 5) of every point (`_ulmet_at`)."""
+    for i in range(R.shape[0]):
+        out[i] = _ulmet_at(Q, m, e, R, s, i)
+
+
 @njit(**JIT)
 def distances(Q, c, e, c_k, half_length, R, s, d, t, ahead):
     """d, t, ahead (N, K) of every point and tube (eq. 4)."""
@@ -67,13 +119,15 @@ def distances(Q, c, e, c_k, half_length, R, s, d, t, ahead):
 
 
 @njit(**JIT)
-def reach(Q, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, line_sigma, line_t, candidate, t_candidate,
-          t_of):
+def reach(Q, m, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, line_sigma, line_t, candidate,
+          t_candidate, t_of, f):
     """Per point, without the (N, K) tables: the nearest tube ahead (index, d, the signed distance as `signed`
     and its t; first of equals; −1 and NaN where none is), whether a tube ahead lies within the radius and
-    the t of the nearest such (∞ where none), and where tube.shape[0] > 0 the t of tube[i]."""
+    the t of the nearest such (∞ where none), where tube.shape[0] > 0 the t of tube[i], and Ulmet's f
+    (`_ulmet_at`)."""
     want = tube.shape[0] > 0
     for i in range(R.shape[0]):
+        f[i] = _ulmet_at(Q, m, e, R, s, i)
         pre = _prepare(Q, c, e, R, s, i)
         best, best_d, best_t, hit, t_hit = -1, np.inf, np.nan, False, np.inf
         for k in range(c_k.shape[0]):

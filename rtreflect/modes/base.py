@@ -54,6 +54,9 @@ class Stripes:
     # Along the ray (`Mode.along_ray`): the ray parameter along s of the nearest level (its tube's closest
     # approach, or the light plane): how far the analytic path tests for occlusion near a stripe; else None.
     level_t: np.ndarray | None = None
+    # The mode's φ where finding the stripes gave it on the way (reflection lines: Ulmet's f, from the same pass
+    # over the reflected rays as the tubes), else None.
+    phi: np.ndarray | None = None
 
 
 def even_stripes(phi: np.ndarray, levels: np.ndarray, half_width: float) -> Stripes:

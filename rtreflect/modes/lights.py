@@ -25,8 +25,21 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def reflect(a: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Reflected direction, paper eq. (3): s = 2 (a·n) n − a, for unit a and n."""
-    return 2.0 * _dot(a, n)[:, None] * n - a
+    """Reflected direction, paper eq. (3): s = 2 (a·n) n − a, for unit a and n (N, 3) (`kernels.tubes.reflect`)."""
+    a, n = np.ascontiguousarray(a, dtype=np.float64), np.ascontiguousarray(n, dtype=np.float64)
+    out = np.empty(a.shape)
+    tubes_kernel.reflect(a, n, out)
+    return out
+
+
+def reflect_rays(directions: np.ndarray, rows: np.ndarray, n: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """`reflect` of the rays ``directions[rows]`` (a = −D, for either camera) at their unit normals n (len(rows), 3):
+    written into ``s[rows]`` and returned as an array of their own (`kernels.tubes.reflect_rays`)."""
+    out = np.empty((len(rows), 3))
+    tubes_kernel.reflect_rays(np.ascontiguousarray(directions, dtype=np.float64),
+                              np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(n, dtype=np.float64),
+                              out, s)
+    return out
 
 
 @dataclass(frozen=True)
@@ -49,6 +62,7 @@ class TubeReach:
     candidate: np.ndarray  # some tube ahead lies within the radius
     t_candidate: np.ndarray  # ray parameter t of the nearest such (inf where none)
     t_of: np.ndarray | None  # t of the tube asked for per point (`reach`'s ``tube``), else None
+    f: np.ndarray  # Ulmet's f of the same reflected ray (`TubeLights.ulmet_f`), NaN where it never meets the plane
 
 
 @dataclass(frozen=True)
@@ -106,12 +120,13 @@ class TubeLights:
         """Ulmet's function, general form of paper eq. (5): the e-coordinate where the reflected ray meets the light plane.
 
         t = m·(Q − R)/(m·s), f = e·(R + t s − Q); NaN where t ≤ 0 (the ray never reaches the plane).
-        For m = k, c = j this is f = [(s × r)·j + z0 (s·i)] / (s·k).
+        For m = k, c = j this is f = [(s × r)·j + z0 (s·i)] / (s·k). By the kernel `kernels.tubes.ulmet_f`
+        (`reach` gives the same f beside the nearest tube).
         """
-        t = self.plane_t(R, s)
-        with np.errstate(invalid="ignore"):
-            f = _dot(R + t[:, None] * s - self.Q, self.e)
-        return np.where(t > 0, f, np.nan)
+        f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+        out = np.empty(len(R))
+        tubes_kernel.ulmet_f(f64(self.Q), f64(self.m), f64(self.e), f64(R), f64(s), out)
+        return out
 
     def nearest(self, dist: TubeDistances) -> tuple[np.ndarray, np.ndarray]:
         """Index and distance d of the nearest tube ahead of each point; −1 and NaN where none is."""
@@ -144,16 +159,18 @@ class TubeLights:
 
         No (points, tubes) table is built, so memory does not grow with the number of tubes; each
         point's values depend on its own row only. The nearest tube's signed distance and t come in the
-        same pass (the analytic path's σ and occlusion distance, `modes.base.Stripes`). With ``tube`` (one tube index per point), also
-        the ray parameter t of closest approach to that tube.
+        same pass (the analytic path's σ and occlusion distance, `modes.base.Stripes`). With ``tube`` (one tube
+        index per point), also the ray parameter t of closest approach to that tube. Ulmet's f (`ulmet_f`) comes
+        along: the renderer's f AOV without a second pass over the rays.
         """
         Q, c, e, c_k, half = self._kernel_args()
         n = len(R)
         line_id, line_dist, line_sigma, line_t = np.empty(n, dtype=np.int64), np.empty(n), np.empty(n), np.empty(n)
         candidate, t_candidate = np.empty(n, dtype=bool), np.empty(n)
-        t_of = np.full(n, np.nan)
+        t_of, f = np.full(n, np.nan), np.empty(n)
         which = np.zeros(0, dtype=np.int64) if tube is None else np.ascontiguousarray(tube, dtype=np.int64)
-        tubes_kernel.reach(Q, c, e, c_k, float(self.radius), half, np.ascontiguousarray(R, dtype=np.float64),
-                           np.ascontiguousarray(s, dtype=np.float64), which, line_id, line_dist, line_sigma, line_t,
-                           candidate, t_candidate, t_of)
-        return TubeReach(line_id, line_dist, line_sigma, line_t, candidate, t_candidate, None if tube is None else t_of)
+        tubes_kernel.reach(Q, np.ascontiguousarray(self.m, dtype=np.float64), c, e, c_k, float(self.radius), half,
+                           np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(s, dtype=np.float64), which,
+                           line_id, line_dist, line_sigma, line_t, candidate, t_candidate, t_of, f)
+        return TubeReach(line_id, line_dist, line_sigma, line_t, candidate, t_candidate, None if tube is None else t_of,
+                         f)

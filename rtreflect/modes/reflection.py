@@ -39,7 +39,8 @@ class ReflectionMode(Mode):
 
     def stripes(self, p: SurfacePoints) -> Stripes:
         tubes = self.lights.reach(p.R, p.s)
-        return Stripes(tubes.line_id, tubes.line_dist, tubes.candidate, tubes.t_candidate, tubes.line_sigma, tubes.line_t)
+        return Stripes(tubes.line_id, tubes.line_dist, tubes.candidate, tubes.t_candidate, tubes.line_sigma,
+                       tubes.line_t, phi=tubes.f)
 
     def surface_rgb(self, p: SurfacePoints) -> None:
         return None
