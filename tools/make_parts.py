@@ -176,10 +176,12 @@ def write_assembly(shape, path: Path) -> None:
     writer.Write(str(path))
 
 
-def write_iges(shape, path: Path) -> None:
+def write_iges(shape, path: Path, mode: int = 1) -> None:
+    """``mode`` 1: B-rep (the default: faces mode turns cylinders into slow revolutions); 0: faces mode (trimmed
+    surfaces, entity 144)."""
     from OCP.IGESControl import IGESControl_Writer
 
-    writer = IGESControl_Writer("MM", 1)  # 1: B-rep mode (faces mode turns cylinders into slow revolutions)
+    writer = IGESControl_Writer("MM", mode)
     writer.AddShape(shape)
     writer.ComputeModel()
     if not writer.Write(str(path)):

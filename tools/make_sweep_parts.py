@@ -322,24 +322,26 @@ def write_step_in(shape, path: Path, unit: str) -> None:
         Interface_Static.SetCVal_s("write.step.unit", "MM")
 
 
-def write_iges_faces(shape, path: Path) -> None:
-    from OCP.IGESControl import IGESControl_Writer
+def new_3dm():
+    """An empty Rhino model in millimetres."""
+    import rhino3dm as r
 
-    writer = IGESControl_Writer("MM", 0)  # 0: faces mode (trimmed surfaces, entity 144)
-    writer.AddShape(shape)
-    writer.ComputeModel()
-    if not writer.Write(str(path)):
+    model = r.File3dm()
+    model.Settings.ModelUnitSystem = r.UnitSystem.Millimeters
+    return model
+
+
+def save_3dm(model, path: Path) -> None:
+    if not model.Write(str(path), 7):  # 7: the Rhino 7 format
         raise SystemExit(f"could not write {path}")
 
 
 def write_sphere_3dm(path: Path) -> None:
     import rhino3dm as r
 
-    model = r.File3dm()
-    model.Settings.ModelUnitSystem = r.UnitSystem.Millimeters
+    model = new_3dm()
     model.Objects.AddBrep(r.Brep.CreateFromSphere(r.Sphere(r.Point3d(0, 0, 0), 15.0)))
-    if not model.Write(str(path), 7):
-        raise SystemExit(f"could not write {path}")
+    save_3dm(model, path)
 
 
 def write_rhino_mix_3dm(path: Path) -> None:
@@ -348,8 +350,7 @@ def write_rhino_mix_3dm(path: Path) -> None:
     (seam and a pole), a capped pipe extrusion with a hole (Extrusion: inner profile), and a trimmed plane."""
     import rhino3dm as r
 
-    model = r.File3dm()
-    model.Settings.ModelUnitSystem = r.UnitSystem.Millimeters
+    model = new_3dm()
     n = 5
     surface = r.NurbsSurface.Create(3, True, 4, 4, n, n)
     for i in range(n):
@@ -375,8 +376,7 @@ def write_rhino_mix_3dm(path: Path) -> None:
                for t in [2 * math.pi * k / 30 for k in range(30)]]
     outline.append(outline[0])
     model.Objects.AddBrep(r.Brep.CreateTrimmedPlane(r.Plane.WorldXY(), r.Curve.CreateControlPointCurve(outline, 3)))
-    if not model.Write(str(path), 7):
-        raise SystemExit(f"could not write {path}")
+    save_3dm(model, path)
 
 
 PARTS = {
@@ -394,7 +394,7 @@ PARTS = {
     "sliver.step": lambda p: write_step(sliver(), p),
     "small_fillet.step": lambda p: write_step(small_fillet(), p),
     "brep.igs": lambda p: write_iges(shelled_box(), p),
-    "faces.igs": lambda p: write_iges_faces(shelled_box(), p),
+    "faces.igs": lambda p: write_iges(shelled_box(), p, mode=0),
     "sphere.3dm": write_sphere_3dm,
     "rhino_mix.3dm": write_rhino_mix_3dm,
 }
