@@ -83,15 +83,13 @@ def test_sweep_part_first_hits_match_open_cascade(tmp_path, name):
     assert np.all(cos <= GRAZING_COS), (name, pixels[only_occt], cos)
 
 
-@pytest.mark.xfail(strict=True, reason="tracing.py _rim_neighbours looks across a rim only to the nearest boundary vertex "
-                                       "of ONE other face; at a corner where three faces meet that is the wrong one")
 def test_shelled_box_rim_corner_keeps_the_nearer_face(tmp_path):
     """shelled_box.step at 480×270, pixel (39, 371): the ray meets the rim (plane z = 20, face 9) next to the corner
     (35, 30, 20) where the rim, a planar wall (face 5) and a corner fillet (face 7) meet. Embree returns the fillet's
     triangle at the rim's own distance; Newton on the fillet lands 0.0038 farther, down the wall, and the rim's
     coincident triangle is skipped. `_rim_neighbours` looks across the rim from the corner vertex, whose nearest
-    other-face vertex belongs to the wall (face 5), not the rim: refined from the rim's own boundary vertex, the
-    hit is OCCT's. (validate reports the pixel: "1 pixels store an exact hit behind a nearer exact surface point".)"""
+    other-face vertex belongs to the wall (face 5), not the rim: every face meeting at the corner is refined
+    (`tracing._corner_faces`), and from the rim's own boundary vertex the hit is OCCT's. (validate reports the pixel: "1 pixels store an exact hit behind a nearer exact surface point".)"""
     path = tmp_path / "shelled_box.step"
     sweep.PARTS["shelled_box.step"](path)
     renderer = Renderer(resolve(load_scene(path).with_image(480, 270, 1)))

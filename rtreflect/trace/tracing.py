@@ -103,6 +103,10 @@ SEAM_CORNER_EDGES = 1.0
 #: chord errors of a rim edge: each mesh lies within its chord error of the shared edge, ×2 as `BAND_CHORDS`
 #: (the measured chord error can fall short).
 RIM_REACH_CHORDS = 2.0
+#: Boundary vertices `_corner_faces` asks the k-d tree for around each boundary vertex: the faces meeting at a
+#: B-rep vertex (3 at a box's corner, 4–6 at a fillet's setback or a cone's apex) with room for a pole's coincident
+#: vertices of one face.
+CORNER_VERTICES = 8
 #: Below this |N·D| a valid hit may be the farther of two close crossings of its sheet: the nearer one is
 #: sought (`_other_root`). As the second look's grazing threshold (78°): ~6% of the teapot's hits at 960×540.
 OTHER_ROOT_COS = 0.2
@@ -446,9 +450,12 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     `RIM_REACH_CHORDS` times both faces' chord errors of its face's boundary (`_rim_corner`; near a chord across
     the face only where the other face's surface passes that close, `_neighbour_passes`), the face across the rim (the nearest
     boundary vertex of another face to the triangle's nearest boundary vertex, `Tessellation.rim_neighbour`)
-    is refined from that vertex. Its valid hit within its band of the mesh hit's distance (the skipped
-    triangle's hit) and nearer than the kept one by more than float32 rounding replaces it (the same point
-    on the shared edge does not: pixels there keep their face).
+    is refined from that vertex. Where that vertex is a corner where 3+ faces meet, every other face with a
+    boundary vertex there is refined too (`_corner_faces`): the nearest other vertex is only one of them (at
+    shelled_box.step's rim corner the wall's, tied to 1e-14 with the rim's, whose triangle was the skipped one).
+    The nearest valid hit within its band of the mesh hit's distance (the skipped triangle's hit) and nearer
+    than the kept one by more than float32 rounding replaces it (the same point on the shared edge does
+    not: pixels there keep their face).
     """
     if not tessellation.has_rim_neighbours:  # no face has a neighbour (a single patch): nothing across any rim
         return
@@ -470,7 +477,14 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     across = np.flatnonzero(close & (edge_dist > reach) & (chord_dist <= reach))
     close &= edge_dist <= reach
     close[across] = _neighbour_passes(tessellation, surfaces, corner[across], points[across], reach[across])
-    rays, pn, un, vn = rays[close], pn[close], un[close], vn[close]
+    # At a corner the other faces meeting there, where the mesh hit lies within their reach of the boundary too.
+    cp, cuv = _corner_faces(tessellation)
+    cp, cuv = cp[corner], cuv[corner]
+    more = (cp >= 0) & (cp != pk[rays, None]) & (corner[:, None] >= 0)
+    more &= edge_dist[:, None] <= RIM_REACH_CHORDS * (chord[pk[rays], None] + chord[np.maximum(cp, 0)]) + skip
+    row, col = np.nonzero(more)
+    rays, pn = np.concatenate([rays[close], rays[row]]), np.concatenate([pn[close], cp[row, col]])
+    un, vn = np.concatenate([un[close], cuv[row, col, 0]]), np.concatenate([vn[close], cuv[row, col, 1]])
     if len(rays) == 0:
         return
     u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
@@ -483,10 +497,51 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
     reach = BAND_CHORDS * band[pn] * allowance + skip
     ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
-    won = rays[ok3]
-    pk[won], ur[won], vr[won], tr[won], aside[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], True
+    # A ray with several faces refined (a corner): its nearest valid hit wins.
+    pick = np.flatnonzero(ok3)
+    pick = pick[np.lexsort((t3[pick], rays[pick]))]
+    pick = pick[np.r_[True, rays[pick][1:] != rays[pick][:-1]]] if len(pick) else pick
+    won = rays[pick]
+    pk[won], ur[won], vr[won], tr[won], aside[won] = pn[pick], u3[pick], v3[pick], t3[pick], True
     for have, new in zip(derivs[:3], d3[:3]):
-        have[won] = new[ok3]
+        have[won] = new[pick]
+
+
+def _corner_faces(tessellation: Tessellation) -> tuple[np.ndarray, np.ndarray]:
+    """Per vertex: the other faces meeting at its boundary vertex beyond its `Tessellation.rim_neighbour` (V, k)
+    (−1 padded) and their boundary vertices' (u, v) (V, k, 2).
+
+    A face counts where one of its boundary vertices lies as close as the rim neighbour's does, give or take
+    `RIM_REACH_CHORDS` times both faces' chord errors and float32 rounding: at a B-rep vertex every face's mesh
+    has a vertex there, a model tolerance apart, while along an edge the next face's vertices lie an edge away.
+    Its nearest such vertex; the faces by distance. Among the `CORNER_VERTICES` nearest boundary vertices. Built
+    once per tessellation, on first use (kept in its ``__dict__``, as `_rim_planes` is).
+    """
+    cached = tessellation.__dict__.get("_corner_faces")
+    if cached is not None:
+        return cached
+    first, _, gap = tessellation.rim_neighbour
+    n_vertices = len(tessellation.vertices)
+    rows = tessellation.boundary[first[tessellation.boundary] >= 0]
+    k = min(CORNER_VERTICES, len(tessellation.boundary))
+    patch, uv = np.full((n_vertices, max(k, 1)), -1), np.full((n_vertices, max(k, 1), 2), np.nan)
+    if len(rows) and k:
+        tree, cand_patch = tessellation._boundary_tree
+        dist, nearest = tree.query(tessellation.vertices[rows], k=k)
+        dist, nearest = dist.reshape(len(rows), k), nearest.reshape(len(rows), k)
+        other = cand_patch[nearest]
+        own = tessellation.vertex_patch[rows]
+        chord = tessellation.chord_error
+        skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+        keep = (other != own[:, None]) & (other != first[rows, None])
+        keep &= dist <= gap[rows, None] + RIM_REACH_CHORDS * (chord[own, None] + chord[other]) + skip
+        # One vertex per face, its nearest (the columns run by distance).
+        for j in range(1, k):
+            keep[:, j] &= ~np.any(keep[:, :j] & (other[:, :j] == other[:, j, None]), axis=1)
+        patch[rows] = np.where(keep, other, -1)
+        uv[rows] = np.where(keep[:, :, None], tessellation.vertex_uv[tessellation.boundary[nearest]], np.nan)
+    cached = tessellation.__dict__["_corner_faces"] = (patch, uv)
+    return cached
 
 
 def _neighbour_passes(tessellation: Tessellation, surfaces: SurfaceSet, corner, points, reach) -> np.ndarray:
