@@ -477,14 +477,19 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     across = np.flatnonzero(close & (edge_dist > reach) & (chord_dist <= reach))
     close &= edge_dist <= reach
     close[across] = _neighbour_passes(tessellation, surfaces, corner[across], points[across], reach[across])
-    # At a corner the other faces meeting there, where the mesh hit lies within their reach of the boundary too.
-    cp, cuv = _corner_faces(tessellation)
-    cp, cuv = cp[corner], cuv[corner]
-    more = (cp >= 0) & (cp != pk[rays, None]) & (corner[:, None] >= 0)
-    more &= edge_dist[:, None] <= RIM_REACH_CHORDS * (chord[pk[rays], None] + chord[np.maximum(cp, 0)]) + skip
-    row, col = np.nonzero(more)
+    # At a corner the other faces meeting there, where the mesh hit lies within their reach of the boundary and
+    # their surface passes within it too (along a long edge whose only vertices are corners, most rays do not).
+    cp, cuv, cX, cn, ckappa = _corner_faces(tessellation, surfaces)
+    cp = np.where(corner[:, None] >= 0, cp[corner], -1)
+    more = (cp >= 0) & (cp != pk[rays, None])
+    reach_more = RIM_REACH_CHORDS * (chord[pk[rays], None] + chord[np.maximum(cp, 0)]) + skip
+    row, col = np.nonzero(more & (edge_dist[:, None] <= reach_more))
+    at = corner[row]
+    passes = _within(cX[at, col], cn[at, col], ckappa[at, col], points[row], reach_more[row, col])
+    row, col = row[passes], col[passes]
+    cuv = cuv[corner[row], col]
     rays, pn = np.concatenate([rays[close], rays[row]]), np.concatenate([pn[close], cp[row, col]])
-    un, vn = np.concatenate([un[close], cuv[row, col, 0]]), np.concatenate([vn[close], cuv[row, col, 1]])
+    un, vn = np.concatenate([un[close], cuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1]])
     if len(rays) == 0:
         return
     u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
@@ -507,9 +512,10 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
         have[won] = new[pick]
 
 
-def _corner_faces(tessellation: Tessellation) -> tuple[np.ndarray, np.ndarray]:
+def _corner_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
     """Per vertex: the other faces meeting at its boundary vertex beyond its `Tessellation.rim_neighbour` (V, k)
-    (−1 padded) and their boundary vertices' (u, v) (V, k, 2).
+    (−1 padded), their boundary vertices' (u, v) (V, k, 2), and there their point, unit normal and largest
+    |principal curvature| (`_planes`).
 
     A face counts where one of its boundary vertices lies as close as the rim neighbour's does, give or take
     `RIM_REACH_CHORDS` times both faces' chord errors and float32 rounding: at a B-rep vertex every face's mesh
@@ -524,8 +530,9 @@ def _corner_faces(tessellation: Tessellation) -> tuple[np.ndarray, np.ndarray]:
     n_vertices = len(tessellation.vertices)
     rows = tessellation.boundary[first[tessellation.boundary] >= 0]
     k = min(CORNER_VERTICES, len(tessellation.boundary))
-    patch, uv = np.full((n_vertices, max(k, 1)), -1), np.full((n_vertices, max(k, 1), 2), np.nan)
-    if len(rows) and k:
+    k = max(k, 1)
+    patch, uv = np.full((n_vertices, k), -1), np.full((n_vertices, k, 2), np.nan)
+    if len(rows) and len(tessellation.boundary):
         tree, cand_patch = tessellation._boundary_tree
         dist, nearest = tree.query(tessellation.vertices[rows], k=k)
         dist, nearest = dist.reshape(len(rows), k), nearest.reshape(len(rows), k)
@@ -540,7 +547,9 @@ def _corner_faces(tessellation: Tessellation) -> tuple[np.ndarray, np.ndarray]:
             keep[:, j] &= ~np.any(keep[:, :j] & (other[:, :j] == other[:, j, None]), axis=1)
         patch[rows] = np.where(keep, other, -1)
         uv[rows] = np.where(keep[:, :, None], tessellation.vertex_uv[tessellation.boundary[nearest]], np.nan)
-    cached = tessellation.__dict__["_corner_faces"] = (patch, uv)
+    X, n, kappa = _planes(surfaces, patch.ravel(), uv.reshape(-1, 2))
+    cached = tessellation.__dict__["_corner_faces"] = (patch, uv, X.reshape(n_vertices, k, 3),
+                                                       n.reshape(n_vertices, k, 3), kappa.reshape(n_vertices, k))
     return cached
 
 
@@ -552,8 +561,14 @@ def _neighbour_passes(tessellation: Tessellation, surfaces: SurfaceSet, corner, 
     their edge.
     """
     X, n, kappa = _rim_planes(tessellation, surfaces)
-    d = points - X[corner]
-    return np.abs(np.einsum("ij,ij->i", d, n[corner])) + 0.5 * kappa[corner] * np.einsum("ij,ij->i", d, d) <= reach
+    return _within(X[corner], n[corner], kappa[corner], points, reach)
+
+
+def _within(X, n, kappa, points, reach) -> np.ndarray:
+    """|n·(P − X)| + ½ |κ| |P − X|² ≤ reach: the surface through X (unit normal n, largest |principal curvature| κ)
+    passes within reach of P, to second order (`_neighbour_passes`)."""
+    d = points - X
+    return np.abs(np.einsum("ij,ij->i", d, n)) + 0.5 * kappa * np.einsum("ij,ij->i", d, d) <= reach
 
 
 def _rim_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -564,14 +579,20 @@ def _rim_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.nd
     cached = tessellation.__dict__.get("_rim_planes")
     if cached is None:
         patch, uv, _ = tessellation.rim_neighbour
-        X, n, kappa = np.full((len(patch), 3), np.nan), np.full((len(patch), 3), np.nan), np.full(len(patch), np.nan)
-        rows = np.flatnonzero(patch >= 0)
-        derivs = surfaces.evaluate(patch[rows], uv[rows, 0], uv[rows, 1], order=2)
-        X[rows], n[rows] = derivs.S, surfaces.normals(patch[rows], uv[rows, 0], uv[rows, 1], derivs)
-        k = curvatures(derivs, n[rows])
-        kappa[rows] = np.nan_to_num(np.maximum(np.abs(k.k1), np.abs(k.k2)), nan=0.0)
-        cached = tessellation.__dict__["_rim_planes"] = (X, n, kappa)
+        cached = tessellation.__dict__["_rim_planes"] = _planes(surfaces, patch, uv)
     return cached
+
+
+def _planes(surfaces: SurfaceSet, patch: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """At (u, v) of each patch (M,) (−1: none): the point (M, 3), unit normal (M, 3) and largest |principal
+    curvature| (M,) (NaN where none; curvature 0 where undefined, at a pole: `_within` then passes more rays)."""
+    X, n, kappa = np.full((len(patch), 3), np.nan), np.full((len(patch), 3), np.nan), np.full(len(patch), np.nan)
+    rows = np.flatnonzero(patch >= 0)
+    derivs = surfaces.evaluate(patch[rows], uv[rows, 0], uv[rows, 1], order=2)
+    X[rows], n[rows] = derivs.S, surfaces.normals(patch[rows], uv[rows, 0], uv[rows, 1], derivs)
+    k = curvatures(derivs, n[rows])
+    kappa[rows] = np.nan_to_num(np.maximum(np.abs(k.k1), np.abs(k.k2)), nan=0.0)
+    return X, n, kappa
 
 
 def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
