@@ -479,15 +479,15 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     close[across] = _neighbour_passes(tessellation, surfaces, corner[across], points[across], reach[across])
     # At a corner the other faces meeting there, where the mesh hit lies within their reach of the boundary and
     # their surface passes within it too (along a long edge whose only vertices are corners, most rays do not).
-    cp, cuv, cX, cn, ckappa = _corner_faces(tessellation, surfaces)
-    cp = np.where(corner[:, None] >= 0, cp[corner], -1)
+    slot, cp, cuv, cX, cn, ckappa = _corner_faces(tessellation, surfaces)
+    at = np.where(corner >= 0, slot[corner], -1)  # −1: the padding row, no face
+    cp = cp[at]
     more = (cp >= 0) & (cp != pk[rays, None])
     reach_more = RIM_REACH_CHORDS * (chord[pk[rays], None] + chord[np.maximum(cp, 0)]) + skip
     row, col = np.nonzero(more & (edge_dist[:, None] <= reach_more))
-    at = corner[row]
-    passes = _within(cX[at, col], cn[at, col], ckappa[at, col], points[row], reach_more[row, col])
+    passes = _within(cX[at[row], col], cn[at[row], col], ckappa[at[row], col], points[row], reach_more[row, col])
     row, col = row[passes], col[passes]
-    cuv = cuv[corner[row], col]
+    cuv = cuv[at[row], col]
     rays, pn = np.concatenate([rays[close], rays[row]]), np.concatenate([pn[close], cp[row, col]])
     un, vn = np.concatenate([un[close], cuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1]])
     if len(rays) == 0:
@@ -513,9 +513,11 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
 
 
 def _corner_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
-    """Per vertex: the other faces meeting at its boundary vertex beyond its `Tessellation.rim_neighbour` (V, k)
-    (−1 padded), their boundary vertices' (u, v) (V, k, 2), and there their point, unit normal and largest
-    |principal curvature| (`_planes`).
+    """The other faces meeting at a boundary vertex beyond its `Tessellation.rim_neighbour`: per vertex its row
+    ``slot`` (V,) in the tables that follow (−1: none, the last row, all padding); per row the faces (M + 1, k)
+    (−1 padded), their boundary vertices' (u, v) (M + 1, k, 2), and there their point, unit normal and largest
+    |principal curvature| (`_planes`). Rows only for the vertices at a corner: (V, k) tables of a fine mesh
+    would take ~0.6 kB per vertex.
 
     A face counts where one of its boundary vertices lies as close as the rim neighbour's does, give or take
     `RIM_REACH_CHORDS` times both faces' chord errors and float32 rounding: at a B-rep vertex every face's mesh
@@ -527,12 +529,10 @@ def _corner_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.
     if cached is not None:
         return cached
     first, _, gap = tessellation.rim_neighbour
-    n_vertices = len(tessellation.vertices)
     rows = tessellation.boundary[first[tessellation.boundary] >= 0]
-    k = min(CORNER_VERTICES, len(tessellation.boundary))
-    k = max(k, 1)
-    patch, uv = np.full((n_vertices, k), -1), np.full((n_vertices, k, 2), np.nan)
-    if len(rows) and len(tessellation.boundary):
+    k = max(min(CORNER_VERTICES, len(tessellation.boundary)), 1)
+    other, keep, at = np.zeros((0, k), dtype=np.int64), np.zeros((0, k), dtype=bool), np.zeros((0, k), dtype=np.int64)
+    if len(rows):
         tree, cand_patch = tessellation._boundary_tree
         dist, nearest = tree.query(tessellation.vertices[rows], k=k)
         dist, nearest = dist.reshape(len(rows), k), nearest.reshape(len(rows), k)
@@ -545,11 +545,16 @@ def _corner_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.
         # One vertex per face, its nearest (the columns run by distance).
         for j in range(1, k):
             keep[:, j] &= ~np.any(keep[:, :j] & (other[:, :j] == other[:, j, None]), axis=1)
-        patch[rows] = np.where(keep, other, -1)
-        uv[rows] = np.where(keep[:, :, None], tessellation.vertex_uv[tessellation.boundary[nearest]], np.nan)
+        used = keep.any(axis=1)
+        rows, other, keep, at = rows[used], other[used], keep[used], tessellation.boundary[nearest[used]]
+    slot = np.full(len(tessellation.vertices), -1)
+    slot[rows] = np.arange(len(rows))
+    patch = np.vstack([np.where(keep, other, -1), np.full((1, k), -1)])
+    uv = np.full((len(rows) + 1, k, 2), np.nan)
+    uv[:-1] = np.where(keep[:, :, None], tessellation.vertex_uv[at], np.nan)
     X, n, kappa = _planes(surfaces, patch.ravel(), uv.reshape(-1, 2))
-    cached = tessellation.__dict__["_corner_faces"] = (patch, uv, X.reshape(n_vertices, k, 3),
-                                                       n.reshape(n_vertices, k, 3), kappa.reshape(n_vertices, k))
+    cached = tessellation.__dict__["_corner_faces"] = (slot, patch, uv, X.reshape(-1, k, 3), n.reshape(-1, k, 3),
+                                                       kappa.reshape(-1, k))
     return cached
 
 
