@@ -480,15 +480,17 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     # At a corner the other faces meeting there, where the mesh hit lies within their reach of the boundary and
     # their surface passes within it too (along a long edge whose only vertices are corners, most rays do not).
     slot, cp, cuv, cX, cn, ckappa = _corner_faces(tessellation, surfaces)
-    at = np.where(corner >= 0, slot[corner], -1)  # −1: the padding row, no face
+    near = np.flatnonzero(corner >= 0)
+    near = near[slot[corner[near]] >= 0]  # the few rays whose nearest boundary vertex is a corner
+    at = slot[corner[near]]
     cp = cp[at]
-    more = (cp >= 0) & (cp != pk[rays, None])
-    reach_more = RIM_REACH_CHORDS * (chord[pk[rays], None] + chord[np.maximum(cp, 0)]) + skip
-    row, col = np.nonzero(more & (edge_dist[:, None] <= reach_more))
-    passes = _within(cX[at[row], col], cn[at[row], col], ckappa[at[row], col], points[row], reach_more[row, col])
+    more = (cp >= 0) & (cp != pk[rays[near], None])
+    reach_more = RIM_REACH_CHORDS * (chord[pk[rays[near]], None] + chord[np.maximum(cp, 0)]) + skip
+    row, col = np.nonzero(more & (edge_dist[near, None] <= reach_more))
+    passes = _within(cX[at[row], col], cn[at[row], col], ckappa[at[row], col], points[near[row]], reach_more[row, col])
     row, col = row[passes], col[passes]
     cuv = cuv[at[row], col]
-    rays, pn = np.concatenate([rays[close], rays[row]]), np.concatenate([pn[close], cp[row, col]])
+    rays, pn = np.concatenate([rays[close], rays[near[row]]]), np.concatenate([pn[close], cp[row, col]])
     un, vn = np.concatenate([un[close], cuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1]])
     if len(rays) == 0:
         return
