@@ -83,19 +83,38 @@ def test_sweep_part_first_hits_match_open_cascade(tmp_path, name):
     assert np.all(cos <= GRAZING_COS), (name, pixels[only_occt], cos)
 
 
-@pytest.mark.xfail(strict=True, reason="tracing.py _rim_neighbours looks across a rim only to the nearest boundary vertex "
-                                       "of ONE other face; at a corner where three faces meet that is the wrong one")
 def test_shelled_box_rim_corner_keeps_the_nearer_face(tmp_path):
     """shelled_box.step at 480×270, pixel (39, 371): the ray meets the rim (plane z = 20, face 9) next to the corner
     (35, 30, 20) where the rim, a planar wall (face 5) and a corner fillet (face 7) meet. Embree returns the fillet's
     triangle at the rim's own distance; Newton on the fillet lands 0.0038 farther, down the wall, and the rim's
     coincident triangle is skipped. `_rim_neighbours` looks across the rim from the corner vertex, whose nearest
-    other-face vertex belongs to the wall (face 5), not the rim: refined from the rim's own boundary vertex, the
-    hit is OCCT's. (validate reports the pixel: "1 pixels store an exact hit behind a nearer exact surface point".)"""
+    other-face vertex belongs to the wall (face 5), not the rim: every face meeting at the corner is refined
+    (`tracing._corner_faces`), and from the rim's own boundary vertex the hit is OCCT's. (validate reports the pixel: "1 pixels store an exact hit behind a nearer exact surface point".)"""
     path = tmp_path / "shelled_box.step"
     sweep.PARTS["shelled_box.step"](path)
     renderer = Renderer(resolve(load_scene(path).with_image(480, 270, 1)))
     origins, directions = renderer.camera.rays(np.array([39]), np.array([371]))
+    hits = renderer.trace(origins, directions)
+    shape, _, _, _ = occt_faces(path)
+    expected = np.einsum("ij,ij->i", occt_nearest(shape, origins, directions) - origins, directions)
+    np.testing.assert_allclose(hits.t, expected, rtol=0, atol=POINT_TOLERANCE * renderer.tessellation.extent)
+
+
+@pytest.mark.parametrize("name, pixel, offset", [
+    ("faces.igs", (14, 212), (0.375, 0.875)),
+    ("faces.igs", (50, 99), (0.375, 0.625)),
+    ("brep.igs", (50, 99), (0.625, 0.375)),
+    ("shelled_box.step", (39, 369), (0.125, 0.375)),
+])
+def test_rim_corner_samples_keep_the_nearer_face(tmp_path, name, pixel, offset):
+    """Edge-pixel samples (the 4×4 grid of `sample_offsets`) at 480×270 by other corners of the shelled box, in both
+    IGES writer modes too, where three faces meet at the rim: each stored a wall or fillet 0.004–0.027 behind the
+    rim, whose triangle Embree skipped, until every face meeting at the corner was refined (`tracing._corner_faces`).
+    The hit is OCCT's."""
+    path = tmp_path / name
+    sweep.PARTS[name](path)
+    renderer = Renderer(resolve(load_scene(path).with_image(480, 270, 1)))
+    origins, directions = renderer.camera.rays(np.array([pixel[0]]), np.array([pixel[1]]), np.array([offset]))
     hits = renderer.trace(origins, directions)
     shape, _, _, _ = occt_faces(path)
     expected = np.einsum("ij,ij->i", occt_nearest(shape, origins, directions) - origins, directions)

@@ -103,6 +103,10 @@ SEAM_CORNER_EDGES = 1.0
 #: chord errors of a rim edge: each mesh lies within its chord error of the shared edge, ×2 as `BAND_CHORDS`
 #: (the measured chord error can fall short).
 RIM_REACH_CHORDS = 2.0
+#: Boundary vertices `_corner_faces` asks the k-d tree for around each boundary vertex: the faces meeting at a
+#: B-rep vertex (3 at a box's corner, 4–6 at a fillet's setback or a cone's apex) with room for a pole's coincident
+#: vertices of one face.
+CORNER_VERTICES = 8
 #: Below this |N·D| a valid hit may be the farther of two close crossings of its sheet: the nearer one is
 #: sought (`_other_root`). As the second look's grazing threshold (78°): ~6% of the teapot's hits at 960×540.
 OTHER_ROOT_COS = 0.2
@@ -446,9 +450,12 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     `RIM_REACH_CHORDS` times both faces' chord errors of its face's boundary (`_rim_corner`; near a chord across
     the face only where the other face's surface passes that close, `_neighbour_passes`), the face across the rim (the nearest
     boundary vertex of another face to the triangle's nearest boundary vertex, `Tessellation.rim_neighbour`)
-    is refined from that vertex. Its valid hit within its band of the mesh hit's distance (the skipped
-    triangle's hit) and nearer than the kept one by more than float32 rounding replaces it (the same point
-    on the shared edge does not: pixels there keep their face).
+    is refined from that vertex. Where that vertex is a corner where 3+ faces meet, every other face with a
+    boundary vertex there is refined too (`_corner_faces`): the nearest other vertex is only one of them (at
+    shelled_box.step's rim corner the wall's, tied to 1e-14 with the rim's, whose triangle was the skipped one).
+    The nearest valid hit within its band of the mesh hit's distance (the skipped triangle's hit) and nearer
+    than the kept one by more than float32 rounding replaces it (the same point on the shared edge does
+    not: pixels there keep their face).
     """
     if not tessellation.has_rim_neighbours:  # no face has a neighbour (a single patch): nothing across any rim
         return
@@ -470,7 +477,21 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     across = np.flatnonzero(close & (edge_dist > reach) & (chord_dist <= reach))
     close &= edge_dist <= reach
     close[across] = _neighbour_passes(tessellation, surfaces, corner[across], points[across], reach[across])
-    rays, pn, un, vn = rays[close], pn[close], un[close], vn[close]
+    # At a corner the other faces meeting there, where the mesh hit lies within their reach of the boundary and
+    # their surface passes within it too (along a long edge whose only vertices are corners, most rays do not).
+    slot, cp, cuv, cX, cn, ckappa = _corner_faces(tessellation, surfaces)
+    near = np.flatnonzero(corner >= 0)
+    near = near[slot[corner[near]] >= 0]  # the few rays whose nearest boundary vertex is a corner
+    at = slot[corner[near]]
+    cp = cp[at]
+    more = (cp >= 0) & (cp != pk[rays[near], None])
+    reach_more = RIM_REACH_CHORDS * (chord[pk[rays[near]], None] + chord[np.maximum(cp, 0)]) + skip
+    row, col = np.nonzero(more & (edge_dist[near, None] <= reach_more))
+    passes = _within(cX[at[row], col], cn[at[row], col], ckappa[at[row], col], points[near[row]], reach_more[row, col])
+    row, col = row[passes], col[passes]
+    cuv = cuv[at[row], col]
+    rays, pn = np.concatenate([rays[close], rays[near[row]]]), np.concatenate([pn[close], cp[row, col]])
+    un, vn = np.concatenate([un[close], cuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1]])
     if len(rays) == 0:
         return
     u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
@@ -483,10 +504,60 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
     reach = BAND_CHORDS * band[pn] * allowance + skip
     ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
-    won = rays[ok3]
-    pk[won], ur[won], vr[won], tr[won], aside[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], True
+    # A ray with several faces refined (a corner): its nearest valid hit wins.
+    pick = np.flatnonzero(ok3)
+    pick = pick[np.lexsort((t3[pick], rays[pick]))]
+    pick = pick[np.r_[True, rays[pick][1:] != rays[pick][:-1]]] if len(pick) else pick
+    won = rays[pick]
+    pk[won], ur[won], vr[won], tr[won], aside[won] = pn[pick], u3[pick], v3[pick], t3[pick], True
     for have, new in zip(derivs[:3], d3[:3]):
-        have[won] = new[ok3]
+        have[won] = new[pick]
+
+
+def _corner_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
+    """The other faces meeting at a boundary vertex beyond its `Tessellation.rim_neighbour`: per vertex its row
+    ``slot`` (V,) in the tables that follow (−1: none, the last row, all padding); per row the faces (M + 1, k)
+    (−1 padded), their boundary vertices' (u, v) (M + 1, k, 2), and there their point, unit normal and largest
+    |principal curvature| (`_planes`). Rows only for the vertices at a corner: (V, k) tables of a fine mesh
+    would take ~0.6 kB per vertex.
+
+    A face counts where one of its boundary vertices lies as close as the rim neighbour's does, give or take
+    `RIM_REACH_CHORDS` times both faces' chord errors and float32 rounding: at a B-rep vertex every face's mesh
+    has a vertex there, a model tolerance apart, while along an edge the next face's vertices lie an edge away.
+    Its nearest such vertex; the faces by distance. Among the `CORNER_VERTICES` nearest boundary vertices. Built
+    once per tessellation, on first use (kept in its ``__dict__``, as `_rim_planes` is).
+    """
+    cached = tessellation.__dict__.get("_corner_faces")
+    if cached is not None:
+        return cached
+    first, _, gap = tessellation.rim_neighbour
+    rows = tessellation.boundary[first[tessellation.boundary] >= 0]
+    k = max(min(CORNER_VERTICES, len(tessellation.boundary)), 1)
+    other, keep, at = np.zeros((0, k), dtype=np.int64), np.zeros((0, k), dtype=bool), np.zeros((0, k), dtype=np.int64)
+    if len(rows):
+        tree, cand_patch = tessellation._boundary_tree
+        dist, nearest = tree.query(tessellation.vertices[rows], k=k)
+        dist, nearest = dist.reshape(len(rows), k), nearest.reshape(len(rows), k)
+        other = cand_patch[nearest]
+        own = tessellation.vertex_patch[rows]
+        chord = tessellation.chord_error
+        skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+        keep = (other != own[:, None]) & (other != first[rows, None])
+        keep &= dist <= gap[rows, None] + RIM_REACH_CHORDS * (chord[own, None] + chord[other]) + skip
+        # One vertex per face, its nearest (the columns run by distance).
+        for j in range(1, k):
+            keep[:, j] &= ~np.any(keep[:, :j] & (other[:, :j] == other[:, j, None]), axis=1)
+        used = keep.any(axis=1)
+        rows, other, keep, at = rows[used], other[used], keep[used], tessellation.boundary[nearest[used]]
+    slot = np.full(len(tessellation.vertices), -1)
+    slot[rows] = np.arange(len(rows))
+    patch = np.vstack([np.where(keep, other, -1), np.full((1, k), -1)])
+    uv = np.full((len(rows) + 1, k, 2), np.nan)
+    uv[:-1] = np.where(keep[:, :, None], tessellation.vertex_uv[at], np.nan)
+    X, n, kappa = _planes(surfaces, patch.ravel(), uv.reshape(-1, 2))
+    cached = tessellation.__dict__["_corner_faces"] = (slot, patch, uv, X.reshape(-1, k, 3), n.reshape(-1, k, 3),
+                                                       kappa.reshape(-1, k))
+    return cached
 
 
 def _neighbour_passes(tessellation: Tessellation, surfaces: SurfaceSet, corner, points, reach) -> np.ndarray:
@@ -497,8 +568,14 @@ def _neighbour_passes(tessellation: Tessellation, surfaces: SurfaceSet, corner, 
     their edge.
     """
     X, n, kappa = _rim_planes(tessellation, surfaces)
-    d = points - X[corner]
-    return np.abs(np.einsum("ij,ij->i", d, n[corner])) + 0.5 * kappa[corner] * np.einsum("ij,ij->i", d, d) <= reach
+    return _within(X[corner], n[corner], kappa[corner], points, reach)
+
+
+def _within(X, n, kappa, points, reach) -> np.ndarray:
+    """|n·(P − X)| + ½ |κ| |P − X|² ≤ reach: the surface through X (unit normal n, largest |principal curvature| κ)
+    passes within reach of P, to second order (`_neighbour_passes`)."""
+    d = points - X
+    return np.abs(np.einsum("ij,ij->i", d, n)) + 0.5 * kappa * np.einsum("ij,ij->i", d, d) <= reach
 
 
 def _rim_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -509,14 +586,20 @@ def _rim_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.nd
     cached = tessellation.__dict__.get("_rim_planes")
     if cached is None:
         patch, uv, _ = tessellation.rim_neighbour
-        X, n, kappa = np.full((len(patch), 3), np.nan), np.full((len(patch), 3), np.nan), np.full(len(patch), np.nan)
-        rows = np.flatnonzero(patch >= 0)
-        derivs = surfaces.evaluate(patch[rows], uv[rows, 0], uv[rows, 1], order=2)
-        X[rows], n[rows] = derivs.S, surfaces.normals(patch[rows], uv[rows, 0], uv[rows, 1], derivs)
-        k = curvatures(derivs, n[rows])
-        kappa[rows] = np.nan_to_num(np.maximum(np.abs(k.k1), np.abs(k.k2)), nan=0.0)
-        cached = tessellation.__dict__["_rim_planes"] = (X, n, kappa)
+        cached = tessellation.__dict__["_rim_planes"] = _planes(surfaces, patch, uv)
     return cached
+
+
+def _planes(surfaces: SurfaceSet, patch: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """At (u, v) of each patch (M,) (−1: none): the point (M, 3), unit normal (M, 3) and largest |principal
+    curvature| (M,) (NaN where none; curvature 0 where undefined, at a pole: `_within` then passes more rays)."""
+    X, n, kappa = np.full((len(patch), 3), np.nan), np.full((len(patch), 3), np.nan), np.full(len(patch), np.nan)
+    rows = np.flatnonzero(patch >= 0)
+    derivs = surfaces.evaluate(patch[rows], uv[rows, 0], uv[rows, 1], order=2)
+    X[rows], n[rows] = derivs.S, surfaces.normals(patch[rows], uv[rows, 0], uv[rows, 1], derivs)
+    k = curvatures(derivs, n[rows])
+    kappa[rows] = np.nan_to_num(np.maximum(np.abs(k.k1), np.abs(k.k2)), nan=0.0)
+    return X, n, kappa
 
 
 def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
