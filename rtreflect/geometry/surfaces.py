@@ -34,6 +34,10 @@ DEGENERATE_SINE = 1e-10
 #: used instead is off by about x: the bound balances the two (√ε, times √(reach/size) far from the origin).
 #: Also unchanged by rescaling u or v.
 VANISHING_PARTIAL = 1e-8
+#: A patch is closed in u (v) where its edges u = u₀ and u = u₁ (v₀, v₁) coincide to this fraction of its reach: a
+#: periodic face's seam, whose two sides' control rows agree to float64 rounding (~1e-15 of the reach); as
+#: `seams.CLOSED_FRACTION` for a curve's ends.
+CLOSED_FRACTION = 1e-12
 
 
 class SurfaceDerivatives(NamedTuple):
@@ -313,3 +317,21 @@ class SurfaceSet:
         """Per-point parameter domain bounds (u0, u1, v0, v1)."""
         rows = self._domain_table[np.asarray(patch)]
         return rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
+
+    @cached_property
+    def closed(self) -> np.ndarray:
+        """Per patch (P, 2): whether it is closed in u, in v: S(u₀, v) = S(u₁, v) for every v (S(u, v₀) = S(u, v₁)),
+        to `CLOSED_FRACTION` of its reach, tested at the other direction's span breaks and span midpoints (the two
+        edges are B-spline curves over those spans). There a point of the seam has two parameter pairs, one on each side.
+        """
+        out = np.zeros((len(self.patches), 2), dtype=bool)
+        for k, surface in enumerate(self.patches):
+            (u0, u1), (v0, v1) = surface.domain
+            for axis, breaks in enumerate(surface.span_breaks()[::-1]):  # along v for the u edges, along u for the v ones
+                s = np.union1d(breaks, 0.5 * (breaks[1:] + breaks[:-1]))
+                if axis == 0:
+                    a, b = surface.evaluate(np.full(len(s), u0), s).S, surface.evaluate(np.full(len(s), u1), s).S
+                else:
+                    a, b = surface.evaluate(s, np.full(len(s), v0)).S, surface.evaluate(s, np.full(len(s), v1)).S
+                out[k, axis] = bool(np.linalg.norm(a - b, axis=1).max(initial=0.0) <= CLOSED_FRACTION * surface.reach)
+        return out
