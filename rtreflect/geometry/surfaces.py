@@ -322,16 +322,28 @@ class SurfaceSet:
     def closed(self) -> np.ndarray:
         """Per patch (P, 2): whether it is closed in u, in v: S(u₀, v) = S(u₁, v) for every v (S(u, v₀) = S(u, v₁)),
         to `CLOSED_FRACTION` of its reach, tested at the other direction's span breaks and span midpoints (the two
-        edges are B-spline curves over those spans). There a point of the seam has two parameter pairs, one on each side.
+        edges are B-spline curves over those spans), all patches' in one evaluation. There a point of the seam has
+        two parameter pairs, one on each side.
         """
-        out = np.zeros((len(self.patches), 2), dtype=bool)
+        patch, axis, a_uv, b_uv = [], [], [], []
         for k, surface in enumerate(self.patches):
             (u0, u1), (v0, v1) = surface.domain
-            for axis, breaks in enumerate(surface.span_breaks()[::-1]):  # along v for the u edges, along u for the v ones
+            for direction, breaks in enumerate(surface.span_breaks()[::-1]):  # along v for the u edges, u for the v ones
                 s = np.union1d(breaks, 0.5 * (breaks[1:] + breaks[:-1]))
-                if axis == 0:
-                    a, b = surface.evaluate(np.full(len(s), u0), s).S, surface.evaluate(np.full(len(s), u1), s).S
-                else:
-                    a, b = surface.evaluate(s, np.full(len(s), v0)).S, surface.evaluate(s, np.full(len(s), v1)).S
-                out[k, axis] = bool(np.linalg.norm(a - b, axis=1).max(initial=0.0) <= CLOSED_FRACTION * surface.reach)
-        return out
+                ends = ((u0, u1), (v0, v1))[direction]
+                for end, out in zip(ends, (a_uv, b_uv)):
+                    e = np.full(len(s), end)
+                    out.append(np.column_stack([e, s] if direction == 0 else [s, e]))
+                patch.append(np.full(len(s), k))
+                axis.append(np.full(len(s), direction))
+        closed = np.zeros((len(self.patches), 2), dtype=bool)
+        if not patch:
+            return closed
+        patch, axis, a_uv, b_uv = (np.concatenate(x) for x in (patch, axis, a_uv, b_uv))
+        uv = np.concatenate([a_uv, b_uv])
+        S = self.evaluate(np.concatenate([patch, patch]), uv[:, 0], uv[:, 1]).S
+        gap = np.linalg.norm(S[:len(patch)] - S[len(patch):], axis=1)
+        reach = np.array([surface.reach for surface in self.patches])
+        worst = np.zeros((len(self.patches), 2))
+        np.maximum.at(worst, (patch, axis), gap)
+        return worst <= CLOSED_FRACTION * reach[:, None]
