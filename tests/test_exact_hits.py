@@ -260,3 +260,33 @@ def test_contours_stop_at_the_trim_and_validate_passes():
     report = validate_scene(scene, renderer=renderer)
     assert report.passed, (report.max_px, report.misses, report.colour_mismatches, report.reasons)
     assert report.points > 200
+
+
+def test_newton_stopped_on_a_closed_seam_goes_on_from_its_other_side():
+    """A restart from a boundary vertex on a closed face's seam (issue 12; parts/plate.step at 480×270, pixel
+    (133, 335)): the vertex has (u, v) on both sides, and started at u₁ Newton runs into the domain's edge though
+    the ray meets the face just past u₀. `_over_closed_seam` restarts it from the other side: the closed form of a
+    ray along −x at height y meeting the unit cylinder at (√(1 − y²), y), t = x₀ − √(1 − y²)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_surfaces import full_cylinder
+
+    from rtreflect.geometry.surfaces import SurfaceSet
+    from rtreflect.trace.tracing import _over_closed_seam, refine_all
+
+    surfaces = SurfaceSet([full_cylinder()])
+    y = np.array([0.003, 0.02, 0.06, -0.02])  # past the seam at (1, 0) counter-clockwise (u > 0), and before it
+    origins = np.column_stack([np.full(len(y), 3.0), y, np.full(len(y), 1.0)])
+    directions = np.tile([-1.0, 0.0, 0.0], (len(y), 1))
+    patch = np.zeros(len(y), dtype=np.int64)
+    start_u = np.array([4.0, 4.0, 4.0, 0.0])  # the seam vertex's parameters on the side away from the hit
+    u, v, derivs, converged, edge = refine_all(surfaces, patch, start_u, np.full(len(y), 0.5), origins, directions,
+                                               np.full(len(y), 2.0), 3.0)[:5]
+    assert not converged.any() and edge.all()  # clamped on the seam: what the tracer stopped at before
+    won = _over_closed_seam(surfaces, patch, u, v, derivs, converged, edge, origins, directions, np.full(len(y), 2.0), 3.0)
+    np.testing.assert_array_equal(won, np.arange(len(y)))
+    assert converged.all() and not edge.any()
+    x = np.sqrt(1.0 - y * y)
+    np.testing.assert_allclose(derivs.S, np.column_stack([x, y, np.ones(len(y))]), rtol=0, atol=1e-12)
+    assert ((u > 0) & (u < 0.1)).sum() == 3 and 3.9 < u[3] < 4.0

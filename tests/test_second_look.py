@@ -244,3 +244,57 @@ def test_plate_edge_sample_keeps_open_cascades_nearer_face():
     expected = np.einsum("ij,ij->i", occt_nearest(occt_faces(part)[0], origins, directions) - origins, directions)
     assert hits.hit.all() and not hits.fallback.any()
     np.testing.assert_allclose(hits.t, expected, rtol=0, atol=1e-6 * renderer.tessellation.extent)
+
+
+@pytest.fixture(scope="module")
+def plate_ray_onto_fillet():
+    """parts/plate.step at 480×270, pixel (133, 335), edge sample 10 of 4×4: its renderer, the ray, and Open CASCADE's
+    nearest intersection's t along it (the reference)."""
+    pytest.importorskip("OCP")
+    import sys
+
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.trace.camera import sample_offsets
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_cad_hits import occt_nearest
+    from test_cad_reader import occt_faces
+
+    part = SCENES.parent / "parts" / "plate.step"
+    renderer = Renderer(resolve(load_scene(part).with_image(480, 270, 1)))
+    origins, directions = renderer.camera.rays(np.array([133]), np.array([335]), sample_offsets(4)[10:11])
+    expected = np.einsum("ij,ij->i", occt_nearest(occt_faces(part)[0], origins, directions) - origins, directions)
+    return renderer, origins, directions, expected
+
+
+def test_plate_ray_through_a_hole_meets_the_fillet_across_its_seam(plate_ray_onto_fillet):
+    """The ray passes the top plane just outside its trim, over a hole, and meets the hole's fillet (a closed face)
+    at u = 0.017, 0.003 inside the hole; its mesh, a chord below the fillet's top circle, is not met. The plane's
+    candidate runs off its trim and restarts on the fillet from their shared boundary vertex on the fillet's seam,
+    whose (u, v) was taken at u = 2π: Newton stopped on the domain's edge, and the ray went on to the hole's floor
+    (face 106) 7.56 farther. Now Newton goes on from the seam's other side (`tracing._over_closed_seam`): the
+    coarse trace alone finds OCCT's nearest hit."""
+    from rtreflect.trace.tracing import trace
+
+    renderer, origins, directions, expected = plate_ray_onto_fillet
+    scale = 1e-6 * renderer.tessellation.extent
+    coarse = trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
+    hits = renderer.trace(origins, directions)
+    for h in (coarse, hits):
+        assert h.hit.all() and not h.fallback.any()
+        np.testing.assert_allclose(h.t, expected, rtol=0, atol=scale)
+
+
+def test_second_look_from_the_shell_goes_on_across_a_closed_seam(plate_ray_onto_fillet, monkeypatch):
+    """The same ray with the tracer's seam restarts switched off (`SEAM_TRIES` = 0: the coarse and the fine trace
+    both go on to the hole's floor): the second look's start from the shell, the fillet's last rim box before its
+    seam at u = 2π, must go on from the seam's other side too, and finds OCCT's hit."""
+    from rtreflect.trace import tracing
+
+    renderer, origins, directions, expected = plate_ray_onto_fillet
+    monkeypatch.setattr(tracing, "SEAM_TRIES", 0)
+    coarse = tracing.trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
+    assert coarse.t[0] > expected[0] + 1.0  # without the restart: the floor behind
+    hits = renderer.trace(origins, directions)
+    assert hits.hit.all() and not hits.fallback.any()
+    np.testing.assert_allclose(hits.t, expected, rtol=0, atol=1e-6 * renderer.tessellation.extent)

@@ -30,7 +30,7 @@ from hypothesis import given, settings, strategies as st
 from reference import angle_between, to_rhino, xyz
 from rtreflect.exchange.bpt import read_bpt
 from rtreflect.geometry.knots import knot_vector_problem
-from rtreflect.geometry.surfaces import NurbsSurface, basis_derivatives, find_span
+from rtreflect.geometry.surfaces import NurbsSurface, SurfaceSet, basis_derivatives, find_span
 
 TEAPOT = Path(__file__).resolve().parents[1] / "scenes" / "teapot.bpt"
 LID_APEX = np.array([0.0, 0.0, 3.15])
@@ -341,6 +341,45 @@ def test_quarter_cylinder_normals_point_to_the_axis():
     inward = -S * [1.0, 0.0, 1.0]
     inward /= np.linalg.norm(inward, axis=1, keepdims=True)
     np.testing.assert_allclose(cylinder.normals(u, v), inward, rtol=0, atol=1e-12)
+
+
+# --------------------------------------------------------------------------- closed sides: surfaces of revolution
+
+#: The unit circle as a rational quadratic (Piegl & Tiller, section 7.5): 9 control points on the square's corners and
+#: edge midpoints, u ∈ [0, 4], one quarter per span, from (1, 0) counter-clockwise.
+CIRCLE_XY = np.array([[1, 0], [1, 1], [0, 1], [-1, 1], [-1, 0], [-1, -1], [0, -1], [1, -1], [1, 0]], dtype=float)
+CIRCLE_W = np.array([1, math.sqrt(0.5)] * 4 + [1])
+CIRCLE_KNOTS = np.array([0, 0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 4], dtype=float)
+
+
+def revolved(profile: np.ndarray, weights: np.ndarray, degree: int, knots: np.ndarray) -> NurbsSurface:
+    """The profile (m, 2) of (radius, z) revolved about the z axis: u around the circle, v along the profile
+    (the tensor product of the circle's and the profile's rational control nets)."""
+    points = np.array([[[r * x, r * y, z] for r, z in profile] for x, y in CIRCLE_XY])
+    return NurbsSurface(2, degree, CIRCLE_KNOTS, knots, points, np.outer(CIRCLE_W, weights))
+
+
+def full_cylinder(radius: float = 1.0, height: float = 2.0) -> NurbsSurface:
+    return revolved(np.array([[radius, 0.0], [radius, height]]), np.ones(2), 1, np.array([0, 0, 1, 1.0]))
+
+
+def test_closed_sides_of_surfaces_of_revolution():
+    """`SurfaceSet.closed` against the construction: a full cylinder and a sphere are closed around (u) only (the
+    sphere's v ends are its two distinct poles), a torus in both directions, a quarter cylinder in neither, and a
+    full cylinder whose seam is opened by 1e-6 of its radius is not closed."""
+    c = math.sqrt(0.5)
+    sphere = revolved(np.array([[0, -1], [1, -1], [1, 0], [1, 1], [0, 1]], dtype=float), np.array([1, c, 1, c, 1]), 2,
+                      np.array([0, 0, 0, 1, 1, 2, 2, 2], dtype=float))
+    torus = revolved(np.column_stack([2.0 + 0.5 * CIRCLE_XY[:, 0], 0.5 * CIRCLE_XY[:, 1]]), CIRCLE_W, 2, CIRCLE_KNOTS)
+    opened = full_cylinder()
+    points = opened.points.copy()
+    points[-1, :, 1] -= 1e-6  # the last control row, at u = 4, moved off the first one
+    opened = NurbsSurface(2, 1, opened.knots_u, opened.knots_v, points, opened.weights)
+    surfaces = SurfaceSet([full_cylinder(), sphere, torus, quarter_cylinder(), opened])
+    np.testing.assert_array_equal(surfaces.closed, [[True, False], [True, False], [True, True], [False, False],
+                                                    [False, False]])
+    S = sphere.evaluate(np.array([0.0, 4.0, 1.3]), np.array([0.0, 0.0, 2.0])).S  # the poles, any u
+    np.testing.assert_allclose(S, [[0, 0, -1], [0, 0, -1], [0, 0, 1]], atol=1e-15)
 
 
 # --------------------------------------------------------------------------- degenerate normals: teapot poles

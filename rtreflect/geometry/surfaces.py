@@ -34,6 +34,10 @@ DEGENERATE_SINE = 1e-10
 #: used instead is off by about x: the bound balances the two (√ε, times √(reach/size) far from the origin).
 #: Also unchanged by rescaling u or v.
 VANISHING_PARTIAL = 1e-8
+#: A patch is closed in u (v) where its edges u = u₀ and u = u₁ (v₀, v₁) coincide to this fraction of its reach: a
+#: periodic face's seam, whose two sides' control rows agree to float64 rounding (~1e-15 of the reach); as
+#: `seams.CLOSED_FRACTION` for a curve's ends.
+CLOSED_FRACTION = 1e-12
 
 
 class SurfaceDerivatives(NamedTuple):
@@ -313,3 +317,33 @@ class SurfaceSet:
         """Per-point parameter domain bounds (u0, u1, v0, v1)."""
         rows = self._domain_table[np.asarray(patch)]
         return rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
+
+    @cached_property
+    def closed(self) -> np.ndarray:
+        """Per patch (P, 2): whether it is closed in u, in v: S(u₀, v) = S(u₁, v) for every v (S(u, v₀) = S(u, v₁)),
+        to `CLOSED_FRACTION` of its reach, tested at the other direction's span breaks and span midpoints (the two
+        edges are B-spline curves over those spans), all patches' in one evaluation. There a point of the seam has
+        two parameter pairs, one on each side.
+        """
+        patch, axis, a_uv, b_uv = [], [], [], []
+        for k, surface in enumerate(self.patches):
+            (u0, u1), (v0, v1) = surface.domain
+            for direction, breaks in enumerate(surface.span_breaks()[::-1]):  # along v for the u edges, u for the v ones
+                s = np.union1d(breaks, 0.5 * (breaks[1:] + breaks[:-1]))
+                ends = ((u0, u1), (v0, v1))[direction]
+                for end, out in zip(ends, (a_uv, b_uv)):
+                    e = np.full(len(s), end)
+                    out.append(np.column_stack([e, s] if direction == 0 else [s, e]))
+                patch.append(np.full(len(s), k))
+                axis.append(np.full(len(s), direction))
+        closed = np.zeros((len(self.patches), 2), dtype=bool)
+        if not patch:
+            return closed
+        patch, axis, a_uv, b_uv = (np.concatenate(x) for x in (patch, axis, a_uv, b_uv))
+        uv = np.concatenate([a_uv, b_uv])
+        S = self.evaluate(np.concatenate([patch, patch]), uv[:, 0], uv[:, 1]).S
+        gap = np.linalg.norm(S[:len(patch)] - S[len(patch):], axis=1)
+        reach = np.array([surface.reach for surface in self.patches])
+        worst = np.zeros((len(self.patches), 2))
+        np.maximum.at(worst, (patch, axis), gap)
+        return worst <= CLOSED_FRACTION * reach[:, None]

@@ -54,8 +54,8 @@ from dataclasses import replace
 import numpy as np
 
 from .accelerator import Accelerator, MeshHits
-from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _normals, _other_root, _rescue, facing,
-                      refine_all, trace)
+from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _normals, _other_root, _over_closed_seam, _rescue,
+                      facing, refine_all, trace)
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
@@ -322,7 +322,9 @@ class SecondLook:
 
         Any converged point on the ray, on its face, ahead of the eye and nearer than the kept hit is an exact
         surface point before it, wherever Newton went; at grazing incidence the nearer of the sheet's two
-        crossings is sought as the tracer does (`tracing._other_root`). Where Newton fails inside the domain a
+        crossings is sought as the tracer does (`tracing._other_root`). Where Newton stops on a closed face's seam
+        it goes on from the seam's other side (`tracing._over_closed_seam`: a seam wall's or rim box's start lies on
+        one side only); where it fails inside the domain a
         short miss search (`SHELL_RESCUE_STEPS`) follows; a start that leads nowhere decides nothing (no miss
         verdict, no fallback: the finer mesh's trace has looked there too).
         """
@@ -334,6 +336,10 @@ class SecondLook:
         u0, v0 = u, v
         u, v, derivs, converged, edge, normal, cosine = refine_all(self.surfaces, patch, u, v, O, D, entry.t[rays],
                                                                    self.tessellation.extent)
+        # A start on a closed face's seam (its last wall or rim box) may lie on the side away from the hit.
+        over = _over_closed_seam(self.surfaces, patch, u, v, derivs, converged, edge, O, D, entry.t[rays],
+                                 self.tessellation.extent)
+        _normals(self.surfaces, patch, derivs, D, over, normal, cosine, np.zeros(len(rays), dtype=bool))
         # Newton from a start far along a grazing ray can fail where the ray does meet the sheet: search there.
         # (Not where Newton ran off the face's domain: the ray leaves the face there, as `tracing._candidates` decides.)
         stuck = np.flatnonzero(~converged & ~edge)

@@ -19,7 +19,8 @@ Embree from just beyond the previous one (vectorised over the rays still open, a
 - *valid*: Newton converged near its mesh hit, ahead of the origin, inside its face's trim;
 - *miss*: the surface is not there: the refinement left the face (ran off the patch's domain
   or out of its trim) and no neighbouring face across that edge takes it (a restart on the
-  nearest face sharing the edge, `Tessellation.across_seam`), or a Levenberg–Marquardt search
+  nearest face sharing the edge, `Tessellation.across_seam`; where it stops on a closed face's seam,
+  again from the seam's other side, `_over_closed_seam`), or a Levenberg–Marquardt search
   for the ray–surface distance stalls at a positive minimum (the ray passes the surface's
   silhouette; Newton on the distance decides where the search runs out of steps, `_passes_by`);
 - *unresolved*: neither could be shown (Newton and the search failed in the face's interior, or
@@ -355,7 +356,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
             # The faces meeting at a corner have their boundary vertices there within a mesh edge of each other: a
             # later try's lies within the first neighbour's edge length of its vertex (`SEAM_CORNER_EDGES`).
             reach = np.minimum(reach, gap + SEAM_CORNER_EDGES * tessellation.edge_length[pn])
-        u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)
+        u3, v3, d3, ok3, edge3 = refine_all(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)[:5]
+        _over_closed_seam(surfaces, pn, u3, v3, d3, ok3, edge3, O[seam], D[seam], tm[seam], tessellation.extent)
         near3, t3 = _near_mesh_hit(d3, pn, O[seam], D[seam], tm[seam], band)
         ok3 &= near3 & surfaces.on_face(pn, u3, v3)
         won = seam[ok3]
@@ -371,6 +373,35 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     _normals(surfaces, pk, derivs, D, np.flatnonzero(aside), normal, cosine, degenerate)
     t = np.where(status == VALID, tr, tm)
     return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside)
+
+
+def _over_closed_seam(surfaces: SurfaceSet, patch, u, v, derivs: SurfaceDerivatives, converged, edge, O, D, t_mesh,
+                      extent) -> np.ndarray:
+    """Newton that stopped unconverged on a closed face's seam, restarted from the same point's parameters on the
+    seam's other side (u₀ ↔ u₁ where S(u₀, ·) ≡ S(u₁, ·), `SurfaceSet.closed`; v alike); in place where it converges
+    there. Returns the rows replaced.
+
+    A boundary vertex on the seam belongs to both sides, and a restart from it (`Tessellation.across_seam`, a
+    shell hit on the seam's last wall or rim box) may start on the side away from the hit: Newton then runs into
+    the domain's edge, clamped, though the surface goes on across it (parts/plate.step at 480×270, pixel
+    (133, 335): a ray through a hole onto its fillet's top circle at u = 0.017, the restart from the plane
+    at u = 2π; the ray went on to the hole's floor 7.6 farther).
+    """
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    closed = surfaces.closed[np.asarray(patch, dtype=np.int64)]
+    on_u, on_v = closed[:, 0] & ((u == u0) | (u == u1)), closed[:, 1] & ((v == v0) | (v == v1))
+    rows = np.flatnonzero(~converged & edge & (on_u | on_v))
+    if len(rows) == 0:
+        return rows
+    # The other end exactly (u₀ + u₁ − u need not round to it).
+    us = np.where(on_u[rows], np.where(u[rows] == u0[rows], u1[rows], u0[rows]), u[rows])
+    vs = np.where(on_v[rows], np.where(v[rows] == v0[rows], v1[rows], v0[rows]), v[rows])
+    u2, v2, d2, ok2 = refine(surfaces, patch[rows], us, vs, O[rows], D[rows], t_mesh[rows], extent)
+    won = rows[ok2]
+    u[won], v[won], converged[won], edge[won] = u2[ok2], v2[ok2], True, False
+    for have, new in zip(derivs[:3], d2[:3]):
+        have[won] = new[ok2]
+    return won
 
 
 def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs, normal, cosine,
