@@ -515,3 +515,54 @@ def test_several_closed_faces_keep_their_seams(tmp_path):
         assert surface.trim._polygon.area == pytest.approx((u.T1 - u.T0) * (v.T1 - v.T0), rel=1e-9)
         (u0, u1), (v0, v1) = surface.domain
         assert (u0, u1, v0, v1) == pytest.approx((u.T0, u.T1, v.T0, v.T1), abs=1e-12)
+
+
+#: A fresh process (one thread: the read forks) whose STEP read ends the reading process by a signal; it prints the
+#: exception read_isolated raised.
+_DEATH = """
+import os, signal, sys
+from pathlib import Path
+from rtreflect.exchange.isolation import read_isolated
+try:
+    read_isolated(Path("part.step"), "STEP file", lambda: os.kill(os.getpid(), getattr(signal, sys.argv[1])))
+except BaseException as exc:
+    print(type(exc).__name__, exc)
+"""
+
+
+def test_a_killed_reader_is_not_called_a_corrupt_file():
+    """SIGKILL (the out-of-memory killer) is not the file's fault; SIGSEGV is Open CASCADE's crash on it; a stop
+    signal that ended the child is the parent's interruption."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("OCP")
+
+    def death(name):
+        return subprocess.run([sys.executable, "-c", _DEATH, name], capture_output=True, text=True).stdout.strip()
+
+    assert death("SIGKILL") == "SceneError part.step: reading it was killed (SIGKILL: out of memory?)"
+    assert death("SIGSEGV").startswith("SceneError part.step: Open CASCADE crashed reading it (SIGSEGV): the STEP file")
+    assert death("SIGTERM") == "Interrupted SIGTERM"
+
+
+def test_the_reader_forks_only_while_the_process_has_one_thread():
+    import os
+    import threading
+
+    from rtreflect.exchange.isolation import read_isolated
+
+    pytest.importorskip("OCP")
+    parent = os.getpid()
+    if threading.active_count() == 1:
+        _, info = read_isolated(Path("part.step"), "STEP file", lambda: (None, {"pid": os.getpid()}))
+        assert info["pid"] != parent
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        _, info = read_isolated(Path("part.step"), "STEP file", lambda: (None, {"pid": os.getpid()}))
+    finally:
+        stop.set()
+        other.join()
+    assert info["pid"] == parent

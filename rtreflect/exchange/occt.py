@@ -552,7 +552,8 @@ def seam_lost(face) -> bool:
 def converted_alone(original, face, key_of):
     """``original`` (an unconverted face) converted on its own (`seam_lost`), with the key maker of its edges:
     each edge keeps the key of its counterpart in the whole shape's conversion ``face`` (the modifier keeps the
-    edges' order), so the seam finder still pairs it with its neighbours."""
+    edges' order), so the seam finder still pairs it with its neighbours. Where the face alone still looks
+    like a lost seam, ``face`` and ``key_of`` unchanged."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
     from OCP.TopAbs import TopAbs_FACE
     from OCP.TopExp import TopExp_Explorer
@@ -563,7 +564,10 @@ def converted_alone(original, face, key_of):
     alone = TopoDS.Face(TopExp_Explorer(alone, TopAbs_FACE).Current())
     mine, theirs = _edges_of(alone), _edges_of(face)
     if len(mine) != len(theirs) or seam_lost(alone):
-        raise FaceError("Open CASCADE's conversion to NURBS lost the seam of its closed surface")
+        # Alone it fails the same test, so the whole shape's conversion did not cause it (an exporter's edge
+        # tolerance understating its pcurve's distance, say): the face as converted, as before this check (the
+        # trim checks downstream still refuse a loop that encloses nothing).
+        return face, key_of
     keys = [key_of(edge) for edge in theirs]
     return alone, lambda edge: next(key for e, key in zip(mine, keys) if e.IsSame(edge))
 
