@@ -426,7 +426,7 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     tangential = Dr - cr[:, None] * nr
     # δ = (du, dv): least squares of [S_u S_v] δ = D_T (the 2×2 normal equations).
     du, dv = parameter_steps(d2.Su, d2.Sv, tangential)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # κ ~ 0: no finite root, dropped below
         kappa = np.einsum("ij,ij->i", nr, d2.Suu * (du * du)[:, None] + 2.0 * d2.Suv * (du * dv)[:, None]
                           + d2.Svv * (dv * dv)[:, None])
         step = 2.0 * cr / kappa
