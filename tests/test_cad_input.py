@@ -545,24 +545,3 @@ def test_a_killed_reader_is_not_called_a_corrupt_file():
     assert death("SIGSEGV").startswith("SceneError part.step: Open CASCADE crashed reading it (SIGSEGV): the STEP file")
     assert death("SIGTERM") == "Interrupted SIGTERM"
 
-
-def test_the_reader_forks_only_while_the_process_has_one_thread():
-    import os
-    import threading
-
-    from rtreflect.exchange.isolation import read_isolated
-
-    pytest.importorskip("OCP")
-    parent = os.getpid()
-    if threading.active_count() == 1:
-        _, info = read_isolated(Path("part.step"), "STEP file", lambda: (None, {"pid": os.getpid()}))
-        assert info["pid"] != parent
-    stop = threading.Event()
-    other = threading.Thread(target=stop.wait)
-    other.start()
-    try:
-        _, info = read_isolated(Path("part.step"), "STEP file", lambda: (None, {"pid": os.getpid()}))
-    finally:
-        stop.set()
-        other.join()
-    assert info["pid"] == parent

@@ -13,10 +13,11 @@ stop signal (Ctrl-C, SIGTERM, SIGHUP) that ended the child is the parent's `Inte
 raised in the child is re-raised in the parent. The stop signals are blocked across the fork, so none
 can land in the child before its own handlers are set, nor in the parent before it waits.
 
-A forked child has only the thread that forked it: a lock another Python thread held (a stream's
-buffer, say) would stay held in it for ever. So the read forks only while this is the process's one
-Python thread (the command line loading its input); elsewhere (tile threads, a Dask worker, a caller's
-threads) and where ``os.fork`` does not exist (Windows) or fails, it runs in-process, as before.
+Where ``os.fork`` does not exist (Windows) or fails, the read runs in-process, as before. (A forked
+child has only the thread that forked it: a lock another Python thread held at that moment would stay
+held in the child. The child takes none but its own streams' before it reads, and those are flushed
+just before the fork; reading in-process instead where other threads run would let a corrupt file
+kill the whole process, a Dask worker or a test run, which is what this module exists to prevent.)
 """
 
 from __future__ import annotations
@@ -28,7 +29,6 @@ import shutil
 import signal
 import sys
 import tempfile
-import threading
 from pathlib import Path
 from typing import Callable
 
@@ -48,7 +48,7 @@ def read_isolated(path: Path, what: str, read: Callable[[], tuple[object, dict]]
     ``what``: the file's kind for the message ("STEP file"). Raises `SceneError` when the child crashed or was
     killed, or its read raised one; `Interrupted` when a stop signal ended it (module doc).
     """
-    if not hasattr(os, "fork") or threading.active_count() > 1:
+    if not hasattr(os, "fork"):
         return read()
     from OCP.BinTools import BinTools
     from OCP.TopoDS import TopoDS_Shape
