@@ -89,6 +89,12 @@ def reflect_rays(D, rows, n, s_rows, s):
 
 
 @njit(inline="always", **JIT)
+def _signed_at(pre, ck):
+    """Eq. (4) without the absolute value, (g − c_k h)/|s × c|, of a ray not parallel to c (`_prepare`'s pre)."""
+    return (pre[1] - ck * pre[2]) * pre[3]
+
+
+@njit(inline="always", **JIT)
 def _ulmet_at(Q, m, e, R, s, i):
     """Ulmet's f of point i (module doc): the e-coordinate of R + t s in the light plane, NaN where t <= 0.
 
@@ -145,7 +151,7 @@ def reach(Q, m, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, 
         line_id[i] = best
         line_dist[i] = best_d if best >= 0 else np.nan
         # The sign as `signed` gives it (the same expression, so the same bits); s ∥ c: the unsigned d.
-        line_sigma[i] = np.nan if best < 0 else (best_d if pre[0] else (pre[1] - c_k[best] * pre[2]) * pre[3])
+        line_sigma[i] = np.nan if best < 0 else (best_d if pre[0] else _signed_at(pre, c_k[best]))
         line_t[i] = best_t
         candidate[i] = hit
         t_candidate[i] = t_hit
@@ -159,6 +165,6 @@ def signed(Q, c, e, c_k, R, s, tube, out):
         pre = _prepare(Q, c, e, R, s, i)
         ck = c_k[tube[i]]
         if not pre[0]:
-            out[i] = (pre[1] - ck * pre[2]) * pre[3]
+            out[i] = _signed_at(pre, ck)
         else:
             out[i] = _pair(Q, c, e, R, i, ck, np.inf, pre)[0]
