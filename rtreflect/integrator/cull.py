@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernels.pixels import box_keep, origin_reach
+
 #: Growth of the box, relative to its diagonal: float32 holds a vertex to ~6e-8 of the part's size,
 #: so 1e-3 is four orders of margin.
 BOX_MARGIN = 1e-3
@@ -43,18 +45,19 @@ class RayBox:
         n = len(origins)
         if self.low is None or n == 0:
             return np.arange(n)
+        return np.flatnonzero(self.keep(origins, directions))
+
+    def keep(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """(N,) True where `may_hit` keeps the ray: the slab test in one compiled pass (`kernels.pixels.box_keep`)."""
+        n = len(origins)
+        if self.low is None or n == 0:
+            return np.ones(n, dtype=bool)
+        origins = np.ascontiguousarray(origins, dtype=np.float64)
+        directions = np.ascontiguousarray(directions, dtype=np.float64)
         centre = 0.5 * (self.low + self.high)
-        reach = float(np.abs(origins - centre).max())
+        reach = origin_reach(origins, centre)
         grow = BOX_MARGIN * float(np.linalg.norm(self.high - self.low)) + ORIGIN_MARGIN * reach
-        low, high = self.low - grow, self.high + grow
-        near, far = np.full(n, -np.inf), np.full(n, np.inf)
-        with np.errstate(over="ignore", invalid="ignore"):
-            for k in range(3):
-                d = directions[:, k]
-                inv = 1.0 / np.where(d == 0.0, TINY, d)
-                t1, t2 = (low[k] - origins[:, k]) * inv, (high[k] - origins[:, k]) * inv
-                np.fmax(near, np.minimum(t1, t2), out=near)
-                np.fmin(far, np.maximum(t1, t2), out=far)
-            # NaN (a NaN ray) compares False both ways: such a ray is kept, for the tracer to answer.
-            culled = (far < near) | (far < 0.0)
-        return np.flatnonzero(~culled)
+        keep = np.empty(n, dtype=bool)
+        # NaN (a NaN ray) compares False both ways: such a ray is kept, for the tracer to answer.
+        box_keep(origins, directions, self.low - grow, self.high + grow, TINY, keep)
+        return keep

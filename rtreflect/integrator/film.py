@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernels.pixels import aov_columns
+
 COLOR_CHANNELS = ("R", "G", "B", "A")
 #: The mode's φ and the curvatures (geometry/curvature.py) come after the reflection AOVs, so the channel
 #: indices of the older ones do not move.
@@ -34,6 +36,9 @@ def aov_planes(aovs: dict[str, np.ndarray], out: np.ndarray | None = None) -> np
     """
     if out is None:
         out = np.empty((len(aovs["u"]), len(AOV_CHANNELS)))
+    elif out.dtype == np.float32 and len(out):  # a tile's channels: one compiled pass (`kernels.pixels.aov_columns`)
+        aov_columns(*(np.asarray(aovs[name], dtype=np.float64) for name, _ in AOV_ARRAYS), out)
+        return out
     column = 0
     for name, width in AOV_ARRAYS:
         if width == 1:

@@ -381,7 +381,7 @@ class Renderer:
         offsets = sample_offsets(s)
         ns = len(offsets)
         with self.clock.stage("camera rays"):
-            origins, directions = self.camera.rays(np.repeat(rows, ns), np.repeat(cols, ns), np.tile(offsets, (len(rows), 1)))
+            origins, directions = self.camera.sample_rays(rows, cols, offsets)
         shading = self.shade(origins, directions)
         rgba = self.colour(shading, self.line_weight(shading), ns)
         return rgba, shading, len(origins)

@@ -13,6 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..exchange.scene import ANALYTIC, CameraSpec
+from ..kernels.pixels import pixel_rays
+
+#: The pixel centre's offset (dy = dx = ½), for `Camera.rays`.
+_CENTRE = np.array([0.5])
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -72,31 +76,36 @@ class Camera:
 
         ``offsets`` defaults to the pixel centre (½, ½); it may be (N, 2) or broadcastable.
         """
-        rows = np.asarray(rows, dtype=np.float64)
-        cols = np.asarray(cols, dtype=np.float64)
         if offsets is None:
-            oy = ox = 0.5
+            oy = ox = _CENTRE
         else:
+            offsets = np.asarray(offsets, dtype=np.float64)
             oy, ox = offsets[..., 0], offsets[..., 1]
-        x = 2.0 * (cols + ox) / self.width - 1.0
-        y = 1.0 - 2.0 * (rows + oy) / self.height
+        if np.size(oy) == 1:  # one offset for every ray: no (N,) copies of it
+            rows, cols = np.broadcast_arrays(np.asarray(rows, dtype=np.float64), np.asarray(cols, dtype=np.float64))
+            oy, ox = np.ravel(oy), np.ravel(ox)
+        else:
+            rows, cols, oy, ox = np.broadcast_arrays(np.asarray(rows, dtype=np.float64),
+                                                     np.asarray(cols, dtype=np.float64), oy, ox)
+        return self._pixel_rays(rows, cols, oy, ox, 1)
+
+    def sample_rays(self, rows: np.ndarray, cols: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`rays` of every pixel (rows, cols) at each of the (s², 2) ``offsets`` in turn (pixel-major): the same as
+        ``rays(np.repeat(rows, s²), np.repeat(cols, s²), np.tile(offsets, (len(rows), 1)))``, without those copies."""
+        offsets = np.asarray(offsets, dtype=np.float64)
+        return self._pixel_rays(np.asarray(rows, dtype=np.float64), np.asarray(cols, dtype=np.float64),
+                                offsets[:, 0], offsets[:, 1], len(offsets))
+
+    def _pixel_rays(self, rows, cols, oy, ox, repeat: int) -> tuple[np.ndarray, np.ndarray]:
+        """The compiled camera contract (`kernels.pixels.pixel_rays`) over 1-D float64 rows, cols and offsets."""
+        rows, cols, oy, ox = (np.ascontiguousarray(np.ravel(a)) for a in (rows, cols, oy, ox))
         w, r, q = self.basis
         half_w, half_h = self._half_extents()
-        x, y = (np.ravel(a) for a in np.broadcast_arrays(x, y))
-        if self.orthographic:
-            origins = self.spec.eye + (x * half_w)[:, None] * r + (y * half_h)[:, None] * q
-            directions = np.broadcast_to(w, origins.shape).copy()
-        else:
-            # w + x·half_w·r + y·half_h·q normalised, one coordinate at a time: the same operations in the same
-            # order as on (N, 3) rows (so the same bits), without (N, 3) temporaries or a strided norm.
-            a, b = x * half_w, y * half_h
-            c = [w[k] + a * r[k] + b * q[k] for k in range(3)]
-            length = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
-            directions = np.empty((len(a), 3))
-            for k in range(3):
-                np.divide(c[k], length, out=directions[:, k])
-            origins = np.empty((len(a), 3))
-            origins[:] = self.spec.eye
+        n = len(rows) * repeat if len(oy) else 0
+        origins, directions = np.empty((n, 3)), np.empty((n, 3))
+        if n:
+            pixel_rays(rows, cols, oy, ox, repeat, np.asarray(self.spec.eye, dtype=np.float64), w, r, q, float(half_w),
+                       float(half_h), float(self.width), float(self.height), self.orthographic, origins, directions)
         return origins, directions
 
     def eye_vectors(self, points: np.ndarray) -> np.ndarray:

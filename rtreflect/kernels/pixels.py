@@ -1,0 +1,156 @@
+"""Compiled per-pixel kernels of the renderer's fixed costs: camera rays, the ray-box cull, AOV planes (issue 14).
+
+Each kernel does in one pass over the rays, with no temporaries, what the numpy form did in a dozen
+passes over (N,) and (N, 3) arrays, and with the same floating-point operations in the same order, so
+the same bits (numba compiles without fast-math, so no reassociation or fused multiply-add).
+
+- `pixel_rays`: the camera contract of `trace.camera` (DESIGN.md): x = 2(j + o_x)/W − 1, y = 1 − 2(i + o_y)/H,
+  a pinhole ray's direction w + x·h_w·r + y·h_h·q normalised, or an orthographic ray from
+  eye + x·h_w·r + y·h_h·q along w.
+- `box_keep`: the slab test of Kay and Kajiya ("Ray tracing complex scenes", SIGGRAPH 1986) against a
+  box [low, high] (`integrator.cull`).
+- `aov_columns`: the AOV arrays written into a tile's float32 channels (`integrator.film.aov_planes`), each
+  value rounded to float32 once.
+
+Argument types (for an ahead-of-time signature) are given in each docstring; all arrays C-contiguous.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from . import JIT
+
+
+@njit(**JIT)
+def pixel_rays(rows, cols, oy, ox, repeat, eye, w, r, q, half_w, half_h, width, height, ortho, origins, directions):
+    """Camera rays (module doc) into ``origins`` and ``directions`` (N, 3), N = len(rows)·repeat.
+
+    Ray k = p·repeat + j is of pixel (rows[p], cols[p]) at sub-pixel offset (oy[m], ox[m]), m = j where
+    len(oy) = repeat, else m = k (len(oy) = N): repeat = 1 and one offset for the pixel centres, repeat = s² and the
+    s² offsets for each pixel's samples, repeat = 1 and N offsets for one offset per ray.
+
+    Types: rows, cols, oy, ox float64[:]; repeat int64; eye, w, r, q float64[:] (3); half_w, half_h float64;
+    width, height float64; ortho bool; origins, directions float64[:, :] (N, 3), written.
+    """
+    per_sample = oy.shape[0] == repeat
+    for k in range(origins.shape[0]):
+        p, j = (k // repeat, k - (k // repeat) * repeat) if repeat > 1 else (k, 0)
+        m = j if per_sample else k
+        x = 2.0 * (cols[p] + ox[m]) / width - 1.0
+        y = 1.0 - 2.0 * (rows[p] + oy[m]) / height
+        a = x * half_w
+        b = y * half_h
+        if ortho:
+            for c in range(3):
+                origins[k, c] = eye[c] + a * r[c] + b * q[c]
+                directions[k, c] = w[c]
+        else:
+            c0 = w[0] + a * r[0] + b * q[0]
+            c1 = w[1] + a * r[1] + b * q[1]
+            c2 = w[2] + a * r[2] + b * q[2]
+            length = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+            directions[k, 0] = c0 / length
+            directions[k, 1] = c1 / length
+            directions[k, 2] = c2 / length
+            for c in range(3):
+                origins[k, c] = eye[c]
+
+
+@njit(inline="always", **JIT)
+def _nan_min(a, b):
+    """numpy.minimum: NaN if either is."""
+    if a != a or b != b:
+        return math.nan
+    return a if a < b else b
+
+
+@njit(inline="always", **JIT)
+def _nan_max(a, b):
+    """numpy.maximum: NaN if either is."""
+    if a != a or b != b:
+        return math.nan
+    return a if a > b else b
+
+
+@njit(inline="always", **JIT)
+def _fmax(a, b):
+    """numpy.fmax: the other where one is NaN."""
+    if a != a:
+        return b
+    if b != b:
+        return a
+    return a if a > b else b
+
+
+@njit(inline="always", **JIT)
+def _fmin(a, b):
+    """numpy.fmin: the other where one is NaN."""
+    if a != a:
+        return b
+    if b != b:
+        return a
+    return a if a < b else b
+
+
+@njit(**JIT)
+def origin_reach(origins, centre):
+    """max |origins − centre| over every coordinate (NaN if any is NaN, as numpy's max).
+
+    Types: origins float64[:, :] (N, 3); centre float64[:] (3). Returns float64.
+    """
+    reach = -math.inf
+    for k in range(origins.shape[0]):
+        for c in range(3):
+            reach = _nan_max(reach, abs(origins[k, c] - centre[c]))
+    return reach
+
+
+@njit(**JIT)
+def box_keep(origins, directions, low, high, tiny, keep):
+    """``keep[k]``: ray k meets the box [low, high] ahead of its origin, or is NaN (module doc; `integrator.cull`).
+
+    Per axis t₁, t₂ = (low − o)/d, (high − o)/d with d = 0 replaced by ``tiny``; near = fmax over the axes of
+    min(t₁, t₂) from −∞, far = fmin of max(t₁, t₂) from +∞; culled where far < near or far < 0.
+
+    Types: origins, directions float64[:, :] (N, 3); low, high float64[:] (3); tiny float64; keep bool[:] (N), written.
+    """
+    for k in range(origins.shape[0]):
+        near = -math.inf
+        far = math.inf
+        for c in range(3):
+            d = directions[k, c]
+            inv = 1.0 / (tiny if d == 0.0 else d)
+            t1 = (low[c] - origins[k, c]) * inv
+            t2 = (high[c] - origins[k, c]) * inv
+            near = _fmax(near, _nan_min(t1, t2))
+            far = _fmin(far, _nan_max(t1, t2))
+        keep[k] = not (far < near or far < 0.0)
+
+
+@njit(**JIT)
+def aov_columns(P, N, u, v, patch, Z, f, line_id, line_dist, phi, K, H, k1, k2, out):
+    """The AOV channels of a tile in `integrator.film.AOV_CHANNELS` order (P and N three columns each, then one
+    per array), each float64 value rounded to ``out``'s float32 once.
+
+    Types: P, N float64[:, :] (n, 3); u ... k2 float64[:] (n), any stride (the odd-s path passes every s²-th
+    sample); out float32[:, :] (n, 18), written (a view of a tile's pixels: its rows strided).
+    """
+    for i in range(out.shape[0]):
+        for c in range(3):
+            out[i, c] = P[i, c]
+            out[i, 3 + c] = N[i, c]
+        out[i, 6] = u[i]
+        out[i, 7] = v[i]
+        out[i, 8] = patch[i]
+        out[i, 9] = Z[i]
+        out[i, 10] = f[i]
+        out[i, 11] = line_id[i]
+        out[i, 12] = line_dist[i]
+        out[i, 13] = phi[i]
+        out[i, 14] = K[i]
+        out[i, 15] = H[i]
+        out[i, 16] = k1[i]
+        out[i, 17] = k2[i]
