@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.surfaces import parameter_steps
+from ..kernels.pixels import edge_flags
 from ..modes.profile import stripe_weight
 
 #: Cells of the blur ramp [r(1 − b), r(1 + b)] over which the soft profile's coverage is summed: the midpoint
@@ -123,13 +124,6 @@ def neighbours(grid: np.ndarray):
         yield padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
 
 
-def neighbour_inside(shape: tuple[int, int]):
-    """Per `NEIGHBOURS` step, a (rows, columns) mask of the pixels whose neighbour there lies inside the grid."""
-    padded = np.pad(np.ones(shape, dtype=bool), 1, constant_values=False)
-    for dr, dc in NEIGHBOURS:
-        yield padded[1 + dr:1 + dr + shape[0], 1 + dc:1 + dc + shape[1]]
-
-
 def edge_pixels(hit: np.ndarray, patch: np.ndarray, level: np.ndarray, near: np.ndarray, blocked: np.ndarray,
                 untrusted: np.ndarray) -> np.ndarray:
     """Pixels the linear stripe model does not describe (module doc): True where any of the 8 neighbours differs.
@@ -138,9 +132,6 @@ def edge_pixels(hit: np.ndarray, patch: np.ndarray, level: np.ndarray, near: np.
     reflected ray is occluded before the stripe (False where not tested); ``untrusted``, near a stripe but
     the footprint is too wide or the gradient unknown.
     """
-    edge = untrusted.copy()
-    for h, p, k, c, o in zip(*(neighbours(x) for x in (hit, patch, level, near, blocked))):
-        edge |= (h != hit) | (hit & (p != patch))
-        edge |= (near | c) & (k != level)
-        edge |= near & c & (o != blocked)
+    edge = np.empty(hit.shape, dtype=bool)
+    edge_flags(hit, patch, level, near, blocked, untrusted, edge)  # one compiled pass, the neighbours as `neighbours`
     return edge

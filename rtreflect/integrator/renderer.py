@@ -26,7 +26,7 @@ import numpy as np
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
-from .analytic import BENDING, EDGE_SAMPLES, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbour_inside, neighbours, stripe_coverage, uv_footprint
+from .analytic import BENDING, EDGE_SAMPLES, TRUSTED_SPAN, edge_pixels, neighbours, stripe_coverage, uv_footprint
 from .cull import RayBox
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect, reflect_rays
@@ -40,6 +40,7 @@ from ..exchange.scene import ANALYTIC, ImageSpec, Scene
 from ..geometry.curvature import curvatures_at
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
+from ..kernels.pixels import bent_flags, stripe_candidates
 from ..trace.secondlook import SecondLook
 from ..trace.tracing import Hits, occluded, trace
 
@@ -437,14 +438,8 @@ class Renderer:
             grid = lambda x: x.reshape(shape + x.shape[1:])[rs, cs]  # noqa: E731 (a (rows, columns) view of the crop)
             grid_level, grid_sigma = grid(level), grid(sigma)
             want = np.zeros(shape, dtype=bool)
-            if crop[1]:
-                move, mixed = np.zeros(crop), np.zeros(crop, dtype=bool)
-                for k, sg in zip(neighbours(grid_level), neighbours(grid_sigma)):
-                    mixed |= k != grid_level
-                    with np.errstate(invalid="ignore"):
-                        move = np.fmax(move, np.abs(sg - grid_sigma))
-                with np.errstate(invalid="ignore"):
-                    want[rs, cs] = (grid_level >= 0) & (mixed | (np.abs(grid_sigma) - move <= self.stripe_reach))
+            if crop[1]:  # one compiled pass over the crop (`kernels.pixels.stripe_candidates`)
+                stripe_candidates(grid_level, grid_sigma, float(self.stripe_reach), want[rs, cs])
             want[:max(0, first - 1 - r0)] = False
             want[last + 2 - r0:] = False
         centre = self.centre_stripes(shading, rows, cols, sigma, want.ravel())
@@ -457,15 +452,9 @@ class Renderer:
                 # σ bending within the pixel (a fold of φ, a tight turn of the line) is not linear: where a
                 # neighbour's σ on the same level strays from the plane σ + g·(Δx, Δy) by `BENDING` half widths,
                 # supersample.
-                gx, gy = grid(centre.grad[:, 0]), grid(centre.grad[:, 1])
-                near = grid(centre.near)
-                bent = np.zeros(crop, dtype=bool)
-                for (dr, dc), inside, k, sg in zip(NEIGHBOURS, neighbour_inside(crop), neighbours(grid_level),
-                                                   neighbours(grid_sigma)):
-                    with np.errstate(invalid="ignore"):
-                        strays = np.abs(sg - grid_sigma - gx * dc - gy * dr) > BENDING * self.half_width
-                    bent |= inside & near & (k == grid_level) & strays
-                grid(centre.untrusted)[...] |= bent
+                # (`kernels.pixels.bent_flags`, in place: the bend is read from σ, g and the levels alone)
+                bent_flags(grid_level, grid_sigma, grid(centre.grad[:, 0]), grid(centre.grad[:, 1]), grid(centre.near),
+                           float(BENDING * self.half_width), grid(centre.untrusted))
                 hits = shading.hits
                 edge[rs, cs] = edge_pixels(*(grid(x) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked,
                                                                centre.untrusted)))

@@ -154,3 +154,84 @@ def aov_columns(P, N, u, v, patch, Z, f, line_id, line_dist, phi, K, H, k1, k2, 
         out[i, 15] = H[i]
         out[i, 16] = k1[i]
         out[i, 17] = k2[i]
+
+
+# -- the analytic path's neighbour tests (`integrator.analytic`, `Renderer._render_analytic`) ----------------------
+# Over a (rows, columns) crop of a tile's centre rays; any row stride. A neighbour beyond the crop is the pixel's own
+# row or column repeated (`analytic.neighbours`: numpy's edge padding), so the crop's border is no edge.
+
+
+@njit(inline="always", **JIT)
+def _clamp(i, n):
+    """Index i held inside [0, n)."""
+    return 0 if i < 0 else (n - 1 if i >= n else i)
+
+
+@njit(**JIT)
+def stripe_candidates(level, sigma, reach, want):
+    """``want``: the pixel is on a level (≥ 0) and its footprint may reach the stripe: a neighbour is on another
+    level, or |σ| − m ≤ ``reach`` with m the largest |σ_n − σ| over the 8 neighbours (NaN ones passed over, as
+    numpy.fmax does; σ NaN: False).
+
+    Types: level int64[:, :]; sigma float64[:, :]; reach float64; want bool[:, :], written (crop-shaped).
+    """
+    rows, cols = level.shape
+    for i in range(rows):
+        for j in range(cols):
+            k0, s0 = level[i, j], sigma[i, j]
+            mixed, move = False, 0.0
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    if dr == 0 and dc == 0:
+                        continue
+                    a, b = _clamp(i + dr, rows), _clamp(j + dc, cols)
+                    mixed = mixed or level[a, b] != k0
+                    move = _fmax(move, abs(sigma[a, b] - s0))
+            want[i, j] = k0 >= 0 and (mixed or abs(s0) - move <= reach)
+
+
+@njit(**JIT)
+def bent_flags(level, sigma, gx, gy, near, limit, untrusted):
+    """``untrusted`` set (in place) where the pixel is ``near`` a stripe and a neighbour inside the crop, on the same
+    level, strays from the plane σ + g·(Δx, Δy) by more than ``limit``: |σ_n − σ − g_x Δx − g_y Δy| > limit
+    (Δx a column step, Δy a row step).
+
+    Types: level int64[:, :]; sigma, gx, gy float64[:, :]; near bool[:, :]; limit float64; untrusted bool[:, :].
+    """
+    rows, cols = level.shape
+    for i in range(rows):
+        for j in range(cols):
+            if not near[i, j]:
+                continue
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    a, b = i + dr, j + dc
+                    if (dr == 0 and dc == 0) or a < 0 or a >= rows or b < 0 or b >= cols or level[a, b] != level[i, j]:
+                        continue
+                    if abs(sigma[a, b] - sigma[i, j] - gx[i, j] * dc - gy[i, j] * dr) > limit:
+                        untrusted[i, j] = True
+
+
+@njit(**JIT)
+def edge_flags(hit, patch, level, near, blocked, untrusted, edge):
+    """``edge``: ``untrusted``, or a neighbour differs on hit or miss, on the patch (both hit), on the level (either
+    near a stripe) or on the occlusion (both near): `analytic.edge_pixels`.
+
+    Types: hit bool[:, :]; patch, level int64[:, :]; near, blocked, untrusted bool[:, :]; edge bool[:, :], written.
+    """
+    rows, cols = hit.shape
+    for i in range(rows):
+        for j in range(cols):
+            e = untrusted[i, j]
+            h0, n0 = hit[i, j], near[i, j]
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    if e:
+                        break
+                    if dr == 0 and dc == 0:
+                        continue
+                    a, b = _clamp(i + dr, rows), _clamp(j + dc, cols)
+                    e = (hit[a, b] != h0 or (h0 and patch[a, b] != patch[i, j])
+                         or ((n0 or near[a, b]) and level[a, b] != level[i, j])
+                         or (n0 and near[a, b] and blocked[a, b] != blocked[i, j]))
+            edge[i, j] = e
