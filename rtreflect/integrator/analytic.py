@@ -29,6 +29,7 @@ import numpy as np
 
 from ..geometry.surfaces import parameter_steps
 from ..kernels.pixels import edge_flags
+from ..kernels.pixels import hard_coverage as _hard_coverage, trapezoid_cdf as _trapezoid_cdf
 from ..modes.profile import stripe_weight
 
 #: Cells of the blur ramp [r(1 − b), r(1 + b)] over which the soft profile's coverage is summed: the midpoint
@@ -52,24 +53,26 @@ NEIGHBOURS = tuple((dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or d
 def trapezoid_cdf(z: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """P(X + Y ≤ z) for independent X ~ U[−a/2, a/2], Y ~ U[−b/2, b/2] (a, b ≥ 0): the trapezoid's CDF.
 
-    With a ≥ b and t = z + (a + b)/2: t²/(2ab) up to b, (t − b/2)/a up to a, 1 − (a + b − t)²/(2ab) up to a + b.
+    With a ≥ b and t = z + (a + b)/2: t²/(2ab) up to b, (t − b/2)/a up to a, 1 − (a + b − t)²/(2ab) up to a + b
+    (compiled: `kernels.pixels.trapezoid_cdf`).
 
     >>> trapezoid_cdf(np.array([-1.0, 0.0, 0.25, 1.0]), np.array([1.0] * 4), np.array([0.5] * 4)).tolist()
     [0.0, 0.5, 0.75, 1.0]
     """
-    hi, lo = np.maximum(a, b), np.minimum(a, b)
-    t = np.clip(z + 0.5 * (hi + lo), 0.0, hi + lo)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rise = t * t / (2.0 * hi * lo)
-        fall = 1.0 - (hi + lo - t) ** 2 / (2.0 * hi * lo)
-        middle = (t - 0.5 * lo) / hi
-    cdf = np.where(t <= lo, np.where(lo > 0, rise, 0.0), np.where(t >= hi, np.where(lo > 0, fall, 1.0), middle))
-    return np.where(hi > 0, cdf, (z >= 0).astype(np.float64))  # no footprint at all: a step at 0
+    return _elementwise(_trapezoid_cdf, z, a, b)
 
 
 def hard_coverage(sigma: np.ndarray, a: np.ndarray, b: np.ndarray, half_width: float) -> np.ndarray:
     """Share of the box pixel where |σ + Z| ≤ w (module doc): F(w − σ) − F(−w − σ)."""
-    return trapezoid_cdf(half_width - sigma, a, b) - trapezoid_cdf(-half_width - sigma, a, b)
+    return _elementwise(lambda x, y, z, out: _hard_coverage(x, y, z, float(half_width), out), sigma, a, b)
+
+
+def _elementwise(kernel, *arrays) -> np.ndarray:
+    """``kernel(*arrays, out)`` over the arrays broadcast, as 1-D float64 (the compiled forms, `kernels.pixels`)."""
+    arrays = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64) for x in arrays))
+    out = np.empty(arrays[0].shape)
+    kernel(*(np.ascontiguousarray(x).ravel() for x in arrays), out.reshape(-1))
+    return out
 
 
 def stripe_coverage(sigma: np.ndarray, gx: np.ndarray, gy: np.ndarray, half_width: float, blur: float) -> np.ndarray:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.pixels import aov_columns
+from ..kernels.pixels import aov_columns, coverage_color_one
 
 COLOR_CHANNELS = ("R", "G", "B", "A")
 #: The mode's φ and the curvatures (geometry/curvature.py) come after the reflection AOVs, so the channel
@@ -58,6 +58,12 @@ def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, 
     Pixels none of whose samples hit all get the one value the sums give for them (the background, A = 0),
     computed once: the sums run over the pixels that see the surface only.
     """
+    if hit.shape[1] == 1:  # one sample per pixel: one compiled pass (`kernels.pixels.coverage_color_one`)
+        out = np.empty((len(hit), 4))
+        coverage_color_one(np.ascontiguousarray(hit[:, 0]), np.ascontiguousarray(lit[:, 0], dtype=np.float64),
+                           np.ones(0) if shade is None else np.ascontiguousarray(shade[:, 0], dtype=np.float64),
+                           shade is not None, *(np.asarray(x, dtype=np.float64) for x in (surface_color, line_color, background)), out)
+        return out
     seen = np.flatnonzero(hit.any(axis=1))
     if len(seen) == len(hit):
         return _coverage_sums(hit, lit, surface_color, line_color, background, shade)

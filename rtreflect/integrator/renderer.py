@@ -514,12 +514,14 @@ class Renderer:
         hits = shading.hits
         with self.clock.stage("analytic AA"):
             if len(idx):
-                patch, u, v, n = hits.patch[idx], hits.u[idx], hits.v[idx], hits.N[idx]
+                # np.take: the rows of x[idx], gathered ~4× faster for (N, 3) arrays (as in `shade`)
+                rows3 = lambda x, at=idx: np.take(x, at, axis=0)  # noqa: E731
+                patch, u, v, n = hits.patch[idx], hits.u[idx], hits.v[idx], rows3(hits.N)
                 k = level[idx]
                 # S_u, S_v as the tracer had them at the hit; the mesh-normals path has none (its P is on the mesh).
-                Su, Sv = (hits.Su[idx], hits.Sv[idx]) if self.vertex_normals is None else \
+                Su, Sv = (rows3(hits.Su), rows3(hits.Sv)) if self.vertex_normals is None else \
                     self.surfaces.evaluate(patch, u, v)[1:3]
-                steps = uv_footprint(self.camera, rows[idx], cols[idx], hits.P[idx], n, Su, Sv)
+                steps = uv_footprint(self.camera, rows[idx], cols[idx], rows3(hits.P), n, Su, Sv)
                 u0, u1, v0, v1 = self.surfaces.domains(patch)
                 # The four ends (u, v) ± ½ (du, dv)/dx and /dy, σ at all of them in one pass (rows are independent).
                 shares, ends_u, ends_v = [], [], []
@@ -549,7 +551,8 @@ class Renderer:
             if len(ok):
                 k = level[ok]
                 other = self.neighbour_level[k]
-                points = SurfacePoints(hits.P[ok], hits.N[ok], shading.s[ok], hits.patch[ok], hits.u[ok], hits.v[ok])
+                points = SurfacePoints(*(np.take(x, ok, axis=0) for x in (hits.P, hits.N, shading.s)), hits.patch[ok],
+                                       hits.u[ok], hits.v[ok])
                 gap = np.where(other == k, np.inf, np.abs(sigma[ok] - level_offset(self.mode, points, other)))
                 with np.errstate(invalid="ignore"):
                     untrusted[ok] = span[ok] > TRUSTED_SPAN * gap
@@ -559,7 +562,7 @@ class Renderer:
         if self.mode.along_ray:  # up to the nearest level along s (`Stripes.level_t`)
             test = np.flatnonzero(near)
             if len(test):
-                R, n, s = hits.P[test], hits.N[test], shading.s[test]
+                R, n, s = (np.take(x, test, axis=0) for x in (hits.P, hits.N, shading.s))
                 start = self.accelerator.surface_origins(R, n, hits.patch[test])
                 with self.clock.stage("occlusion (Embree)"):
                     blocked[test] = occluded(self.accelerator, self.tessellation, self.surfaces, start, s,

@@ -235,3 +235,78 @@ def edge_flags(hit, patch, level, near, blocked, untrusted, edge):
                          or ((n0 or near[a, b]) and level[a, b] != level[i, j])
                          or (n0 and near[a, b] and blocked[a, b] != blocked[i, j]))
             edge[i, j] = e
+
+
+# -- the analytic path's closed-form coverage (`integrator.analytic`) ---------------------------------------------
+
+
+@njit(inline="always", **JIT)
+def _clip(x, low, high):
+    """numpy.clip: NaN stays NaN."""
+    if x != x:
+        return x
+    return high if x > high else (low if x < low else x)
+
+
+@njit(inline="always", **JIT)
+def _trapezoid_cdf(z, a, b):
+    """P(X + Y ≤ z), X ~ U[−a/2, a/2], Y ~ U[−b/2, b/2]: `analytic.trapezoid_cdf`, with hi = max(a, b), lo = min(a, b)
+    and t = clip(z + (hi + lo)/2, 0, hi + lo): t²/(2·hi·lo) up to lo, (t − lo/2)/hi up to hi, 1 − (hi + lo − t)²/(2·hi·lo)
+    up to hi + lo; a step at 0 where hi = 0. The operations and their order are numpy's there (same bits)."""
+    hi = _nan_max(a, b)
+    lo = _nan_min(a, b)
+    t = _clip(z + 0.5 * (hi + lo), 0.0, hi + lo)
+    if not hi > 0:
+        return 1.0 if z >= 0 else 0.0
+    if t <= lo:
+        return t * t / (2.0 * hi * lo) if lo > 0 else 0.0
+    if t >= hi:
+        if lo > 0:
+            gap = hi + lo - t
+            return 1.0 - gap * gap / (2.0 * hi * lo)
+        return 1.0
+    return (t - 0.5 * lo) / hi
+
+
+@njit(**JIT)
+def trapezoid_cdf(z, a, b, out):
+    """``out`` = the trapezoid's CDF (`_trapezoid_cdf`) per element.
+
+    Types: z, a, b float64[:] (n); out float64[:] (n), written.
+    """
+    for i in range(out.shape[0]):
+        out[i] = _trapezoid_cdf(z[i], a[i], b[i])
+
+
+@njit(**JIT)
+def hard_coverage(sigma, a, b, half_width, out):
+    """``out`` = the hard stripe's share of the box pixel, F(w − σ) − F(−w − σ) (`analytic.hard_coverage`).
+
+    Types: sigma, a, b float64[:] (n); half_width float64; out float64[:] (n), written.
+    """
+    for i in range(out.shape[0]):
+        out[i] = _trapezoid_cdf(half_width - sigma[i], a[i], b[i]) - _trapezoid_cdf(-half_width - sigma[i], a[i], b[i])
+
+
+# -- colour of one-sample pixels (`integrator.film.coverage_color`) -----------------------------------------------
+
+
+@njit(**JIT)
+def coverage_color_one(hit, weight, shade, shaded, surface, line, background, out):
+    """``out`` (n, 4) linear RGBA of pixels of one sample each (the centre ray of samples = 1 and of the analytic
+    path): a hit shows w·line + (1 − w)·k·surface, a miss the background; A = 1 on a hit. The same sums as
+    `film.coverage_color` over one sample (its counts 0 or 1), term for term, so the same bits.
+
+    Types: hit bool[:] (n); weight float64[:] (n) (line weights or lit flags as 0/1); shade float64[:] (n, read
+    where ``shaded``); shaded bool; surface, line, background float64[:] (3); out float64[:, :] (n, 4), written.
+    """
+    for i in range(out.shape[0]):
+        if hit[i]:
+            w = weight[i]
+            unlit = (1.0 - w) * shade[i] if shaded else 1.0 - w
+            missed = 0.0
+        else:
+            w, unlit, missed = 0.0, 0.0, 1.0
+        for c in range(3):
+            out[i, c] = w * line[c] + unlit * surface[c] + missed * background[c]
+        out[i, 3] = 1.0 if hit[i] else 0.0
