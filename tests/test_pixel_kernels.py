@@ -1,0 +1,216 @@
+"""Compiled per-pixel kernels (kernels/pixels.py): the same bits as the numpy forms they replace (issue 14).
+
+The renderer's output at samples = 1..N must not move by a bit when its fixed per-pixel costs are compiled:
+each kernel is held here against the numpy form it replaced (kept in this file only, as the reference),
+over random inputs with the awkward values (zeros, NaN, ties, infinities), and against a geometric witness
+where one exists (camera rays project back to their pixel positions; a culled ray meets no triangle).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtreflect.exchange.scene import load_scene
+from rtreflect.integrator import film
+from rtreflect.integrator.analytic import hard_coverage, neighbours, trapezoid_cdf
+from rtreflect.integrator.cull import BOX_MARGIN, ORIGIN_MARGIN, TINY, RayBox
+from rtreflect.kernels.pixels import bent_flags, edge_flags, stripe_candidates
+from rtreflect.trace.camera import Camera, sample_offsets
+
+ROOT = Path(__file__).resolve().parent.parent
+NEIGHBOURS = tuple((dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc)
+
+
+# -- the numpy forms replaced (references) --------------------------------------------------------------------------
+
+def numpy_rays(camera: Camera, rows, cols, offsets=None):
+    rows, cols = np.asarray(rows, dtype=np.float64), np.asarray(cols, dtype=np.float64)
+    oy, ox = (0.5, 0.5) if offsets is None else (offsets[..., 0], offsets[..., 1])
+    x = 2.0 * (cols + ox) / camera.width - 1.0
+    y = 1.0 - 2.0 * (rows + oy) / camera.height
+    w, r, q = camera.basis
+    half_w, half_h = camera._half_extents()
+    x, y = (np.ravel(a) for a in np.broadcast_arrays(x, y))
+    if camera.orthographic:
+        origins = camera.spec.eye + (x * half_w)[:, None] * r + (y * half_h)[:, None] * q
+        return origins, np.broadcast_to(w, origins.shape).copy()
+    a, b = x * half_w, y * half_h
+    c = [w[k] + a * r[k] + b * q[k] for k in range(3)]
+    length = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+    origins = np.empty((len(a), 3))
+    origins[:] = camera.spec.eye
+    return origins, np.stack([c[k] / length for k in range(3)], axis=1)
+
+
+def numpy_may_hit(box: RayBox, origins, directions):
+    centre = 0.5 * (box.low + box.high)
+    grow = BOX_MARGIN * float(np.linalg.norm(box.high - box.low)) + ORIGIN_MARGIN * float(np.abs(origins - centre).max())
+    low, high = box.low - grow, box.high + grow
+    near, far = np.full(len(origins), -np.inf), np.full(len(origins), np.inf)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        for k in range(3):
+            d = directions[:, k]
+            inv = 1.0 / np.where(d == 0.0, TINY, d)
+            t1, t2 = (low[k] - origins[:, k]) * inv, (high[k] - origins[:, k]) * inv
+            np.fmax(near, np.minimum(t1, t2), out=near)
+            np.fmin(far, np.maximum(t1, t2), out=far)
+        return np.flatnonzero(~((far < near) | (far < 0.0)))
+
+
+def numpy_cdf(z, a, b):
+    hi, lo = np.maximum(a, b), np.minimum(a, b)
+    t = np.clip(z + 0.5 * (hi + lo), 0.0, hi + lo)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rise = t * t / (2.0 * hi * lo)
+        fall = 1.0 - (hi + lo - t) ** 2 / (2.0 * hi * lo)
+        middle = (t - 0.5 * lo) / hi
+    cdf = np.where(t <= lo, np.where(lo > 0, rise, 0.0), np.where(t >= hi, np.where(lo > 0, fall, 1.0), middle))
+    return np.where(hi > 0, cdf, (z >= 0).astype(np.float64))
+
+
+def inside(shape):
+    padded = np.pad(np.ones(shape, dtype=bool), 1, constant_values=False)
+    for dr, dc in NEIGHBOURS:
+        yield padded[1 + dr:1 + dr + shape[0], 1 + dc:1 + dc + shape[1]]
+
+
+# -- camera rays ----------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_camera_rays_are_the_numpy_contract_to_the_bit_and_project_back_to_their_pixel(projection):
+    # a camera along no axis: every term of w + x·h_w·r + y·h_h·q counts in every coordinate
+    spec = replace(load_scene(ROOT / "bench" / "peer.toml").camera, projection=projection, view_height=2.5,
+                   eye=np.array([1.3, -3.2, 2.4]), look_at=np.array([0.2, 0.1, -0.3]), up=np.array([0.1, 0.0, 1.0]))
+    camera = Camera(spec, 97, 61)
+    rows, cols = np.divmod(np.arange(97 * 61), 97)
+    rng = np.random.default_rng(5)
+    for offsets in (None, np.array([0.25, 0.75]), rng.uniform(size=(len(rows), 2))):
+        got, want = camera.rays(rows, cols, offsets), numpy_rays(camera, rows, cols, offsets)
+        assert all(np.array_equal(g, w) for g, w in zip(got, want))
+        o = np.full((len(rows), 2), 0.5) if offsets is None else np.broadcast_to(offsets, (len(rows), 2))
+        points = got[0] + 2.0 * got[1]  # a point on each ray projects to the pixel position it was cast through
+        np.testing.assert_allclose(camera.project(points), np.column_stack([cols + o[:, 1], rows + o[:, 0]]), atol=1e-9)
+    offsets = sample_offsets(4)
+    got = camera.sample_rays(rows[::7], cols[::7], offsets)
+    want = numpy_rays(camera, np.repeat(rows[::7], 16), np.repeat(cols[::7], 16), np.tile(offsets, (len(rows[::7]), 1)))
+    assert all(np.array_equal(g, w) for g, w in zip(got, want))
+
+
+# -- ray-box cull ---------------------------------------------------------------------------------------------------
+
+def test_cull_keeps_the_rays_the_numpy_slab_test_keeps_with_zeros_and_nan():
+    rng = np.random.default_rng(7)
+    box = RayBox(rng.uniform(size=(40, 3)))
+    origins = rng.normal(size=(50000, 3)) * 3.0
+    directions = rng.normal(size=(50000, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    directions[rng.uniform(size=directions.shape) < 0.1] = 0.0  # axis-parallel rays: a slab all or nothing
+    origins[rng.uniform(size=origins.shape) < 0.3] = 0.5  # origins on the box's planes
+    directions[::997] = np.nan
+    kept = box.may_hit(origins, directions)
+    assert np.array_equal(kept, numpy_may_hit(box, origins, directions))
+    assert set(range(0, 50000, 997)) <= set(kept.tolist())  # a NaN ray is kept, for the tracer to answer
+    assert 0 < len(kept) < len(origins)
+
+
+# -- analytic coverage ----------------------------------------------------------------------------------------------
+
+def test_trapezoid_cdf_and_hard_coverage_are_the_numpy_forms_to_the_bit():
+    rng = np.random.default_rng(11)
+    for scale in (1e-6, 0.05, 1.0, 30.0):
+        z, a, b = rng.normal(size=30000) * scale, np.abs(rng.normal(size=30000)) * scale, np.abs(rng.normal(size=30000)) * scale
+        a[::7], b[::11], z[::13], a[::17], z[::19], b[::23] = 0.0, 0.0, np.nan, np.nan, 0.0, a[::23]
+        assert np.array_equal(trapezoid_cdf(z, a, b), numpy_cdf(z, a, b), equal_nan=True)
+        assert np.array_equal(hard_coverage(z, a, b, 0.05), numpy_cdf(0.05 - z, a, b) - numpy_cdf(-0.05 - z, a, b),
+                              equal_nan=True)
+    # a closed form: z uniform on [−a/2, a/2] alone (b = 0) is a ramp
+    assert trapezoid_cdf(np.array([-1.0, -0.25, 0.0, 0.25, 1.0]), np.ones(5), np.zeros(5)).tolist() == [0.0, 0.25, 0.5, 0.75, 1.0]
+
+
+# -- the analytic path's neighbour tests ----------------------------------------------------------------------------
+
+def random_grids(rng, shape):
+    level = rng.integers(-1, 3, size=shape)
+    level[rng.uniform(size=shape) < 0.6] = 1  # mostly one level, so the σ tests decide
+    sigma = rng.normal(size=shape) * 0.05
+    sigma[rng.uniform(size=shape) < 0.05] = np.nan
+    return level, sigma
+
+
+def test_stripe_candidates_are_the_shifted_grid_form():
+    rng = np.random.default_rng(13)
+    for shape in ((1, 1), (1, 9), (7, 1), (23, 31)):
+        level, sigma = random_grids(rng, shape)
+        move, mixed = np.zeros(shape), np.zeros(shape, dtype=bool)
+        for k, sg in zip(neighbours(level), neighbours(sigma)):
+            mixed |= k != level
+            with np.errstate(invalid="ignore"):
+                move = np.fmax(move, np.abs(sg - sigma))
+        with np.errstate(invalid="ignore"):
+            want = (level >= 0) & (mixed | (np.abs(sigma) - move <= 0.06))
+        got = np.zeros((shape[0] + 2, shape[1] + 4), dtype=bool)  # written into a strided view, as in the renderer
+        stripe_candidates(level, sigma, 0.06, got[1:-1, 2:-2])
+        assert np.array_equal(got[1:-1, 2:-2], want) and not got[0].any() and not got[:, :2].any()
+
+
+def test_bent_and_edge_flags_are_the_shifted_grid_form():
+    rng = np.random.default_rng(17)
+    for shape in ((1, 1), (2, 5), (19, 27)):
+        level, sigma = random_grids(rng, shape)
+        gx, gy = rng.normal(size=shape) * 0.05, rng.normal(size=shape) * 0.05
+        gx[rng.uniform(size=shape) < 0.05] = np.nan
+        near, untrusted = rng.uniform(size=shape) < 0.7, rng.uniform(size=shape) < 0.05
+        bent = np.zeros(shape, dtype=bool)
+        for (dr, dc), ins, k, sg in zip(NEIGHBOURS, inside(shape), neighbours(level), neighbours(sigma)):
+            with np.errstate(invalid="ignore"):
+                strays = np.abs(sg - sigma - gx * dc - gy * dr) > 0.025
+            bent |= ins & near & (k == level) & strays
+        got = untrusted.copy()
+        bent_flags(level, sigma, gx, gy, near, 0.025, got)
+        assert np.array_equal(got, untrusted | bent)
+
+        hit = rng.uniform(size=shape) < 0.8
+        patch, blocked = rng.integers(0, 2, size=shape), rng.uniform(size=shape) < 0.3
+        edge = got.copy()
+        for h, p, k, c, o in zip(*(neighbours(x) for x in (hit, patch, level, near, blocked))):
+            edge |= (h != hit) | (hit & (p != patch))
+            edge |= (near | c) & (k != level)
+            edge |= near & c & (o != blocked)
+        out = np.empty(shape, dtype=bool)
+        edge_flags(hit, patch, level, near, blocked, got, out)
+        assert np.array_equal(out, edge)
+
+
+# -- colour and AOV channels ----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("weights", ["flags", "fractions"])
+@pytest.mark.parametrize("shaded", [False, True])
+def test_one_sample_colour_is_the_general_sums_to_the_bit(weights, shaded):
+    rng = np.random.default_rng(19)
+    n = 20000
+    hit = rng.uniform(size=(n, 1)) < 0.4
+    lit = rng.uniform(size=(n, 1)) < 0.5 if weights == "flags" else rng.uniform(size=(n, 1))
+    shade = rng.uniform(size=(n, 1)) if shaded else None
+    colours = ((0.2, 0.3, 0.4), (1.0, 0.9, 0.1), (0.3, 0.2, 0.1))
+    got = film.coverage_color(hit, lit, *colours, shade)
+    want = np.empty((n, 4))
+    want[:] = film._coverage_sums(np.zeros((1, 1), dtype=bool), np.zeros((1, 1), dtype=lit.dtype), *colours,
+                                  None if shade is None else np.ones((1, 1)))
+    seen = np.flatnonzero(hit[:, 0])
+    want[seen] = film._coverage_sums(hit[seen], lit[seen], *colours, None if shade is None else shade[seen])
+    assert np.array_equal(got, want)
+
+
+def test_aov_channels_of_a_tile_are_each_array_rounded_once():
+    rng = np.random.default_rng(23)
+    n = 5000
+    aovs = {name: rng.normal(size=(n, 3) if width == 3 else n) * 1e3 for name, width in film.AOV_ARRAYS}
+    aovs["u"][::5] = np.nan
+    pixels = np.zeros((n, len(film.CHANNELS)), dtype=np.float32)
+    film.aov_planes(aovs, pixels[:, 4:])
+    want = np.column_stack([aovs[name] for name, _ in film.AOV_ARRAYS]).astype(np.float32)
+    assert np.array_equal(pixels[:, 4:], want, equal_nan=True) and not pixels[:, :4].any()
