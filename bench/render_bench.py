@@ -3,7 +3,7 @@
 Prints total seconds, primary Mrays/s, the per-stage breakdown (summed over threads) and, in the
 same run, a bare embreex intersect of the same primary rays with the ratio total/bare.
 
-    python bench/render_bench.py [--width 1920 --height 1080 --repeat 3 --threads 2]
+    python bench/render_bench.py [--width 1920 --height 1080 --repeat 3 --threads 2 --cpu]
 """
 
 from __future__ import annotations
@@ -65,7 +65,12 @@ def main() -> None:
     ap.add_argument("--height", type=int, default=1080)
     ap.add_argument("--repeat", type=int, default=3, help="best of N renders")
     ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--cpu", action="store_true",
+                    help="time the render and the bare intersect in CPU seconds of the process (all threads summed), "
+                         "not wall time: on a loaded machine the time other jobs hold the cores is not counted "
+                         "(with --threads 1, the figure to compare two versions by)")
     args = ap.parse_args()
+    clock = time.process_time if args.cpu else time.perf_counter
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench.toml"
@@ -75,11 +80,13 @@ def main() -> None:
     t0 = time.perf_counter()
     renderer = Renderer(scene)
     setup = time.perf_counter() - t0
-    best = None
+    best, best_s = None, np.inf
     for _ in range(args.repeat):
+        t0 = clock()
         result = renderer.render(threads=args.threads)
-        if best is None or result.stats.seconds < best.stats.seconds:
-            best = result
+        seconds = clock() - t0 if args.cpu else result.stats.seconds
+        if seconds < best_s:
+            best, best_s = result, seconds
     stats = best.stats
     coverage = float(best.film.channel("A").mean())
 
@@ -88,20 +95,20 @@ def main() -> None:
     o32, d32 = origins.astype(np.float32), directions.astype(np.float32)
     bare = []
     for _ in range(args.repeat):
-        t0 = time.perf_counter()
+        t0 = clock()
         renderer.accelerator.scene.run(o32, d32, query="INTERSECT", output=1)
-        bare.append(time.perf_counter() - t0)
+        bare.append(clock() - t0)
     bare_s = min(bare)
 
     print(f"image {args.width}×{args.height}, 1 sample/px, surface covers {100 * coverage:.0f}% of the frame")
     print(f"setup (tessellate + BVH): {setup:.3f} s")
-    print(f"total render:             {stats.seconds:.3f} s  ({stats.rays / 1e6:.2f} Mrays, "
+    print(f"total render:             {best_s:.3f} s{' CPU' if args.cpu else ''}  ({stats.rays / 1e6:.2f} Mrays, "
           f"{stats.mrays_per_second:.2f} Mrays/s primary, {stats.fallbacks} Newton fallbacks)")
     print("stages (seconds summed over threads):")
     for stage, seconds in sorted(stats.stages.items(), key=lambda kv: -kv[1]):
         print(f"  {stage:<22} {seconds:.3f}")
     print(f"bare embreex intersect:   {bare_s:.3f} s (one thread, float32 rays ready)")
-    print(f"ratio total/bare:         {stats.seconds / bare_s:.2f}")
+    print(f"ratio total/bare:         {best_s / bare_s:.2f}")
 
 
 if __name__ == "__main__":
