@@ -18,7 +18,7 @@ from rtreflect.exchange.scene import load_scene
 from rtreflect.integrator import film
 from rtreflect.integrator.analytic import hard_coverage, neighbours, trapezoid_cdf
 from rtreflect.integrator.cull import BOX_MARGIN, ORIGIN_MARGIN, TINY, RayBox
-from rtreflect.kernels.pixels import bent_flags, edge_flags, stripe_candidates
+from rtreflect.kernels.pixels import bent_flags, edge_flags, scatter_rows, stripe_candidates
 from rtreflect.trace.camera import Camera, sample_offsets
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -214,3 +214,15 @@ def test_aov_channels_of_a_tile_are_each_array_rounded_once():
     film.aov_planes(aovs, pixels[:, 4:])
     want = np.column_stack([aovs[name] for name, _ in film.AOV_ARRAYS]).astype(np.float32)
     assert np.array_equal(pixels[:, 4:], want, equal_nan=True) and not pixels[:, :4].any()
+
+
+def test_scatter_rows_is_numpy_fancy_assignment():
+    rng = np.random.default_rng(29)
+    dst = np.full((1000, 3), np.nan)
+    want = dst.copy()
+    rows = rng.choice(1000, size=400, replace=False)
+    src = rng.normal(size=(400, 3))
+    src[::9] = np.nan
+    want[rows] = src
+    scatter_rows(dst, rows, src)
+    assert np.array_equal(dst, want, equal_nan=True)

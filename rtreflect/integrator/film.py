@@ -60,9 +60,10 @@ def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, 
     """
     if hit.shape[1] == 1:  # one sample per pixel: one compiled pass (`kernels.pixels.coverage_color_one`)
         out = np.empty((len(hit), 4))
+        colours = (np.asarray(x, dtype=np.float64) for x in (surface_color, line_color, background))
         coverage_color_one(np.ascontiguousarray(hit[:, 0]), np.ascontiguousarray(lit[:, 0], dtype=np.float64),
                            np.ones(0) if shade is None else np.ascontiguousarray(shade[:, 0], dtype=np.float64),
-                           shade is not None, *(np.asarray(x, dtype=np.float64) for x in (surface_color, line_color, background)), out)
+                           shade is not None, *colours, out)
         return out
     seen = np.flatnonzero(hit.any(axis=1))
     if len(seen) == len(hit):
