@@ -5,7 +5,7 @@ turn), and a camera ray is asked of the coarse mesh and of the second look's she
 (`trace.secondlook`) even where it misses both: with the surface in a fifth of the image, most of
 the tracing went to rays that hit nothing. A ray misses every triangle when it misses a box
 holding all of them; the slab test (Kay and Kajiya, "Ray tracing complex scenes", SIGGRAPH 1986)
-decides that in a few vectorised passes, and the renderer gives such rays the miss values of
+decides that in one compiled pass (`kernels.pixels.box_keep`), and the renderer gives such rays the miss values of
 `tracing.Hits.blank` (what the tracer itself leaves there: the same bits).
 
 The box is the meshes' bounding box grown by `BOX_MARGIN` of its diagonal, plus `ORIGIN_MARGIN` of the

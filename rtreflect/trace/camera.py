@@ -2,7 +2,8 @@
 
 forward w = normalize(look_at − eye), right r = normalize(w × up), image up q = r × w.
 For pixel (row i, column j) of a W×H image, x = 2(j + ½)/W − 1 and y = 1 − 2(i + ½)/H;
-sample offsets replace the ½ with the centres of an s×s grid inside the pixel.
+sample offsets replace the ½ with the centres of an s×s grid inside the pixel. The rays are formed by one
+compiled pass (`kernels.pixels.pixel_rays`).
 """
 
 from __future__ import annotations
