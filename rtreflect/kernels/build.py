@@ -66,10 +66,10 @@ def _use_jit_flags() -> None:
         flags = args[5].copy()
         return plain_compile_extra(*args[:5], flags, *args[6:], **kwargs)
 
+    if getattr(pycc_compiler, "rtreflect_flags", False):  # patched already in this process
+        return
     plain_compile_extra = pycc_compiler.compile_extra
-    if getattr(plain_compile_extra, "__name__", "") != "compile_extra" or plain_compile_extra.__module__ != __name__:
-        pycc_compiler.compile_extra = compile_extra
-    pycc_compiler.Flags = kernel_flags
+    pycc_compiler.compile_extra, pycc_compiler.Flags, pycc_compiler.rtreflect_flags = compile_extra, kernel_flags, True
 
 
 def compiler():
