@@ -27,7 +27,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from .compiled import njit
 
 from . import JIT
 
@@ -37,6 +37,10 @@ MAX_ORDER = 2
 #: Its rounding error grows with degree: ~1e-13 of the net's size at degree 5, 4e-12 at 7 (tests/test_surfaces.py).
 POWER_FORM_MAX_DEGREE = 5
 POWER_FORM_MAX_BYTES = 64 << 20
+
+#: AOT signatures (`kernels.compiled`): `PatchTable.args`, and the arrays of points, rays and their outputs.
+TABLE = "i8[:, ::1], i8[:, ::1], i8[:, ::1], f8[::1], i8[::1], f8[:, ::1], f8[:, ::1], i8[::1], f8[:, ::1], i8"
+I1, F1, B1, F2 = "i8[::1]", "f8[::1]", "b1[::1]", "f8[:, ::1]"
 
 
 @dataclass(frozen=True)
@@ -190,7 +194,7 @@ def basis_ders_at(knots, lo, span, t, p, n, ders, ndu, a, left, right):
             ders[k, j] = 0.0
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({F1}, i8, {I1}, {F1}, i8, f8[:, :, ::1])",))
 def basis_ders_many(knots, p, span, t, n, out):
     """`basis_ders_at` for arrays span, t: out (N, n+1, p+1)."""
     ndu = np.empty((p + 1, p + 1))
@@ -201,7 +205,7 @@ def basis_ders_many(knots, p, span, t, n, out):
         basis_ders_at(knots, 0, span[i], t[i], p, n, out[i], ndu, a, left, right)
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({F1}, i8, i8, {F1}, {I1})",))
 def find_span_many(knots, p, n_ctrl, t, out):
     for i in range(t.shape[0]):
         out[i] = find_span_at(knots, 0, p, n_ctrl, t[i])
@@ -326,7 +330,7 @@ def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_off
             out[5, c] = (H[0, 2, c] - 2 * H[0, 1, 3] * Sv - H[0, 2, 3] * S) / w
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, i8, f8[:, :, ::1])",))
 def evaluate(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree, patch, u, v,
              order, outs):
     """`point_at` for arrays (patch, u, v); outs (3 or 6, N, 3). Rows with patch < 0 are left untouched."""
@@ -385,7 +389,7 @@ def normal_at(domain, scale, k, Su, Sv, i, sine, vanishing):
     return x0 / norm, x1 / norm, x2 / norm, bad
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({F2}, {F2}, {I1}, {F2}, {F2}, f8, f8, {F2}, {B1})",))
 def unit_normals(domain, scale, patch, Su, Sv, sine, vanishing, out, degenerate):
     """n = (S_u × S_v)/|S_u × S_v| per point into out; degenerate[i] where that does not define the normal.
 
@@ -405,7 +409,7 @@ def unit_normals(domain, scale, patch, Su, Sv, sine, vanishing, out, degenerate)
             out[i, 0], out[i, 1], out[i, 2] = n0, n1, n2
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({F2}, {F2}, {I1}, {F2}, {F2}, {F2}, f8, f8, {F2}, {F1}, {B1})",))
 def normals_and_cosines(domain, scale, patch, Su, Sv, D, sine, vanishing, out, cosine, degenerate):
     """`normal_at` for every row, written whether degenerate or not, and cosine = n·D (n not turned to the ray)."""
     for i in range(patch.shape[0]):
@@ -423,7 +427,7 @@ def barycentric_uv(faces, vertex_uv, f, b1, b2):
             w * vertex_uv[a, 1] + b1 * vertex_uv[b, 1] + b2 * vertex_uv[c, 1])
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void(i8[:, ::1], {F2}, {I1}, {F1}, {F1}, {F1}, {F1})",))
 def start_parameters(faces, vertex_uv, prim, b1, b2, u, v):
     """`barycentric_uv` for every mesh hit (prim, b1, b2): the start of Newton (`geometry.tessellation`)."""
     for i in range(prim.shape[0]):
@@ -513,7 +517,7 @@ def near_at(S, Su, Sv, O, D, i, t_mesh, chord, jump_limit, grazing_allowance):
     return (t > 0) and near, t
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({I1}, {F2}, {F2}, {F2}, {F2}, {F2}, {F1}, {F1}, f8, f8, {B1}, {F1})",))
 def near_mesh_hits(patch, S, Su, Sv, O, D, t_mesh, band, jump_limit, grazing_allowance, near, t):
     """`near_at` for each ray (patch k's reach: band[k] chord errors)."""
     for i in range(patch.shape[0]):
@@ -526,7 +530,9 @@ def on_domain_edge(domain, k, u, v):
     return u == domain[k, 0] or u == domain[k, 1] or v == domain[k, 2] or v == domain[k, 3]
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({TABLE}, {F2}, i8[:, ::1], {F2}, {I1}, {F1}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, "
+                        f"f8, f8, i8, f8, f8, f8, f8, {I1}, {F1}, {F1}, {F1}, {F1}, {F2}, {F2}, {F2}, {F1}, {F2}, {F1}, "
+                        f"{B1}, {B1}, {B1}, {B1})",))
 def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
                      scale, faces, vertex_uv, face_patch, band, prim, b1, b2, O, D, t_mesh, extent, tolerance,
                      max_steps, jump_limit, grazing_allowance, sine, vanishing,
@@ -567,7 +573,7 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
         cosine[i] = dot3(n0, n1, n2, D[i, 0], D[i, 1], D[i, 2])
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, i8, f8, f8, {F2}, {F2}, {F2}, {B1}, {B1}, {B1})",))
 def rescue(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
            patch, u, v, O, D, tol, steps, stationary_cosine, stalled_damping, S, Su, Sv, converged, stationary, edge):
     """Levenberg–Marquardt on the ray residual r = (e1·(S − O), e2·(S − O)) where Newton failed (`trace.tracing._rescue`).
@@ -681,7 +687,7 @@ def curvature_of(E, F, G, L, M, N):
     return K, H, H + root, H - root
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({F2}, {F2}, {F2}, {F2}, {F2}, {F2}, {F2})",))
 def curvatures(Su, Sv, Suu, Suv, Svv, n, out):
     """`curvature_of` at every row of the (N, 3) derivatives and unit normals n; out (4, N): K, H, κ1, κ2."""
     for i in range(n.shape[0]):
@@ -689,7 +695,7 @@ def curvatures(Su, Sv, Suu, Suv, Svv, n, out):
         out[0, i], out[1, i], out[2, i], out[3, i] = curvature_of(E, F, G, L, M, N)
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({F2}, {F2}, {F2}, {F2}, {F2}, {F2}, {F2}, {F1})",))
 def normal_curvatures(Su, Sv, Suu, Suv, Svv, n, w, out):
     """κ(w) = II(w, w)/I(w, w) per row, w a tangent vector written as a S_u + b S_v (do Carmo 3-2): (a, b) from
     w·S_u = aE + bF, w·S_v = aF + bG by Cramer's rule."""
@@ -704,7 +710,7 @@ def normal_curvatures(Su, Sv, Suu, Suv, Svv, n, w, out):
         out[i] = (L * a * a + 2.0 * M * a * b + N * b * b) / first
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2})",))
 def curvatures_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
                   patch, u, v, n, out):
     """K, H, κ1, κ2 of points (patch, u, v) with unit normals n into out (4, N), fused: `point_at` of order 2

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from .compiled import njit
 
 from . import JIT
 
@@ -25,7 +25,7 @@ def _segment_distance(vertices, a, b, p0, p1, p2):
     return math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(i8[:, ::1], f8[:, ::1], b1[::1], i8[:, ::1], i8[::1], f8[:, ::1], f8[::1], f8[::1], i8[::1])",))
 def rim_distances(faces, vertices, on_rim, path, prim, points, dist, chords, corner):
     """Per point i on triangle prim[i]: ``dist[i]`` the least distance to the boundary edges (c, path[c, k]) from its
     triangle's corners c on the rim and to the triangle's edges with one end on the rim; ``chords[i]`` to its

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from .compiled import njit
 
 from . import JIT
 
@@ -71,14 +71,14 @@ def _reflect_at(a0, a1, a2, n, i, out, j):
     out[j, 2] = twice * n[i, 2] - a2
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[:, ::1], f8[:, ::1], f8[:, ::1])",))
 def reflect(a, n, out):
     """Reflected directions (`_reflect_at`) of every row a, n."""
     for i in range(a.shape[0]):
         _reflect_at(a[i, 0], a[i, 1], a[i, 2], n, i, out, i)
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[:, ::1], i8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1])",))
 def reflect_rays(D, rows, n, s_rows, s):
     """Reflected directions of the rays D[rows] (a = −D towards the eye) at unit normals n (one per row): into
     s_rows and into the rows of s, without the gathered, negated and scattered (N, 3) copies."""
@@ -108,14 +108,14 @@ def _ulmet_at(Q, m, e, R, s, i):
         (R[i, 1] + t * s[i, 1]) - Q[1]) * e[1]
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[::1])",))
 def ulmet_f(Q, m, e, R, s, out):
     """Ulmet's f (eq. 5) of every point (`_ulmet_at`)."""
     for i in range(R.shape[0]):
         out[i] = _ulmet_at(Q, m, e, R, s, i)
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[::1], f8[::1], f8[::1], f8[::1], f8, f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], b1[:, ::1])",))
 def distances(Q, c, e, c_k, half_length, R, s, d, t, ahead):
     """d, t, ahead (N, K) of every point and tube (eq. 4)."""
     for i in range(R.shape[0]):
@@ -124,7 +124,8 @@ def distances(Q, c, e, c_k, half_length, R, s, d, t, ahead):
             d[i, k], t[i, k], ahead[i, k] = _pair(Q, c, e, R, i, c_k[k], half_length, pre)
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8, f8, f8[:, ::1], f8[:, ::1], i8[::1], i8[::1], f8[::1], "
+                  "f8[::1], f8[::1], b1[::1], f8[::1], f8[::1], f8[::1])",))
 def reach(Q, m, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, line_sigma, line_t, candidate,
           t_candidate, t_of, f):
     """Per point, without the (N, K) tables: the nearest tube ahead (index, d, the signed distance as `signed`
@@ -157,7 +158,7 @@ def reach(Q, m, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, 
         t_candidate[i] = t_hit
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], i8[::1], f8[::1])",))
 def signed(Q, c, e, c_k, R, s, tube, out):
     """Signed skew-line distance (g − c_k h)/|s × c| of point i's ray to tube[i] (eq. 4 without the absolute
     value: continuous across the tube's axis, so a stripe is |σ| ≤ r); where s ∥ c, the unsigned |b × c|."""
