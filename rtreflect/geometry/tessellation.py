@@ -19,6 +19,7 @@ from functools import cached_property
 import numpy as np
 
 from ..kernels import nurbs as kernel
+from ..kernels import rims as rims_kernel
 from .surfaces import NurbsSurface
 
 
@@ -193,22 +194,22 @@ class Tessellation:
         if len(self.boundary) == 0 or len(points) == 0 or (uv is None and self.single_patch):
             return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
         tree, cand_patch = self._boundary_tree
+        boundary_uv, half_span = self._boundary_uv
         todo = np.arange(len(points))
+        patch = np.ascontiguousarray(patch, dtype=np.int64)
+        uv = np.zeros((0, 2)) if uv is None else np.ascontiguousarray(uv, dtype=np.float64)
+        tried = np.zeros((len(points), 0), dtype=np.int64) if tried is None else np.ascontiguousarray(tried, dtype=np.int64)
         k = SEAM_NEIGHBOURS
         while len(todo):
             k = min(k, len(self.boundary))
             dist, nearest = tree.query(points[todo], k=k)
             dist, nearest = dist.reshape(len(todo), k), nearest.reshape(len(todo), k)
-            other = cand_patch[nearest] != patch[todo, None]
-            if uv is not None:
-                far_side = np.abs(self.vertex_uv[self.boundary[nearest]] - uv[todo, None, :]) > 0.5 * self._domain_span[patch[todo], None, :]
-                other |= np.any(far_side, axis=2)
-            if tried is not None:
-                other &= ~np.any(cand_patch[nearest][:, :, None] == tried[todo, None, :], axis=2)
-            if reach is not None:
-                other &= dist <= reach[todo, None]
-            first = np.argmax(other, axis=1)
-            found = other[np.arange(len(todo)), first]
+            # The first qualifying column per row (`kernels.rims.first_across`: its face, the far side of its own
+            # closed face's seam, the faces tried, the reach), without (rows, k) temporaries.
+            first = np.empty(len(todo), dtype=np.int64)
+            rims_kernel.first_across(nearest, dist, cand_patch, boundary_uv, patch[todo], uv[todo] if len(uv) else uv,
+                                     half_span, tried[todo], np.zeros(0) if reach is None else reach[todo], first)
+            found = first >= 0
             rows, best = todo[found], nearest[found, first[found]]
             patch_out[rows] = cand_patch[best]
             uv_out[rows] = self.vertex_uv[self.boundary[best]]
@@ -274,6 +275,11 @@ class Tessellation:
             if len(uv):
                 span[k] = np.ptp(uv, axis=0)
         return span
+
+    @cached_property
+    def _boundary_uv(self) -> tuple[np.ndarray, np.ndarray]:
+        """(the boundary vertices' (u, v) (B, 2), half of each patch's `_domain_span` (patches, 2)) for `across_seam`."""
+        return np.ascontiguousarray(self.vertex_uv[self.boundary], dtype=np.float64), 0.5 * self._domain_span
 
     @cached_property
     def _boundary_tree(self):
