@@ -57,6 +57,7 @@ from .accelerator import Accelerator, MeshHits
 from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _normals, _other_root, _over_closed_seam, _rescue,
                       facing, refine_all, trace)
 from ..clock import NULL_CLOCK, StageClock
+from ..geometry.patches import net_plane
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
 
@@ -116,17 +117,9 @@ def flat(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
     rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
     out = np.zeros(len(surfaces), dtype=bool)
     for k, surface in enumerate(surfaces.patches):
-        _, _, deviation = _plane(surface)
+        _, _, deviation = net_plane(surface)
         out[k] = deviation <= rounding and SHELL_CHORDS * tessellation.chord_error[k] <= rounding
     return out
-
-
-def _plane(surface) -> tuple[np.ndarray, np.ndarray, float]:
-    """The plane best fitting a face's control net: (a point on it, its unit normal, the net's largest distance from it)."""
-    net = surface.points.reshape(-1, 3)
-    centre = net.mean(axis=0)
-    normal = np.linalg.svd(net - centre, full_matrices=False)[2][-1]
-    return centre, normal, float(np.abs((net - centre) @ normal).max(initial=0.0))
 
 
 def clear_sides(tessellation: Tessellation, surfaces: SurfaceSet, flat_faces: np.ndarray
@@ -150,7 +143,7 @@ def clear_sides(tessellation: Tessellation, surfaces: SurfaceSet, flat_faces: np
     nets = np.concatenate(nets)
     slack = GRAZING_COS * FLOAT32_SLACK * tessellation.extent
     for k in rows:
-        centre[k], normal[k], deviation = _plane(surfaces.patches[k])
+        centre[k], normal[k], deviation = net_plane(surfaces.patches[k])
         d = (nets[owner != k] - centre[k]) @ normal[k]
         clear[k] = d.max(initial=-np.inf) + deviation < slack, -d.min(initial=np.inf) + deviation < slack
     return centre, normal, clear
