@@ -19,6 +19,7 @@ from functools import cached_property
 import numpy as np
 
 from ..kernels import nurbs as kernel
+from ..kernels import rims as rims_kernel
 from .surfaces import NurbsSurface
 
 
@@ -166,8 +167,8 @@ class Tessellation:
                 np.ascontiguousarray(self.face_patch, dtype=np.int64))
 
     def across_seam(self, points: np.ndarray, patch: np.ndarray, tried: np.ndarray | None = None,
-                    uv: np.ndarray | None = None, reach: np.ndarray | None = None
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    uv: np.ndarray | None = None, reach: np.ndarray | None = None,
+                    memo: tuple[np.ndarray, dict] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For points on the boundary of ``patch``: the nearest boundary vertex of another patch.
 
         ``tried`` (N, m) lists patches to pass over as well (neighbours already tried: where
@@ -184,6 +185,9 @@ class Tessellation:
         can restart on its neighbour, and the distance to it (patch −1 and inf where there
         is no other patch). A k-d tree over the boundary vertices: the SEAM_NEIGHBOURS nearest,
         then more for the points whose nearest all belong to their own patch.
+
+        ``memo`` (ids (N,), {}): the same point asked again (the next try, with more faces ``tried``) under the same id
+        takes the k-d answers its id got before (`_nearest`): the same queries, each once.
         """
         patch_out = np.full(len(points), -1)
         uv_out = np.full((len(points), 2), np.nan)
@@ -193,22 +197,21 @@ class Tessellation:
         if len(self.boundary) == 0 or len(points) == 0 or (uv is None and self.single_patch):
             return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
         tree, cand_patch = self._boundary_tree
+        boundary_uv, half_span = self._boundary_uv
         todo = np.arange(len(points))
+        patch = np.ascontiguousarray(patch, dtype=np.int64)
+        uv = np.zeros((0, 2)) if uv is None else np.ascontiguousarray(uv, dtype=np.float64)
+        tried = np.zeros((len(points), 0), dtype=np.int64) if tried is None else np.ascontiguousarray(tried, dtype=np.int64)
         k = SEAM_NEIGHBOURS
         while len(todo):
             k = min(k, len(self.boundary))
-            dist, nearest = tree.query(points[todo], k=k)
-            dist, nearest = dist.reshape(len(todo), k), nearest.reshape(len(todo), k)
-            other = cand_patch[nearest] != patch[todo, None]
-            if uv is not None:
-                far_side = np.abs(self.vertex_uv[self.boundary[nearest]] - uv[todo, None, :]) > 0.5 * self._domain_span[patch[todo], None, :]
-                other |= np.any(far_side, axis=2)
-            if tried is not None:
-                other &= ~np.any(cand_patch[nearest][:, :, None] == tried[todo, None, :], axis=2)
-            if reach is not None:
-                other &= dist <= reach[todo, None]
-            first = np.argmax(other, axis=1)
-            found = other[np.arange(len(todo)), first]
+            dist, nearest = _nearest(tree, points, todo, k, memo)
+            # The first qualifying column per row (`kernels.rims.first_across`: its face, the far side of its own
+            # closed face's seam, the faces tried, the reach), without (rows, k) temporaries.
+            first = np.empty(len(todo), dtype=np.int64)
+            rims_kernel.first_across(nearest, dist, cand_patch, boundary_uv, patch[todo], uv[todo] if len(uv) else uv,
+                                     half_span, tried[todo], np.zeros(0) if reach is None else reach[todo], first)
+            found = first >= 0
             rows, best = todo[found], nearest[found, first[found]]
             patch_out[rows] = cand_patch[best]
             uv_out[rows] = self.vertex_uv[self.boundary[best]]
@@ -276,10 +279,41 @@ class Tessellation:
         return span
 
     @cached_property
+    def _boundary_uv(self) -> tuple[np.ndarray, np.ndarray]:
+        """(the boundary vertices' (u, v) (B, 2), half of each patch's `_domain_span` (patches, 2)) for `across_seam`."""
+        return np.ascontiguousarray(self.vertex_uv[self.boundary], dtype=np.float64), 0.5 * self._domain_span
+
+    @cached_property
     def _boundary_tree(self):
         from scipy.spatial import cKDTree
 
         return cKDTree(self.vertices[self.boundary]), self.vertex_patch[self.boundary]
+
+
+def _nearest(tree, points: np.ndarray, todo: np.ndarray, k: int, memo: tuple[np.ndarray, dict] | None
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """The k nearest boundary vertices (distances and indices, (n, k)) of ``points[todo]``; with ``memo`` (ids, answers
+    by k: sorted ids, distances, indices), the ids asked before at this k take their earlier answer, the rest are
+    queried and kept."""
+    if memo is None:
+        dist, nearest = tree.query(points[todo], k=k)
+        return dist.reshape(len(todo), k), nearest.reshape(len(todo), k)
+    ids, answers = memo
+    rows = ids[todo]
+    dist, nearest = np.empty((len(todo), k)), np.empty((len(todo), k), dtype=np.int64)
+    known, known_dist, known_nearest = answers.get(k, (np.zeros(0, dtype=np.int64), np.zeros((0, k)), np.zeros((0, k), dtype=np.int64)))
+    at = np.minimum(np.searchsorted(known, rows), max(len(known) - 1, 0))
+    have = (at < len(known)) & (known[at] == rows) if len(known) else np.zeros(len(rows), dtype=bool)
+    dist[have], nearest[have] = known_dist[at[have]], known_nearest[at[have]]
+    new = np.flatnonzero(~have)
+    if len(new):
+        d, i = tree.query(points[todo[new]], k=k)
+        dist[new], nearest[new] = d.reshape(len(new), k), i.reshape(len(new), k)
+        merged = np.concatenate([known, rows[new]])
+        order = np.argsort(merged, kind="stable")
+        answers[k] = (merged[order], np.concatenate([known_dist, dist[new]])[order],
+                      np.concatenate([known_nearest, nearest[new]])[order])
+    return dist, nearest
 
 
 def _chord_error(surface: NurbsSurface, mesh: PatchMesh) -> float:

@@ -6,7 +6,10 @@ loop's pcurves into a closed polyline in (u, v) of the NURBS surface the face wa
 (never of the original analytic surface: conversion moves the parameters).
 
 The test is GEOS's prepared point-in-polygon (shapely, installed with the ``[cad]`` extra,
-which is the only source of trimmed faces).
+which is the only source of trimmed faces). For many points on many faces at once (the tracer's
+every candidate) `TrimTable` answers the same in one compiled pass (`kernels.trims.inside_faces`:
+crossing parity with proven signs), asking GEOS only about the points it cannot prove (on or
+within float rounding of a loop) and on faces whose loops GEOS had to repair.
 """
 
 from __future__ import annotations
@@ -14,6 +17,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from ..kernels import trims as kernel
+
+#: `TrimTable` cuts each face's v-range into bands holding about this many loop segments each, so a point
+#: tests a few segments (those of its band) rather than the whole loop (the plate's top face: 12,832).
+SEGMENTS_PER_BAND = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,3 +70,93 @@ class Trim:
 
         u, v = self.wrap(u, v)
         return shapely.intersects_xy(self._polygon, u, v)
+
+
+class TrimTable:
+    """The point-in-face test of many faces at once: ``contains(patch, u, v)`` is, per point, its face's
+    `Trim.contains` (True on an untrimmed face), bit for bit, in one compiled pass (`kernels.trims.inside_faces`).
+
+    Per trimmed face a table row: its loops' segments (outer loop and holes, each closed) bucketed into
+    equal bands of v (`SEGMENTS_PER_BAND`). A face whose polygon GEOS had to repair (``make_valid``: no
+    longer the loops' even–odd region) has no row: its points go to GEOS, as do the points the kernel
+    flags unsure.
+    """
+
+    def __init__(self, trims: list[Trim | None]):
+        self.trims = list(trims)
+        n = len(self.trims)
+        self.row = np.full(n, -1, dtype=np.int64)  # −1: untrimmed; −2: GEOS only
+        self.u0, self.u_period, self.v0, self.v_period = (np.zeros(n) for _ in range(4))
+        vlo, vhi, inv, first, count, ptr, seg, segments = [], [], [], [], [], [np.zeros(1, dtype=np.int64)], [], []
+        bands = n_seg = 0
+        for k, trim in enumerate(self.trims):
+            if trim is None:
+                continue
+            self.u0[k], self.u_period[k] = trim.u0, trim.u_period or 0.0
+            self.v0[k], self.v_period[k] = trim.v0, trim.v_period or 0.0
+            if trim._polygon.geom_type != "Polygon" or not _same_rings(trim):
+                self.row[k] = -2
+                continue
+            a = np.concatenate([np.asarray(r, dtype=np.float64).reshape(-1, 2) for r in (trim.outer, *trim.holes)])
+            b = np.concatenate([np.roll(np.asarray(r, dtype=np.float64).reshape(-1, 2), -1, axis=0)
+                                for r in (trim.outer, *trim.holes)])
+            lo, hi = float(min(a[:, 1].min(), b[:, 1].min())), float(max(a[:, 1].max(), b[:, 1].max()))
+            nb = max(1, -(-len(a) // SEGMENTS_PER_BAND))
+            scale = nb / (hi - lo) if hi > lo else 0.0
+            # Each segment in every band its v-range meets: the kernel's band index (`kernels.trims._band`, the same
+            # float64 operations, monotone in v) of its lowest and highest v and those between.
+            b0 = np.clip(np.floor((np.minimum(a[:, 1], b[:, 1]) - lo) * scale).astype(np.int64), 0, nb - 1)
+            b1 = np.clip(np.floor((np.maximum(a[:, 1], b[:, 1]) - lo) * scale).astype(np.int64), 0, nb - 1)
+            reps = b1 - b0 + 1
+            which = np.repeat(np.arange(len(a)), reps)
+            band = np.repeat(b0, reps) + (np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps))
+            order = np.argsort(band, kind="stable")
+            ptr.append(ptr[-1][-1] + np.cumsum(np.bincount(band, minlength=nb)))
+            seg.append(which[order] + n_seg)
+            segments.append(np.column_stack([a, b]))
+            self.row[k] = len(vlo)
+            vlo.append(lo), vhi.append(hi), inv.append(scale), first.append(bands), count.append(nb)
+            bands, n_seg = bands + nb, n_seg + len(a)
+        ptr = np.concatenate(ptr)
+        self._args = (np.array(vlo, dtype=np.float64), np.array(vhi, dtype=np.float64), np.array(inv, dtype=np.float64),
+                      np.array(first, dtype=np.int64), np.array(count, dtype=np.int64), ptr.astype(np.int64),
+                      np.concatenate(seg).astype(np.int64) if seg else np.zeros(0, dtype=np.int64),
+                      np.concatenate(segments) if segments else np.zeros((0, 4)))
+        self.wraps = bool(np.any(self.u_period > 0) or np.any(self.v_period > 0))
+
+    def contains(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """True where (u, v) lies on the face of ``patch`` (module doc): inside its trim, anywhere on an untrimmed one."""
+        given = np.asarray(patch, dtype=np.int64).ravel()
+        patch = np.maximum(given, 0)  # −1 (no face): True, as `SurfaceSet.on_face` always answered there
+        u0 = u = np.asarray(u, dtype=np.float64).ravel()
+        v0 = v = np.asarray(v, dtype=np.float64).ravel()
+        if self.wraps:  # `Trim.wrap`'s arithmetic, per point
+            u, v = u.copy(), v.copy()
+            for x, x0, period in ((u, self.u0[patch], self.u_period[patch]), (v, self.v0[patch], self.v_period[patch])):
+                at = np.flatnonzero(period > 0)
+                x[at] = x0[at] + np.mod(x[at] - x0[at], period[at])
+        row = np.where(given >= 0, self.row[patch], -1)
+        inside, unsure = np.empty(len(patch), dtype=bool), np.empty(len(patch), dtype=bool)
+        kernel.inside_faces(np.maximum(row, -1), u, v, *self._args, inside, unsure)
+        ask = np.flatnonzero(unsure | (row == -2))
+        if len(ask):  # GEOS (`Trim.contains`), per face: the few points the kernel cannot prove
+            for k in np.unique(patch[ask]):
+                at = ask[patch[ask] == k]
+                inside[at] = self.trims[k].contains(u0[at], v0[at])  # as given: it wraps them itself
+        return inside
+
+
+def _same_rings(trim: Trim) -> bool:
+    """Whether GEOS's polygon has the loops as given (its shell and holes; their point counts, one closing point more)."""
+    polygon = trim._polygon
+    rings = [polygon.exterior, *polygon.interiors]
+    loops = [trim.outer, *trim.holes]
+    if len(rings) != len(loops):
+        return False
+    for ring, loop in zip(rings, loops):
+        loop = np.asarray(loop, dtype=np.float64).reshape(-1, 2)
+        coords = np.asarray(ring.coords)
+        closed = np.array_equal(loop[0], loop[-1])
+        if not np.array_equal(coords[: len(loop) - closed], loop[: len(loop) - closed]) or len(coords) != len(loop) + (not closed):
+            return False
+    return True

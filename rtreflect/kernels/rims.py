@@ -1,4 +1,5 @@
-"""Compiled distances from mesh hits to their face's mesh boundary (`trace.tracing._rim_corner`).
+"""Compiled distances from mesh hits to their face's mesh boundary (`trace.tracing._rim_corner`), and the choice of
+the boundary vertex across a face's edge among a k-d query's nearest (`geometry.tessellation.Tessellation.across_seam`).
 
 For a point p and a segment from vertex a to b, the distance is |p − a − s(b − a)| with
 s = clamp((p − a)·(b − a)/|b − a|², 0, 1), the foot on the segment.
@@ -50,3 +51,33 @@ def rim_distances(faces, vertices, on_rim, path, prim, points, dist, chords, cor
                 if path[c, k] >= 0:
                     best = min(best, _segment_distance(vertices, c, path[c, k], p0, p1, p2))
         dist[i], chords[i], corner[i] = best, chord, near
+
+
+@njit(**JIT)
+def first_across(nearest, dist, cand_patch, boundary_uv, patch, uv, half_span, tried, reach, first):
+    """Per row i of a k-d query (``nearest``, ``dist`` (n, k), by distance): ``first[i]`` the first column whose
+    boundary vertex qualifies for `Tessellation.across_seam`, −1 where none does. It qualifies where its face
+    ``cand_patch`` is not ``patch[i]`` (or, with ``uv`` (n, 2) given (else (0, 2)), its ``boundary_uv`` lies more than
+    ``half_span[patch[i]]`` from ``uv[i]`` in u or v: the far side of a closed face's seam), is none of ``tried[i]``,
+    and lies within ``reach[i]`` (``reach`` empty: any distance)."""
+    with_uv, with_reach = uv.shape[0] > 0, reach.shape[0] > 0
+    for i in range(nearest.shape[0]):
+        first[i] = -1
+        p = patch[i]
+        for j in range(nearest.shape[1]):
+            c = nearest[i, j]
+            q = cand_patch[c]
+            other = q != p
+            if with_uv and not other:
+                other = (abs(boundary_uv[c, 0] - uv[i, 0]) > half_span[p, 0]
+                         or abs(boundary_uv[c, 1] - uv[i, 1]) > half_span[p, 1])
+            if other:
+                for m in range(tried.shape[1]):
+                    if q == tried[i, m]:
+                        other = False
+                        break
+            if other and with_reach:
+                other = dist[i, j] <= reach[i]
+            if other:
+                first[i] = j
+                break

@@ -57,6 +57,7 @@ from .accelerator import Accelerator, MeshHits
 from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _normals, _other_root, _over_closed_seam, _rescue,
                       facing, refine_all, trace)
 from ..clock import NULL_CLOCK, StageClock
+from ..geometry.patches import net_plane
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
 
@@ -116,12 +117,36 @@ def flat(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
     rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
     out = np.zeros(len(surfaces), dtype=bool)
     for k, surface in enumerate(surfaces.patches):
-        net = surface.points.reshape(-1, 3)
-        centred = net - net.mean(axis=0)
-        normal = np.linalg.svd(centred, full_matrices=False)[2][-1]  # the best-fitting plane's normal
-        out[k] = (np.abs(centred @ normal).max(initial=0.0) <= rounding
-                  and SHELL_CHORDS * tessellation.chord_error[k] <= rounding)
+        _, _, deviation = net_plane(surface)
+        out[k] = deviation <= rounding and SHELL_CHORDS * tessellation.chord_error[k] <= rounding
     return out
+
+
+def clear_sides(tessellation: Tessellation, surfaces: SurfaceSet, flat_faces: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per face: (a point on its plane (P, 3), unit normal (P, 3), (P, 2) bool: no other face in front of its side
+    +n, of its side −n), for the `flat` faces that support the whole scene (False elsewhere).
+
+    A face whose plane has every other face's control net behind it (on the far side from +n, or from −n), within
+    ``GRAZING_COS`` × float32 rounding less its own net's deviation from the plane, supports the scene (the top of the
+    plate, every plane of a convex solid): the surfaces lie in their nets' convex hulls (weights > 0), so a ray from
+    that side meets no other surface before it crosses the plane, nor any nearer than that rounding over |N·D| ≥
+    ``GRAZING_COS``, which the second look would not take (`SecondLook.apply`): its hit there is final.
+    """
+    n = len(surfaces)
+    centre, normal, clear = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2), dtype=bool)
+    rows = np.flatnonzero(flat_faces)
+    if len(rows) == 0 or not all(np.all(s.weights > 0) for s in surfaces.patches):
+        return centre, normal, clear
+    nets = [s.points.reshape(-1, 3) for s in surfaces.patches]
+    owner = np.concatenate([np.full(len(x), k) for k, x in enumerate(nets)])
+    nets = np.concatenate(nets)
+    slack = GRAZING_COS * FLOAT32_SLACK * tessellation.extent
+    for k in rows:
+        centre[k], normal[k], deviation = net_plane(surfaces.patches[k])
+        d = (nets[owner != k] - centre[k]) @ normal[k]
+        clear[k] = d.max(initial=-np.inf) + deviation < slack, -d.min(initial=np.inf) + deviation < slack
+    return centre, normal, clear
 
 
 def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator, Tessellation]:
@@ -234,6 +259,7 @@ class SecondLook:
         # Past a shell hit by float32 rounding of the scene's largest coordinates, with margin (as `trace`'s).
         self._skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
         self.isolated = isolated(self.shell_mesh, self._reach / GRAZING_COS + 2.0 * self._skip)
+        self._planes = clear_sides(tessellation, surfaces, flat(tessellation, surfaces))
         self._lock = threading.Lock()
         self._fine: tuple[Tessellation, Accelerator] | None = None
 
@@ -260,7 +286,7 @@ class SecondLook:
         with np.errstate(divide="ignore"):
             passage = np.where(hits.hit, hits.t - self._reach / np.maximum(cos, GRAZING_COS) - slack, far)
         look = hits.hit & ~hits.fallback & ((cos < GRAZING_COS) | hits.aside)
-        ask = ~look & ~hits.fallback
+        ask = ~look & ~hits.fallback & ~self._in_front_of_all(hits, origins)
         # Any shell before the passage (for a ray that missed: anywhere) makes a suspect, whatever its face:
         # Embree's occlusion query answers that, cheaper than the nearest hit (the entry is found below). Asked of
         # every ray (an empty segment for the others): gathering the rays first cost more than the query saves.
@@ -296,6 +322,18 @@ class SecondLook:
             for have, new in zip(entry, mesh):
                 have[rays] = new
         return np.flatnonzero(look), entry
+
+    def _in_front_of_all(self, hits: Hits, origins: np.ndarray) -> np.ndarray:
+        """Rays whose kept hit lies on a plane supporting the scene, from its clear side (`clear_sides`): none nearer."""
+        centre, normal, clear = self._planes
+        out = np.zeros(len(origins), dtype=bool)
+        rays = np.flatnonzero(hits.hit)
+        rays = rays[clear[hits.patch[rays]].any(axis=1)]
+        if len(rays):
+            k = hits.patch[rays]
+            side = np.einsum("ij,ij->i", origins[rays] - centre[k], normal[k])
+            out[rays] = np.where(side > 0, clear[k, 0], np.where(side < 0, clear[k, 1], False))
+        return out
 
     def apply(self, hits: Hits, origins: np.ndarray, directions: np.ndarray, far: np.ndarray,
               clock: StageClock = NULL_CLOCK) -> Hits:

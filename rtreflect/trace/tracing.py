@@ -49,6 +49,7 @@ import numpy as np
 from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.curvature import curvatures
+from ..geometry.patches import net_plane
 from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
@@ -346,10 +347,12 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
     reach = 2.0 * tessellation.edge_length[pk[seam]]
     restarted = [stuck]
+    memo = {}  # the k-d answers of each seam row's point `at`, asked again by the next try (`Tessellation.across_seam`)
     for attempt in range(SEAM_TRIES):
         if len(seam) == 0:
             break
-        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]), reach)
+        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]), reach,
+                                                   memo=(seam, memo))
         close = pn >= 0
         seam, at, tried, reach, pn, un, vn, gap = (x[close] for x in (seam, at, tried, reach, pn, un, vn, gap))
         if attempt == 0:
@@ -523,6 +526,9 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     cuv = cuv[at[row], col]
     rays, pn = np.concatenate([rays[close], rays[near[row]]]), np.concatenate([pn[close], cp[row, col]])
     un, vn = np.concatenate([un[close], cuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1]])
+    # A planar neighbour is met where the ray crosses its plane: rows whose crossing cannot win below are not refined.
+    may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], band, skip, slack)
+    rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     if len(rays) == 0:
         return
     u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
@@ -543,6 +549,52 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     pk[won], ur[won], vr[won], tr[won], aside[won] = pn[pick], u3[pick], v3[pick], t3[pick], True
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[pick]
+
+
+def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, band, skip, slack) -> np.ndarray:
+    """Which (ray, neighbour) rows of `_rim_neighbours` may win: False only where the neighbour is planar (`_net_planes`)
+    and its crossing cannot pass the winning tests (ahead, within the band's reach of the mesh hit, nearer than the kept
+    hit by float32 rounding), whatever Newton from any start converges to.
+
+    A converged point S lies within |r⊥| ≤ tol of the ray (Newton's test, tol = `NEWTON_TOLERANCE` × max(t_mesh,
+    extent, |O + t_mesh D|)) and, in its net's convex hull (weights > 0), within the net's deviation ρ of the plane
+    (point c, unit normal n); so its t = (S − O)·D lies within (ρ + tol)/|n·D| of the ray's crossing of that plane,
+    t_p = n·(c − O)/(n·D), plus 1000× tol for the rounding of both. The band's reach is taken at its largest
+    (`GRAZING_ALLOWANCE`). On the plate at 960×540 the faces across the rim of its holes' fillets include the big top
+    plane, whose crossing lies far from the fillet's mesh hit for all but a few of those rays.
+    """
+    may = np.ones(len(pn), dtype=bool)
+    centre, normal, deviation, planar = _net_planes(tessellation, surfaces)
+    rows = np.flatnonzero(planar[pn])
+    if len(rows) == 0:
+        return may
+    k, O, D, tm, tr = pn[rows], O[rows], D[rows], tm[rows], tr[rows]
+    nd = np.einsum("ij,ij->i", normal[k], D)
+    tol = NEWTON_TOLERANCE * np.maximum(np.maximum(tm, tessellation.extent), np.linalg.norm(O + tm[:, None] * D, axis=1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tp = np.einsum("ij,ij->i", normal[k], centre[k] - O) / nd
+        margin = (deviation[k] + tol) / np.abs(nd) + 1000.0 * tol
+    reach = BAND_CHORDS * band[k] * GRAZING_ALLOWANCE + skip
+    # Comparisons with NaN or inf (a ray along the plane) are False: such rows are refined.
+    never = (tp + margin <= 0.0) | (tp - margin >= tr - slack) | (np.abs(tp - tm) - margin > reach)
+    may[rows[never]] = False
+    return may
+
+
+def _net_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
+    """Per face: its control net's plane (`geometry.patches.net_plane`: point (P, 3), unit normal (P, 3), the net's
+    deviation (P,)) and whether it is planar: deviation within float32 rounding of the scene, weights > 0. Built once
+    per tessellation, on first use (kept in its ``__dict__``, as `_rim_planes` is)."""
+    cached = tessellation.__dict__.get("_net_planes")
+    if cached is None:
+        rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+        planes = [net_plane(s) for s in surfaces.patches]
+        centre = np.array([p[0] for p in planes]).reshape(-1, 3)
+        normal = np.array([p[1] for p in planes]).reshape(-1, 3)
+        deviation = np.array([p[2] for p in planes])
+        planar = (deviation <= rounding) & np.array([bool(np.all(s.weights > 0)) for s in surfaces.patches], dtype=bool)
+        cached = tessellation.__dict__["_net_planes"] = (centre, normal, deviation, planar)
+    return cached
 
 
 def _corner_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
