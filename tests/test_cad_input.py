@@ -545,3 +545,111 @@ def test_a_killed_reader_is_not_called_a_corrupt_file():
     assert death("SIGSEGV").startswith("SceneError part.step: Open CASCADE crashed reading it (SIGSEGV): the STEP file")
     assert death("SIGTERM") == "Interrupted SIGTERM"
 
+
+
+# --- the reading child while other threads run (exchange/isolation.py) -------------------------------------------
+
+TESTS = Path(__file__).resolve().parent
+#: Seconds a subprocess of these tests may take: its imports, the reading server's start (~1 s idle) and one read, on
+#: a loaded machine; a read that hangs fails the test here instead of blocking the run.
+SUBPROCESS_TIMEOUT = 180
+
+#: A fresh process that reads while another Python thread runs, holding `isolated_reads.LOCK` (argv[1] "lock": the read
+#: takes that lock) or not (argv[1] a signal name: the read sends itself that signal); argv[2] "nohup" starts it with
+#: SIGHUP ignored, "alone" reads with no other thread. Prints what read_isolated returned or raised.
+_THREADED = """
+import functools, signal, sys, threading
+from pathlib import Path
+import isolated_reads
+from rtreflect.exchange.isolation import read_isolated
+if "nohup" in sys.argv:
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+held, release = threading.Event(), threading.Event()
+def hold():
+    with isolated_reads.LOCK:
+        held.set()
+        release.wait()
+if "alone" not in sys.argv:
+    threading.Thread(target=hold, daemon=True).start()
+    held.wait()
+read = isolated_reads.take_lock if sys.argv[1] == "lock" else functools.partial(isolated_reads.raise_signal, sys.argv[1])
+try:
+    print(*read_isolated(Path("part.step"), "STEP file", read))
+except BaseException as exc:
+    print(type(exc).__name__, exc)
+release.set()
+"""
+
+
+def _threaded_read(*args: str) -> str:
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(TESTS), str(TESTS.parent), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run([sys.executable, "-c", _THREADED, *args], capture_output=True, text=True, env=env,
+                          cwd=TESTS.parent, timeout=SUBPROCESS_TIMEOUT).stdout.strip()
+
+
+def test_read_completes_while_another_thread_holds_a_lock_it_takes():
+    """A child forked while another thread held a lock inherits the lock held, and nothing in the child releases
+    it: the read hung (here: gave up after isolated_reads.LOCK_WAIT s and failed). Where other threads run, the
+    child comes from the reading server, a process of one thread, so the lock it takes is free."""
+    assert _threaded_read("lock") == "None {'took': True}"
+
+
+def test_a_killed_reader_is_reported_alike_while_another_thread_runs():
+    """The reading server's child reports its end as a forked child does (test_a_killed_reader_is_not_called_a_corrupt_file),
+    and a stop signal ignored by the process (nohup) stays ignored in either child."""
+    assert _threaded_read("SIGKILL") == "SceneError part.step: reading it was killed (SIGKILL: out of memory?)"
+    assert _threaded_read("SIGSEGV").startswith("SceneError part.step: Open CASCADE crashed reading it (SIGSEGV): the STEP file")
+    assert _threaded_read("SIGTERM") == "Interrupted SIGTERM"
+    assert _threaded_read("SIGHUP") == "Interrupted SIGHUP"
+    assert _threaded_read("SIGHUP", "nohup") == "None {'survived': 'SIGHUP'}"
+    assert _threaded_read("SIGHUP", "nohup", "alone") == "None {'survived': 'SIGHUP'}"
+
+
+def test_corrupt_file_read_while_another_thread_runs_is_one_line_exit_2(tmp_path):
+    """Open CASCADE's crash on a corrupt STEP, read in the reading server's child (a thread runs: a progress bar's
+    monitor, a Dask worker's), is the same one line as from a forked child, and nothing is written."""
+    import os
+    import subprocess
+    import sys
+
+    path = _box_file(tmp_path, ".step")
+    path.write_text(_dangling_vector(path.read_text()))
+    code = ("import threading; threading.Thread(target=threading.Event().wait, daemon=True).start(); "
+            "from rtreflect.cli import main; main()")
+    result = subprocess.run([sys.executable, "-c", code, "render", str(path), "-o", str(tmp_path / "out"), *TINY],
+                            capture_output=True, text=True, timeout=SUBPROCESS_TIMEOUT, cwd=TESTS.parent,
+                            env={**os.environ, "PYTHONFAULTHANDLER": "1"})
+    assert result.returncode == EXIT_BAD_INPUT and result.stdout == ""
+    assert result.stderr.splitlines() == [f"rtreflect: error: {path}: Open CASCADE crashed reading it (SIGSEGV): the STEP "
+                                          "file is corrupt (broken references or sections), or uses entities it cannot read"]
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("suffix", [".step", ".igs"])
+def test_read_while_another_thread_runs_keeps_the_geometry_and_does_not_fork(tmp_path, monkeypatch, suffix):
+    """With another thread running, this process must not fork (os.fork fails the test); the shape comes back from
+    the reading server's child bit-identical to the one read in-process."""
+    import os
+    import threading
+
+    path = _box_file(tmp_path, suffix)
+    monkeypatch.setattr(os, "fork", lambda: pytest.fail("forked while another thread ran"))
+    stop = threading.Event()
+    thread = threading.Thread(target=stop.wait)
+    thread.start()
+    try:
+        served = read_cad(path)
+    finally:
+        stop.set()
+        thread.join()
+    monkeypatch.delattr(os, "fork")
+    direct = read_cad(path)
+    assert len(served.surfaces) == len(direct.surfaces) == 6
+    for a, b in zip(served.surfaces, direct.surfaces):
+        for x, y in ((a.points, b.points), (a.weights, b.weights), (a.knots_u, b.knots_u), (a.knots_v, b.knots_v),
+                     (a.trim.outer, b.trim.outer), (a.mesh_uv[0], b.mesh_uv[0]), (a.mesh_uv[1], b.mesh_uv[1])):
+            assert np.array_equal(x, y)

@@ -130,6 +130,31 @@ def test_tube_search_gives_ulmet_f_of_the_same_ray():
     assert 50 < ahead < 250, "the sample must mix rays towards and away from the light plane"
 
 
+def test_light_plane_parameter_is_the_one_ulmet_f_reads():
+    """`TubeLights.plane_t` (the highlight and circles modes, the contours) is the kernel that Ulmet's f reads its
+    plane crossing from, no second copy of t = m·(Q − R)/(m·s): bit for bit the former numpy form on C-ordered rows
+    (einsum's dot), f = e·(R + t s − Q) from it bit for bit `ulmet_f` where t > 0, t against the brute-force plane
+    crossing, and ±inf or NaN where s is parallel to the plane."""
+    rng = np.random.default_rng(13)
+    lights = tubes(6.0)
+    R = rng.uniform(-3, 3, (300, 3)) * 10.0 ** rng.uniform(-3, 3, (300, 1))
+    s = rng.normal(size=(300, 3))
+    s /= np.linalg.norm(s, axis=1, keepdims=True)
+    t = lights.plane_t(R, s)
+    numpy_t = np.einsum("...j,...j->...", lights.Q - R, lights.m) / np.einsum("...j,...j->...", s, lights.m)
+    assert np.array_equal(t.view(np.int64), numpy_t.view(np.int64))
+    ahead = t > 0
+    f = np.einsum("...j,...j->...", R[ahead] + t[ahead, None] * s[ahead] - lights.Q, lights.e)
+    assert np.array_equal(f.view(np.int64), lights.ulmet_f(R, s)[ahead].view(np.int64))
+    for row in range(0, len(R), 7):
+        crossing, _, _ = np.linalg.solve(np.column_stack([s[row], -lights.e, -lights.c]), lights.Q - R[row])
+        assert t[row] == pytest.approx(crossing, rel=1e-9, abs=1e-12)
+    along = np.array([1.0, 0.0, 0.0])  # in the plane: m = (0, −0.8, 0.6)
+    off, on = lights.Q + 2.0 * lights.m, lights.Q + 3.0 * along  # beside the plane; in it
+    assert np.isinf(lights.plane_t(off[None], along[None])).all()
+    assert np.isnan(lights.plane_t(on[None], along[None])).all()
+
+
 @pytest.mark.parametrize("name", ["hood", "hood_curvature"])
 def test_f_aov_is_ulmet_f_of_the_stored_hit(name):
     """The renderer takes f from the tubes' pass: it is Ulmet's f of the pixel-centre ray's hit P and reflected

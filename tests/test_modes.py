@@ -208,3 +208,33 @@ def test_zebra_is_the_limit_of_reflection_lines_of_tubes_at_infinity():
     off = np.abs(psi - 5.0 * np.round(psi / 5.0))
     lit = np.all(zebra.rgba[..., :3][hit][ahead] == 1.0, axis=1)
     assert lit.sum() > 50 and off[lit].max() <= 0.5 + 1e-4 and off[~lit].min() >= 0.5 - 1e-4
+
+
+@pytest.mark.parametrize("scene, along_ray, field", [("hood.toml", True, "occlusion_t"), ("hood.toml", True, "level_t"),
+                                                     ("cylinder_highlight.toml", False, "occlusion_t")])
+def test_a_mode_breaking_the_along_ray_contract_is_refused(monkeypatch, scene, along_ray, field):
+    """A mode seen along the reflected ray must give `Stripes.occlusion_t` (the sampled path's occlusion test: without
+    it the stripes were lit with no occlusion test, silently) and `Stripes.level_t` (the analytic path's,
+    `Renderer.centre_stripes`: without it a tile failed deep in the render); a mode seen where it is, neither (an
+    occlusion_t would be tested by one path and not the other). The Renderer refuses such a mode when it is built."""
+    from dataclasses import dataclass, replace
+
+    from rtreflect.integrator.renderer import Renderer
+
+    name = load_scene(SCENES / scene).render.mode
+    build = MODES[name]
+
+    @dataclass(frozen=True)
+    class Broken:
+        inner: object
+
+        def __getattr__(self, attr):
+            return getattr(self.inner, attr)
+
+        def stripes(self, p):
+            stripes = self.inner.stripes(p)
+            return replace(stripes, **{field: None if along_ray else np.full(len(stripes.level_id), np.inf)})
+
+    monkeypatch.setitem(MODES, name, lambda *args: Broken(build(*args)))
+    with pytest.raises(TypeError, match=f"{field} is {'missing' if along_ray else 'given'}"):
+        Renderer(load_scene(SCENES / scene))

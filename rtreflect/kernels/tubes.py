@@ -13,7 +13,8 @@ infinite. A tube is *ahead* where t > 0 and |τ| <= length/2.
 
 Ulmet's function (paper eq. 5, general form) reads the same reflected ray where it meets the tubes'
 plane (through Q, unit normal m): t = m·(Q − R)/(m·s), f = e·(R + t s − Q), NaN where t <= 0.
-`reach` writes it beside the nearest tube (the renderer's f AOV), so the ray is read once.
+`reach` writes it beside the nearest tube (the renderer's f AOV), so the ray is read once; `plane_t` gives
+that t alone (`TubeLights.plane_t`: the highlight and circles modes, the contours), from the same expression.
 """
 
 from __future__ import annotations
@@ -95,13 +96,28 @@ def _signed_at(pre, ck):
 
 
 @njit(inline="always", **JIT)
+def _plane_t_at(Q, m, R, s, i):
+    """Ray parameter where R + t s of point i meets the light plane (module doc), t = m·(Q − R)/(m·s); ±inf or NaN
+    where s ∥ plane. The operations in the order of the former numpy form (`numpy.einsum`'s 3-term dot of C-ordered
+    rows sums terms 0, 2, then 1), so t is the same to the bit."""
+    return (((Q[0] - R[i, 0]) * m[0] + (Q[2] - R[i, 2]) * m[2]) + (Q[1] - R[i, 1]) * m[1]) / (
+        (s[i, 0] * m[0] + s[i, 2] * m[2]) + s[i, 1] * m[1])
+
+
+@njit(**JIT)
+def plane_t(Q, m, R, s, out):
+    """The light plane's ray parameter t (`_plane_t_at`) of every point."""
+    for i in range(R.shape[0]):
+        out[i] = _plane_t_at(Q, m, R, s, i)
+
+
+@njit(inline="always", **JIT)
 def _ulmet_at(Q, m, e, R, s, i):
     """Ulmet's f of point i (module doc): the e-coordinate of R + t s in the light plane, NaN where t <= 0.
 
     The operations in the order of the former numpy form (`numpy.einsum`'s 3-term dot sums terms 0, 2, then 1),
     so f is the same to the bit."""
-    t = (((Q[0] - R[i, 0]) * m[0] + (Q[2] - R[i, 2]) * m[2]) + (Q[1] - R[i, 1]) * m[1]) / (
-        (s[i, 0] * m[0] + s[i, 2] * m[2]) + s[i, 1] * m[1])
+    t = _plane_t_at(Q, m, R, s, i)
     if not t > 0:
         return np.nan
     return (((R[i, 0] + t * s[i, 0]) - Q[0]) * e[0] + ((R[i, 2] + t * s[i, 2]) - Q[2]) * e[2]) + (

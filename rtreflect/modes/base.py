@@ -116,7 +116,9 @@ class Mode(Protocol):
     #: Stage name under which the renderer's clock counts the mode's time.
     stage: str
     #: Whether the stripes are seen along the reflected ray s (reflection lines of tubes or circles), so the
-    #: surface may occlude them on the way (`Stripes.occlusion_t`); the others are lit where they are.
+    #: surface may occlude them on the way; the others are lit where they are. A mode seen along the ray gives
+    #: `Stripes.occlusion_t` and `Stripes.level_t` (how far the sampled and the analytic path test for occlusion),
+    #: the others neither: `checked` refuses a mode that breaks this.
     along_ray: ClassVar[bool] = False
 
     def phi(self, p: SurfacePoints) -> np.ndarray:
@@ -127,3 +129,19 @@ class Mode(Protocol):
 
     def surface_rgb(self, p: SurfacePoints) -> np.ndarray | None:
         """(N, 3) linear RGB of the surface where no stripe is (map modes), or None: `[render] surface_color`."""
+
+
+def checked(mode: Mode) -> Mode:
+    """``mode``, or a TypeError where its stripes break `Mode.along_ray`'s contract (asked of no points).
+
+    The renderer tests occlusion along s up to `Stripes.occlusion_t` (sampled path) and `Stripes.level_t` (analytic
+    path, `Renderer.centre_stripes`) exactly where the mode is seen along the ray: a missing one would light stripes
+    with no occlusion test or fail deep in a tile, a superfluous one make the two paths disagree.
+    """
+    none = np.zeros((0, 3))
+    stripes = mode.stripes(SurfacePoints(none, none, none, np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)))
+    for field in ("occlusion_t", "level_t"):
+        if (getattr(stripes, field) is None) == bool(mode.along_ray):
+            raise TypeError(f"mode {mode.name!r} (along_ray={bool(mode.along_ray)}): its stripes' {field} is "
+                            f"{'missing' if mode.along_ray else 'given'}")
+    return mode

@@ -88,9 +88,12 @@ class TubeLights:
         return float(gaps.min()) if len(gaps) else float("inf")
 
     def plane_t(self, R: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Ray parameter where R + t s meets the light plane, t = m·(Q − R)/(m·s) (±inf or NaN where s ∥ plane)."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return _dot(self.Q - R, self.m) / _dot(s, self.m)
+        """Ray parameter where R + t s meets the light plane, t = m·(Q − R)/(m·s) (±inf or NaN where s ∥ plane), for
+        points R and directions s (N, 3), by the kernel `kernels.tubes.plane_t` (the t `ulmet_f` and `reach` read f at)."""
+        f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+        out = np.empty(len(R))
+        tubes_kernel.plane_t(f64(self.Q), f64(self.m), f64(R), f64(s), out)
+        return out
 
     @property
     def points(self) -> np.ndarray:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from .base import Mode
+from .base import Mode, checked
 from .lights import TubeLights
 from .curvaturemap import curvature_mode
 from .draft import draft_mode
@@ -26,5 +26,5 @@ MODES: dict[str, Callable[..., Mode]] = {
 
 
 def mode_of(scene, lights: TubeLights, surfaces) -> Mode:
-    """The mode ``scene.render.mode`` names, built for the scene's tubes and patches (a `SurfaceSet`)."""
-    return MODES[scene.render.mode](scene, lights, surfaces)
+    """The mode ``scene.render.mode`` names, built for the scene's tubes and patches (a `SurfaceSet`), `checked`."""
+    return checked(MODES[scene.render.mode](scene, lights, surfaces))
