@@ -24,6 +24,10 @@ try:  # the collector back on even where an import fails (a caller importing cli
     import click  # noqa: E402
     from tqdm import tqdm  # noqa: E402
 
+    # No tqdm monitor thread: a second CAD file read while it ran would need the reading server (~2 s CPU to
+    # start; exchange/isolation.py), and the monitor only re-tunes the refresh rate of stalled bars.
+    tqdm.monitor_interval = 0
+
     from . import __version__  # noqa: E402
     from .errors import RtreflectError, error_lines, one_line  # noqa: E402
     from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, removed_note, write_json  # noqa: E402,E501
