@@ -19,12 +19,14 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from .compiled import njit
 
 from . import JIT
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(
+    "void(f8[::1], f8[::1], f8[::1], f8[::1], i8, f8[::1], f8[::1], f8[::1], f8[::1], f8, f8, f8, f8, b1, f8[:, ::1], f8[:, ::1])",
+))
 def pixel_rays(rows, cols, oy, ox, repeat, eye, w, r, q, half_w, half_h, width, height, ortho, origins, directions):
     """Camera rays (module doc) into ``origins`` and ``directions`` (N, 3), N = len(rows)·repeat.
 
@@ -95,7 +97,7 @@ def _fmin(a, b):
     return a if a < b else b
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[:, ::1], f8[::1])",))
 def origin_reach(origins, centre):
     """max |origins − centre| over every coordinate (NaN if any is NaN, as numpy's max).
 
@@ -108,7 +110,7 @@ def origin_reach(origins, centre):
     return reach
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8, b1[::1])",))
 def box_keep(origins, directions, low, high, tiny, keep):
     """``keep[k]``: ray k meets the box [low, high] ahead of its origin, or is NaN (module doc; `integrator.cull`).
 
@@ -130,7 +132,9 @@ def box_keep(origins, directions, low, high, tiny, keep):
         keep[k] = not (far < near or far < 0.0)
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(
+    "void(f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f4[:, :])",
+))
 def aov_columns(P, N, u, v, patch, Z, f, line_id, line_dist, phi, K, H, k1, k2, out):
     """The AOV channels of a tile in `integrator.film.AOV_CHANNELS` order (P and N three columns each, then one
     per array), each float64 value rounded to ``out``'s float32 once.
@@ -167,7 +171,11 @@ def _clamp(i, n):
     return 0 if i < 0 else (n - 1 if i >= n else i)
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(
+    "void(i8[:, :], f8[:, :], f8, b1[:, :])",
+    "void(i8[:, ::1], f8[:, ::1], f8, b1[:, ::1])",
+    "void(i8[:, ::1], f8[:, ::1], f8, b1[:, :])",
+))
 def stripe_candidates(level, sigma, reach, want):
     """``want``: the pixel is on a level (≥ 0) and its footprint may reach the stripe: a neighbour is on another
     level, or |σ| − m ≤ ``reach`` with m the largest |σ_n − σ| over the 8 neighbours (NaN ones passed over, as
@@ -190,7 +198,10 @@ def stripe_candidates(level, sigma, reach, want):
             want[i, j] = k0 >= 0 and (mixed or abs(s0) - move <= reach)
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(
+    "void(i8[:, :], f8[:, :], f8[:, :], f8[:, :], b1[:, :], f8, b1[:, :])",
+    "void(i8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], b1[:, ::1], f8, b1[:, ::1])",
+))
 def bent_flags(level, sigma, gx, gy, near, limit, untrusted):
     """``untrusted`` set (in place) where the pixel is ``near`` a stripe and a neighbour inside the crop, on the same
     level, strays from the plane σ + g·(Δx, Δy) by more than ``limit``: |σ_n − σ − g_x Δx − g_y Δy| > limit
@@ -212,7 +223,10 @@ def bent_flags(level, sigma, gx, gy, near, limit, untrusted):
                         untrusted[i, j] = True
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(
+    "void(b1[:, :], i8[:, :], i8[:, :], b1[:, :], b1[:, :], b1[:, :], b1[:, ::1])",
+    "void(b1[:, ::1], i8[:, ::1], i8[:, ::1], b1[:, ::1], b1[:, ::1], b1[:, ::1], b1[:, ::1])",
+))
 def edge_flags(hit, patch, level, near, blocked, untrusted, edge):
     """``edge``: ``untrusted``, or a neighbour differs on hit or miss, on the patch (both hit), on the level (either
     near a stripe) or on the occlusion (both near): `analytic.edge_pixels`.
@@ -269,7 +283,7 @@ def _trapezoid_cdf(z, a, b):
     return (t - 0.5 * lo) / hi
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[::1], f8[::1], f8[::1], f8[::1])",))
 def trapezoid_cdf(z, a, b, out):
     """``out`` = the trapezoid's CDF (`_trapezoid_cdf`) per element.
 
@@ -279,7 +293,7 @@ def trapezoid_cdf(z, a, b, out):
         out[i] = _trapezoid_cdf(z[i], a[i], b[i])
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[::1], f8[::1], f8[::1], f8, f8[::1])",))
 def hard_coverage(sigma, a, b, half_width, out):
     """``out`` = the hard stripe's share of the box pixel, F(w − σ) − F(−w − σ) (`analytic.hard_coverage`).
 
@@ -292,7 +306,7 @@ def hard_coverage(sigma, a, b, half_width, out):
 # -- colour of one-sample pixels (`integrator.film.coverage_color`) -----------------------------------------------
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(b1[::1], f8[::1], f8[::1], b1, f8[::1], f8[::1], f8[::1], f8[:, ::1])",))
 def coverage_color_one(hit, weight, shade, shaded, surface, line, background, out):
     """``out`` (n, 4) linear RGBA of pixels of one sample each (the centre ray of samples = 1 and of the analytic
     path): a hit shows w·line + (1 − w)·k·surface, a miss the background; A = 1 on a hit. The same sums as
@@ -316,7 +330,7 @@ def coverage_color_one(hit, weight, shade, shaded, surface, line, background, ou
 # -- rows of (N, 3) arrays ------------------------------------------------------------------------------------------
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[:, ::1], i8[::1], f8[:, ::1])",))
 def scatter_rows(dst, rows, src):
     """``dst[rows[k]] = src[k]`` for every k, row by row: numpy's fancy assignment of (N, 3) rows (~4× slower, it
     copies element by element through its general index machinery). The values are copied, not computed.

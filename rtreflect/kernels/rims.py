@@ -53,7 +53,9 @@ def rim_distances(faces, vertices, on_rim, path, prim, points, dist, chords, cor
         dist[i], chords[i], corner[i] = best, chord, near
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(
+    "void(i8[:, ::1], f8[:, ::1], i8[::1], f8[:, ::1], i8[::1], f8[:, ::1], f8[:, ::1], i8[:, ::1], f8[::1], i8[::1])",
+))
 def first_across(nearest, dist, cand_patch, boundary_uv, patch, uv, half_span, tried, reach, first):
     """Per row i of a k-d query (``nearest``, ``dist`` (n, k), by distance): ``first[i]`` the first column whose
     boundary vertex qualifies for `Tessellation.across_seam`, −1 where none does. It qualifies where its face

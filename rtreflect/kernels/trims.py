@@ -18,7 +18,7 @@ whose v-range contains the point's v lies in it).
 
 from __future__ import annotations
 
-from numba import njit
+from .compiled import njit
 
 from . import JIT
 
@@ -36,7 +36,9 @@ def _band(v, vlo, inv_height, bands):
     return min(max(b, 0), bands - 1)
 
 
-@njit(**JIT)
+@njit(**JIT, aot=(
+    "void(i8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], i8[::1], i8[::1], i8[::1], i8[::1], f8[:, ::1], b1[::1], b1[::1])",
+))
 def inside_faces(row, u, v, vlo, vhi, inv_height, band_first, band_count, band_ptr, band_seg, segments,
                  inside, unsure):
     """Per point i on face table row ``row[i]`` (−1: an untrimmed face, inside): ``inside[i]`` by crossing parity,

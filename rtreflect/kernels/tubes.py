@@ -104,7 +104,7 @@ def _plane_t_at(Q, m, R, s, i):
         (s[i, 0] * m[0] + s[i, 2] * m[2]) + s[i, 1] * m[1])
 
 
-@njit(**JIT)
+@njit(**JIT, aot=("void(f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[::1])",))
 def plane_t(Q, m, R, s, out):
     """The light plane's ray parameter t (`_plane_t_at`) of every point."""
     for i in range(R.shape[0]):
