@@ -7,7 +7,8 @@ point by point, in registers, with no (N, …) temporaries:
 * the non-zero basis functions and their derivatives (Piegl & Tiller A2.3, eq. 2.9–2.10);
 * the homogeneous derivatives A^(k,l), w^(k,l) as Σ_i Σ_j N_i^(k)(u) N_j^(l)(v) P^w_ij; up to
   degree `POWER_FORM_MAX_DEGREE` from each span's power (Taylor) form instead, Σ_kl C_kl τ_u^k τ_v^l
-  with τ the local parameter in [0, 1]: no divisions, about 3× fewer operations than A2.3;
+  with τ the local parameter in [0, 1]: no divisions, about 3× fewer operations than A2.3; for
+  bicubic patches written out in registers (`bicubic_contract`: the same sums, the same bits);
 * the rational derivatives by Piegl & Tiller eq. 4.20 (algorithm A4.4), for k + l <= 2;
 * the unit normal (S_u × S_v)/|S_u × S_v| and its degenerate test, and Newton's iteration onto
   the exact ray–surface hit (`newton`);
