@@ -115,7 +115,8 @@ def main() -> None:
     print(f"{n} primary mesh hits of render_bench's scene at {args.width}×{args.height}; CPU of one thread, best of "
           f"{args.repeat}")
     mean_evaluations = np.mean(np.minimum(steps, tracing.NEWTON_MAX_STEPS) + 1)
-    print("Newton steps to converge: " + ", ".join(f"{s}: {100 * np.mean(steps == s):.1f} %" for s in np.unique(steps))
+    label = lambda s: str(s) if s <= tracing.NEWTON_MAX_STEPS else "not converged"  # noqa: E731
+    print("Newton steps to converge: " + ", ".join(f"{label(s)}: {100 * np.mean(steps == s):.3g} %" for s in np.unique(steps))
           + f" (mean evaluations per hit {mean_evaluations:.2f})")
     print(f"refine_mesh_hits:          {newton_s:.3f} s, {1e6 * newton_s / n:.3f} µs per hit")
     print(f"curvatures_at (AOVs):      {curvature_s:.3f} s, {1e6 * curvature_s / n:.3f} µs per hit")
