@@ -4,6 +4,7 @@
   least-squares closest approach (tests/reference.py) and the point-to-line distance;
 * a scene's patches evaluated in one kernel call, bit for bit each patch's own evaluation,
   whatever the mix or order of patches (what makes tiles independent of each other);
+* the bicubic power form written out in registers, bit for bit the generic loops (orders 1 and 2);
 * Newton's converged hits lie on their rays and on the surface (rhino3dm's evaluator);
 * the fused first refinement of mesh hits (start, Newton, near test, t, normal) against its steps
   done separately: the triangle's barycentric (u, v), rhino3dm's points and normals, the numpy tests;
@@ -190,6 +191,41 @@ def test_patch_mix_evaluates_bit_for_bit_as_each_patch():
         rows = np.flatnonzero(k == p)
         for got, own in zip(mixed, patches[p].evaluate(u[rows], v[rows], order=2)):
             np.testing.assert_array_equal(got[rows], own)
+
+
+def test_bicubic_written_out_evaluation_is_bit_for_bit_the_generic_loops():
+    """`bicubic_contract` (the power form of a bicubic span in registers, zero terms left out) gives the very bits
+    of `power_rows` + `contract` for orders 1 and 2: random spans (rational weights, exact zeros and −0.0 among
+    the coefficients), τ at the span's ends and inside, short and long spans."""
+    from numba import njit
+    from rtreflect.kernels import nurbs
+
+    @njit
+    def both(power, tau_u, inv_u, tau_v, inv_v, order, generic, written):
+        Nu, Nv = np.empty((3, 4)), np.empty((3, 4))
+        for i in range(tau_u.shape[0]):
+            base = 16 * i
+            nurbs.power_rows(tau_u[i], inv_u[i], 3, order, Nu)
+            nurbs.power_rows(tau_v[i], inv_v[i], 3, order, Nv)
+            a = nurbs.contract(Nu, Nv, power, base, 4, 3, 3, order)
+            b = nurbs.bicubic_contract(power, base, tau_u[i], inv_u[i], tau_v[i], inv_v[i], order)
+            for m in range(6):
+                for c in range(4):
+                    generic[i, m, c], written[i, m, c] = a[m][c], b[m][c]
+
+    rng = np.random.default_rng(14)
+    n = 4000
+    power = rng.normal(scale=rng.choice([1e-3, 1.0, 1e3], (16 * n, 1)), size=(16 * n, 4))
+    power[rng.random(power.shape) < 0.1] = 0.0
+    power[rng.random(power.shape) < 0.05] = -0.0
+    tau_u, tau_v = rng.random(n), rng.random(n)
+    tau_u[:50], tau_v[50:100], tau_u[100:150] = 0.0, 1.0, np.nextafter(1.0, 0.0)
+    inv_u, inv_v = 1.0 / rng.uniform(1e-3, 10.0, n), 1.0 / rng.uniform(1e-3, 10.0, n)
+    for order in (1, 2):
+        generic, written = np.empty((n, 6, 4)), np.empty((n, 6, 4))
+        both(power, tau_u, inv_u, tau_v, inv_v, order, generic, written)
+        np.testing.assert_array_equal(written.view(np.int64), generic.view(np.int64), err_msg=f"order {order}")
+        assert np.count_nonzero(generic[:, 1:3]) > n, "the derivatives must be exercised"
 
 
 def test_newton_lands_on_the_ray_and_on_rhinos_surface():
