@@ -72,7 +72,9 @@ def main() -> None:
         for name, dispatcher in kernels.items():
             declared = set(compiled.SOURCES[module, name][2])
             for signature in dispatcher.signatures:
-                text = f"void({', '.join(spelled(t) for t in signature)})"
+                returned = dispatcher.overloads[signature].signature.return_type
+                result = "void" if str(returned) == "none" else spelled(returned)
+                text = f"{result}({', '.join(spelled(t) for t in signature)})"
                 print(f"{module}.{name}: {text!r}{'' if text in declared else '   <- not declared'}")
 
 

@@ -97,7 +97,7 @@ def _fmin(a, b):
     return a if a < b else b
 
 
-@njit(**JIT, aot=("void(f8[:, ::1], f8[::1])",))
+@njit(**JIT, aot=("f8(f8[:, ::1], f8[::1])",))
 def origin_reach(origins, centre):
     """max |origins − centre| over every coordinate (NaN if any is NaN, as numpy's max).
 
