@@ -198,17 +198,22 @@ def test_bicubic_written_out_evaluation_is_bit_for_bit_the_generic_loops():
     of `power_rows` + `contract` for orders 1 and 2: random spans (rational weights, exact zeros and −0.0 among
     the coefficients), τ at the span's ends and inside, short and long spans."""
     from numba import njit
-    from rtreflect.kernels import nurbs
+    from rtreflect.kernels import compiled, nurbs
+
+    # The helpers as numba's dispatchers whichever compiler serves the renders (with the AOT module fresh, the
+    # module's own names are AOT `Kernel`s, which a jitted caller cannot call).
+    jitted = compiled.jit_namespace(nurbs.__name__)
+    power_rows, contract, bicubic_contract = jitted["power_rows"], jitted["contract"], jitted["bicubic_contract"]
 
     @njit
     def both(power, tau_u, inv_u, tau_v, inv_v, order, generic, written):
         Nu, Nv = np.empty((3, 4)), np.empty((3, 4))
         for i in range(tau_u.shape[0]):
             base = 16 * i
-            nurbs.power_rows(tau_u[i], inv_u[i], 3, order, Nu)
-            nurbs.power_rows(tau_v[i], inv_v[i], 3, order, Nv)
-            a = nurbs.contract(Nu, Nv, power, base, 4, 3, 3, order)
-            b = nurbs.bicubic_contract(power, base, tau_u[i], inv_u[i], tau_v[i], inv_v[i], order)
+            power_rows(tau_u[i], inv_u[i], 3, order, Nu)
+            power_rows(tau_v[i], inv_v[i], 3, order, Nv)
+            a = contract(Nu, Nv, power, base, 4, 3, 3, order)
+            b = bicubic_contract(power, base, tau_u[i], inv_u[i], tau_v[i], inv_v[i], order)
             for m in range(6):
                 for c in range(4):
                     generic[i, m, c], written[i, m, c] = a[m][c], b[m][c]
