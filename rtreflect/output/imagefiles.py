@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import secrets
 import sys
 import tempfile
 from pathlib import Path
@@ -104,16 +105,22 @@ def _png_failure(final: Path, out, muted: list[str]) -> RtreflectError:
     return RtreflectError(f"{final}: cannot write image ({out.geterror() or libpng or 'file cut short: disk full?'})")
 
 
+#: Random bytes in a temporary's name: 8 hex digits, the length of mkstemp's names that `sharing` recognises.
+TEMPORARY_TOKEN_BYTES = 4
+
+
 @contextlib.contextmanager
 def atomic_path(final: Path) -> Iterator[Path]:
     """A temporary path beside ``final`` (same extension, so OpenImageIO picks the format), renamed on success."""
     final = Path(final)
-    # The name carries this host and process: a run killed before it could clean up is recognised later.
-    fd, tmp = tempfile.mkstemp(prefix=temporary_prefix(final), suffix=final.suffix, dir=final.parent)
-    os.close(fd)
+    # The name carries this host and process: a run killed before it could clean up is recognised later. It is
+    # chosen before the file exists (not by mkstemp, which names it only after creating it), so a Ctrl-C that
+    # lands while the file is being created still finds the name to remove.
+    tmp = final.parent / f"{temporary_prefix(final)}{secrets.token_hex(TEMPORARY_TOKEN_BYTES)}{final.suffix}"
     try:
-        yield Path(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; a finished image gets the usual permissions
+        os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        yield tmp
+        os.chmod(tmp, 0o666 & ~_umask())  # created 0600 while unfinished; a finished image gets the usual permissions
         os.replace(tmp, final)
     except BaseException:
         with contextlib.suppress(OSError):
