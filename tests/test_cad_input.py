@@ -80,6 +80,15 @@ BAD_FILES = {
 }
 
 
+def assert_same_surfaces(model, direct, count: int) -> None:
+    """The two reads' faces bit for bit: control points, weights, knots, outer trim loop, mesh (u, v)."""
+    assert len(model.surfaces) == len(direct.surfaces) == count
+    for a, b in zip(model.surfaces, direct.surfaces):
+        for x, y in ((a.points, b.points), (a.weights, b.weights), (a.knots_u, b.knots_u), (a.knots_v, b.knots_v),
+                     (a.trim.outer, b.trim.outer), (a.mesh_uv[0], b.mesh_uv[0]), (a.mesh_uv[1], b.mesh_uv[1])):
+            assert np.array_equal(x, y)
+
+
 @pytest.mark.parametrize("name", sorted(BAD_FILES))
 def test_bad_cad_file_is_one_line_exit_2_nothing_written(tmp_path, name):
     make, reason = BAD_FILES[name]
@@ -180,11 +189,7 @@ def test_step_read_through_the_child_keeps_the_geometry(tmp_path, monkeypatch):
     model = read_cad(path)
     monkeypatch.delattr(os, "fork")
     direct = read_cad(path)
-    assert len(model.surfaces) == len(direct.surfaces) == 6
-    for a, b in zip(model.surfaces, direct.surfaces):
-        for x, y in ((a.points, b.points), (a.weights, b.weights), (a.knots_u, b.knots_u), (a.knots_v, b.knots_v),
-                     (a.trim.outer, b.trim.outer), (a.mesh_uv[0], b.mesh_uv[0]), (a.mesh_uv[1], b.mesh_uv[1])):
-            assert np.array_equal(x, y)
+    assert_same_surfaces(model, direct, 6)
 
 
 def test_step_with_only_curves_says_so(tmp_path):
@@ -648,8 +653,4 @@ def test_read_while_another_thread_runs_keeps_the_geometry_and_does_not_fork(tmp
         thread.join()
     monkeypatch.delattr(os, "fork")
     direct = read_cad(path)
-    assert len(served.surfaces) == len(direct.surfaces) == 6
-    for a, b in zip(served.surfaces, direct.surfaces):
-        for x, y in ((a.points, b.points), (a.weights, b.weights), (a.knots_u, b.knots_u), (a.knots_v, b.knots_v),
-                     (a.trim.outer, b.trim.outer), (a.mesh_uv[0], b.mesh_uv[0]), (a.mesh_uv[1], b.mesh_uv[1])):
-            assert np.array_equal(x, y)
+    assert_same_surfaces(served, direct, 6)
