@@ -12,6 +12,6 @@ from setuptools import setup
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # the build imports the kernels from this source tree
 
-from rtreflect.kernels.build import extension  # noqa: E402
+from rtreflect.kernels.build import extensions  # noqa: E402
 
-setup(ext_modules=[extension()])
+setup(ext_modules=extensions())

@@ -9,7 +9,10 @@ into tmp_path and read back; the reference is OCCT's own evaluation of the surfa
 from __future__ import annotations
 
 import math
+import os
 import shutil
+import signal
+import time
 from pathlib import Path
 
 import numpy as np
@@ -654,3 +657,42 @@ def test_read_while_another_thread_runs_keeps_the_geometry_and_does_not_fork(tmp
     monkeypatch.delattr(os, "fork")
     direct = read_cad(path)
     assert_same_surfaces(served, direct, 6)
+
+
+def test_a_reader_child_dies_with_its_reading_server():
+    """The server's child (`isolation._die_with`) ends when the server is killed: a client stopped before the
+    child's PID came back kills the server, and the reader must not go on alone (read from /proc: gone, or a
+    zombie left for init to reap)."""
+    from rtreflect.exchange.isolation import _die_with
+
+    ready_r, ready_w = os.pipe()
+    server = os.fork()
+    if server == 0:  # the server: forks a reader that would run for a minute
+        try:
+            me = os.getpid()
+            reader = os.fork()
+            if reader == 0:
+                _die_with(me)
+                time.sleep(60)
+                os._exit(0)
+            os.write(ready_w, str(reader).encode())
+            time.sleep(60)
+        finally:
+            os._exit(0)
+    reader = int(os.read(ready_r, 32))
+    time.sleep(0.3)  # the reader has called prctl
+    os.kill(server, signal.SIGKILL)
+    os.waitpid(server, 0)
+    deadline = time.monotonic() + 10
+    state = "running"
+    while time.monotonic() < deadline:
+        try:
+            state = next(line for line in Path(f"/proc/{reader}/status").read_text().splitlines() if line.startswith("State"))
+        except (FileNotFoundError, ProcessLookupError):
+            state = "gone"
+        if state == "gone" or "zombie" in state:
+            break
+        time.sleep(0.05)
+    else:
+        os.kill(reader, signal.SIGKILL)
+    assert state == "gone" or "zombie" in state, state

@@ -89,6 +89,11 @@ def test_sources_hash_follows_every_kernel_file(tmp_path, monkeypatch):
         assert compiled.sources_hash() != before, name
         file.write_text(text)
     assert compiled.sources_hash() == before
+    # Machine code for another CPU (a venv or image copied from a newer machine) is stale too, not run (SIGILL).
+    host = compiled.host_cpu()
+    assert host.split()[0] and "+" in host  # LLVM's CPU name and its +feature list
+    monkeypatch.setattr(compiled, "host_cpu", lambda: host.replace("+", "-", 1))
+    assert compiled.sources_hash() != before
 
 
 def householder(a: np.ndarray, n: np.ndarray) -> np.ndarray:

@@ -36,6 +36,7 @@ read runs in-process.
 from __future__ import annotations
 
 import atexit
+import ctypes
 import faulthandler
 import importlib
 import json
@@ -291,6 +292,7 @@ def serve() -> None:
             importlib.import_module(name)
         except ImportError:  # without OCP (or a reader) the children import what they need, or fail as in-process
             pass
+    server = os.getpid()
     while True:
         try:
             folder, ignored, path, cwd, read = pickle.loads(_exactly(requests, _receive(requests)))
@@ -301,12 +303,29 @@ def serve() -> None:
         except OSError:
             pid = -1
         if pid == 0:
+            _die_with(server)
             os.close(requests)
             os.close(replies)
             _child(partial(_unpickled, read, path, cwd), Path(folder), frozenset(ignored), mask)
         os.write(replies, _NUMBER.pack(pid))
         if pid > 0:
             os.write(replies, _NUMBER.pack(os.waitpid(pid, 0)[1]))
+
+
+#: Linux prctl option: the signal a process gets when its parent ends.
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with(server: int) -> None:
+    """In the server's child: SIGKILL when the server ends (Linux ``prctl(PR_SET_PDEATHSIG)``). A client stopped
+    before the child's PID came back kills the server, which cannot pass the stop on: the reader must not go on
+    alone. Where prctl is missing the child runs to its end, as before."""
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != server:  # the server ended before prctl took effect
+        os.kill(os.getpid(), signal.SIGKILL)
 
 
 def _unpickled(read: bytes, path: list[str], cwd: str) -> tuple[object, dict]:

@@ -27,6 +27,7 @@ import shutil
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 from . import compiled
@@ -104,9 +105,15 @@ def _check_parsed(text: str) -> None:
         raise ValueError(f"AOT signature {text!r}: the loader reads {compiled.Signature(text).args}, numba {theirs}")
 
 
-def extension():
-    """The setuptools extension of the AOT module (setup.py); a C compiler missing only skips it (JIT then)."""
-    return compiler().distutils_extension(optional=True)
+def extensions() -> list:
+    """The setuptools extension of the AOT module (setup.py); a C compiler missing only skips it (JIT then), and so
+    does a numba that cannot compile it (pycc is on numba's deprecation path): a warning, no extension."""
+    try:
+        return [compiler().distutils_extension(optional=True)]
+    except Exception as error:  # noqa: BLE001 (any failure of pycc: the JIT serves instead)
+        warnings.warn(f"rtreflect: the ahead-of-time kernels are not built ({type(error).__name__}: {error}); "
+                      f"numba's JIT compiles them on first use instead")
+        return []
 
 
 def build(output_dir: Path | None = None) -> Path:

@@ -50,7 +50,7 @@ HASH_DIGITS = 15
 REGISTRY: dict[str, dict[str, "Kernel | object"]] = {}
 #: The options and Python function of each registered kernel: (module, name) -> (func, options, aot).
 SOURCES: dict[tuple[str, str], tuple[types.FunctionType, dict, tuple[str, ...]]] = {}
-#: Calls that found no AOT signature and went to the JIT: (module.kernel, argument types) (diagnostics, tests).
+#: Calls that found no AOT signature and went to the JIT: (module.kernel, argument types), each once (diagnostics, tests).
 FALLBACKS: list[tuple[str, str]] = []
 
 _lock = threading.Lock()
@@ -70,9 +70,19 @@ def source_files() -> list[Path]:
     return sorted(Path(__file__).parent.glob("*.py"))
 
 
+def host_cpu() -> str:
+    """LLVM's name and features of this CPU: the AOT build compiles for the host's CPU (as numba's JIT, whose
+    cache is keyed alike), so a module built on another CPU (a copied venv or image) could run instructions this
+    one lacks (SIGILL). llvmlite's binding alone, not numba (~0.03 s)."""
+    import llvmlite.binding as llvm  # noqa: PLC0415
+
+    return f"{llvm.get_host_cpu_name()} {llvm.get_host_cpu_features().flatten()}"
+
+
 def sources_hash() -> int:
-    """SHA-256 of the kernel sources (`source_files`, names and bytes), as a non-negative int64."""
-    digest = hashlib.sha256()
+    """SHA-256 of the kernel sources (`source_files`, names and bytes) and of the CPU they are compiled for
+    (`host_cpu`), as a non-negative int64: a module built from other sources or for another CPU is stale."""
+    digest = hashlib.sha256(host_cpu().encode() + b"\0")
     for file in source_files():
         digest.update(file.name.encode() + b"\0" + file.read_bytes() + b"\0")
     return int(digest.hexdigest()[:HASH_DIGITS], 16)
@@ -152,7 +162,9 @@ class Kernel:
         if mode() == "aot":
             raise TypeError(f"{self.module}.{self.__name__}: no ahead-of-time signature for ({types_}) "
                             f"(add it to the kernel's aot=...)")
-        FALLBACKS.append((f"{self.module}.{self.__name__}", types_))
+        call = (f"{self.module}.{self.__name__}", types_)
+        if call not in FALLBACKS:  # each kind of call once: a per-tile fallback must not grow the list without end
+            FALLBACKS.append(call)
         return jit_namespace(self.module)[self.__name__](*args)
 
 
