@@ -25,6 +25,11 @@ from ..kernels import trims as kernel
 SEGMENTS_PER_BAND = 2
 
 
+def into_period(x: np.ndarray, x0, period) -> np.ndarray:
+    """A periodic parameter moved into [x0, x0 + period), the period the trim loops were sampled in."""
+    return x0 + np.mod(x - x0, period)
+
+
 @dataclass(frozen=True, eq=False)
 class Trim:
     """One face's loops: ``outer`` (n, 2) and ``holes`` (m_k, 2), closed polylines in (u, v).
@@ -59,9 +64,9 @@ class Trim:
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
         if self.u_period:
-            u = self.u0 + np.mod(u - self.u0, self.u_period)
+            u = into_period(u, self.u0, self.u_period)
         if self.v_period:
-            v = self.v0 + np.mod(v - self.v0, self.v_period)
+            v = into_period(v, self.v0, self.v_period)
         return u, v
 
     def contains(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -130,11 +135,11 @@ class TrimTable:
         patch = np.maximum(given, 0)  # −1 (no face): True, as `SurfaceSet.on_face` always answered there
         u0 = u = np.asarray(u, dtype=np.float64).ravel()
         v0 = v = np.asarray(v, dtype=np.float64).ravel()
-        if self.wraps:  # `Trim.wrap`'s arithmetic, per point
+        if self.wraps:  # `Trim.wrap`, per point's face
             u, v = u.copy(), v.copy()
             for x, x0, period in ((u, self.u0[patch], self.u_period[patch]), (v, self.v0[patch], self.v_period[patch])):
                 at = np.flatnonzero(period > 0)
-                x[at] = x0[at] + np.mod(x[at] - x0[at], period[at])
+                x[at] = into_period(x[at], x0[at], period[at])
         row = np.where(given >= 0, self.row[patch], -1)
         inside, unsure = np.empty(len(patch), dtype=bool), np.empty(len(patch), dtype=bool)
         kernel.inside_faces(np.maximum(row, -1), u, v, *self._args, inside, unsure)
