@@ -187,22 +187,42 @@ def test_bent_and_edge_flags_are_the_shifted_grid_form():
 
 # -- colour and AOV channels ----------------------------------------------------------------------------------------
 
+def _numpy_coverage_sums(hit, lit, surface_color, line_color, background, shade):
+    """The colour sums as film.py wrote them in numpy before the compiled pass served every case (the reference)."""
+    samples = hit.shape[1]
+    n_hit = hit.sum(axis=1)
+    weight = np.where(hit, lit, 0)
+    n_lit = weight.sum(axis=1)
+    unlit = np.where(hit, 1 - weight, 0) if shade is None else np.where(hit, (1 - weight) * shade, 0.0)
+    n_unlit, n_missed = unlit.sum(axis=1), samples - n_hit
+    line, surface, back = np.asarray(line_color), np.asarray(surface_color), np.asarray(background)
+    out = np.empty((len(hit), 4))
+    for c in range(3):
+        out[:, c] = (n_lit * line[c] + n_unlit * surface[c] + n_missed * back[c]) / samples
+    out[:, 3] = n_hit / samples
+    return out
+
+
+@pytest.mark.parametrize("samples", [1, 4, 9, 16, 25, 64, 144, 256])
 @pytest.mark.parametrize("weights", ["flags", "fractions"])
 @pytest.mark.parametrize("shaded", [False, True])
-def test_one_sample_colour_is_the_general_sums_to_the_bit(weights, shaded):
+def test_one_sample_colour_is_the_general_sums_to_the_bit(weights, shaded, samples):
+    """The compiled colour pass (`kernels.pixels.coverage_rgba`) is numpy's sums of the samples to the bit, for every
+    s² up to 256 (numpy's pairwise summation: 8 running sums from 8 values, halves beyond 128)."""
     rng = np.random.default_rng(19)
-    n = 20000
-    hit = rng.uniform(size=(n, 1)) < 0.4
-    lit = rng.uniform(size=(n, 1)) < 0.5 if weights == "flags" else rng.uniform(size=(n, 1))
-    shade = rng.uniform(size=(n, 1)) if shaded else None
+    n = 20000 // samples + 50
+    hit = rng.uniform(size=(n, samples)) < 0.4
+    hit[:5] = False  # whole pixels missing
+    lit = rng.uniform(size=(n, samples)) < 0.5 if weights == "flags" else rng.uniform(size=(n, samples))
+    shade = rng.uniform(size=(n, samples)) if shaded else None
     colours = ((0.2, 0.3, 0.4), (1.0, 0.9, 0.1), (0.3, 0.2, 0.1))
     got = film.coverage_color(hit, lit, *colours, shade)
-    want = np.empty((n, 4))
-    want[:] = film._coverage_sums(np.zeros((1, 1), dtype=bool), np.zeros((1, 1), dtype=lit.dtype), *colours,
-                                  None if shade is None else np.ones((1, 1)))
-    seen = np.flatnonzero(hit[:, 0])
-    want[seen] = film._coverage_sums(hit[seen], lit[seen], *colours, None if shade is None else shade[seen])
+    want = _numpy_coverage_sums(hit, lit, *colours, shade)
     assert np.array_equal(got, want)
+    # Into a tile's float32 colour columns: each value rounded once.
+    pixels = np.zeros((n, len(film.CHANNELS)), dtype=np.float32)
+    film.coverage_color(hit, lit, *colours, shade, out=pixels[:, :4])
+    assert np.array_equal(pixels[:, :4], want.astype(np.float32)) and not pixels[:, 4:].any()
 
 
 def test_aov_channels_of_a_tile_are_each_array_rounded_once():

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.pixels import aov_columns, coverage_color_one
+from ..kernels.pixels import aov_columns, coverage_rgba
 
 COLOR_CHANNELS = ("R", "G", "B", "A")
 #: The mode's φ and the curvatures (geometry/curvature.py) come after the reflection AOVs, so the channel
@@ -29,72 +29,32 @@ AOV_ARRAYS = (("P", 3), ("N", 3), ("u", 1), ("v", 1), ("patch", 1), ("Z", 1), ("
 
 
 def aov_planes(aovs: dict[str, np.ndarray], out: np.ndarray | None = None) -> np.ndarray:
-    """(N, 18) AOV values in channel order from the named per-pixel arrays (P and N are (N, 3)).
+    """(N, 18) AOV values in channel order from the named per-pixel arrays (P and N are (N, 3)), by one compiled
+    pass (`kernels.pixels.aov_columns`): each float64 value rounded to out's type once.
 
-    ``out``: the (N, 18) block to fill (a tile's float32 AOV columns), written array by array with no
-    float64 (N, 18) temporary in between; each value is rounded to out's type once, as before.
+    ``out``: the (N, 18) block to fill (a tile's float32 AOV columns), else a new float64 one.
     """
     if out is None:
         out = np.empty((len(aovs["u"]), len(AOV_CHANNELS)))
-    elif out.dtype == np.float32 and len(out):  # a tile's channels: one compiled pass (`kernels.pixels.aov_columns`)
-        aov_columns(*(np.asarray(aovs[name], dtype=np.float64) for name, _ in AOV_ARRAYS), out)
-        return out
-    column = 0
-    for name, width in AOV_ARRAYS:
-        if width == 1:
-            out[:, column] = aovs[name]
-        else:
-            out[:, column:column + width] = aovs[name]
-        column += width
+    aov_columns(*(np.asarray(aovs[name], dtype=np.float64) for name, _ in AOV_ARRAYS), out)
     return out
 
 
 def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, background,
-                   shade: np.ndarray | None = None) -> np.ndarray:
+                   shade: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
     """(P, 4) linear RGBA from per-sample (P, s²) hit flags and line weights ``lit`` (flags, or weights in [0, 1]).
 
-    ``shade``: per-sample (P, s²) factors k of the surface colour (None: flat, k = 1).
-    With flags and no shade the sums are whole sample counts, as they always were.
-    Pixels none of whose samples hit all get the one value the sums give for them (the background, A = 0),
-    computed once: the sums run over the pixels that see the surface only.
+    ``shade``: per-sample (P, s²) factors k of the surface colour (None: flat, k = 1). Per pixel, the line weights'
+    sum L, the surface's U = Σ (1 − w)·k and the hits' count H over its s² samples give
+    RGB = (L·line_color + U·surface_color + (s² − H)·background)/s² and A = H/s², by one compiled pass
+    (`kernels.pixels.coverage_rgba`, which sums as numpy sums a row). ``out``: the (P, 4) block to fill (a tile's
+    float32 colour columns, each value rounded once), else a new float64 one.
     """
-    if hit.shape[1] == 1:  # one sample per pixel: one compiled pass (`kernels.pixels.coverage_color_one`)
+    if out is None:
         out = np.empty((len(hit), 4))
-        colours = (np.asarray(x, dtype=np.float64) for x in (surface_color, line_color, background))
-        coverage_color_one(np.ascontiguousarray(hit[:, 0]), np.ascontiguousarray(lit[:, 0], dtype=np.float64),
-                           np.ones(0) if shade is None else np.ascontiguousarray(shade[:, 0], dtype=np.float64),
-                           shade is not None, *colours, out)
-        return out
-    seen = np.flatnonzero(hit.any(axis=1))
-    if len(seen) == len(hit):
-        return _coverage_sums(hit, lit, surface_color, line_color, background, shade)
-    # The same sums over one all-miss pixel: every miss row's value, bit for bit.
-    empty = np.zeros((1, hit.shape[1]), dtype=bool)
-    out = np.empty((len(hit), 4))
-    out[:] = _coverage_sums(empty, np.zeros((1, hit.shape[1]), dtype=np.asarray(lit).dtype), surface_color,
-                            line_color, background, None if shade is None else np.ones((1, hit.shape[1])))
-    if len(seen):
-        out[seen] = _coverage_sums(hit[seen], lit[seen], surface_color, line_color, background,
-                                   None if shade is None else shade[seen])
-    return out
-
-
-def _coverage_sums(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, background,
-                   shade: np.ndarray | None) -> np.ndarray:
-    """`coverage_color`'s sums over every pixel given."""
-    samples = hit.shape[1]
-    n_hit = hit.sum(axis=1)
-    weight = np.where(hit, lit, 0)
-    n_lit = weight.sum(axis=1)
-    unlit = np.where(hit, 1 - weight, 0) if shade is None else np.where(hit, (1 - weight) * shade, 0.0)
-    n_unlit, n_missed = unlit.sum(axis=1), samples - n_hit
-    line, surface, back = np.asarray(line_color), np.asarray(surface_color), np.asarray(background)
-    # Channel by channel: the same operations as the (P, 1) × (3,) broadcast, whose length-3 inner loops cost
-    # ~6× more (numpy calls them once per pixel).
-    out = np.empty((len(hit), 4))
-    for c in range(3):
-        out[:, c] = (n_lit * line[c] + n_unlit * surface[c] + n_missed * back[c]) / samples
-    out[:, 3] = n_hit / samples
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    coverage_rgba(np.ascontiguousarray(hit, dtype=bool), f64(lit), np.ones((0, 0)) if shade is None else f64(shade),
+                  shade is not None, f64(surface_color), f64(line_color), f64(background), out)
     return out
 
 
@@ -117,7 +77,11 @@ class Film:
 
     def put_span(self, start: int, stop: int, pixels: np.ndarray) -> None:
         """Store pixels [start, stop) in row-major order: (stop − start, 22) values in `CHANNELS` order."""
-        self.pixels.reshape(-1, len(CHANNELS))[start:stop] = pixels
+        self.span(start, stop)[:] = pixels
+
+    def span(self, start: int, stop: int) -> np.ndarray:
+        """Pixels [start, stop) in row-major order, (stop − start, 22) in `CHANNELS` order: a view to render into."""
+        return self.pixels.reshape(-1, len(CHANNELS))[start:stop]
 
     def channel(self, name: str) -> np.ndarray:
         return self.pixels[..., CHANNELS.index(name)]

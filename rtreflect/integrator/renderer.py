@@ -349,16 +349,19 @@ class Renderer:
                 "phi": phi, "K": curv[0], "H": curv[1], "k1": curv[2], "k2": curv[3], "shading": shading}
 
     # -- tiles ---------------------------------------------------------------------------
-    def render_span(self, start: int, stop: int) -> Tile:
+    def render_span(self, start: int, stop: int, out: np.ndarray | None = None) -> Tile:
         """Pixels [start, stop) in row-major order (a tile may begin or end mid-row) as one `Tile`.
 
         Every pixel's value depends only on its own rays (and, with ``samples = "analytic"``, its
         8 neighbours' centre rays, traced as a halo around the span), so any cut of the image into
-        spans gives the same bytes.
+        spans gives the same bytes. ``out``: the (stop − start, 22) float32 block to write them into (a span
+        of a `Film`, `Film.span`: no tile-sized array and no copy into the film), else a new one.
         """
+        if out is None:
+            out = np.empty((stop - start, len(CHANNELS)), dtype=np.float32)
         s = self.scene.image.samples
         if s == ANALYTIC:
-            return self._render_analytic(start, stop)
+            return self._render_analytic(start, stop, out)
         width = self.scene.image.width
         rows, cols = np.divmod(np.arange(start, stop), width)
         rgba, shading, rays = self.supersample(rows, cols, s)
@@ -376,10 +379,9 @@ class Renderer:
             fallbacks += int(centre.sum())
             fell_back |= centre
         fallback_pixels = int(fell_back.sum())
-        pixels = np.empty((len(rows), len(CHANNELS)), dtype=np.float32)
-        pixels[:, :4] = rgba
-        aov_planes(aovs, pixels[:, 4:])
-        return Tile(start, stop, pixels, rays, fallbacks, fallback_pixels)
+        out[:, :4] = rgba
+        aov_planes(aovs, out[:, 4:])
+        return Tile(start, stop, out, rays, fallbacks, fallback_pixels)
 
     def supersample(self, rows: np.ndarray, cols: np.ndarray, s: int) -> tuple[np.ndarray, Shading, int]:
         """(P, 4) RGBA of pixels (rows, cols) from their s×s samples, the samples' `Shading`, and the rays traced."""
@@ -403,7 +405,7 @@ class Renderer:
         return map_color(shading.hits.hit.reshape(-1, ns), weight.reshape(-1, ns),
                          shading.surface_rgb.reshape(-1, ns, 3), settings.line_color, settings.background)
 
-    def _render_analytic(self, start: int, stop: int) -> Tile:
+    def _render_analytic(self, start: int, stop: int, out: np.ndarray) -> Tile:
         """`render_span` for ``samples = "analytic"`` (`analytic`): centre rays with a halo, the stripes' coverage in
         closed form, and the edge pixels supersampled.
 
@@ -484,10 +486,9 @@ class Renderer:
             fallbacks += int(samples.hits.fallback.sum())
             fell_back[part] |= samples.hits.fallback.reshape(len(part), -1).any(axis=1)
         aovs = self.aovs(mine)
-        pixels = np.empty((stop - start, len(CHANNELS)), dtype=np.float32)
-        pixels[:, :4] = rgba
-        aov_planes(aovs, pixels[:, 4:])
-        return Tile(start, stop, pixels, rays, fallbacks, int(fell_back.sum()), len(edges))
+        out[:, :4] = rgba
+        aov_planes(aovs, out[:, 4:])
+        return Tile(start, stop, out, rays, fallbacks, int(fell_back.sum()), len(edges))
 
     def stripe_offsets(self, shading: Shading) -> np.ndarray:
         """Per ray the signed offset σ from its nearest level's centre (`modes.base.level_offset`), NaN where none is:
@@ -584,14 +585,15 @@ class Renderer:
         return pixel_spans(self.scene.image, rays_per_tile)
 
     def stream(self, threads: int | None = None, rays_per_tile: int = RAYS_PER_TILE,
-               stats: RenderStats | None = None) -> Iterator[Tile]:
+               stats: RenderStats | None = None, film: Film | None = None) -> Iterator[Tile]:
         """Tiles in image order, rendered ``threads`` at a time.
 
         At most ``threads`` tiles are in flight plus one waiting to be taken, so memory
         is bounded by the tile size, not the image size. ``stats`` (if given) counts rays
-        and fallbacks as tiles are yielded.
+        and fallbacks as tiles are yielded. ``film``: each tile is rendered straight into its span of it
+        (`Film.span`; the tile's pixels are that view), else into an array of its own.
         """
-        for tile in self._tiles_in_order(threads or default_threads(), self.spans(rays_per_tile)):
+        for tile in self._tiles_in_order(threads or default_threads(), self.spans(rays_per_tile), film):
             if stats is not None:
                 stats.rays += tile.rays
                 stats.fallbacks += tile.fallbacks
@@ -599,18 +601,21 @@ class Renderer:
                 stats.supersampled += tile.supersampled
             yield tile
 
-    def _tiles_in_order(self, threads: int, spans: list[tuple[int, int]]) -> Iterator[Tile]:
+    def _tiles_in_order(self, threads: int, spans: list[tuple[int, int]], film: Film | None = None) -> Iterator[Tile]:
+        # Each span's own block of the film (tiles write disjoint rows of it), or None: a new array per tile.
+        into = (lambda start, stop: None) if film is None else film.span  # noqa: E731
         if threads == 1:  # one tile at a time, in this thread (batch workers)
-            yield from (self.render_span(*span) for span in spans)
+            yield from (self.render_span(*span, into(*span)) for span in spans)
             return
         todo = iter(spans)
         with ThreadPoolExecutor(max_workers=threads) as pool:
-            pending: deque[Future[Tile]] = deque(pool.submit(self.render_span, *span)
+            pending: deque[Future[Tile]] = deque(pool.submit(self.render_span, *span, into(*span))
                                                  for span in itertools.islice(todo, threads))
             try:
                 while pending:
                     tile = pending.popleft().result()
-                    pending.extend(pool.submit(self.render_span, *span) for span in itertools.islice(todo, 1))
+                    pending.extend(pool.submit(self.render_span, *span, into(*span))
+                                   for span in itertools.islice(todo, 1))
                     yield tile
             finally:  # the consumer stopped early (error, Ctrl-C): do not render the rest
                 for future in pending:
@@ -622,11 +627,12 @@ class Renderer:
         return RenderStats(image.width, image.height, image.samples)
 
     def run(self, sink: Callable[[Tile], None], threads: int | None = None, rays_per_tile: int = RAYS_PER_TILE,
-            progress: Callable[[int], None] | None = None) -> RenderStats:
-        """Render the whole image, handing each tile to ``sink`` in image order; ``progress(pixels)`` after each."""
+            progress: Callable[[int], None] | None = None, film: Film | None = None) -> RenderStats:
+        """Render the whole image, handing each tile to ``sink`` in image order; ``progress(pixels)`` after each.
+        ``film``: the tiles are rendered straight into it (`stream`)."""
         start = time.perf_counter()
         stats = self.new_stats()
-        for tile in self.stream(threads, rays_per_tile, stats):
+        for tile in self.stream(threads, rays_per_tile, stats, film):
             sink(tile)
             stats.tiles += 1
             if progress:
@@ -639,6 +645,6 @@ class Renderer:
                rays_per_tile: int = RAYS_PER_TILE) -> RenderResult:
         """Render the whole image into an in-memory `Film`; ``progress(pixels)`` is called as tiles finish."""
         film = Film(self.scene.image.width, self.scene.image.height)
-        stats = self.run(lambda tile: film.put_span(tile.start, tile.stop, tile.pixels), threads, rays_per_tile,
-                         progress)
+        # Each tile is rendered into its span of the film: nothing left to copy when it comes.
+        stats = self.run(lambda tile: None, threads, rays_per_tile, progress, film)
         return RenderResult(self.scene, film, stats)

@@ -11,6 +11,7 @@ the same bits (numba compiles without fast-math, so no reassociation or fused mu
   box [low, high] (`integrator.cull`).
 - `aov_columns`: the AOV arrays written into a tile's float32 channels (`integrator.film.aov_planes`), each
   value rounded to float32 once.
+- `coverage_rgba`: a pixel's colour from its samples (`integrator.film.coverage_color`), summed as numpy sums.
 
 Argument types (for an ahead-of-time signature) are given in each docstring; all arrays C-contiguous.
 """
@@ -18,6 +19,8 @@ Argument types (for an ahead-of-time signature) are given in each docstring; all
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 from .compiled import njit
 
@@ -134,13 +137,15 @@ def box_keep(origins, directions, low, high, tiny, keep):
 
 @njit(**JIT, aot=(
     "void(f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f4[:, :])",
+    "void(f8[:, :], f8[:, :], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f4[:, :])",
+    "void(f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1])",
 ))
 def aov_columns(P, N, u, v, patch, Z, f, line_id, line_dist, phi, K, H, k1, k2, out):
     """The AOV channels of a tile in `integrator.film.AOV_CHANNELS` order (P and N three columns each, then one
-    per array), each float64 value rounded to ``out``'s float32 once.
+    per array), each float64 value rounded to ``out``'s type once.
 
     Types: P, N float64[:, :] (n, 3); u ... k2 float64[:] (n), any stride (the odd-s path passes every s²-th
-    sample); out float32[:, :] (n, 18), written (a view of a tile's pixels: its rows strided).
+    sample); out float32[:, :] (n, 18), written (a view of a tile's pixels: its rows strided), or float64[:, :].
     """
     for i in range(out.shape[0]):
         for c in range(3):
@@ -303,28 +308,81 @@ def hard_coverage(sigma, a, b, half_width, out):
         out[i] = _trapezoid_cdf(half_width - sigma[i], a[i], b[i]) - _trapezoid_cdf(-half_width - sigma[i], a[i], b[i])
 
 
-# -- colour of one-sample pixels (`integrator.film.coverage_color`) -----------------------------------------------
+# -- colour of pixels from their samples (`integrator.film.coverage_color`) -----------------------------------------
+
+#: numpy's pairwise summation works in blocks of this many values (its PW_BLOCKSIZE), split in halves beyond.
+PAIRWISE_BLOCK = 128
 
 
-@njit(**JIT, aot=("void(b1[::1], f8[::1], f8[::1], b1, f8[::1], f8[::1], f8[::1], f8[:, ::1])",))
-def coverage_color_one(hit, weight, shade, shaded, surface, line, background, out):
-    """``out`` (n, 4) linear RGBA of pixels of one sample each (the centre ray of samples = 1 and of the analytic
-    path): a hit shows w·line + (1 − w)·k·surface, a miss the background; A = 1 on a hit. The same sums as
-    `film.coverage_color` over one sample (its counts 0 or 1), term for term, so the same bits.
+@njit(**JIT)
+def _pairwise_sum(a, first, n):
+    """numpy's sum of a[first:first + n] (a float64 row reduced along its contiguous axis), term for term: its
+    pairwise summation (numpy/_core/src/umath/loops_utils.h, ``pairwise_sum``): below 8 values in turn, up to
+    `PAIRWISE_BLOCK` in 8 running sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)) then the rest
+    in turn, beyond that the two halves (the first a multiple of 8) summed apart. Starts from 0.0, numpy's initial
+    value of an add reduction."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[first + i]
+        return res
+    if n <= PAIRWISE_BLOCK:
+        r0, r1, r2, r3 = a[first], a[first + 1], a[first + 2], a[first + 3]
+        r4, r5, r6, r7 = a[first + 4], a[first + 5], a[first + 6], a[first + 7]
+        i = 8
+        while i < n - n % 8:
+            r0 += a[first + i]
+            r1 += a[first + i + 1]
+            r2 += a[first + i + 2]
+            r3 += a[first + i + 3]
+            r4 += a[first + i + 4]
+            r5 += a[first + i + 5]
+            r6 += a[first + i + 6]
+            r7 += a[first + i + 7]
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < n:
+            res += a[first + i]
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_sum(a, first, n2) + _pairwise_sum(a, first + n2, n - n2)
 
-    Types: hit bool[:] (n); weight float64[:] (n) (line weights or lit flags as 0/1); shade float64[:] (n, read
-    where ``shaded``); shaded bool; surface, line, background float64[:] (3); out float64[:, :] (n, 4), written.
+
+@njit(**JIT, aot=("void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[::1], f8[::1], f8[:, ::1])",
+                  "void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[::1], f8[::1], f4[:, :])"))
+def coverage_rgba(hit, weight, shade, shaded, surface, line, background, out):
+    """``out`` (P, 4) linear RGBA of pixels from their (P, s²) samples (`film.coverage_color`): per pixel the line
+    weights' sum L = Σ w, the surface's U = Σ (1 − w)·k and the hits' count H over its samples (a miss adds 0), then
+    RGB = (L·line + U·surface + (s² − H)·background)/s², A = H/s². L and U are summed as numpy sums a row
+    (`_pairwise_sum`), so the same bits as the sums of numpy arrays; with one sample they are the sample's own
+    values. Each value is rounded to ``out``'s type once.
+
+    Types: hit bool[:, :] (P, s²); weight float64[:, :] (P, s²) (line weights, or lit flags as 0/1); shade
+    float64[:, :] (P, s², read where ``shaded``); shaded bool; surface, line, background float64[:] (3); out
+    float64[:, :] or float32[:, :] (P, 4), written (a float32 view of a tile's pixels: its rows strided).
     """
+    samples = hit.shape[1]
+    lit = np.zeros(samples)
+    unlit = np.zeros(samples)
     for i in range(out.shape[0]):
-        if hit[i]:
-            w = weight[i]
-            unlit = (1.0 - w) * shade[i] if shaded else 1.0 - w
-            missed = 0.0
-        else:
-            w, unlit, missed = 0.0, 0.0, 1.0
+        n_hit = 0
+        for j in range(samples):
+            if hit[i, j]:
+                w = weight[i, j]
+                lit[j] = w
+                unlit[j] = (1.0 - w) * shade[i, j] if shaded else 1.0 - w
+                n_hit += 1
+            else:
+                lit[j] = 0.0
+                unlit[j] = 0.0
+        n_lit = _pairwise_sum(lit, 0, samples)
+        n_unlit = _pairwise_sum(unlit, 0, samples)
+        n_missed = float(samples - n_hit)
         for c in range(3):
-            out[i, c] = w * line[c] + unlit * surface[c] + missed * background[c]
-        out[i, 3] = 1.0 if hit[i] else 0.0
+            out[i, c] = (n_lit * line[c] + n_unlit * surface[c] + n_missed * background[c]) / samples
+        out[i, 3] = n_hit / samples
 
 
 # -- rows of (N, 3) arrays ------------------------------------------------------------------------------------------

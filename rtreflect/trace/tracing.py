@@ -55,6 +55,7 @@ from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
 from ..kernels import nurbs as nurbs_kernel
 from ..kernels import rims as rims_kernel
+from ..kernels.pixels import scatter_rows
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance (or the part's size),
 #: and at least to the hit's distance from the origin: S's coordinates cannot be computed more finely than
@@ -697,6 +698,16 @@ def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
     return BAND_CHORDS * chord * allowance + FLOAT32_SLACK * tessellation.extent
 
 
+def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values: tuple[np.ndarray, ...]) -> None:
+    """``target[rows] = value`` for (N, 3) arrays: a slice copies as numpy does, index rows by the compiled row copy
+    (`kernels.pixels.scatter_rows`, ~4× numpy's fancy assignment of (N, 3) rows); the values are copied, not computed."""
+    for target, value in zip(targets, values):
+        if isinstance(rows, slice):
+            target[rows] = value
+        else:
+            scatter_rows(target, rows, np.ascontiguousarray(value))
+
+
 def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet,
           origins: np.ndarray, directions: np.ndarray, clock: StageClock = NULL_CLOCK,
           max_distance: np.ndarray | None = None) -> Hits:
@@ -733,16 +744,19 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             mesh = MeshHits(*(x[found] for x in mesh))
         if len(rays) == 0:
             break
+        # The rays still open are every ray in order (the first query, all found): slices, not index arrays.
+        every = start is None and len(rays) == n
+        at = slice(None) if every else rays
         with clock.stage("newton (exact hit)"):
             c = _candidates(tessellation, surfaces, O, D, mesh.prim, mesh.b1, mesh.b2, mesh.t)
-            take = (c.status == VALID) & (c.t < best[rays]) & (c.t < far[rays])
+            take = (c.status == VALID) & (c.t < best[at]) & (c.t < far[at])
             if take.all():  # the common case (every first hit valid): no gathers
                 take = slice(None)
-            rows = rays[take]
+            rows = at if isinstance(take, slice) else rays[take]
             best[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = c.t[take], c.patch[take], c.u[take], c.v[take]
-            hits.P[rows], hits.aside[rows] = c.derivs.S[take], c.aside[take]
-            hits.Su[rows], hits.Sv[rows] = c.derivs.Su[take], c.derivs.Sv[take]
-            odd = np.flatnonzero((c.status == UNRESOLVED) & (mesh.t < doubt[rays]))
+            hits.aside[rows] = c.aside[take]
+            _put_rows((hits.P, hits.Su, hits.Sv), rows, (c.derivs.S[take], c.derivs.Su[take], c.derivs.Sv[take]))
+            odd = np.flatnonzero((c.status == UNRESOLVED) & (mesh.t < doubt[at]))
             doubt[rays[odd]] = mesh.t[odd]
         with clock.stage("exact normals"):
             normal, cosine = c.normal[take], c.cosine[take]
@@ -751,11 +765,11 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 kept = SurfaceDerivatives(*(x[take][bad] for x in c.derivs[:3]))
                 normal[bad] = surfaces.normals(c.patch[take][bad], c.u[take][bad], c.v[take][bad], kept)
                 cosine[bad] = np.einsum("ij,ij->i", normal[bad], D[take][bad])
-            hits.N[rows] = facing(normal, D[take], cosine)
+            _put_rows((hits.N,), rows, (facing(normal, D[take], cosine),))
             cos[rows] = np.abs(cosine)
         # Go on where a mesh hit behind this one could still carry a nearer exact hit.
         # An unresolved candidate does not stop the search: the exact hit may lie behind it.
-        limit = np.minimum(far[rays], best[rays] + _band(tessellation, cos[rays]))
+        limit = np.minimum(far[at], best[at] + _band(tessellation, cos[at]))
         nxt = mesh.t + skip
         go = nxt < limit
         rays, start, limit = rays[go], nxt[go], limit[go]
