@@ -314,40 +314,72 @@ def hard_coverage(sigma, a, b, half_width, out):
 PAIRWISE_BLOCK = 128
 
 
-@njit(**JIT)
-def _pairwise_sum(a, first, n):
-    """numpy's sum of a[first:first + n] (a float64 row reduced along its contiguous axis), term for term: its
-    pairwise summation (numpy/_core/src/umath/loops_utils.h, ``pairwise_sum``): below 8 values in turn, up to
-    `PAIRWISE_BLOCK` in 8 running sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)) then the rest
-    in turn, beyond that the two halves (the first a multiple of 8) summed apart. Starts from 0.0, numpy's initial
-    value of an add reduction."""
+#: Depth of `_pairwise_sum`'s stack: the halves' tree of n values is about log2(n / 8) deep.
+PAIRWISE_DEPTH = 64
+
+
+@njit(inline="always", **JIT)
+def _block_sum(a, first, n):
+    """numpy's ``pairwise_sum`` of a[first:first + n] for n ≤ `PAIRWISE_BLOCK` (`_pairwise_sum`)."""
     if n < 8:
         res = 0.0
         for i in range(n):
             res += a[first + i]
         return res
+    r0, r1, r2, r3 = a[first], a[first + 1], a[first + 2], a[first + 3]
+    r4, r5, r6, r7 = a[first + 4], a[first + 5], a[first + 6], a[first + 7]
+    i = 8
+    while i < n - n % 8:
+        r0 += a[first + i]
+        r1 += a[first + i + 1]
+        r2 += a[first + i + 2]
+        r3 += a[first + i + 3]
+        r4 += a[first + i + 4]
+        r5 += a[first + i + 5]
+        r6 += a[first + i + 6]
+        r7 += a[first + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[first + i]
+        i += 1
+    return res
+
+
+@njit(**JIT)
+def _pairwise_sum(a, n, stack):
+    """numpy's sum of a[:n] (a float64 row reduced along its contiguous axis), term for term: 0.0 (numpy's initial
+    value of an add reduction) plus its pairwise summation (numpy/_core/src/umath/loops_utils.h, ``pairwise_sum``):
+    below 8 values in turn, up to `PAIRWISE_BLOCK` in 8 running sums combined as
+    ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)) then the rest in turn, beyond that the two halves (the first
+    n/2 rounded down to a multiple of 8) summed apart and added. The halves by an explicit stack (``stack``: int64
+    (`PAIRWISE_DEPTH`, 3) rows first, n, state; numba's on-disk cache of a recursive function crashes on load).
+    """
     if n <= PAIRWISE_BLOCK:
-        r0, r1, r2, r3 = a[first], a[first + 1], a[first + 2], a[first + 3]
-        r4, r5, r6, r7 = a[first + 4], a[first + 5], a[first + 6], a[first + 7]
-        i = 8
-        while i < n - n % 8:
-            r0 += a[first + i]
-            r1 += a[first + i + 1]
-            r2 += a[first + i + 2]
-            r3 += a[first + i + 3]
-            r4 += a[first + i + 4]
-            r5 += a[first + i + 5]
-            r6 += a[first + i + 6]
-            r7 += a[first + i + 7]
-            i += 8
-        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-        while i < n:
-            res += a[first + i]
-            i += 1
-        return res
-    n2 = n // 2
-    n2 -= n2 % 8
-    return _pairwise_sum(a, first, n2) + _pairwise_sum(a, first + n2, n - n2)
+        return 0.0 + _block_sum(a, 0, n)
+    sums = np.empty(PAIRWISE_DEPTH)
+    top, done = 0, 0
+    stack[0, 0], stack[0, 1], stack[0, 2] = 0, n, 0
+    while top >= 0:
+        first, m = stack[top, 0], stack[top, 1]
+        if m <= PAIRWISE_BLOCK:
+            sums[done] = _block_sum(a, first, m)
+            done += 1
+            top -= 1
+            continue
+        half = m // 2
+        half -= half % 8
+        if stack[top, 2] < 2:  # its left half, then its right half
+            stack[top, 2] += 1
+            top += 1
+            stack[top, 0] = first if stack[top - 1, 2] == 1 else first + half
+            stack[top, 1] = half if stack[top - 1, 2] == 1 else m - half
+            stack[top, 2] = 0
+        else:  # both halves summed: left + right
+            sums[done - 2] = sums[done - 2] + sums[done - 1]
+            done -= 1
+            top -= 1
+    return 0.0 + sums[0]
 
 
 @njit(**JIT, aot=("void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[::1], f8[::1], f8[:, ::1])",
@@ -366,6 +398,7 @@ def coverage_rgba(hit, weight, shade, shaded, surface, line, background, out):
     samples = hit.shape[1]
     lit = np.zeros(samples)
     unlit = np.zeros(samples)
+    stack = np.empty((PAIRWISE_DEPTH, 3), dtype=np.int64)
     for i in range(out.shape[0]):
         n_hit = 0
         for j in range(samples):
@@ -377,8 +410,8 @@ def coverage_rgba(hit, weight, shade, shaded, surface, line, background, out):
             else:
                 lit[j] = 0.0
                 unlit[j] = 0.0
-        n_lit = _pairwise_sum(lit, 0, samples)
-        n_unlit = _pairwise_sum(unlit, 0, samples)
+        n_lit = _pairwise_sum(lit, samples, stack)
+        n_unlit = _pairwise_sum(unlit, samples, stack)
         n_missed = float(samples - n_hit)
         for c in range(3):
             out[i, c] = (n_lit * line[c] + n_unlit * surface[c] + n_missed * background[c]) / samples
