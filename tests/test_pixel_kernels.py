@@ -18,7 +18,7 @@ from rtreflect.exchange.scene import load_scene
 from rtreflect.integrator import film
 from rtreflect.integrator.analytic import hard_coverage, neighbours, trapezoid_cdf
 from rtreflect.integrator.cull import BOX_MARGIN, ORIGIN_MARGIN, TINY, RayBox
-from rtreflect.kernels.pixels import bent_flags, edge_flags, scatter_rows, stripe_candidates
+from rtreflect.kernels.pixels import bent_flags, edge_flags, scatter_picked, scatter_rows, stripe_candidates
 from rtreflect.trace.camera import Camera, sample_offsets
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -245,4 +245,17 @@ def test_scatter_rows_is_numpy_fancy_assignment():
     src[::9] = np.nan
     want[rows] = src
     scatter_rows(dst, rows, src)
+    assert np.array_equal(dst, want, equal_nan=True)
+
+
+def test_scatter_picked_is_numpy_fancy_assignment_of_the_picked_rows():
+    rng = np.random.default_rng(31)
+    dst = np.full((1000, 3), np.nan)
+    want = dst.copy()
+    rows = rng.choice(1000, size=400, replace=False)
+    src = rng.normal(size=(700, 3))
+    src[::9] = np.nan
+    pick = rng.choice(700, size=400, replace=False)
+    want[rows] = src[pick]
+    scatter_picked(dst, rows, src, pick)
     assert np.array_equal(dst, want, equal_nan=True)

@@ -364,7 +364,7 @@ class Renderer:
             return self._render_analytic(start, stop, out)
         width = self.scene.image.width
         rows, cols = np.divmod(np.arange(start, stop), width)
-        rgba, shading, rays = self.supersample(rows, cols, s)
+        _, shading, rays = self.supersample(rows, cols, s, out[:, :4])
         ns = s * s
         fallbacks = int(shading.hits.fallback.sum())
         fell_back = shading.hits.fallback.reshape(-1, ns).any(axis=1)
@@ -379,31 +379,39 @@ class Renderer:
             fallbacks += int(centre.sum())
             fell_back |= centre
         fallback_pixels = int(fell_back.sum())
-        out[:, :4] = rgba
         aov_planes(aovs, out[:, 4:])
         return Tile(start, stop, out, rays, fallbacks, fallback_pixels)
 
-    def supersample(self, rows: np.ndarray, cols: np.ndarray, s: int) -> tuple[np.ndarray, Shading, int]:
-        """(P, 4) RGBA of pixels (rows, cols) from their s×s samples, the samples' `Shading`, and the rays traced."""
+    def supersample(self, rows: np.ndarray, cols: np.ndarray, s: int,
+                    out: np.ndarray | None = None) -> tuple[np.ndarray, Shading, int]:
+        """(P, 4) RGBA of pixels (rows, cols) from their s×s samples, the samples' `Shading`, and the rays traced.
+        ``out``: the (P, 4) block to write the RGBA into (`colour`)."""
         offsets = sample_offsets(s)
         ns = len(offsets)
         with self.clock.stage("camera rays"):
             origins, directions = self.camera.sample_rays(rows, cols, offsets)
         shading = self.shade(origins, directions)
-        rgba = self.colour(shading, self.line_weight(shading), ns)
+        rgba = self.colour(shading, self.line_weight(shading), ns, out)
         return rgba, shading, len(origins)
 
-    def colour(self, shading: Shading, weight: np.ndarray, ns: int) -> np.ndarray:
-        """(P, 4) RGBA of pixels of ``ns`` samples each: hits, line weights (`film`) and the surface's shade or map."""
+    def colour(self, shading: Shading, weight: np.ndarray, ns: int, out: np.ndarray | None = None) -> np.ndarray:
+        """(P, 4) RGBA of pixels of ``ns`` samples each: hits, line weights (`film`) and the surface's shade or map.
+
+        ``out``: the (P, 4) block to write them into (a tile's float32 colour columns: each value rounded once, as
+        when a float64 RGBA is copied in), else a new float64 array."""
         settings = self.scene.render
         if shading.surface_rgb is None:
             shade = self.surface_shade(shading)
             return coverage_color(shading.hits.hit.reshape(-1, ns), weight.reshape(-1, ns),
                                   settings.surface_color, settings.line_color, settings.background,
-                                  None if shade is None else shade.reshape(-1, ns))
+                                  None if shade is None else shade.reshape(-1, ns), out)
         # a map mode: each sample's own surface colour
-        return map_color(shading.hits.hit.reshape(-1, ns), weight.reshape(-1, ns),
+        rgba = map_color(shading.hits.hit.reshape(-1, ns), weight.reshape(-1, ns),
                          shading.surface_rgb.reshape(-1, ns, 3), settings.line_color, settings.background)
+        if out is None:
+            return rgba
+        out[:] = rgba
+        return out
 
     def _render_analytic(self, start: int, stop: int, out: np.ndarray) -> Tile:
         """`render_span` for ``samples = "analytic"`` (`analytic`): centre rays with a halo, the stripes' coverage in
@@ -470,7 +478,7 @@ class Renderer:
                         edge[rs, cs] |= np.abs(other - rgb).max(axis=2) > MAP_STEP
             edge = edge.ravel()[own]
         mine = shading.take(own)
-        rgba = self.colour(mine, np.where(centre.blocked[own], 0.0, centre.coverage[own]), 1)
+        rgba = self.colour(mine, np.where(centre.blocked[own], 0.0, centre.coverage[own]), 1, out[:, :4])
         fell_back = mine.hits.fallback.copy()
         fallbacks = int(fell_back.sum())
         rays = len(rows)
@@ -486,7 +494,6 @@ class Renderer:
             fallbacks += int(samples.hits.fallback.sum())
             fell_back[part] |= samples.hits.fallback.reshape(len(part), -1).any(axis=1)
         aovs = self.aovs(mine)
-        out[:, :4] = rgba
         aov_planes(aovs, out[:, 4:])
         return Tile(start, stop, out, rays, fallbacks, int(fell_back.sum()), len(edges))
 

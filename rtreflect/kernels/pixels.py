@@ -431,3 +431,15 @@ def scatter_rows(dst, rows, src):
     for k in range(rows.shape[0]):
         for c in range(dst.shape[1]):
             dst[rows[k], c] = src[k, c]
+
+
+@njit(**JIT, aot=("void(f8[:, ::1], i8[::1], f8[:, ::1], i8[::1])",))
+def scatter_picked(dst, rows, src, pick):
+    """``dst[rows[k]] = src[pick[k]]`` for every k: `scatter_rows` of the rows ``pick`` of ``src`` with no gathered
+    copy of them in between. The values are copied, not computed.
+
+    Types: dst float64[:, :] (N, m), written; rows int64[:] (K); src float64[:, :] (M, m); pick int64[:] (K).
+    """
+    for k in range(rows.shape[0]):
+        for c in range(dst.shape[1]):
+            dst[rows[k], c] = src[pick[k], c]

@@ -55,7 +55,7 @@ from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
 from ..kernels import nurbs as nurbs_kernel
 from ..kernels import rims as rims_kernel
-from ..kernels.pixels import scatter_rows
+from ..kernels.pixels import scatter_picked
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance (or the part's size),
 #: and at least to the hit's distance from the origin: S's coordinates cannot be computed more finely than
@@ -698,14 +698,17 @@ def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
     return BAND_CHORDS * chord * allowance + FLOAT32_SLACK * tessellation.extent
 
 
-def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values: tuple[np.ndarray, ...]) -> None:
-    """``target[rows] = value`` for (N, 3) arrays: a slice copies as numpy does, index rows by the compiled row copy
-    (`kernels.pixels.scatter_rows`, ~4× numpy's fancy assignment of (N, 3) rows); the values are copied, not computed."""
+def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values: tuple[np.ndarray, ...],
+              pick: np.ndarray | slice) -> None:
+    """``target[rows] = value[pick]`` for (N, 3) arrays: slices copy as numpy does, index rows by the compiled row
+    copy (`kernels.pixels.scatter_picked`, ~4× numpy's fancy indexing of (N, 3) rows, and no gathered copy); the
+    values are copied, not computed."""
     for target, value in zip(targets, values):
         if isinstance(rows, slice):
-            target[rows] = value
+            target[rows] = value[pick]
         else:
-            scatter_rows(target, rows, np.ascontiguousarray(value))
+            scatter_picked(target, rows, np.ascontiguousarray(value),
+                           np.arange(len(rows)) if isinstance(pick, slice) else pick)
 
 
 def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet,
@@ -750,23 +753,25 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
         with clock.stage("newton (exact hit)"):
             c = _candidates(tessellation, surfaces, O, D, mesh.prim, mesh.b1, mesh.b2, mesh.t)
             take = (c.status == VALID) & (c.t < best[at]) & (c.t < far[at])
-            if take.all():  # the common case (every first hit valid): no gathers
-                take = slice(None)
-            rows = at if isinstance(take, slice) else rays[take]
-            best[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = c.t[take], c.patch[take], c.u[take], c.v[take]
-            hits.aside[rows] = c.aside[take]
-            _put_rows((hits.P, hits.Su, hits.Sv), rows, (c.derivs.S[take], c.derivs.Su[take], c.derivs.Sv[take]))
+            # The candidates kept (`pick`) and their rays (`rows`): slices where every ray keeps its candidate (the
+            # common case), no gathers.
+            pick = slice(None) if take.all() else np.flatnonzero(take)
+            rows = at if isinstance(pick, slice) else rays[pick]
+            best[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = c.t[pick], c.patch[pick], c.u[pick], c.v[pick]
+            hits.aside[rows] = c.aside[pick]
             odd = np.flatnonzero((c.status == UNRESOLVED) & (mesh.t < doubt[at]))
             doubt[rays[odd]] = mesh.t[odd]
         with clock.stage("exact normals"):
-            normal, cosine = c.normal[take], c.cosine[take]
-            bad = np.flatnonzero(c.degenerate[take])
+            # Per row: the normals of every candidate turned in place, only the kept ones' stored.
+            normal, cosine = c.normal, c.cosine
+            bad = np.flatnonzero(c.degenerate & take)
             if len(bad):  # the limit from the interior (`SurfaceSet.normals`)
-                kept = SurfaceDerivatives(*(x[take][bad] for x in c.derivs[:3]))
-                normal[bad] = surfaces.normals(c.patch[take][bad], c.u[take][bad], c.v[take][bad], kept)
-                cosine[bad] = np.einsum("ij,ij->i", normal[bad], D[take][bad])
-            _put_rows((hits.N,), rows, (facing(normal, D[take], cosine),))
-            cos[rows] = np.abs(cosine)
+                kept = SurfaceDerivatives(*(x[bad] for x in c.derivs[:3]))
+                normal[bad] = surfaces.normals(c.patch[bad], c.u[bad], c.v[bad], kept)
+                cosine[bad] = np.einsum("ij,ij->i", normal[bad], D[bad])
+            facing(normal, D, cosine)
+            _put_rows((hits.P, hits.Su, hits.Sv, hits.N), rows, (c.derivs.S, c.derivs.Su, c.derivs.Sv, normal), pick)
+            cos[rows] = np.abs(cosine[pick])
         # Go on where a mesh hit behind this one could still carry a nearer exact hit.
         # An unresolved candidate does not stop the search: the exact hit may lie behind it.
         limit = np.minimum(far[at], best[at] + _band(tessellation, cos[at]))
