@@ -55,7 +55,7 @@ import numpy as np
 
 from .accelerator import Accelerator, MeshHits
 from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _normals, _other_root, _over_closed_seam, _rescue,
-                      facing, refine_all, trace)
+                      facing, float32_rounding, refine_all, trace)
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.patches import net_plane
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
@@ -114,7 +114,7 @@ def flat(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
     deviates from the surface by less than Embree's float32 rounding of the scene's coordinates (then its
     ±`SHELL_CHORDS` chord-error sheets coincide with the mesh and its walls have no height).
     """
-    rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+    rounding = float32_rounding(tessellation)
     out = np.zeros(len(surfaces), dtype=bool)
     for k, surface in enumerate(surfaces.patches):
         _, _, deviation = net_plane(surface)
@@ -213,7 +213,7 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
     mid = 0.5 * (tessellation.vertex_uv[a] + tessellation.vertex_uv[b])
     sagitta = np.abs(np.einsum("ij,ij->i", surfaces.evaluate(patch, mid[:, 0], mid[:, 1]).S - 0.5 * (pa + pb), across))
     # An edge straight in the tangent plane (a cylinder's seam, a circle curving along the normal): its wall suffices.
-    rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+    rounding = float32_rounding(tessellation)
     bent = SHELL_CHORDS * sagitta > rounding
     a, b, patch, pa, pb, across, sagitta = (x[bent] for x in (a, b, patch, pa, pb, across, sagitta))
     width = (SHELL_CHORDS * sagitta)[:, None]
@@ -257,7 +257,7 @@ class SecondLook:
         self.shell, self.shell_mesh = shell(tessellation, surfaces)
         self._reach = 2.0 * SHELL_CHORDS * float(tessellation.chord_error.max(initial=0.0))
         # Past a shell hit by float32 rounding of the scene's largest coordinates, with margin (as `trace`'s).
-        self._skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+        self._skip = float32_rounding(tessellation)
         self.isolated = isolated(self.shell_mesh, self._reach / GRAZING_COS + 2.0 * self._skip)
         self._planes = clear_sides(tessellation, surfaces, flat(tessellation, surfaces))
         self._lock = threading.Lock()

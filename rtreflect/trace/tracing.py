@@ -116,6 +116,25 @@ OTHER_ROOT_COS = 0.2
 VALID, MISS, UNRESOLVED = 0, 1, 2
 
 
+def float32_rounding(tessellation: Tessellation) -> float:
+    """Float32 rounding of the scene's coordinates, with margin: `FLOAT32_SLACK` × (extent + largest |coordinate|).
+
+    Embree holds the mesh and the rays in float32 (24 bits: a relative 6e-8 of a coordinate's magnitude), and a
+    mesh hit's t comes back so rounded. A coordinate is at most the mesh's largest |coordinate| (the BVH's centred
+    ones are smaller: an upper bound) and a ray distance across the part at most its extent, so two points closer
+    than this may be one to Embree: the step past a mesh hit for the next query (`trace`, the second look's shell
+    walk), the reach within which another face's mesh may coincide with the hit's (`_rim_neighbours`,
+    `_corner_faces`), and the flatness Embree cannot resolve (`_net_planes`, `secondlook.flat`,
+    `secondlook._rim_boxes`). Computed once per tessellation, on first use (kept in its ``__dict__``, as
+    `_rim_planes` is).
+    """
+    cached = tessellation.__dict__.get("_float32_rounding")
+    if cached is None:
+        cached = tessellation.__dict__["_float32_rounding"] = (
+            FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0))))
+    return cached
+
+
 @dataclass
 class Hits:
     """Exact hits of N rays; rows where ``hit`` is False hold NaN (patch −1)."""
@@ -303,7 +322,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     restart, `_other_root`, `_rim_neighbours`) in numpy on the rays that need them.
     """
     n = len(prim)
-    band = tessellation.chord_error + 1e-6 * tessellation.extent  # per patch: `JUMP_LIMIT`'s chord error
+    band = tessellation.chord_error + FLOAT32_SLACK * tessellation.extent  # per patch: `JUMP_LIMIT`'s chord error
     pk = np.empty(n, dtype=np.int64)
     us, vs, ur, vr, tr, cosine = (np.empty(n) for _ in range(6))
     S, Su, Sv, normal = (np.empty((n, 3)) for _ in range(4))
@@ -496,7 +515,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     patch_of, uv_of, gap_of = tessellation.rim_neighbour
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
-    skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
+    skip = float32_rounding(tessellation)  # as `trace`'s
     points = O[rays] + tm[rays, None] * D[rays]
     edge_dist, chord_dist, corner = _rim_corner(tessellation, prim[rays], points)
     pn, un, vn, gap = patch_of[corner], uv_of[corner, 0], uv_of[corner, 1], gap_of[corner]
@@ -587,7 +606,7 @@ def _net_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.nd
     per tessellation, on first use (kept in its ``__dict__``, as `_rim_planes` is)."""
     cached = tessellation.__dict__.get("_net_planes")
     if cached is None:
-        rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+        rounding = float32_rounding(tessellation)
         planes = [net_plane(s) for s in surfaces.patches]
         centre = np.array([p[0] for p in planes]).reshape(-1, 3)
         normal = np.array([p[1] for p in planes]).reshape(-1, 3)
@@ -624,7 +643,7 @@ def _corner_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.
         other = cand_patch[nearest]
         own = tessellation.vertex_patch[rows]
         chord = tessellation.chord_error
-        skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+        skip = float32_rounding(tessellation)
         keep = (other != own[:, None]) & (other != first[rows, None])
         keep &= dist <= gap[rows, None] + RIM_REACH_CHORDS * (chord[own, None] + chord[other]) + skip
         # One vertex per face, its nearest (the columns run by distance).
@@ -712,7 +731,7 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     doubt = np.full(n, np.inf)  # mesh t of the nearest unresolved candidate
     rays, start, limit = np.arange(n), None, far
     # Past a mesh hit by float32 rounding of the scene's largest coordinates, with margin.
-    skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+    skip = float32_rounding(tessellation)
     for _ in range(MAX_CANDIDATES):
         if len(rays) == 0:
             break
