@@ -288,6 +288,18 @@ class SurfaceSet:
         return kernel.PatchTable.of(self.patches)
 
     @cached_property
+    def net_planes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per patch its control net's plane (`patches.net_plane`): a point on it (P, 3), its unit normal (P, 3), the
+        net's largest distance from it (P,); and (P,) whether its weights are all > 0 (then the surface lies in the
+        net's convex hull, so within that distance of the plane). Fitted once per patch, on first use (the tracer's
+        planar neighbours and the second look's flat faces and supporting planes read it)."""
+        from .patches import net_plane  # patches.py imports this module
+
+        planes = [net_plane(s) for s in self.patches]
+        return (np.array([p[0] for p in planes]).reshape(-1, 3), np.array([p[1] for p in planes]).reshape(-1, 3),
+                np.array([p[2] for p in planes]), np.array([bool(np.all(s.weights > 0)) for s in self.patches], dtype=bool))
+
+    @cached_property
     def _domain_table(self) -> np.ndarray:
         return np.array([[*p.domain[0], *p.domain[1]] for p in self.patches])
 

@@ -57,7 +57,6 @@ from .accelerator import Accelerator, MeshHits
 from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _normals, _other_root, _over_closed_seam, _rescue,
                       facing, float32_rounding, refine_all, trace)
 from ..clock import NULL_CLOCK, StageClock
-from ..geometry.patches import net_plane
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
 
@@ -115,11 +114,8 @@ def flat(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
     ±`SHELL_CHORDS` chord-error sheets coincide with the mesh and its walls have no height).
     """
     rounding = float32_rounding(tessellation)
-    out = np.zeros(len(surfaces), dtype=bool)
-    for k, surface in enumerate(surfaces.patches):
-        _, _, deviation = net_plane(surface)
-        out[k] = deviation <= rounding and SHELL_CHORDS * tessellation.chord_error[k] <= rounding
-    return out
+    deviation = surfaces.net_planes[2]
+    return (deviation <= rounding) & (SHELL_CHORDS * tessellation.chord_error <= rounding)
 
 
 def clear_sides(tessellation: Tessellation, surfaces: SurfaceSet, flat_faces: np.ndarray
@@ -136,14 +132,15 @@ def clear_sides(tessellation: Tessellation, surfaces: SurfaceSet, flat_faces: np
     n = len(surfaces)
     centre, normal, clear = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2), dtype=bool)
     rows = np.flatnonzero(flat_faces)
-    if len(rows) == 0 or not all(np.all(s.weights > 0) for s in surfaces.patches):
+    planes, normals, deviations, positive = surfaces.net_planes
+    if len(rows) == 0 or not positive.all():
         return centre, normal, clear
     nets = [s.points.reshape(-1, 3) for s in surfaces.patches]
     owner = np.concatenate([np.full(len(x), k) for k, x in enumerate(nets)])
     nets = np.concatenate(nets)
     slack = GRAZING_COS * FLOAT32_SLACK * tessellation.extent
     for k in rows:
-        centre[k], normal[k], deviation = net_plane(surfaces.patches[k])
+        centre[k], normal[k], deviation = planes[k], normals[k], deviations[k]
         d = (nets[owner != k] - centre[k]) @ normal[k]
         clear[k] = d.max(initial=-np.inf) + deviation < slack, -d.min(initial=np.inf) + deviation < slack
     return centre, normal, clear

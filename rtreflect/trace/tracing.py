@@ -49,7 +49,6 @@ import numpy as np
 from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.curvature import curvatures
-from ..geometry.patches import net_plane
 from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
@@ -601,17 +600,13 @@ def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D
 
 
 def _net_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
-    """Per face: its control net's plane (`geometry.patches.net_plane`: point (P, 3), unit normal (P, 3), the net's
+    """Per face: its control net's plane (`SurfaceSet.net_planes`: point (P, 3), unit normal (P, 3), the net's
     deviation (P,)) and whether it is planar: deviation within float32 rounding of the scene, weights > 0. Built once
     per tessellation, on first use (kept in its ``__dict__``, as `_rim_planes` is)."""
     cached = tessellation.__dict__.get("_net_planes")
     if cached is None:
-        rounding = float32_rounding(tessellation)
-        planes = [net_plane(s) for s in surfaces.patches]
-        centre = np.array([p[0] for p in planes]).reshape(-1, 3)
-        normal = np.array([p[1] for p in planes]).reshape(-1, 3)
-        deviation = np.array([p[2] for p in planes])
-        planar = (deviation <= rounding) & np.array([bool(np.all(s.weights > 0)) for s in surfaces.patches], dtype=bool)
+        centre, normal, deviation, positive = surfaces.net_planes
+        planar = (deviation <= float32_rounding(tessellation)) & positive
         cached = tessellation.__dict__["_net_planes"] = (centre, normal, deviation, planar)
     return cached
 
