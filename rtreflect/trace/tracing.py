@@ -252,8 +252,8 @@ def _passes_by(surfaces: SurfaceSet, patch, u, v, O, D, tol) -> np.ndarray:
     at all). Newton on f = ½|r|², r = (S − O) − ((S − O)·D) D the point's offset from the ray, takes the full
     Hessian: gradient (r·S_u, r·S_v), Hessian [[|S_u⊥|² + r·S_uu, S_u⊥·S_v⊥ + r·S_uv], [·, |S_v⊥|² + r·S_vv]]
     with S_u⊥ = S_u − (S_u·D) D. A point where the Hessian is positive definite, |r| > tol and the cosine of
-    (r·S_u, r·S_v) against |r| (|S_u⊥|² + |S_v⊥|²)^½ at most `STATIONARY_COSINE` (as the search's test) is
-    such a minimum.
+    (r·S_u, r·S_v) against |r| (|S_u⊥|² + |S_v⊥|²)^½ at most `STATIONARY_COSINE` is such a minimum: the search's own
+    test (`kernels.nurbs.stationary_at`; its Jᵀr and |J| in the frame (e1, e2) across the ray are these).
     """
     u, v = np.array(u, dtype=np.float64), np.array(v, dtype=np.float64)
     u0, u1, v0, v1 = surfaces.domains(patch)
@@ -268,9 +268,10 @@ def _passes_by(surfaces: SurfaceSet, patch, u, v, O, D, tol) -> np.ndarray:
         a, b, c = dot(Su, Su) + dot(r, d.Suu), dot(Su, Sv) + dot(r, d.Suv), dot(Sv, Sv) + dot(r, d.Svv)
         det = a * c - b * b
         rn = np.linalg.norm(r, axis=1)
+        stationary = np.empty(len(u), dtype=bool)
+        nurbs_kernel.stationary_points(gu, gv, dot(Su, Su) + dot(Sv, Sv), rn, STATIONARY_COSINE, stationary)
         with np.errstate(divide="ignore", invalid="ignore"):
-            cosine = np.hypot(gu, gv) / (np.sqrt(dot(Su, Su) + dot(Sv, Sv)) * rn)
-            passes = (a > 0) & (det > 0) & (rn > tol) & (cosine <= STATIONARY_COSINE)
+            passes = (a > 0) & (det > 0) & (rn > tol) & stationary
             du, dv = (c * gu - b * gv) / det, (a * gv - b * gu) / det
         du, dv = np.where(np.isfinite(du), du, 0.0), np.where(np.isfinite(dv), dv, 0.0)
         u, v = np.clip(u - du, u0, u1), np.clip(v - dv, v0, v1)
