@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import signal
 import threading
+import time
+from pathlib import Path
 
 #: The lock a thread of the test holds while the read runs; the read takes it. A child forked while the
 #: thread held it inherits it held, and no thread of the child will ever release it.
@@ -15,6 +17,11 @@ LOCK = threading.Lock()
 #: Seconds `take_lock` waits for `LOCK` before it gives up (a forked child would otherwise hang for ever): far
 #: above the microseconds a free lock takes, well below the test's timeout.
 LOCK_WAIT = 20.0
+#: Seconds `wait_for_release` waits for its release before it gives up: the test releases it at once, on a loaded
+#: machine within seconds.
+RELEASE_WAIT = 120.0
+#: Seconds between its looks for the release file.
+RELEASE_POLL = 0.01
 
 
 def take_lock() -> tuple[None, dict]:
@@ -30,3 +37,15 @@ def raise_signal(name: str) -> tuple[None, dict]:
     signal neither ended nor interrupted it (ignored), says so."""
     signal.raise_signal(getattr(signal, name))
     return None, {"survived": name}
+
+
+def wait_for_release(folder: str) -> tuple[None, dict]:
+    """A read that runs until the test lets it end: it writes ``started`` in ``folder``, then waits for the file
+    ``release`` there (another process: no Event reaches it), at most `RELEASE_WAIT` s."""
+    Path(folder, "started").touch()
+    deadline = time.monotonic() + RELEASE_WAIT
+    while not Path(folder, "release").exists():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"not released within {RELEASE_WAIT:g} s")
+        time.sleep(RELEASE_POLL)
+    return None, {"released": True}

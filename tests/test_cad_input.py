@@ -659,6 +659,51 @@ def test_read_while_another_thread_runs_keeps_the_geometry_and_does_not_fork(tmp
     assert_same_surfaces(served, direct, 6)
 
 
+def test_closing_the_reading_server_lets_a_running_read_finish(tmp_path):
+    """`_Server.close` from another thread while a read runs: it took the pipes from under the read and killed the
+    server, and with it the reading child (the read failed: its reading server ended). Now it waits for the read
+    (here for no time, wait=0: it refuses, the server stays) and the read ends as it would have; once no read runs,
+    close ends the server."""
+    import functools
+    import json
+    import threading
+
+    import isolated_reads
+    from rtreflect.exchange.isolation import _Server
+
+    answer = tmp_path / "answer"
+    answer.mkdir()
+    server = _Server()
+    outcome = {}
+
+    def read():
+        try:
+            outcome["status"] = server.run(functools.partial(isolated_reads.wait_for_release, str(tmp_path)), answer,
+                                           frozenset())
+        except BaseException as exc:  # noqa: BLE001  (reported by the assertion below)
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=read)
+    thread.start()
+    try:
+        deadline = time.monotonic() + SUBPROCESS_TIMEOUT
+        while not (tmp_path / "started").exists() and thread.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert (tmp_path / "started").exists(), outcome
+        process = server._process
+        closed = server.close(wait=0.0)
+    finally:
+        (tmp_path / "release").touch()
+        thread.join(SUBPROCESS_TIMEOUT)
+    assert "error" not in outcome, outcome
+    status = outcome["status"]
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0, status
+    assert json.loads((answer / "info.json").read_text()) == {"released": True, "null": True}
+    assert closed is False and process.poll() is None  # refused during the read: the server still runs
+    assert server.close() is True
+    assert process.poll() is not None  # ended once no read ran
+
+
 def test_a_reader_child_dies_with_its_reading_server():
     """The server's child (`isolation._die_with`) ends when the server is killed: a client stopped before the
     child's PID came back kills the server, and the reader must not go on alone (read from /proc: gone, or a

@@ -68,7 +68,7 @@ _PRELOAD = ("OCP.STEPControl", "OCP.IGESControl", "OCP.IFSelect", "OCP.BinTools"
 #: One number of the server's pipes: a request's length, a child's PID (−1: it could not fork), a wait status.
 _NUMBER = struct.Struct("!i")
 #: Seconds the server may take to end after its pipe closes when this process exits (it is waiting for a new
-#: request then, unless a daemon thread's read was still running: that child is left to finish on its own).
+#: request then), and a daemon thread's read still running may take to end before (else it is left to finish).
 _SERVER_EXIT_WAIT = 5.0
 #: How the reading server starts: this checkout's package first on the path (argv[1]), whatever the environment says.
 _SERVE = "import sys; sys.path.insert(0, sys.argv[1]); from rtreflect.exchange.isolation import serve; serve()"
@@ -242,7 +242,7 @@ class _Server:
                         os.kill(pid, signal.SIGKILL)
                     except OSError:
                         pass
-                self.close(wait=0.0)
+                self._end(wait=0.0)
                 if isinstance(exc, OSError):  # the pipe broke (BrokenPipeError): the server is gone
                     raise _ServerLost from exc
                 raise
@@ -259,8 +259,23 @@ class _Server:
             self._owner = os.getpid()
         return self._process
 
-    def close(self, wait: float = _SERVER_EXIT_WAIT) -> None:
-        """End the server: its pipe closed (it ends by itself), killed if it has not after ``wait`` seconds."""
+    def close(self, wait: float = _SERVER_EXIT_WAIT) -> bool:
+        """End the server once no read runs (`_end`); False where a read in another thread still ran after ``wait``
+        seconds: the server is left to it (ending it would kill the read), and ends once this process's pipe closes
+        (at exit at the latest), after the read."""
+        if self._owner != os.getpid():  # none started by this process (a forked one's lock may stay held for ever)
+            return True
+        if not self._lock.acquire(timeout=wait):
+            return False
+        try:
+            self._end(wait)
+        finally:
+            self._lock.release()
+        return True
+
+    def _end(self, wait: float) -> None:
+        """End the server, the lock held: its pipe closed (it ends by itself), killed if it has not after ``wait``
+        seconds."""
         process, self._process = self._process, None
         if process is None or self._owner != os.getpid():
             return

@@ -27,16 +27,6 @@ def has_area(surface: NurbsSurface) -> bool:
     return bool(sv[1] > 1e-12 * max(sv[0], 1e-300))
 
 
-def net_plane(surface: NurbsSurface) -> tuple[np.ndarray, np.ndarray, float]:
-    """The plane best fitting a patch's control net (least squares: the SVD's last right singular vector): a point on
-    it (the net's centroid), its unit normal, and the net's largest distance from it. With weights > 0 the surface lies
-    in the net's convex hull, so within that distance of the plane."""
-    net = surface.points.reshape(-1, 3)
-    centre = net.mean(axis=0)
-    normal = np.linalg.svd(net - centre, full_matrices=False)[2][-1]
-    return centre, normal, float(np.abs((net - centre) @ normal).max(initial=0.0))
-
-
 def patch_problem(surface: NurbsSurface) -> str | None:
     """Why ``surface`` cannot render (a phrase for a user; the caller names the file and field), or None."""
     if not np.all(np.isfinite(surface.points)):

@@ -254,6 +254,16 @@ class NurbsSurface:
         return n if np.linalg.norm(n) > 0 else np.array([0.0, 0.0, 1.0])
 
 
+def net_plane(surface: NurbsSurface) -> tuple[np.ndarray, np.ndarray, float]:
+    """The plane best fitting a patch's control net (least squares: the SVD's last right singular vector): a point on
+    it (the net's centroid), its unit normal, and the net's largest distance from it. With weights > 0 the surface lies
+    in the net's convex hull, so within that distance of the plane."""
+    net = surface.points.reshape(-1, 3)
+    centre = net.mean(axis=0)
+    normal = np.linalg.svd(net - centre, full_matrices=False)[2][-1]
+    return centre, normal, float(np.abs((net - centre) @ normal).max(initial=0.0))
+
+
 class SurfaceSet:
     """All patches of a scene, numbered from 0; evaluation by (patch, u, v) arrays."""
 
@@ -286,6 +296,16 @@ class SurfaceSet:
     def table(self) -> "kernel.PatchTable":
         """All patches as the kernels' flat table (patch k of the set is row k)."""
         return kernel.PatchTable.of(self.patches)
+
+    @cached_property
+    def net_planes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per patch its control net's plane (`net_plane`): a point on it (P, 3), its unit normal (P, 3), the
+        net's largest distance from it (P,); and (P,) whether its weights are all > 0 (then the surface lies in the
+        net's convex hull, so within that distance of the plane). Fitted once per patch, on first use (the tracer's
+        planar neighbours and the second look's flat faces and supporting planes read it)."""
+        planes = [net_plane(s) for s in self.patches]
+        return (np.array([p[0] for p in planes]).reshape(-1, 3), np.array([p[1] for p in planes]).reshape(-1, 3),
+                np.array([p[2] for p in planes]), np.array([bool(np.all(s.weights > 0)) for s in self.patches], dtype=bool))
 
     @cached_property
     def _domain_table(self) -> np.ndarray:

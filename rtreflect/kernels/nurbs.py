@@ -645,6 +645,21 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
         cosine[i] = dot3(n0, n1, n2, D[i, 0], D[i, 1], D[i, 2])
 
 
+@njit(inline="always", **JIT)
+def stationary_at(g1, g2, jacobian_square, rn, stationary_cosine):
+    """Whether |r|² is stationary: r normal to the tangent plane, the cosine of the gradient Jᵀr = (g1, g2) against
+    |J| |r| (|J|² = jacobian_square, the Frobenius norm's square) not above stationary_cosine (NaN counts as
+    stationary: Jᵀr = 0 with J = 0). The one test of `rescue` and of `trace.tracing._passes_by` (`stationary_points`)."""
+    return not (math.hypot(g1, g2) / (math.sqrt(jacobian_square) * rn) > stationary_cosine)
+
+
+@njit(**JIT, aot=(f"void({F1}, {F1}, {F1}, {F1}, f8, {B1})",))
+def stationary_points(g1, g2, jacobian_square, rn, stationary_cosine, out):
+    """`stationary_at` for every row."""
+    for i in range(g1.shape[0]):
+        out[i] = stationary_at(g1[i], g2[i], jacobian_square[i], rn[i], stationary_cosine)
+
+
 @njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, i8, f8, f8, {F2}, {F2}, {F2}, {B1}, {B1}, {B1})",))
 def rescue(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
            patch, u, v, O, D, tol, steps, stationary_cosine, stalled_damping, S, Su, Sv, converged, stationary, edge):
@@ -701,8 +716,7 @@ def rescue(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offse
                     ok = True
                     break
                 g1, g2 = a * r1 + c * r2, b * r1 + dd * r2  # Jᵀ r
-                cosine = math.hypot(g1, g2) / (math.sqrt(a * a + b * b + c * c + dd * dd) * rn)
-                if not (cosine > stationary_cosine) or lam > stalled_damping:
+                if stationary_at(g1, g2, a * a + b * b + c * c + dd * dd, rn, stationary_cosine) or lam > stalled_damping:
                     flat = True
                     break
                 A11, A12, A22 = a * a + c * c, a * b + c * dd, b * b + dd * dd

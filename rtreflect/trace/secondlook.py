@@ -55,9 +55,8 @@ import numpy as np
 
 from .accelerator import Accelerator, MeshHits
 from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _normals, _other_root, _over_closed_seam, _rescue,
-                      facing, refine_all, trace)
+                      facing, float32_rounding, refine_all, trace)
 from ..clock import NULL_CLOCK, StageClock
-from ..geometry.patches import net_plane
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
 
@@ -114,12 +113,9 @@ def flat(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
     deviates from the surface by less than Embree's float32 rounding of the scene's coordinates (then its
     ±`SHELL_CHORDS` chord-error sheets coincide with the mesh and its walls have no height).
     """
-    rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
-    out = np.zeros(len(surfaces), dtype=bool)
-    for k, surface in enumerate(surfaces.patches):
-        _, _, deviation = net_plane(surface)
-        out[k] = deviation <= rounding and SHELL_CHORDS * tessellation.chord_error[k] <= rounding
-    return out
+    rounding = float32_rounding(tessellation)
+    deviation = surfaces.net_planes[2]
+    return (deviation <= rounding) & (SHELL_CHORDS * tessellation.chord_error <= rounding)
 
 
 def clear_sides(tessellation: Tessellation, surfaces: SurfaceSet, flat_faces: np.ndarray
@@ -136,14 +132,15 @@ def clear_sides(tessellation: Tessellation, surfaces: SurfaceSet, flat_faces: np
     n = len(surfaces)
     centre, normal, clear = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2), dtype=bool)
     rows = np.flatnonzero(flat_faces)
-    if len(rows) == 0 or not all(np.all(s.weights > 0) for s in surfaces.patches):
+    planes, normals, deviations, positive = surfaces.net_planes
+    if len(rows) == 0 or not positive.all():
         return centre, normal, clear
     nets = [s.points.reshape(-1, 3) for s in surfaces.patches]
     owner = np.concatenate([np.full(len(x), k) for k, x in enumerate(nets)])
     nets = np.concatenate(nets)
     slack = GRAZING_COS * FLOAT32_SLACK * tessellation.extent
     for k in rows:
-        centre[k], normal[k], deviation = net_plane(surfaces.patches[k])
+        centre[k], normal[k], deviation = planes[k], normals[k], deviations[k]
         d = (nets[owner != k] - centre[k]) @ normal[k]
         clear[k] = d.max(initial=-np.inf) + deviation < slack, -d.min(initial=np.inf) + deviation < slack
     return centre, normal, clear
@@ -213,7 +210,7 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
     mid = 0.5 * (tessellation.vertex_uv[a] + tessellation.vertex_uv[b])
     sagitta = np.abs(np.einsum("ij,ij->i", surfaces.evaluate(patch, mid[:, 0], mid[:, 1]).S - 0.5 * (pa + pb), across))
     # An edge straight in the tangent plane (a cylinder's seam, a circle curving along the normal): its wall suffices.
-    rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+    rounding = float32_rounding(tessellation)
     bent = SHELL_CHORDS * sagitta > rounding
     a, b, patch, pa, pb, across, sagitta = (x[bent] for x in (a, b, patch, pa, pb, across, sagitta))
     width = (SHELL_CHORDS * sagitta)[:, None]
@@ -257,7 +254,7 @@ class SecondLook:
         self.shell, self.shell_mesh = shell(tessellation, surfaces)
         self._reach = 2.0 * SHELL_CHORDS * float(tessellation.chord_error.max(initial=0.0))
         # Past a shell hit by float32 rounding of the scene's largest coordinates, with margin (as `trace`'s).
-        self._skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+        self._skip = float32_rounding(tessellation)
         self.isolated = isolated(self.shell_mesh, self._reach / GRAZING_COS + 2.0 * self._skip)
         self._planes = clear_sides(tessellation, surfaces, flat(tessellation, surfaces))
         self._lock = threading.Lock()

@@ -49,7 +49,6 @@ import numpy as np
 from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.curvature import curvatures
-from ..geometry.patches import net_plane
 from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
@@ -115,6 +114,25 @@ CORNER_VERTICES = 8
 OTHER_ROOT_COS = 0.2
 
 VALID, MISS, UNRESOLVED = 0, 1, 2
+
+
+def float32_rounding(tessellation: Tessellation) -> float:
+    """Float32 rounding of the scene's coordinates, with margin: `FLOAT32_SLACK` × (extent + largest |coordinate|).
+
+    Embree holds the mesh and the rays in float32 (24 bits: a relative 6e-8 of a coordinate's magnitude), and a
+    mesh hit's t comes back so rounded. A coordinate is at most the mesh's largest |coordinate| (the BVH's centred
+    ones are smaller: an upper bound) and a ray distance across the part at most its extent, so two points closer
+    than this may be one to Embree: the step past a mesh hit for the next query (`trace`, the second look's shell
+    walk), the reach within which another face's mesh may coincide with the hit's (`_rim_neighbours`,
+    `_corner_faces`), and the flatness Embree cannot resolve (`_net_planes`, `secondlook.flat`,
+    `secondlook._rim_boxes`). Computed once per tessellation, on first use (kept in its ``__dict__``, as
+    `_rim_planes` is).
+    """
+    cached = tessellation.__dict__.get("_float32_rounding")
+    if cached is None:
+        cached = tessellation.__dict__["_float32_rounding"] = (
+            FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0))))
+    return cached
 
 
 @dataclass
@@ -235,8 +253,8 @@ def _passes_by(surfaces: SurfaceSet, patch, u, v, O, D, tol) -> np.ndarray:
     at all). Newton on f = ½|r|², r = (S − O) − ((S − O)·D) D the point's offset from the ray, takes the full
     Hessian: gradient (r·S_u, r·S_v), Hessian [[|S_u⊥|² + r·S_uu, S_u⊥·S_v⊥ + r·S_uv], [·, |S_v⊥|² + r·S_vv]]
     with S_u⊥ = S_u − (S_u·D) D. A point where the Hessian is positive definite, |r| > tol and the cosine of
-    (r·S_u, r·S_v) against |r| (|S_u⊥|² + |S_v⊥|²)^½ at most `STATIONARY_COSINE` (as the search's test) is
-    such a minimum.
+    (r·S_u, r·S_v) against |r| (|S_u⊥|² + |S_v⊥|²)^½ at most `STATIONARY_COSINE` is such a minimum: the search's own
+    test (`kernels.nurbs.stationary_at`; its Jᵀr and |J| in the frame (e1, e2) across the ray are these).
     """
     u, v = np.array(u, dtype=np.float64), np.array(v, dtype=np.float64)
     u0, u1, v0, v1 = surfaces.domains(patch)
@@ -251,9 +269,10 @@ def _passes_by(surfaces: SurfaceSet, patch, u, v, O, D, tol) -> np.ndarray:
         a, b, c = dot(Su, Su) + dot(r, d.Suu), dot(Su, Sv) + dot(r, d.Suv), dot(Sv, Sv) + dot(r, d.Svv)
         det = a * c - b * b
         rn = np.linalg.norm(r, axis=1)
+        stationary = np.empty(len(u), dtype=bool)
+        nurbs_kernel.stationary_points(gu, gv, dot(Su, Su) + dot(Sv, Sv), rn, STATIONARY_COSINE, stationary)
         with np.errstate(divide="ignore", invalid="ignore"):
-            cosine = np.hypot(gu, gv) / (np.sqrt(dot(Su, Su) + dot(Sv, Sv)) * rn)
-            passes = (a > 0) & (det > 0) & (rn > tol) & (cosine <= STATIONARY_COSINE)
+            passes = (a > 0) & (det > 0) & (rn > tol) & stationary
             du, dv = (c * gu - b * gv) / det, (a * gv - b * gu) / det
         du, dv = np.where(np.isfinite(du), du, 0.0), np.where(np.isfinite(dv), dv, 0.0)
         u, v = np.clip(u - du, u0, u1), np.clip(v - dv, v0, v1)
@@ -304,7 +323,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     restart, `_other_root`, `_rim_neighbours`) in numpy on the rays that need them.
     """
     n = len(prim)
-    band = tessellation.chord_error + 1e-6 * tessellation.extent  # per patch: `JUMP_LIMIT`'s chord error
+    band = tessellation.chord_error + FLOAT32_SLACK * tessellation.extent  # per patch: `JUMP_LIMIT`'s chord error
     pk = np.empty(n, dtype=np.int64)
     us, vs, ur, vr, tr, cosine = (np.empty(n) for _ in range(6))
     S, Su, Sv, normal = (np.empty((n, 3)) for _ in range(4))
@@ -497,7 +516,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     patch_of, uv_of, gap_of = tessellation.rim_neighbour
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
-    skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))  # as `trace`'s
+    skip = float32_rounding(tessellation)  # as `trace`'s
     points = O[rays] + tm[rays, None] * D[rays]
     edge_dist, chord_dist, corner = _rim_corner(tessellation, prim[rays], points)
     pn, un, vn, gap = patch_of[corner], uv_of[corner, 0], uv_of[corner, 1], gap_of[corner]
@@ -583,17 +602,13 @@ def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D
 
 
 def _net_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
-    """Per face: its control net's plane (`geometry.patches.net_plane`: point (P, 3), unit normal (P, 3), the net's
+    """Per face: its control net's plane (`SurfaceSet.net_planes`: point (P, 3), unit normal (P, 3), the net's
     deviation (P,)) and whether it is planar: deviation within float32 rounding of the scene, weights > 0. Built once
     per tessellation, on first use (kept in its ``__dict__``, as `_rim_planes` is)."""
     cached = tessellation.__dict__.get("_net_planes")
     if cached is None:
-        rounding = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
-        planes = [net_plane(s) for s in surfaces.patches]
-        centre = np.array([p[0] for p in planes]).reshape(-1, 3)
-        normal = np.array([p[1] for p in planes]).reshape(-1, 3)
-        deviation = np.array([p[2] for p in planes])
-        planar = (deviation <= rounding) & np.array([bool(np.all(s.weights > 0)) for s in surfaces.patches], dtype=bool)
+        centre, normal, deviation, positive = surfaces.net_planes
+        planar = (deviation <= float32_rounding(tessellation)) & positive
         cached = tessellation.__dict__["_net_planes"] = (centre, normal, deviation, planar)
     return cached
 
@@ -625,7 +640,7 @@ def _corner_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.
         other = cand_patch[nearest]
         own = tessellation.vertex_patch[rows]
         chord = tessellation.chord_error
-        skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+        skip = float32_rounding(tessellation)
         keep = (other != own[:, None]) & (other != first[rows, None])
         keep &= dist <= gap[rows, None] + RIM_REACH_CHORDS * (chord[own, None] + chord[other]) + skip
         # One vertex per face, its nearest (the columns run by distance).
@@ -726,7 +741,7 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     doubt = np.full(n, np.inf)  # mesh t of the nearest unresolved candidate
     rays, start, limit = np.arange(n), None, far
     # Past a mesh hit by float32 rounding of the scene's largest coordinates, with margin.
-    skip = FLOAT32_SLACK * (tessellation.extent + float(np.abs(tessellation.vertices).max(initial=0.0)))
+    skip = float32_rounding(tessellation)
     for _ in range(MAX_CANDIDATES):
         if len(rays) == 0:
             break
