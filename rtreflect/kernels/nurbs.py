@@ -297,12 +297,25 @@ def _madd4(h, a, x):
 
 
 @njit(inline="always", **JIT)
-def _bicubic_row(power, first, t1, t2, t3, d1, d2, d3, e2, e3, order):
-    """Σ_j Nv[m, j] C_ij for m = 0, 1 (and 2): one u-row of `contract` for q = 3, the zero terms of Nv left out."""
-    x0 = (power[first, 0], power[first, 1], power[first, 2], power[first, 3])
-    x1 = (power[first + 1, 0], power[first + 1, 1], power[first + 1, 2], power[first + 1, 3])
-    x2 = (power[first + 2, 0], power[first + 2, 1], power[first + 2, 2], power[first + 2, 3])
-    x3 = (power[first + 3, 0], power[first + 3, 1], power[first + 3, 2], power[first + 3, 3])
+def _row4(power, first):
+    """Homogeneous control coefficient ``power[first]`` as a 4-tuple."""
+    return power[first, 0], power[first, 1], power[first, 2], power[first, 3]
+
+
+@njit(inline="always", **JIT)
+def bicubic_net(power, base):
+    """The 16 power-form coefficients C_ij of one bicubic span (rows i of four j), as 4-tuples: loaded once, they serve
+    every point of the span (`eval_lanes`)."""
+    return ((_row4(power, base), _row4(power, base + 1), _row4(power, base + 2), _row4(power, base + 3)),
+            (_row4(power, base + 4), _row4(power, base + 5), _row4(power, base + 6), _row4(power, base + 7)),
+            (_row4(power, base + 8), _row4(power, base + 9), _row4(power, base + 10), _row4(power, base + 11)),
+            (_row4(power, base + 12), _row4(power, base + 13), _row4(power, base + 14), _row4(power, base + 15)))
+
+
+@njit(inline="always", **JIT)
+def _bicubic_row(x, t1, t2, t3, d1, d2, d3, e2, e3, order):
+    """Σ_j Nv[m, j] C_ij for m = 0, 1 (and 2): one u-row x of `contract` for q = 3, the zero terms of Nv left out."""
+    x0, x1, x2, x3 = x
     r0 = _madd4(_madd4(_madd4(_madd4(_ZERO4, 1.0, x0), t1, x1), t2, x2), t3, x3)
     r1 = _madd4(_madd4(_madd4(_ZERO4, d1, x1), d2, x2), d3, x3)
     r2 = _madd4(_madd4(_ZERO4, e2, x2), e3, x3) if order >= 2 else _ZERO4
@@ -319,36 +332,96 @@ def _cubic_rows(tau, inv_len):
 
 @njit(inline="always", **JIT)
 def bicubic_contract(power, base, tau_u, inv_u, tau_v, inv_v, order):
-    """`contract` of the power form for p = q = 3 (`power_rows`' τ_u, τ_v rows by the C_ij), as `contract` returns it.
+    """`contract` of the power form for p = q = 3 (`power_rows`' τ_u, τ_v rows by the C_ij), as `contract` returns it:
+    `bicubic_contract_net` of the span's coefficients at ``power[base:base + 16]``."""
+    return bicubic_contract_net(bicubic_net(power, base), tau_u, inv_u, tau_v, inv_v, order)
+
+
+@njit(inline="always", **JIT)
+def bicubic_contract_net(net, tau_u, inv_u, tau_v, inv_v, order):
+    """`bicubic_contract` of a span's coefficients already loaded (`bicubic_net`).
 
     The same sums as `power_rows` and `contract` in the same order, so the same bits, but in registers
     (4-tuples, the bases as scalars, the loops unrolled) and without the terms whose basis value is an
     exact 0 (d/dt τ⁰, d²/dt² τ⁰ and τ¹): an accumulator that starts at 0.0 and skips a term 0·x (x finite)
-    holds what it would have held after adding it.
+    holds what it would have held after adding it. Straight-line code: across the points of one span it
+    vectorises (`eval_lanes`).
     """
     u1, u2, u3, du1, du2, du3, eu2, eu3 = _cubic_rows(tau_u, inv_u)
     v1, v2, v3, dv1, dv2, dv3, ev2, ev3 = _cubic_rows(tau_v, inv_v)
     h00 = h01 = h10 = h02 = h11 = h20 = _ZERO4
     # row i = 0: d^m/dt^m τ⁰ = (1, 0, 0)
-    r0, r1, r2 = _bicubic_row(power, base, v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
+    r0, r1, r2 = _bicubic_row(net[0], v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
     if order >= 2:
         h02 = _madd4(h02, 1.0, r2)
     h00, h01 = _madd4(h00, 1.0, r0), _madd4(h01, 1.0, r1)
     # row 1: (τ, 1/h, 0)
-    r0, r1, r2 = _bicubic_row(power, base + 4, v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
+    r0, r1, r2 = _bicubic_row(net[1], v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
     if order >= 2:
         h02, h11 = _madd4(h02, u1, r2), _madd4(h11, du1, r1)
     h00, h01, h10 = _madd4(h00, u1, r0), _madd4(h01, u1, r1), _madd4(h10, du1, r0)
     # rows 2 and 3: every term
-    r0, r1, r2 = _bicubic_row(power, base + 8, v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
+    r0, r1, r2 = _bicubic_row(net[2], v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
     if order >= 2:
         h02, h11, h20 = _madd4(h02, u2, r2), _madd4(h11, du2, r1), _madd4(h20, eu2, r0)
     h00, h01, h10 = _madd4(h00, u2, r0), _madd4(h01, u2, r1), _madd4(h10, du2, r0)
-    r0, r1, r2 = _bicubic_row(power, base + 12, v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
+    r0, r1, r2 = _bicubic_row(net[3], v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
     if order >= 2:
         h02, h11, h20 = _madd4(h02, u3, r2), _madd4(h11, du3, r1), _madd4(h20, eu3, r0)
     h00, h01, h10 = _madd4(h00, u3, r0), _madd4(h01, u3, r1), _madd4(h10, du3, r0)
     return h00, h01, h10, h02, h11, h20
+
+
+@njit(inline="always", **JIT)
+def rational_at(H, c, order):
+    """Coordinate c of S, S_u, S_v, S_uu, S_uv, S_vv from the homogeneous derivatives H (`contract`'s 6 4-tuples) by
+    Piegl & Tiller eq. 4.20: S = A/w, S_u = (A_u − w_u S)/w, S_uu = (A_uu − 2 w_u S_u − w_uu S)/w,
+    S_uv = (A_uv − w_uv S − w_u S_v − w_v S_u)/w (the second derivatives 0.0 for order 1)."""
+    h00, h01, h10, h02, h11, h20 = H
+    w = h00[3]
+    S = h00[c] / w
+    Su = (h10[c] - h10[3] * S) / w
+    Sv = (h01[c] - h01[3] * S) / w
+    Suu = Suv = Svv = 0.0
+    if order >= 2:
+        Suu = (h20[c] - 2 * h10[3] * Su - h20[3] * S) / w
+        Suv = (h11[c] - h11[3] * S - h10[3] * Sv - h01[3] * Su) / w
+        Svv = (h02[c] - 2 * h01[3] * Sv - h02[3] * S) / w
+    return S, Su, Sv, Suu, Suv, Svv
+
+
+@njit(inline="always", **JIT)
+def clamp_to_domain(domain, k, u, v):
+    """(u, v) clamped to patch k's parameter domain."""
+    if u < domain[k, 0]:
+        u = domain[k, 0]
+    elif u > domain[k, 1]:
+        u = domain[k, 1]
+    if v < domain[k, 2]:
+        v = domain[k, 2]
+    elif v > domain[k, 3]:
+        v = domain[k, 3]
+    return u, v
+
+
+@njit(inline="always", **JIT)
+def is_bicubic_power(degree, power_offset, k):
+    """Whether patch k is evaluated by `bicubic_contract` (bicubic, with a power form)."""
+    return power_offset[k] >= 0 and degree[k, 0] == WRITTEN_OUT_DEGREE and degree[k, 1] == WRITTEN_OUT_DEGREE
+
+
+@njit(inline="always", **JIT)
+def bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v):
+    """Where (u, v) (inside the domain) lies in bicubic patch k's power form: (first row of its span's C_ij in
+    ``power``, τ_u, 1/h_u, τ_v, 1/h_v), τ = (t − span start)/h the local parameter (`power_form`)."""
+    nu, nv = count[k, 0], count[k, 1]
+    ku, kv = knot_offset[k, 0], knot_offset[k, 1]
+    su = find_span_at(knots, ku, WRITTEN_OUT_DEGREE, nu, u)
+    sv = find_span_at(knots, kv, WRITTEN_OUT_DEGREE, nv, v)
+    start_u, start_v = knots[ku + su], knots[kv + sv]
+    len_u, len_v = knots[ku + su + 1] - start_u, knots[kv + sv + 1] - start_v
+    span = (su - WRITTEN_OUT_DEGREE) * (nv - WRITTEN_OUT_DEGREE) + (sv - WRITTEN_OUT_DEGREE)
+    return power_offset[k] + span * 16, (u - start_u) / len_u, 1.0 / len_u, (v - start_v) / len_v, 1.0 / len_v
 
 
 @njit(inline="always", **JIT)
@@ -358,48 +431,35 @@ def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_off
 
     Homogeneous derivatives from the span's power form or the basis (A2.3), then Piegl & Tiller
     eq. 4.20: S = A/w, S_u = (A_u − w_u S)/w, S_uu = (A_uu − 2 w_u S_u − w_uu S)/w,
-    S_uv = (A_uv − w_uv S − w_u S_v − w_v S_u)/w.
+    S_uv = (A_uv − w_uv S − w_u S_v − w_v S_u)/w (`rational_at`).
     """
     Nu, Nv, ndu, a, left, right = scratch
     p, q = degree[k, 0], degree[k, 1]
     nu, nv = count[k, 0], count[k, 1]
-    if u < domain[k, 0]:
-        u = domain[k, 0]
-    elif u > domain[k, 1]:
-        u = domain[k, 1]
-    if v < domain[k, 2]:
-        v = domain[k, 2]
-    elif v > domain[k, 3]:
-        v = domain[k, 3]
-    ku, kv = knot_offset[k, 0], knot_offset[k, 1]
-    su = find_span_at(knots, ku, p, nu, u)
-    sv = find_span_at(knots, kv, q, nv, v)
-    if power_offset[k] >= 0:
-        start_u, start_v = knots[ku + su], knots[kv + sv]
-        len_u, len_v = knots[ku + su + 1] - start_u, knots[kv + sv + 1] - start_v
-        span = (su - p) * (nv - q) + (sv - q)
-        if p == WRITTEN_OUT_DEGREE and q == WRITTEN_OUT_DEGREE:
-            H = bicubic_contract(power, power_offset[k] + span * 16, (u - start_u) / len_u, 1.0 / len_u,
-                                 (v - start_v) / len_v, 1.0 / len_v, order)
-        else:
+    u, v = clamp_to_domain(domain, k, u, v)
+    if is_bicubic_power(degree, power_offset, k):
+        base, tau_u, inv_u, tau_v, inv_v = bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v)
+        H = bicubic_contract(power, base, tau_u, inv_u, tau_v, inv_v, order)
+    else:
+        ku, kv = knot_offset[k, 0], knot_offset[k, 1]
+        su = find_span_at(knots, ku, p, nu, u)
+        sv = find_span_at(knots, kv, q, nv, v)
+        if power_offset[k] >= 0:
+            start_u, start_v = knots[ku + su], knots[kv + sv]
+            len_u, len_v = knots[ku + su + 1] - start_u, knots[kv + sv + 1] - start_v
+            span = (su - p) * (nv - q) + (sv - q)
             power_rows((u - start_u) / len_u, 1.0 / len_u, p, order, Nu)
             power_rows((v - start_v) / len_v, 1.0 / len_v, q, order, Nv)
             H = contract(Nu, Nv, power, power_offset[k] + span * (p + 1) * (q + 1), q + 1, p, q, order)
-    else:
-        basis_ders_at(knots, ku, su, u, p, order, Nu, ndu, a, left, right)
-        basis_ders_at(knots, kv, sv, v, q, order, Nv, ndu, a, left, right)
-        H = contract(Nu, Nv, pw, pw_offset[k] + (su - p) * nv + (sv - q), nv, p, q, order)
-    h00, h01, h10, h02, h11, h20 = H
-    w = h00[3]
+        else:
+            basis_ders_at(knots, ku, su, u, p, order, Nu, ndu, a, left, right)
+            basis_ders_at(knots, kv, sv, v, q, order, Nv, ndu, a, left, right)
+            H = contract(Nu, Nv, pw, pw_offset[k] + (su - p) * nv + (sv - q), nv, p, q, order)
     for c in range(3):
-        S = h00[c] / w
-        Su = (h10[c] - h10[3] * S) / w
-        Sv = (h01[c] - h01[3] * S) / w
+        S, Su, Sv, Suu, Suv, Svv = rational_at(H, c, order)
         out[0, c], out[1, c], out[2, c] = S, Su, Sv
         if order >= 2:
-            out[3, c] = (h20[c] - 2 * h10[3] * Su - h20[3] * S) / w
-            out[4, c] = (h11[c] - h11[3] * S - h10[3] * Sv - h01[3] * Su) / w
-            out[5, c] = (h02[c] - 2 * h01[3] * Sv - h02[3] * S) / w
+            out[3, c], out[4, c], out[5, c] = Suu, Suv, Svv
 
 
 @njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, i8, f8[:, :, ::1])",))
@@ -506,6 +566,95 @@ def start_parameters(faces, vertex_uv, prim, b1, b2, u, v):
         u[i], v[i] = barycentric_uv(faces, vertex_uv, prim[i], b1[i], b2[i])
 
 
+# -- Lane blocks: one pass per stage over a block of points, so the arithmetic vectorises across points ----------
+# (issue 14 goal 2). Scalar code per point leaves SIMD units idle and waits on each division's latency; a loop over
+# a block's points of straight-line arithmetic, every operand at buf[field·LANES + j], compiles to AVX-512 (or
+# AVX2) arithmetic on 8 (4) points at a time. Each point's operations and their order are those of the scalar code
+# (numba contracts no a·b + c into an FMA without fastmath), so the bits are the same; only where the work is
+# irregular (the knot span's binary search, non-bicubic patches) a scalar pass per point remains.
+
+#: Points per block: the fields of a block (`LANE_FIELDS` × LANES doubles, 40 KB) stay in the L1/L2 cache, and the
+#: runs of points on one span (`eval_lanes`) are long enough for the vector loop (adjacent pixels share spans).
+LANES = 128
+#: Fields of a lane block, each LANES doubles at field·LANES in one flat buffer: constant offsets from one base,
+#: so LLVM proves the loads and stores of a vector loop independent without runtime checks.
+LANE_TU, LANE_IU, LANE_TV, LANE_IV = 0, 1, 2, 3  # where the point lies in its span (`bicubic_span_at`)
+LANE_D = 4  # S, S_u, S_v, S_uu, S_uv, S_vv: 18 fields, coordinate by coordinate (`rational_at`)
+LANE_U, LANE_V, LANE_TOL = 22, 23, 24  # Newton's (u, v) and tolerance
+LANE_E = 25  # e1, e2 (6 fields, `across_at`); the unit normal n for the curvature (3)
+LANE_O = 31  # the ray's origin (3 fields)
+LANE_DOMAIN = 34  # u0, u1, v0, v1 of the point's patch (4 fields)
+LANE_STATE = 38  # Newton's state after a step: `STEPPING`, `CONVERGED` or `STOPPED`
+LANE_CURVATURE = 39  # K, H, κ1, κ2 (4 fields)
+LANE_FIELDS = 43
+STEPPING, CONVERGED, STOPPED = 0.0, 1.0, 2.0
+
+
+@njit(inline="always", **JIT)
+def _store_coordinate(lane, j, H, c, order):
+    """`rational_at` of H for coordinate c into the lane fields `LANE_D`… of point j."""
+    S, Su, Sv, Suu, Suv, Svv = rational_at(H, c, order)
+    lane[(LANE_D + c) * LANES + j] = S
+    lane[(LANE_D + 3 + c) * LANES + j] = Su
+    lane[(LANE_D + 6 + c) * LANES + j] = Sv
+    if order >= 2:
+        lane[(LANE_D + 9 + c) * LANES + j] = Suu
+        lane[(LANE_D + 12 + c) * LANES + j] = Suv
+        lane[(LANE_D + 15 + c) * LANES + j] = Svv
+
+
+@njit(inline="always", **JIT)
+def _eval_run(net, buf, a, b, order):
+    """S and its derivatives (`bicubic_contract_net`, `rational_at`) at points a..b−1 of a block, all on the span
+    whose coefficients are net: the vector loop."""
+    lane = buf[a:]  # indices from 0: numba's negative-index wrap-around folds away, the accesses stay affine
+    for j in range(b - a):
+        H = bicubic_contract_net(net, lane[LANE_TU * LANES + j], lane[LANE_IU * LANES + j],
+                                 lane[LANE_TV * LANES + j], lane[LANE_IV * LANES + j], order)
+        _store_coordinate(lane, j, H, 0, order)  # written out: a constant c selects H's coordinates
+        _store_coordinate(lane, j, H, 1, order)
+        _store_coordinate(lane, j, H, 2, order)
+
+
+@njit(inline="always", **JIT)
+def eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, patch, base, buf, n,
+               order, d, scratch):
+    """`point_at` at points 0..n−1 of a lane block (patch[j], (u, v) in `LANE_U`, `LANE_V`) into the fields `LANE_D`….
+
+    A scalar pass finds each point's span (`bicubic_span_at`; other patches: `point_at` itself); then each run of
+    consecutive points on one bicubic span is evaluated by one vector loop (`_eval_run`), its 16 coefficients
+    loaded once (no gathers).
+    """
+    for j in range(n):
+        k = patch[j]
+        u, v = clamp_to_domain(domain, k, buf[LANE_U * LANES + j], buf[LANE_V * LANES + j])
+        if is_bicubic_power(degree, power_offset, k):
+            first, tau_u, inv_u, tau_v, inv_v = bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v)
+            base[j] = first
+            buf[LANE_TU * LANES + j], buf[LANE_IU * LANES + j] = tau_u, inv_u
+            buf[LANE_TV * LANES + j], buf[LANE_IV * LANES + j] = tau_v, inv_v
+        else:
+            base[j] = -1
+            point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, u, v, order, d,
+                     scratch)
+            for r in range(3 * order):
+                for c in range(3):
+                    buf[(LANE_D + 3 * r + c) * LANES + j] = d[r, c]
+    a = 0
+    while a < n:
+        b = a + 1
+        while b < n and base[b] == base[a]:
+            b += 1
+        if base[a] >= 0:
+            _eval_run(bicubic_net(power, base[a]), buf, a, b, order)
+        a = b
+
+
+@njit(inline="always", **JIT)
+def _field3(buf, field, j):
+    return buf[field * LANES + j], buf[(field + 1) * LANES + j], buf[(field + 2) * LANES + j]
+
+
 # -- Newton onto the exact hit (`trace.tracing`) ---------------------------------------------
 # In this file, not one of its own: numba's cache watches only the file that defines a kernel, and a
 # cached caller of a changed callee in another file ran stale machine code (a segmentation fault).
@@ -515,9 +664,9 @@ SINGULAR_SINE = 1e-12
 
 
 @njit(inline="always", **JIT)
-def newton_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, ui, vi, O, D, i, tol,
-              max_steps, d, e, scratch):
-    """Newton on S(u, v) = O + tD for ray i on patch k from (ui, vi): (u, v, converged), S, S_u, S_v in d[:3].
+def newton_lanes(buf, n, last):
+    """One step of Newton on S(u, v) = O + tD at points 0..n−1 of a lane block (S, S_u, S_v evaluated at (u, v)):
+    the vector loop; `LANE_STATE` says which points are done.
 
     DESIGN.md, "Exact hit": the ray condition as two equations across the ray, r1 = e1·(S − O) = 0
     and r2 = e2·(S − O) = 0 with e1, e2 ⊥ D (`across_at`), Jacobian J = [[e1·S_u, e1·S_v],
@@ -525,41 +674,45 @@ def newton_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_of
     to the patch's domain. det J = D·(S_u × S_v): tiny at grazing rays and degenerate points,
     where Newton is not to be trusted (`SINGULAR_SINE`).
 
-    Converged once |(r1, r2)| <= tol, checked after each evaluation (at most max_steps steps,
-    max_steps + 1 evaluations); a singular Jacobian or a non-finite step stops it unconverged.
+    `CONVERGED` once |(r1, r2)| <= tol, checked after each evaluation (at most max_steps steps,
+    max_steps + 1 evaluations: ``last`` on the last); `STOPPED` unconverged at the last evaluation,
+    a singular Jacobian or a non-finite step. Every quantity is computed for every point and the
+    verdict selected (branch-free: the loop vectorises); a done point keeps its (u, v).
     """
-    across_at(D, i, e)
-    u0, u1, v0, v1 = domain[k, 0], domain[k, 1], domain[k, 2], domain[k, 3]
-    ok = False
-    for step in range(max_steps + 1):
-        point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, ui, vi, 1, d,
-                 scratch)
-        r0, r1, r2 = d[0, 0] - O[i, 0], d[0, 1] - O[i, 1], d[0, 2] - O[i, 2]
-        f1 = e[0, 0] * r0 + e[0, 1] * r1 + e[0, 2] * r2
-        f2 = e[1, 0] * r0 + e[1, 1] * r1 + e[1, 2] * r2
+    for j in range(n):
+        S0, S1, S2 = _field3(buf, LANE_D, j)
+        Su0, Su1, Su2 = _field3(buf, LANE_D + 3, j)
+        Sv0, Sv1, Sv2 = _field3(buf, LANE_D + 6, j)
+        e00, e01, e02 = _field3(buf, LANE_E, j)
+        e10, e11, e12 = _field3(buf, LANE_E + 3, j)
+        O0, O1, O2 = _field3(buf, LANE_O, j)
+        ui, vi, tol = buf[LANE_U * LANES + j], buf[LANE_V * LANES + j], buf[LANE_TOL * LANES + j]
+        r0, r1, r2 = S0 - O0, S1 - O1, S2 - O2
+        f1 = e00 * r0 + e01 * r1 + e02 * r2
+        f2 = e10 * r0 + e11 * r1 + e12 * r2
         # |(r1, r2)| <= tol, squared: math.hypot is a libm call; without it the fused pass takes 4–10 % less CPU
         # (the verdict differs only within an ulp of tol)
-        if f1 * f1 + f2 * f2 <= tol * tol:
-            ok = True
-            break
-        if step == max_steps:
-            break
-        a = e[0, 0] * d[1, 0] + e[0, 1] * d[1, 1] + e[0, 2] * d[1, 2]
-        b = e[0, 0] * d[2, 0] + e[0, 1] * d[2, 1] + e[0, 2] * d[2, 2]
-        c = e[1, 0] * d[1, 0] + e[1, 1] * d[1, 1] + e[1, 2] * d[1, 2]
-        dd = e[1, 0] * d[2, 0] + e[1, 1] * d[2, 1] + e[1, 2] * d[2, 2]
+        converged = f1 * f1 + f2 * f2 <= tol * tol
+        a = e00 * Su0 + e01 * Su1 + e02 * Su2
+        b = e00 * Sv0 + e01 * Sv1 + e02 * Sv2
+        c = e10 * Su0 + e11 * Su1 + e12 * Su2
+        dd = e10 * Sv0 + e11 * Sv1 + e12 * Sv2
         det = a * dd - b * c
-        len_u = math.sqrt(d[1, 0] ** 2 + d[1, 1] ** 2 + d[1, 2] ** 2)
-        len_v = math.sqrt(d[2, 0] ** 2 + d[2, 1] ** 2 + d[2, 2] ** 2)
-        if not abs(det) > SINGULAR_SINE * len_u * len_v:
-            break
+        len_u = math.sqrt(Su0 ** 2 + Su1 ** 2 + Su2 ** 2)
+        len_v = math.sqrt(Sv0 ** 2 + Sv1 ** 2 + Sv2 ** 2)
+        regular = abs(det) > SINGULAR_SINE * len_u * len_v
         du = (dd * f1 - b * f2) / det
         dv = (a * f2 - c * f1) / det
-        if not (math.isfinite(du) and math.isfinite(dv)):  # derivatives ~1e-296 pass the test, then overflow
-            break
-        ui = min(max(ui - du, u0), u1)
-        vi = min(max(vi - dv, v0), v1)
-    return ui, vi, ok
+        # derivatives ~1e-296 pass the singular test, then overflow
+        finite = (abs(du) < math.inf) & (abs(dv) < math.inf)
+        step = (not converged) & (not last) & regular & finite
+        u0, u1 = buf[LANE_DOMAIN * LANES + j], buf[(LANE_DOMAIN + 1) * LANES + j]
+        v0, v1 = buf[(LANE_DOMAIN + 2) * LANES + j], buf[(LANE_DOMAIN + 3) * LANES + j]
+        un = min(max(ui - du, u0), u1)
+        vn = min(max(vi - dv, v0), v1)
+        buf[LANE_U * LANES + j] = un if step else ui
+        buf[LANE_V * LANES + j] = vn if step else vi
+        buf[LANE_STATE * LANES + j] = CONVERGED if converged else (STEPPING if step else STOPPED)
 
 
 @njit(inline="always", **JIT)
@@ -614,8 +767,9 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
     For each mesh hit (triangle prim, Embree's barycentrics b1, b2, distance t_mesh): the start
     (u, v) on the triangle's patch (`barycentric_uv`), written to patch, u_start, v_start; where
     prim < 0, the start is read from them instead (`trace.tracing.refine`: Newton from a given
-    (u, v), the one compiled copy of Newton). Then Newton (`newton_at`) to the tolerance
-    tolerance · max(t_mesh, extent, |mesh point|_∞) (S's coordinates are not computed more finely);
+    (u, v), the one compiled copy of Newton). Then Newton (`newton_lanes`) to the tolerance
+    tolerance · max(t_mesh, extent, |mesh point|_∞) (S's coordinates are not computed more finely), LANES
+    rays at a time (`eval_lanes`, `newton_lanes`);
     whether the hit is ahead and near its mesh hit, and its t (`near_at`); whether an unconverged
     Newton stopped on the domain's edge (`on_domain_edge`); the unit normal n = (S_u × S_v)/|S_u × S_v|
     (not yet turned to the ray), cosine = n·D, and whether n is degenerate (`normal_at`).
@@ -623,26 +777,63 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
     scratch = new_scratch(max_degree)
     d = np.empty((6, 3))
     e = np.empty((2, 3))
-    for i in range(prim.shape[0]):
-        f = prim[i]
-        if f >= 0:
-            k = face_patch[f]
-            us, vs = barycentric_uv(faces, vertex_uv, f, b1[i], b2[i])
-        else:
-            k, us, vs = patch[i], u_start[i], v_start[i]
-        tm = t_mesh[i]
-        magnitude = max(abs(O[i, 0] + tm * D[i, 0]), abs(O[i, 1] + tm * D[i, 1]), abs(O[i, 2] + tm * D[i, 2]))
-        tol = tolerance * max(max(tm, extent), magnitude)
-        ui, vi, ok = newton_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, us, vs,
-                               O, D, i, tol, max_steps, d, e, scratch)
-        patch[i], u_start[i], v_start[i], u[i], v[i], converged[i] = k, us, vs, ui, vi, ok
-        for c in range(3):
-            S[i, c], Su[i, c], Sv[i, c] = d[0, c], d[1, c], d[2, c]
-        near[i], t[i] = near_at(S, Su, Sv, O, D, i, tm, band[k], jump_limit, grazing_allowance)
-        edge[i] = (not ok) and on_domain_edge(domain, k, ui, vi)
-        n0, n1, n2, bad = normal_at(domain, scale, k, Su, Sv, i, sine, vanishing)
-        normal[i, 0], normal[i, 1], normal[i, 2], degenerate[i] = n0, n1, n2, bad
-        cosine[i] = dot3(n0, n1, n2, D[i, 0], D[i, 1], D[i, 2])
+    buf = np.empty(LANE_FIELDS * LANES)
+    ray = np.empty(LANES, dtype=np.int64)
+    lane_patch = np.empty(LANES, dtype=np.int64)
+    base = np.empty(LANES, dtype=np.int64)
+    for first in range(0, prim.shape[0], LANES):
+        m = min(LANES, prim.shape[0] - first)
+        for j in range(m):  # the starts, tolerances and the planes across the rays
+            i = first + j
+            f = prim[i]
+            if f >= 0:
+                k = face_patch[f]
+                us, vs = barycentric_uv(faces, vertex_uv, f, b1[i], b2[i])
+            else:
+                k, us, vs = patch[i], u_start[i], v_start[i]
+            tm = t_mesh[i]
+            magnitude = max(abs(O[i, 0] + tm * D[i, 0]), abs(O[i, 1] + tm * D[i, 1]), abs(O[i, 2] + tm * D[i, 2]))
+            patch[i], u_start[i], v_start[i] = k, us, vs
+            ray[j], lane_patch[j] = i, k
+            buf[LANE_U * LANES + j], buf[LANE_V * LANES + j] = us, vs
+            buf[LANE_TOL * LANES + j] = tolerance * max(max(tm, extent), magnitude)
+            across_at(D, i, e)
+            for c in range(3):
+                buf[(LANE_E + c) * LANES + j], buf[(LANE_E + 3 + c) * LANES + j] = e[0, c], e[1, c]
+                buf[(LANE_O + c) * LANES + j] = O[i, c]
+            for c in range(4):
+                buf[(LANE_DOMAIN + c) * LANES + j] = domain[k, c]
+        active = m
+        for step in range(max_steps + 1):  # Newton on the rays not yet done, which stay packed at the front
+            eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, lane_patch, base,
+                       buf, active, 1, d, scratch)
+            newton_lanes(buf, active, step == max_steps)
+            kept = 0
+            for j in range(active):
+                state = buf[LANE_STATE * LANES + j]
+                if state != STEPPING:
+                    i = ray[j]
+                    u[i], v[i], converged[i] = buf[LANE_U * LANES + j], buf[LANE_V * LANES + j], state == CONVERGED
+                    for c in range(3):
+                        S[i, c] = buf[(LANE_D + c) * LANES + j]
+                        Su[i, c] = buf[(LANE_D + 3 + c) * LANES + j]
+                        Sv[i, c] = buf[(LANE_D + 6 + c) * LANES + j]
+                    continue
+                if kept != j:
+                    ray[kept], lane_patch[kept] = ray[j], lane_patch[j]
+                    for field in range(LANE_U, LANE_DOMAIN + 4):
+                        buf[field * LANES + kept] = buf[field * LANES + j]
+                kept += 1
+            active = kept
+            if active == 0:
+                break
+        for i in range(first, first + m):
+            k, ok = patch[i], converged[i]
+            near[i], t[i] = near_at(S, Su, Sv, O, D, i, t_mesh[i], band[k], jump_limit, grazing_allowance)
+            edge[i] = (not ok) and on_domain_edge(domain, k, u[i], v[i])
+            n0, n1, n2, bad = normal_at(domain, scale, k, Su, Sv, i, sine, vanishing)
+            normal[i, 0], normal[i, 1], normal[i, 2], degenerate[i] = n0, n1, n2, bad
+            cosine[i] = dot3(n0, n1, n2, D[i, 0], D[i, 1], D[i, 2])
 
 
 @njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, i8, f8, f8, {F2}, {F2}, {F2}, {B1}, {B1}, {B1})",))
