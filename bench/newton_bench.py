@@ -13,8 +13,9 @@ other jobs still inflate CPU time through the shared caches):
 
     python bench/newton_bench.py [--width 1920 --height 1080 --repeat 5]
 
-``--save FILE.npz`` keeps every output of the Newton kernel, ``--compare FILE.npz`` says field by field
-whether they are the same bits as those saved (e.g. by another checkout).
+``--save FILE.npz`` keeps every output of the Newton kernel and of the curvature kernel (``curvature``: K, H,
+κ1, κ2), ``--compare FILE.npz`` says field by field whether they are the same bits as those saved (e.g. by
+another checkout).
 """
 
 from __future__ import annotations
@@ -122,12 +123,14 @@ def main() -> None:
     print(f"curvatures_at (AOVs):      {curvature_s:.3f} s, {1e6 * curvature_s / n:.3f} µs per hit")
     print(f"S, S_u, S_v (order 1):     {evaluation_s:.3f} s, {1e6 * evaluation_s / n:.3f} µs per evaluation; "
           f"Newton's evaluations {100 * mean_evaluations * evaluation_s / newton_s:.0f} % of its kernel")
+    hits["curvature"] = curv
     if args.save:
         np.savez(args.save, **hits)
         print(f"saved {args.save}")
     if args.compare:
         saved = np.load(args.compare)
-        same = {name: np.array_equal(hits[name].view(np.uint8), saved[name].view(np.uint8)) for name in FIELDS}
+        same = {name: np.array_equal(hits[name].view(np.uint8), saved[name].view(np.uint8))
+                for name in FIELDS + ("curvature",) if name in saved}
         print("same bits as " + str(args.compare) + ": "
               + ("every field" if all(same.values()) else "NOT " + ", ".join(k for k, v in same.items() if not v)))
 

@@ -411,17 +411,32 @@ def is_bicubic_power(degree, power_offset, k):
 
 
 @njit(inline="always", **JIT)
-def bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v):
+def find_span_near(knots, lo, p, n_ctrl, t, guess):
+    """`find_span_at`, answered without the search where t lies in span ``guess`` (the span of the point's previous
+    Newton iterate, mostly the same; −1: none): knots[guess] <= t < knots[guess + 1], or the last span and beyond."""
+    if guess >= p and knots[lo + guess] <= t and (guess == n_ctrl - 1 or t < knots[lo + guess + 1]):
+        return guess
+    return find_span_at(knots, lo, p, n_ctrl, t)
+
+
+@njit(inline="always", **JIT)
+def bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v, guess_u, guess_v):
     """Where (u, v) (inside the domain) lies in bicubic patch k's power form: (first row of its span's C_ij in
-    ``power``, τ_u, 1/h_u, τ_v, 1/h_v), τ = (t − span start)/h the local parameter (`power_form`)."""
+    ``power``, the span indices, each span's start and length h); guesses of the spans as `find_span_near`'s."""
     nu, nv = count[k, 0], count[k, 1]
     ku, kv = knot_offset[k, 0], knot_offset[k, 1]
-    su = find_span_at(knots, ku, WRITTEN_OUT_DEGREE, nu, u)
-    sv = find_span_at(knots, kv, WRITTEN_OUT_DEGREE, nv, v)
+    su = find_span_near(knots, ku, WRITTEN_OUT_DEGREE, nu, u, guess_u)
+    sv = find_span_near(knots, kv, WRITTEN_OUT_DEGREE, nv, v, guess_v)
     start_u, start_v = knots[ku + su], knots[kv + sv]
     len_u, len_v = knots[ku + su + 1] - start_u, knots[kv + sv + 1] - start_v
     span = (su - WRITTEN_OUT_DEGREE) * (nv - WRITTEN_OUT_DEGREE) + (sv - WRITTEN_OUT_DEGREE)
-    return power_offset[k] + span * 16, (u - start_u) / len_u, 1.0 / len_u, (v - start_v) / len_v, 1.0 / len_v
+    return power_offset[k] + span * 16, su, sv, start_u, len_u, start_v, len_v
+
+
+@njit(inline="always", **JIT)
+def span_local(t, start, length):
+    """(τ, 1/h) of parameter t on the span (start, h): τ = (t − start)/h the power form's local parameter."""
+    return (t - start) / length, 1.0 / length
 
 
 @njit(inline="always", **JIT)
@@ -438,7 +453,10 @@ def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_off
     nu, nv = count[k, 0], count[k, 1]
     u, v = clamp_to_domain(domain, k, u, v)
     if is_bicubic_power(degree, power_offset, k):
-        base, tau_u, inv_u, tau_v, inv_v = bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v)
+        base, _, _, start_u, len_u, start_v, len_v = bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v,
+                                                                     -1, -1)
+        tau_u, inv_u = span_local(u, start_u, len_u)
+        tau_v, inv_v = span_local(v, start_v, len_v)
         H = bicubic_contract(power, base, tau_u, inv_u, tau_v, inv_v, order)
     else:
         ku, kv = knot_offset[k, 0], knot_offset[k, 1]
@@ -578,15 +596,15 @@ def start_parameters(faces, vertex_uv, prim, b1, b2, u, v):
 LANES = 128
 #: Fields of a lane block, each LANES doubles at field·LANES in one flat buffer: constant offsets from one base,
 #: so LLVM proves the loads and stores of a vector loop independent without runtime checks.
-LANE_TU, LANE_IU, LANE_TV, LANE_IV = 0, 1, 2, 3  # where the point lies in its span (`bicubic_span_at`)
-LANE_D = 4  # S, S_u, S_v, S_uu, S_uv, S_vv: 18 fields, coordinate by coordinate (`rational_at`)
-LANE_U, LANE_V, LANE_TOL = 22, 23, 24  # Newton's (u, v) and tolerance
-LANE_E = 25  # e1, e2 (6 fields, `across_at`); the unit normal n for the curvature (3)
-LANE_O = 31  # the ray's origin (3 fields)
-LANE_DOMAIN = 34  # u0, u1, v0, v1 of the point's patch (4 fields)
-LANE_STATE = 38  # Newton's state after a step: `STEPPING`, `CONVERGED` or `STOPPED`
-LANE_CURVATURE = 39  # K, H, κ1, κ2 (4 fields)
-LANE_FIELDS = 43
+LANE_SPAN = 0  # u, span start, span length, then the same for v: where the point lies (`bicubic_span_at`)
+LANE_D = 6  # S, S_u, S_v, S_uu, S_uv, S_vv: 18 fields, coordinate by coordinate (`rational_at`)
+LANE_U, LANE_V, LANE_TOL = 24, 25, 26  # Newton's (u, v) and tolerance
+LANE_E = 27  # e1, e2 (6 fields, `across_at`); the unit normal n for the curvature (3)
+LANE_O = 33  # the ray's origin (3 fields)
+LANE_DOMAIN = 36  # u0, u1, v0, v1 of the point's patch (4 fields)
+LANE_STATE = 40  # Newton's state after a step: `STEPPING`, `CONVERGED` or `STOPPED`
+LANE_CURVATURE = 41  # K, H, κ1, κ2 (4 fields)
+LANE_FIELDS = 45
 STEPPING, CONVERGED, STOPPED = 0.0, 1.0, 2.0
 
 
@@ -609,19 +627,23 @@ def _eval_run(net, buf, a, b, order):
     whose coefficients are net: the vector loop."""
     lane = buf[a:]  # indices from 0: numba's negative-index wrap-around folds away, the accesses stay affine
     for j in range(b - a):
-        H = bicubic_contract_net(net, lane[LANE_TU * LANES + j], lane[LANE_IU * LANES + j],
-                                 lane[LANE_TV * LANES + j], lane[LANE_IV * LANES + j], order)
+        u, start_u, len_u = _field3(lane, LANE_SPAN, j)
+        v, start_v, len_v = _field3(lane, LANE_SPAN + 3, j)
+        tau_u, inv_u = span_local(u, start_u, len_u)  # here, not in the span pass: the divisions vectorise
+        tau_v, inv_v = span_local(v, start_v, len_v)
+        H = bicubic_contract_net(net, tau_u, inv_u, tau_v, inv_v, order)
         _store_coordinate(lane, j, H, 0, order)  # written out: a constant c selects H's coordinates
         _store_coordinate(lane, j, H, 1, order)
         _store_coordinate(lane, j, H, 2, order)
 
 
 @njit(inline="always", **JIT)
-def eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, patch, base, buf, n,
-               order, d, scratch):
+def eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, patch, base, span_u,
+               span_v, buf, n, order, d, scratch):
     """`point_at` at points 0..n−1 of a lane block (patch[j], (u, v) in `LANE_U`, `LANE_V`) into the fields `LANE_D`….
 
-    A scalar pass finds each point's span (`bicubic_span_at`; other patches: `point_at` itself); then each run of
+    A scalar pass finds each point's span (`bicubic_span_at`, from the guesses span_u[j], span_v[j] (−1: none),
+    which it updates; other patches: `point_at` itself); then each run of
     consecutive points on one bicubic span is evaluated by one vector loop (`_eval_run`), its 16 coefficients
     loaded once (no gathers).
     """
@@ -629,10 +651,12 @@ def eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_o
         k = patch[j]
         u, v = clamp_to_domain(domain, k, buf[LANE_U * LANES + j], buf[LANE_V * LANES + j])
         if is_bicubic_power(degree, power_offset, k):
-            first, tau_u, inv_u, tau_v, inv_v = bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v)
+            first, span_u[j], span_v[j], start_u, len_u, start_v, len_v = bicubic_span_at(
+                knots, count, knot_offset, power_offset, k, u, v, span_u[j], span_v[j])
             base[j] = first
-            buf[LANE_TU * LANES + j], buf[LANE_IU * LANES + j] = tau_u, inv_u
-            buf[LANE_TV * LANES + j], buf[LANE_IV * LANES + j] = tau_v, inv_v
+            buf[LANE_SPAN * LANES + j], buf[(LANE_SPAN + 1) * LANES + j] = u, start_u
+            buf[(LANE_SPAN + 2) * LANES + j], buf[(LANE_SPAN + 3) * LANES + j] = len_u, v
+            buf[(LANE_SPAN + 4) * LANES + j], buf[(LANE_SPAN + 5) * LANES + j] = start_v, len_v
         else:
             base[j] = -1
             point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, u, v, order, d,
@@ -781,6 +805,8 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
     ray = np.empty(LANES, dtype=np.int64)
     lane_patch = np.empty(LANES, dtype=np.int64)
     base = np.empty(LANES, dtype=np.int64)
+    span_u = np.empty(LANES, dtype=np.int64)  # each point's span in u and v: `find_span_near`'s guesses
+    span_v = np.empty(LANES, dtype=np.int64)
     for first in range(0, prim.shape[0], LANES):
         m = min(LANES, prim.shape[0] - first)
         for j in range(m):  # the starts, tolerances and the planes across the rays
@@ -794,7 +820,7 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
             tm = t_mesh[i]
             magnitude = max(abs(O[i, 0] + tm * D[i, 0]), abs(O[i, 1] + tm * D[i, 1]), abs(O[i, 2] + tm * D[i, 2]))
             patch[i], u_start[i], v_start[i] = k, us, vs
-            ray[j], lane_patch[j] = i, k
+            ray[j], lane_patch[j], span_u[j], span_v[j] = i, k, -1, -1
             buf[LANE_U * LANES + j], buf[LANE_V * LANES + j] = us, vs
             buf[LANE_TOL * LANES + j] = tolerance * max(max(tm, extent), magnitude)
             across_at(D, i, e)
@@ -806,7 +832,7 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
         active = m
         for step in range(max_steps + 1):  # Newton on the rays not yet done, which stay packed at the front
             eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, lane_patch, base,
-                       buf, active, 1, d, scratch)
+                       span_u, span_v, buf, active, 1, d, scratch)
             newton_lanes(buf, active, step == max_steps)
             kept = 0
             for j in range(active):
@@ -820,7 +846,7 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
                         Sv[i, c] = buf[(LANE_D + 6 + c) * LANES + j]
                     continue
                 if kept != j:
-                    ray[kept], lane_patch[kept] = ray[j], lane_patch[j]
+                    ray[kept], lane_patch[kept], span_u[kept], span_v[kept] = ray[j], lane_patch[j], span_u[j], span_v[j]
                     for field in range(LANE_U, LANE_DOMAIN + 4):
                         buf[field * LANES + kept] = buf[field * LANES + j]
                 kept += 1
@@ -973,19 +999,50 @@ def normal_curvatures(Su, Sv, Suu, Suv, Svv, n, w, out):
         out[i] = (L * a * a + 2.0 * M * a * b + N * b * b) / first
 
 
+@njit(inline="always", **JIT)
+def curvature_lanes(buf, n):
+    """`fundamental_forms_at` and `curvature_of` at points 0..n−1 of a lane block (derivatives in `LANE_D`…, unit
+    normal in `LANE_E`) into `LANE_CURVATURE`…: the vector loop."""
+    for j in range(n):
+        E, F, G, L, M, N = fundamental_forms_at(_field3(buf, LANE_D + 3, j), _field3(buf, LANE_D + 6, j),
+                                                _field3(buf, LANE_D + 9, j), _field3(buf, LANE_D + 12, j),
+                                                _field3(buf, LANE_D + 15, j), _field3(buf, LANE_E, j))
+        K, H, k1, k2 = curvature_of(E, F, G, L, M, N)
+        buf[LANE_CURVATURE * LANES + j], buf[(LANE_CURVATURE + 1) * LANES + j] = K, H
+        buf[(LANE_CURVATURE + 2) * LANES + j], buf[(LANE_CURVATURE + 3) * LANES + j] = k1, k2
+
+
 @njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2})",))
 def curvatures_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
                   patch, u, v, n, out):
     """K, H, κ1, κ2 of points (patch, u, v) with unit normals n into out (4, N), fused: `point_at` of order 2
-    and `curvature_of` per point in registers, no (N, 3) derivative arrays. Rows with patch < 0: NaN."""
+    and `curvature_of` per point, LANES points at a time (`eval_lanes`, `curvature_lanes`), no (N, 3) derivative
+    arrays. Rows with patch < 0: NaN."""
     scratch = new_scratch(max_degree)
     d = np.empty((6, 3))
-    for i in range(patch.shape[0]):
-        k = patch[i]
-        if k < 0:
-            out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
-            continue
-        point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, u[i], v[i], 2, d,
-                 scratch)
-        E, F, G, L, M, N = fundamental_forms_at(d[1], d[2], d[3], d[4], d[5], n[i])
-        out[0, i], out[1, i], out[2, i], out[3, i] = curvature_of(E, F, G, L, M, N)
+    buf = np.empty(LANE_FIELDS * LANES)
+    row = np.empty(LANES, dtype=np.int64)
+    lane_patch = np.empty(LANES, dtype=np.int64)
+    base = np.empty(LANES, dtype=np.int64)
+    span_u = np.empty(LANES, dtype=np.int64)  # each point's span in u and v: `find_span_near`'s guesses
+    span_v = np.empty(LANES, dtype=np.int64)
+    for first in range(0, patch.shape[0], LANES):
+        filled = 0
+        for i in range(first, min(first + LANES, patch.shape[0])):
+            k = patch[i]
+            if k < 0:
+                out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
+                continue
+            row[filled], lane_patch[filled] = i, k
+            buf[LANE_U * LANES + filled], buf[LANE_V * LANES + filled] = u[i], v[i]
+            for c in range(3):
+                buf[(LANE_E + c) * LANES + filled] = n[i, c]
+            filled += 1
+        span_u[:filled] = -1
+        span_v[:filled] = -1
+        eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, lane_patch, base,
+                   span_u, span_v, buf, filled, 2, d, scratch)
+        curvature_lanes(buf, filled)
+        for j in range(filled):
+            for r in range(4):
+                out[r, row[j]] = buf[(LANE_CURVATURE + r) * LANES + j]
