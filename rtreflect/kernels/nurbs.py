@@ -373,20 +373,22 @@ def bicubic_contract_net(net, tau_u, inv_u, tau_v, inv_v, order):
 
 
 @njit(inline="always", **JIT)
-def rational_at(H, c, order):
-    """Coordinate c of S, S_u, S_v, S_uu, S_uv, S_vv from the homogeneous derivatives H (`contract`'s 6 4-tuples) by
-    Piegl & Tiller eq. 4.20: S = A/w, S_u = (A_u − w_u S)/w, S_uu = (A_uu − 2 w_u S_u − w_uu S)/w,
-    S_uv = (A_uv − w_uv S − w_u S_v − w_v S_u)/w (the second derivatives 0.0 for order 1)."""
+def rational_at(A, Au, Av, Auu, Auv, Avv, H, order):
+    """One coordinate of S, S_u, S_v, S_uu, S_uv, S_vv from that coordinate's homogeneous derivatives A… and the
+    weight's in H (`contract`'s 6 4-tuples) by Piegl & Tiller eq. 4.20: S = A/w, S_u = (A_u − w_u S)/w,
+    S_uu = (A_uu − 2 w_u S_u − w_uu S)/w, S_uv = (A_uv − w_uv S − w_u S_v − w_v S_u)/w (the second derivatives
+    0.0 for order 1). The coordinate picked by the caller: a constant index into a tuple keeps vector loops
+    vectorisable, a variable one (numba's dynamic tuple getitem) does not."""
     h00, h01, h10, h02, h11, h20 = H
     w = h00[3]
-    S = h00[c] / w
-    Su = (h10[c] - h10[3] * S) / w
-    Sv = (h01[c] - h01[3] * S) / w
+    S = A / w
+    Su = (Au - h10[3] * S) / w
+    Sv = (Av - h01[3] * S) / w
     Suu = Suv = Svv = 0.0
     if order >= 2:
-        Suu = (h20[c] - 2 * h10[3] * Su - h20[3] * S) / w
-        Suv = (h11[c] - h11[3] * S - h10[3] * Sv - h01[3] * Su) / w
-        Svv = (h02[c] - 2 * h01[3] * Sv - h02[3] * S) / w
+        Suu = (Auu - 2 * h10[3] * Su - h20[3] * S) / w
+        Suv = (Auv - h11[3] * S - h10[3] * Sv - h01[3] * Su) / w
+        Svv = (Avv - 2 * h01[3] * Sv - h02[3] * S) / w
     return S, Su, Sv, Suu, Suv, Svv
 
 
@@ -473,8 +475,9 @@ def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_off
             basis_ders_at(knots, ku, su, u, p, order, Nu, ndu, a, left, right)
             basis_ders_at(knots, kv, sv, v, q, order, Nv, ndu, a, left, right)
             H = contract(Nu, Nv, pw, pw_offset[k] + (su - p) * nv + (sv - q), nv, p, q, order)
+    h00, h01, h10, h02, h11, h20 = H
     for c in range(3):
-        S, Su, Sv, Suu, Suv, Svv = rational_at(H, c, order)
+        S, Su, Sv, Suu, Suv, Svv = rational_at(h00[c], h10[c], h01[c], h20[c], h11[c], h02[c], H, order)
         out[0, c], out[1, c], out[2, c] = S, Su, Sv
         if order >= 2:
             out[3, c], out[4, c], out[5, c] = Suu, Suv, Svv
@@ -609,9 +612,9 @@ STEPPING, CONVERGED, STOPPED = 0.0, 1.0, 2.0
 
 
 @njit(inline="always", **JIT)
-def _store_coordinate(lane, j, H, c, order):
-    """`rational_at` of H for coordinate c into the lane fields `LANE_D`… of point j."""
-    S, Su, Sv, Suu, Suv, Svv = rational_at(H, c, order)
+def _store_coordinate(lane, j, c, derivatives, order):
+    """Coordinate c of S and its derivatives (`rational_at`) into the lane fields `LANE_D`… of point j."""
+    S, Su, Sv, Suu, Suv, Svv = derivatives
     lane[(LANE_D + c) * LANES + j] = S
     lane[(LANE_D + 3 + c) * LANES + j] = Su
     lane[(LANE_D + 6 + c) * LANES + j] = Sv
@@ -632,9 +635,10 @@ def _eval_run(net, buf, a, b, order):
         tau_u, inv_u = span_local(u, start_u, len_u)  # here, not in the span pass: the divisions vectorise
         tau_v, inv_v = span_local(v, start_v, len_v)
         H = bicubic_contract_net(net, tau_u, inv_u, tau_v, inv_v, order)
-        _store_coordinate(lane, j, H, 0, order)  # written out: a constant c selects H's coordinates
-        _store_coordinate(lane, j, H, 1, order)
-        _store_coordinate(lane, j, H, 2, order)
+        h00, h01, h10, h02, h11, h20 = H
+        _store_coordinate(lane, j, 0, rational_at(h00[0], h10[0], h01[0], h20[0], h11[0], h02[0], H, order), order)
+        _store_coordinate(lane, j, 1, rational_at(h00[1], h10[1], h01[1], h20[1], h11[1], h02[1], H, order), order)
+        _store_coordinate(lane, j, 2, rational_at(h00[2], h10[2], h01[2], h20[2], h11[2], h02[2], H, order), order)
 
 
 @njit(inline="always", **JIT)
