@@ -11,10 +11,13 @@ point by point, in registers, with no (N, …) temporaries:
   bicubic patches written out in registers (`bicubic_contract`: the same sums, the same bits);
 * the rational derivatives by Piegl & Tiller eq. 4.20 (algorithm A4.4), for k + l <= 2;
 * the unit normal (S_u × S_v)/|S_u × S_v| and its degenerate test, and Newton's iteration onto
-  the exact ray–surface hit (`newton`);
+  the exact ray–surface hit (`newton_lanes`);
 * the exact hit's common case fused per ray (`refine_mesh_hits`: the start from a mesh hit's
   barycentrics, Newton, the near-mesh-hit test, t, the unit normal), and the Levenberg–Marquardt
-  search where Newton fails (`rescue`): `trace.tracing` keeps only the rare paths in numpy.
+  search where Newton fails (`rescue`): `trace.tracing` keeps only the rare paths in numpy;
+* Newton and the curvature AOVs in lane blocks ("Lane blocks" below): LANES points per pass, the
+  evaluation, the Newton step and the curvature as vector loops across points (AVX-512 or AVX2),
+  the same operations per point as the scalar `point_at`, so the same bits.
 
 The patches of a scene live in one flat table (`PatchTable`): degrees, control-point counts,
 knot vectors and homogeneous control points concatenated, so one kernel call serves points on
