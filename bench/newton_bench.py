@@ -5,7 +5,8 @@ seconds of one thread, best of ``--repeat``, per hit of
 
 * `kernels.nurbs.refine_mesh_hits` (start from the mesh hit, Newton, near test, t, unit normal);
 * `kernels.nurbs.curvatures_at` (the order-2 evaluation and K, H, κ1, κ2 of the K, H, k1, k2 AOVs);
-* one evaluation of S, S_u, S_v (`point_at`, order 1) at the same points, the unit Newton is made of,
+* one evaluation of S, S_u, S_v (`point_at`, order 1, one point at a time: the scalar path, which the lane
+  blocks of the two kernels above vectorise) at the same points,
 
 and how many evaluations Newton made per hit (steps + 1, counted by re-running it step-capped). Per-hit
 figures compare between checkouts in the same minute (run both back to back; on a loaded machine
@@ -13,8 +14,9 @@ other jobs still inflate CPU time through the shared caches):
 
     python bench/newton_bench.py [--width 1920 --height 1080 --repeat 5]
 
-``--save FILE.npz`` keeps every output of the Newton kernel, ``--compare FILE.npz`` says field by field
-whether they are the same bits as those saved (e.g. by another checkout).
+``--save FILE.npz`` keeps every output of the Newton kernel and of the curvature kernel (``curvature``: K, H,
+κ1, κ2), ``--compare FILE.npz`` says field by field whether they are the same bits as those saved (e.g. by
+another checkout).
 """
 
 from __future__ import annotations
@@ -120,14 +122,16 @@ def main() -> None:
           + f" (mean evaluations per hit {mean_evaluations:.2f})")
     print(f"refine_mesh_hits:          {newton_s:.3f} s, {1e6 * newton_s / n:.3f} µs per hit")
     print(f"curvatures_at (AOVs):      {curvature_s:.3f} s, {1e6 * curvature_s / n:.3f} µs per hit")
-    print(f"S, S_u, S_v (order 1):     {evaluation_s:.3f} s, {1e6 * evaluation_s / n:.3f} µs per evaluation; "
-          f"Newton's evaluations {100 * mean_evaluations * evaluation_s / newton_s:.0f} % of its kernel")
+    print(f"S, S_u, S_v (scalar):      {evaluation_s:.3f} s, {1e6 * evaluation_s / n:.3f} µs per evaluation; "
+          f"Newton's evaluations at that cost: {100 * mean_evaluations * evaluation_s / newton_s:.0f} % of its kernel")
+    hits["curvature"] = curv
     if args.save:
         np.savez(args.save, **hits)
         print(f"saved {args.save}")
     if args.compare:
         saved = np.load(args.compare)
-        same = {name: np.array_equal(hits[name].view(np.uint8), saved[name].view(np.uint8)) for name in FIELDS}
+        same = {name: np.array_equal(hits[name].view(np.uint8), saved[name].view(np.uint8))
+                for name in FIELDS + ("curvature",) if name in saved}
         print("same bits as " + str(args.compare) + ": "
               + ("every field" if all(same.values()) else "NOT " + ", ".join(k for k, v in same.items() if not v)))
 

@@ -177,3 +177,35 @@ def test_kernel_normal_curvature_matches_the_numpy_formula():
     a, b = (G * wu - F * wv) / (E * G - F * F), (E * wv - F * wu) / (E * G - F * F)
     want = (L * a * a + 2 * M * a * b + N * b * b) / (E * a * a + 2 * F * a * b + G * b * b)
     np.testing.assert_allclose(normal_curvature(d, n, w), want, rtol=1e-10)
+
+
+def test_curvatures_in_lane_blocks_equal_evaluate_then_curvatures_bit_for_bit_on_bicubic_spans():
+    """`curvatures_at` evaluates LANES points at a time, one vector loop per run of points on one bicubic span
+    (`kernels.nurbs`, "Lane blocks"): bit for bit the order-2 evaluation (`SurfaceSet.evaluate`) then `curvatures`,
+    on a multi-span rational bicubic (runs on one span, span changes, an empty span, points clamped into the
+    domain) beside the rational sphere (the scalar path) and misses, over several blocks, sorted and shuffled."""
+    from test_kernels import wavy_bicubic
+
+    from rtreflect.geometry.curvature import curvatures_at
+    from rtreflect.geometry.surfaces import SurfaceSet
+    from rtreflect.kernels.nurbs import LANES
+
+    surfaces = SurfaceSet([wavy_bicubic(), *two_patches()])
+    rng = np.random.default_rng(8)
+    count = 5 * LANES + 31
+    patch = rng.choice([-1, 0, 0, 0, 0, 1, 2], count)
+    u, v = rng.uniform(-0.02, 1.02, (2, count))
+    order = np.lexsort((u, np.round(v, 1), patch))
+    patch, u, v = patch[order], u[order], v[order]
+    d = surfaces.evaluate(patch, u, v, order=2)
+    n = surfaces.normals(patch, u, v, d)
+    hit = patch >= 0
+    two_pass = curvatures(type(d)(*(x[hit] for x in d)), n[hit])
+    for rows in (np.arange(count), rng.permutation(count)):
+        fused = curvatures_at(surfaces, patch[rows], u[rows], v[rows], n[rows])
+        for a, b in zip(fused, two_pass):
+            got = np.full(count, np.nan)
+            got[rows] = a
+            assert np.array_equal(got[hit].view(np.int64), b.view(np.int64))
+            assert np.isnan(got[~hit]).all()
+    assert np.isfinite(two_pass[0]).mean() > 0.9

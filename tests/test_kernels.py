@@ -9,6 +9,7 @@
 * the fused first refinement of mesh hits (start, Newton, near test, t, normal) against its steps
   done separately: the triangle's barycentric (u, v), rhino3dm's points and normals, the numpy tests;
 * the compiled Levenberg–Marquardt search, answer for answer its numpy implementation (tests/reference.py);
+* Newton in lane blocks (vector loops across rays), bit for bit the same iteration written in numpy;
 * the reflected direction (paper eq. 3) against the Householder matrix I − 2 n nᵀ, and Ulmet's f found in the tube
   search's pass, bit for bit `ulmet_f` and against the brute-force plane crossing; the renderer's f AOV is that f;
 * a second process finds every kernel in numba's cache (no compilation).
@@ -29,6 +30,7 @@ from rtreflect.exchange.bpt import read_bpt
 from rtreflect.exchange.load import load_scene
 from rtreflect.geometry.surfaces import SurfaceSet
 from rtreflect.integrator.renderer import Renderer
+from rtreflect.kernels import nurbs
 from rtreflect.modes.lights import TubeLights, reflect, reflect_rays
 from rtreflect.trace import tracing
 from rtreflect.trace.tracing import refine
@@ -357,3 +359,92 @@ def test_kernels_call_only_kernels_of_their_own_file():
             if line.startswith("from .") or line.startswith("from rtreflect.kernels"):
                 # JIT's options and the decorator (`compiled.njit`: AOT or numba's JIT), no other file's kernel
                 assert line in ("from . import JIT", "from .compiled import njit"), f"{file.name}: {line}"
+
+
+def wavy_bicubic(seed: int = 2) -> "NurbsSurface":
+    """A rational bicubic B-spline of 8×7 control points over several spans, an empty span (a double knot) in u."""
+    from rtreflect import NurbsSurface
+
+    rng = np.random.default_rng(seed)
+    X, Y = np.meshgrid(np.linspace(-1.5, 1.5, 8), np.linspace(-1.0, 1.0, 7), indexing="ij")
+    points = np.stack([X, Y, 0.2 * np.sin(2.0 * X) * np.cos(1.5 * Y) + 0.1 * X * Y], axis=-1)
+    knots_u = np.array([0.0] * 4 + [0.3, 0.5, 0.5, 0.8] + [1.0] * 4)
+    knots_v = np.array([0.0] * 4 + [0.25, 0.5, 0.75] + [1.0] * 4)
+    return NurbsSurface(3, 3, knots_u, knots_v, points, rng.uniform(0.6, 1.4, (8, 7)))
+
+
+def across_numpy(D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """e1, e2 ⊥ D as DESIGN.md's "Exact hit" defines them (helper axis along D's smallest component), in numpy."""
+    x, y, z = D.T
+    ax, ay, az = np.abs(D).T
+    zero = np.zeros_like(x)
+    first, second = (ax <= ay) & (ax <= az), ay <= az
+    c = [np.where(first, zero, np.where(second, -z, y)), np.where(first, z, np.where(second, zero, -x)),
+         np.where(first, -y, np.where(second, x, zero))]
+    norm = np.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+    c0, c1, c2 = c[0] / norm, c[1] / norm, c[2] / norm
+    return np.stack([c0, c1, c2], axis=1), np.stack([y * c2 - z * c1, z * c0 - x * c2, x * c1 - y * c0], axis=1)
+
+
+def newton_numpy(surfaces, k, u, v, O, D, tol, max_steps):
+    """Newton on the ray residual (DESIGN.md, "Exact hit") in numpy, all rays at once, one evaluation per step by
+    `SurfaceSet.evaluate`: (u, v, converged, S, S_u, S_v)."""
+    e1, e2 = across_numpy(D)
+    u, v = u.copy(), v.copy()
+    u0, u1, v0, v1 = surfaces.domains(k)
+    S, Su, Sv = (np.empty((len(u), 3)) for _ in range(3))
+    converged, live = np.zeros(len(u), dtype=bool), np.arange(len(u))
+    dot = lambda a, b: a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]  # noqa: E731 (coordinate order)
+    for step in range(max_steps + 1):
+        d = surfaces.evaluate(k[live], u[live], v[live])
+        S[live], Su[live], Sv[live] = d.S, d.Su, d.Sv
+        r = d.S - O[live]
+        f1, f2 = dot(e1[live], r), dot(e2[live], r)
+        ok = f1 * f1 + f2 * f2 <= tol[live] * tol[live]
+        a, b, c, dd = dot(e1[live], d.Su), dot(e1[live], d.Sv), dot(e2[live], d.Su), dot(e2[live], d.Sv)
+        det = a * dd - b * c
+        regular = np.abs(det) > nurbs.SINGULAR_SINE * np.sqrt(dot(d.Su, d.Su)) * np.sqrt(dot(d.Sv, d.Sv))
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            du, dv = (dd * f1 - b * f2) / det, (a * f2 - c * f1) / det
+        go = ~ok & (step < max_steps) & regular & np.isfinite(du) & np.isfinite(dv)
+        converged[live] = ok
+        moving = live[go]
+        u[moving] = np.minimum(np.maximum(u[moving] - du[go], u0[moving]), u1[moving])
+        v[moving] = np.minimum(np.maximum(v[moving] - dv[go], v0[moving]), v1[moving])
+        live = moving
+    return u, v, converged, S, Su, Sv
+
+
+def test_newton_in_lane_blocks_is_bit_for_bit_the_iteration_in_numpy():
+    """`refine_mesh_hits` runs Newton LANES rays at a time, vector loops over the rays of a block (`kernels.nurbs`,
+    "Lane blocks"): each ray's (u, v), verdict and S, S_u, S_v are the bits of the same iteration written in numpy
+    (one `SurfaceSet.evaluate` per step), on a mix of bicubic spans (runs of rays on one span, spans left between
+    steps, an empty span), a rational biquadratic patch (the scalar evaluation) and Bézier patches, over several
+    blocks and a partial one, in sorted and in shuffled order."""
+    from test_curvature import SQRT_HALF, revolve  # a rational biquadratic (the scalar path of a lane block)
+
+    patches = [wavy_bicubic(), revolve([(2.0, 0.0, 1.0), (2.0, 2.0, SQRT_HALF), (0.0, 2.0, 1.0)])] + read_bpt(TEAPOT)[:4]
+    surfaces = SurfaceSet(patches)
+    rng = np.random.default_rng(21)
+    n = 7 * nurbs.LANES + 57
+    k = np.sort(rng.choice([0, 0, 0, 1, 2, 3, 4, 5], n))  # runs of rays on one patch, as a tile's pixels
+    u0, v0 = rng.uniform(0.02, 0.98, (2, n))
+    order = np.lexsort((u0, np.round(v0, 1), k))
+    k, u0, v0 = k[order], u0[order], v0[order]
+    target = surfaces.evaluate(k, u0, v0).S
+    D = rng.normal(size=(n, 3))
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    O = target - 5.0 * D
+    us, vs = u0 + rng.uniform(-0.08, 0.08, n), v0 + rng.uniform(-0.08, 0.08, n)  # some across a span's edge
+    t_mesh = np.full(n, 5.0)
+    magnitude = np.abs(O + t_mesh[:, None] * D).max(axis=1)
+    tol = tracing.NEWTON_TOLERANCE * np.maximum(np.maximum(t_mesh, 1.0), magnitude)
+    want = newton_numpy(surfaces, k, us, vs, O, D, tol, tracing.NEWTON_MAX_STEPS)
+    assert 0.5 * n < want[2].sum() < n, "both verdicts must be exercised"
+    shuffled = rng.permutation(n)
+    for rows in (np.arange(n), shuffled):
+        u, v, d, converged, *_ = tracing.refine_all(surfaces, k[rows], us[rows], vs[rows], O[rows], D[rows],
+                                                    t_mesh[rows], 1.0)
+        for name, got, expected in (("u", u, want[0]), ("v", v, want[1]), ("converged", converged, want[2]),
+                                    ("S", d.S, want[3]), ("Su", d.Su, want[4]), ("Sv", d.Sv, want[5])):
+            assert np.array_equal(got.view(np.uint8), expected[rows].view(np.uint8)), name  # the bits, ±0 and NaN too

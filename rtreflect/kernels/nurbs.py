@@ -11,10 +11,13 @@ point by point, in registers, with no (N, …) temporaries:
   bicubic patches written out in registers (`bicubic_contract`: the same sums, the same bits);
 * the rational derivatives by Piegl & Tiller eq. 4.20 (algorithm A4.4), for k + l <= 2;
 * the unit normal (S_u × S_v)/|S_u × S_v| and its degenerate test, and Newton's iteration onto
-  the exact ray–surface hit (`newton`);
+  the exact ray–surface hit (`newton_lanes`);
 * the exact hit's common case fused per ray (`refine_mesh_hits`: the start from a mesh hit's
   barycentrics, Newton, the near-mesh-hit test, t, the unit normal), and the Levenberg–Marquardt
-  search where Newton fails (`rescue`): `trace.tracing` keeps only the rare paths in numpy.
+  search where Newton fails (`rescue`): `trace.tracing` keeps only the rare paths in numpy;
+* Newton and the curvature AOVs in lane blocks ("Lane blocks" below): LANES points per pass, the
+  evaluation, the Newton step and the curvature as vector loops across points (AVX-512 or AVX2),
+  the same operations per point as the scalar `point_at`, so the same bits.
 
 The patches of a scene live in one flat table (`PatchTable`): degrees, control-point counts,
 knot vectors and homogeneous control points concatenated, so one kernel call serves points on
@@ -297,12 +300,25 @@ def _madd4(h, a, x):
 
 
 @njit(inline="always", **JIT)
-def _bicubic_row(power, first, t1, t2, t3, d1, d2, d3, e2, e3, order):
-    """Σ_j Nv[m, j] C_ij for m = 0, 1 (and 2): one u-row of `contract` for q = 3, the zero terms of Nv left out."""
-    x0 = (power[first, 0], power[first, 1], power[first, 2], power[first, 3])
-    x1 = (power[first + 1, 0], power[first + 1, 1], power[first + 1, 2], power[first + 1, 3])
-    x2 = (power[first + 2, 0], power[first + 2, 1], power[first + 2, 2], power[first + 2, 3])
-    x3 = (power[first + 3, 0], power[first + 3, 1], power[first + 3, 2], power[first + 3, 3])
+def _row4(power, first):
+    """Homogeneous control coefficient ``power[first]`` as a 4-tuple."""
+    return power[first, 0], power[first, 1], power[first, 2], power[first, 3]
+
+
+@njit(inline="always", **JIT)
+def bicubic_net(power, base):
+    """The 16 power-form coefficients C_ij of one bicubic span (rows i of four j), as 4-tuples: loaded once, they serve
+    every point of the span (`eval_lanes`)."""
+    return ((_row4(power, base), _row4(power, base + 1), _row4(power, base + 2), _row4(power, base + 3)),
+            (_row4(power, base + 4), _row4(power, base + 5), _row4(power, base + 6), _row4(power, base + 7)),
+            (_row4(power, base + 8), _row4(power, base + 9), _row4(power, base + 10), _row4(power, base + 11)),
+            (_row4(power, base + 12), _row4(power, base + 13), _row4(power, base + 14), _row4(power, base + 15)))
+
+
+@njit(inline="always", **JIT)
+def _bicubic_row(x, t1, t2, t3, d1, d2, d3, e2, e3, order):
+    """Σ_j Nv[m, j] C_ij for m = 0, 1 (and 2): one u-row x of `contract` for q = 3, the zero terms of Nv left out."""
+    x0, x1, x2, x3 = x
     r0 = _madd4(_madd4(_madd4(_madd4(_ZERO4, 1.0, x0), t1, x1), t2, x2), t3, x3)
     r1 = _madd4(_madd4(_madd4(_ZERO4, d1, x1), d2, x2), d3, x3)
     r2 = _madd4(_madd4(_ZERO4, e2, x2), e3, x3) if order >= 2 else _ZERO4
@@ -319,36 +335,113 @@ def _cubic_rows(tau, inv_len):
 
 @njit(inline="always", **JIT)
 def bicubic_contract(power, base, tau_u, inv_u, tau_v, inv_v, order):
-    """`contract` of the power form for p = q = 3 (`power_rows`' τ_u, τ_v rows by the C_ij), as `contract` returns it.
+    """`contract` of the power form for p = q = 3 (`power_rows`' τ_u, τ_v rows by the C_ij), as `contract` returns it:
+    `bicubic_contract_net` of the span's coefficients at ``power[base:base + 16]``."""
+    return bicubic_contract_net(bicubic_net(power, base), tau_u, inv_u, tau_v, inv_v, order)
+
+
+@njit(inline="always", **JIT)
+def bicubic_contract_net(net, tau_u, inv_u, tau_v, inv_v, order):
+    """`bicubic_contract` of a span's coefficients already loaded (`bicubic_net`).
 
     The same sums as `power_rows` and `contract` in the same order, so the same bits, but in registers
     (4-tuples, the bases as scalars, the loops unrolled) and without the terms whose basis value is an
     exact 0 (d/dt τ⁰, d²/dt² τ⁰ and τ¹): an accumulator that starts at 0.0 and skips a term 0·x (x finite)
-    holds what it would have held after adding it.
+    holds what it would have held after adding it. Straight-line code: across the points of one span it
+    vectorises (`eval_lanes`).
     """
     u1, u2, u3, du1, du2, du3, eu2, eu3 = _cubic_rows(tau_u, inv_u)
     v1, v2, v3, dv1, dv2, dv3, ev2, ev3 = _cubic_rows(tau_v, inv_v)
     h00 = h01 = h10 = h02 = h11 = h20 = _ZERO4
     # row i = 0: d^m/dt^m τ⁰ = (1, 0, 0)
-    r0, r1, r2 = _bicubic_row(power, base, v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
+    r0, r1, r2 = _bicubic_row(net[0], v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
     if order >= 2:
         h02 = _madd4(h02, 1.0, r2)
     h00, h01 = _madd4(h00, 1.0, r0), _madd4(h01, 1.0, r1)
     # row 1: (τ, 1/h, 0)
-    r0, r1, r2 = _bicubic_row(power, base + 4, v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
+    r0, r1, r2 = _bicubic_row(net[1], v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
     if order >= 2:
         h02, h11 = _madd4(h02, u1, r2), _madd4(h11, du1, r1)
     h00, h01, h10 = _madd4(h00, u1, r0), _madd4(h01, u1, r1), _madd4(h10, du1, r0)
     # rows 2 and 3: every term
-    r0, r1, r2 = _bicubic_row(power, base + 8, v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
+    r0, r1, r2 = _bicubic_row(net[2], v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
     if order >= 2:
         h02, h11, h20 = _madd4(h02, u2, r2), _madd4(h11, du2, r1), _madd4(h20, eu2, r0)
     h00, h01, h10 = _madd4(h00, u2, r0), _madd4(h01, u2, r1), _madd4(h10, du2, r0)
-    r0, r1, r2 = _bicubic_row(power, base + 12, v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
+    r0, r1, r2 = _bicubic_row(net[3], v1, v2, v3, dv1, dv2, dv3, ev2, ev3, order)
     if order >= 2:
         h02, h11, h20 = _madd4(h02, u3, r2), _madd4(h11, du3, r1), _madd4(h20, eu3, r0)
     h00, h01, h10 = _madd4(h00, u3, r0), _madd4(h01, u3, r1), _madd4(h10, du3, r0)
     return h00, h01, h10, h02, h11, h20
+
+
+@njit(inline="always", **JIT)
+def rational_at(A, Au, Av, Auu, Auv, Avv, H, order):
+    """One coordinate of S, S_u, S_v, S_uu, S_uv, S_vv from that coordinate's homogeneous derivatives A… and the
+    weight's in H (`contract`'s 6 4-tuples) by Piegl & Tiller eq. 4.20: S = A/w, S_u = (A_u − w_u S)/w,
+    S_uu = (A_uu − 2 w_u S_u − w_uu S)/w, S_uv = (A_uv − w_uv S − w_u S_v − w_v S_u)/w (the second derivatives
+    0.0 for order 1). The coordinate picked by the caller: a constant index into a tuple keeps vector loops
+    vectorisable, a variable one (numba's dynamic tuple getitem) does not."""
+    h00, h01, h10, h02, h11, h20 = H
+    w = h00[3]
+    S = A / w
+    Su = (Au - h10[3] * S) / w
+    Sv = (Av - h01[3] * S) / w
+    Suu = Suv = Svv = 0.0
+    if order >= 2:
+        Suu = (Auu - 2 * h10[3] * Su - h20[3] * S) / w
+        Suv = (Auv - h11[3] * S - h10[3] * Sv - h01[3] * Su) / w
+        Svv = (Avv - 2 * h01[3] * Sv - h02[3] * S) / w
+    return S, Su, Sv, Suu, Suv, Svv
+
+
+@njit(inline="always", **JIT)
+def clamp_to_domain(domain, k, u, v):
+    """(u, v) clamped to patch k's parameter domain."""
+    if u < domain[k, 0]:
+        u = domain[k, 0]
+    elif u > domain[k, 1]:
+        u = domain[k, 1]
+    if v < domain[k, 2]:
+        v = domain[k, 2]
+    elif v > domain[k, 3]:
+        v = domain[k, 3]
+    return u, v
+
+
+@njit(inline="always", **JIT)
+def is_bicubic_power(degree, power_offset, k):
+    """Whether patch k is evaluated by `bicubic_contract` (bicubic, with a power form)."""
+    return power_offset[k] >= 0 and degree[k, 0] == WRITTEN_OUT_DEGREE and degree[k, 1] == WRITTEN_OUT_DEGREE
+
+
+@njit(inline="always", **JIT)
+def find_span_near(knots, lo, p, n_ctrl, t, guess):
+    """`find_span_at`, answered without the search where t lies in span ``guess`` (the span of the point's previous
+    Newton iterate, mostly the same; −1: none): knots[guess] <= t < knots[guess + 1], or the last span and beyond."""
+    if guess >= p and knots[lo + guess] <= t and (guess == n_ctrl - 1 or t < knots[lo + guess + 1]):
+        return guess
+    return find_span_at(knots, lo, p, n_ctrl, t)
+
+
+@njit(inline="always", **JIT)
+def bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v, guess_u, guess_v):
+    """Where (u, v) (inside the domain) lies in bicubic patch k's power form: (first row of its span's C_ij in
+    ``power``, the span indices, each span's start and length h); guesses of the spans as `find_span_near`'s."""
+    nu, nv = count[k, 0], count[k, 1]
+    ku, kv = knot_offset[k, 0], knot_offset[k, 1]
+    su = find_span_near(knots, ku, WRITTEN_OUT_DEGREE, nu, u, guess_u)
+    sv = find_span_near(knots, kv, WRITTEN_OUT_DEGREE, nv, v, guess_v)
+    start_u, start_v = knots[ku + su], knots[kv + sv]
+    len_u, len_v = knots[ku + su + 1] - start_u, knots[kv + sv + 1] - start_v
+    span = (su - WRITTEN_OUT_DEGREE) * (nv - WRITTEN_OUT_DEGREE) + (sv - WRITTEN_OUT_DEGREE)
+    return power_offset[k] + span * 16, su, sv, start_u, len_u, start_v, len_v
+
+
+@njit(inline="always", **JIT)
+def span_local(t, start, length):
+    """(τ, 1/h) of parameter t on the span (start, h): τ = (t − start)/h the power form's local parameter."""
+    return (t - start) / length, 1.0 / length
 
 
 @njit(inline="always", **JIT)
@@ -358,48 +451,39 @@ def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_off
 
     Homogeneous derivatives from the span's power form or the basis (A2.3), then Piegl & Tiller
     eq. 4.20: S = A/w, S_u = (A_u − w_u S)/w, S_uu = (A_uu − 2 w_u S_u − w_uu S)/w,
-    S_uv = (A_uv − w_uv S − w_u S_v − w_v S_u)/w.
+    S_uv = (A_uv − w_uv S − w_u S_v − w_v S_u)/w (`rational_at`).
     """
     Nu, Nv, ndu, a, left, right = scratch
     p, q = degree[k, 0], degree[k, 1]
     nu, nv = count[k, 0], count[k, 1]
-    if u < domain[k, 0]:
-        u = domain[k, 0]
-    elif u > domain[k, 1]:
-        u = domain[k, 1]
-    if v < domain[k, 2]:
-        v = domain[k, 2]
-    elif v > domain[k, 3]:
-        v = domain[k, 3]
-    ku, kv = knot_offset[k, 0], knot_offset[k, 1]
-    su = find_span_at(knots, ku, p, nu, u)
-    sv = find_span_at(knots, kv, q, nv, v)
-    if power_offset[k] >= 0:
-        start_u, start_v = knots[ku + su], knots[kv + sv]
-        len_u, len_v = knots[ku + su + 1] - start_u, knots[kv + sv + 1] - start_v
-        span = (su - p) * (nv - q) + (sv - q)
-        if p == WRITTEN_OUT_DEGREE and q == WRITTEN_OUT_DEGREE:
-            H = bicubic_contract(power, power_offset[k] + span * 16, (u - start_u) / len_u, 1.0 / len_u,
-                                 (v - start_v) / len_v, 1.0 / len_v, order)
-        else:
+    u, v = clamp_to_domain(domain, k, u, v)
+    if is_bicubic_power(degree, power_offset, k):
+        base, _, _, start_u, len_u, start_v, len_v = bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v,
+                                                                     -1, -1)
+        tau_u, inv_u = span_local(u, start_u, len_u)
+        tau_v, inv_v = span_local(v, start_v, len_v)
+        H = bicubic_contract(power, base, tau_u, inv_u, tau_v, inv_v, order)
+    else:
+        ku, kv = knot_offset[k, 0], knot_offset[k, 1]
+        su = find_span_at(knots, ku, p, nu, u)
+        sv = find_span_at(knots, kv, q, nv, v)
+        if power_offset[k] >= 0:
+            start_u, start_v = knots[ku + su], knots[kv + sv]
+            len_u, len_v = knots[ku + su + 1] - start_u, knots[kv + sv + 1] - start_v
+            span = (su - p) * (nv - q) + (sv - q)
             power_rows((u - start_u) / len_u, 1.0 / len_u, p, order, Nu)
             power_rows((v - start_v) / len_v, 1.0 / len_v, q, order, Nv)
             H = contract(Nu, Nv, power, power_offset[k] + span * (p + 1) * (q + 1), q + 1, p, q, order)
-    else:
-        basis_ders_at(knots, ku, su, u, p, order, Nu, ndu, a, left, right)
-        basis_ders_at(knots, kv, sv, v, q, order, Nv, ndu, a, left, right)
-        H = contract(Nu, Nv, pw, pw_offset[k] + (su - p) * nv + (sv - q), nv, p, q, order)
+        else:
+            basis_ders_at(knots, ku, su, u, p, order, Nu, ndu, a, left, right)
+            basis_ders_at(knots, kv, sv, v, q, order, Nv, ndu, a, left, right)
+            H = contract(Nu, Nv, pw, pw_offset[k] + (su - p) * nv + (sv - q), nv, p, q, order)
     h00, h01, h10, h02, h11, h20 = H
-    w = h00[3]
     for c in range(3):
-        S = h00[c] / w
-        Su = (h10[c] - h10[3] * S) / w
-        Sv = (h01[c] - h01[3] * S) / w
+        S, Su, Sv, Suu, Suv, Svv = rational_at(h00[c], h10[c], h01[c], h20[c], h11[c], h02[c], H, order)
         out[0, c], out[1, c], out[2, c] = S, Su, Sv
         if order >= 2:
-            out[3, c] = (h20[c] - 2 * h10[3] * Su - h20[3] * S) / w
-            out[4, c] = (h11[c] - h11[3] * S - h10[3] * Sv - h01[3] * Su) / w
-            out[5, c] = (h02[c] - 2 * h01[3] * Sv - h02[3] * S) / w
+            out[3, c], out[4, c], out[5, c] = Suu, Suv, Svv
 
 
 @njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, i8, f8[:, :, ::1])",))
@@ -506,6 +590,102 @@ def start_parameters(faces, vertex_uv, prim, b1, b2, u, v):
         u[i], v[i] = barycentric_uv(faces, vertex_uv, prim[i], b1[i], b2[i])
 
 
+# -- Lane blocks: one pass per stage over a block of points, so the arithmetic vectorises across points ----------
+# (issue 14 goal 2). Scalar code per point leaves SIMD units idle and waits on each division's latency; a loop over
+# a block's points of straight-line arithmetic, every operand at buf[field·LANES + j], compiles to AVX-512 (or
+# AVX2) arithmetic on 8 (4) points at a time. Each point's operations and their order are those of the scalar code
+# (numba contracts no a·b + c into an FMA without fastmath), so the bits are the same; only where the work is
+# irregular (the knot span's binary search, non-bicubic patches) a scalar pass per point remains.
+
+#: Points per block: the fields of a block (`LANE_FIELDS` × LANES doubles, 40 KB) stay in the L1/L2 cache, and the
+#: runs of points on one span (`eval_lanes`) are long enough for the vector loop (adjacent pixels share spans).
+LANES = 128
+#: Fields of a lane block, each LANES doubles at field·LANES in one flat buffer: constant offsets from one base,
+#: so LLVM proves the loads and stores of a vector loop independent without runtime checks.
+LANE_SPAN = 0  # u, span start, span length, then the same for v: where the point lies (`bicubic_span_at`)
+LANE_D = 6  # S, S_u, S_v, S_uu, S_uv, S_vv: 18 fields, coordinate by coordinate (`rational_at`)
+LANE_U, LANE_V, LANE_TOL = 24, 25, 26  # Newton's (u, v) and tolerance
+LANE_E = 27  # e1, e2 (6 fields, `across_at`); the unit normal n for the curvature (3)
+LANE_O = 33  # the ray's origin (3 fields)
+LANE_DOMAIN = 36  # u0, u1, v0, v1 of the point's patch (4 fields)
+LANE_STATE = 40  # Newton's state after a step: `STEPPING`, `CONVERGED` or `STOPPED`
+LANE_CURVATURE = 41  # K, H, κ1, κ2 (4 fields)
+LANE_FIELDS = 45
+STEPPING, CONVERGED, STOPPED = 0.0, 1.0, 2.0
+
+
+@njit(inline="always", **JIT)
+def _store_coordinate(lane, j, c, derivatives, order):
+    """Coordinate c of S and its derivatives (`rational_at`) into the lane fields `LANE_D`… of point j."""
+    S, Su, Sv, Suu, Suv, Svv = derivatives
+    lane[(LANE_D + c) * LANES + j] = S
+    lane[(LANE_D + 3 + c) * LANES + j] = Su
+    lane[(LANE_D + 6 + c) * LANES + j] = Sv
+    if order >= 2:
+        lane[(LANE_D + 9 + c) * LANES + j] = Suu
+        lane[(LANE_D + 12 + c) * LANES + j] = Suv
+        lane[(LANE_D + 15 + c) * LANES + j] = Svv
+
+
+@njit(inline="always", **JIT)
+def _eval_run(net, buf, a, b, order):
+    """S and its derivatives (`bicubic_contract_net`, `rational_at`) at points a..b−1 of a block, all on the span
+    whose coefficients are net: the vector loop."""
+    lane = buf[a:]  # indices from 0: numba's negative-index wrap-around folds away, the accesses stay affine
+    for j in range(b - a):
+        u, start_u, len_u = _field3(lane, LANE_SPAN, j)
+        v, start_v, len_v = _field3(lane, LANE_SPAN + 3, j)
+        tau_u, inv_u = span_local(u, start_u, len_u)  # here, not in the span pass: the divisions vectorise
+        tau_v, inv_v = span_local(v, start_v, len_v)
+        H = bicubic_contract_net(net, tau_u, inv_u, tau_v, inv_v, order)
+        h00, h01, h10, h02, h11, h20 = H
+        _store_coordinate(lane, j, 0, rational_at(h00[0], h10[0], h01[0], h20[0], h11[0], h02[0], H, order), order)
+        _store_coordinate(lane, j, 1, rational_at(h00[1], h10[1], h01[1], h20[1], h11[1], h02[1], H, order), order)
+        _store_coordinate(lane, j, 2, rational_at(h00[2], h10[2], h01[2], h20[2], h11[2], h02[2], H, order), order)
+
+
+@njit(inline="always", **JIT)
+def eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, patch, base, span_u,
+               span_v, buf, n, order, d, scratch):
+    """`point_at` at points 0..n−1 of a lane block (patch[j], (u, v) in `LANE_U`, `LANE_V`) into the fields `LANE_D`….
+
+    A scalar pass finds each point's span (`bicubic_span_at`, from the guesses span_u[j], span_v[j] (−1: none),
+    which it updates; other patches: `point_at` itself); then each run of
+    consecutive points on one bicubic span is evaluated by one vector loop (`_eval_run`), its 16 coefficients
+    loaded once (no gathers).
+    """
+    for j in range(n):
+        k = patch[j]
+        u, v = clamp_to_domain(domain, k, buf[LANE_U * LANES + j], buf[LANE_V * LANES + j])
+        if is_bicubic_power(degree, power_offset, k):
+            first, span_u[j], span_v[j], start_u, len_u, start_v, len_v = bicubic_span_at(
+                knots, count, knot_offset, power_offset, k, u, v, span_u[j], span_v[j])
+            base[j] = first
+            buf[LANE_SPAN * LANES + j], buf[(LANE_SPAN + 1) * LANES + j] = u, start_u
+            buf[(LANE_SPAN + 2) * LANES + j], buf[(LANE_SPAN + 3) * LANES + j] = len_u, v
+            buf[(LANE_SPAN + 4) * LANES + j], buf[(LANE_SPAN + 5) * LANES + j] = start_v, len_v
+        else:
+            base[j] = -1
+            point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, u, v, order, d,
+                     scratch)
+            for r in range(3 * order):
+                for c in range(3):
+                    buf[(LANE_D + 3 * r + c) * LANES + j] = d[r, c]
+    a = 0
+    while a < n:
+        b = a + 1
+        while b < n and base[b] == base[a]:
+            b += 1
+        if base[a] >= 0:
+            _eval_run(bicubic_net(power, base[a]), buf, a, b, order)
+        a = b
+
+
+@njit(inline="always", **JIT)
+def _field3(buf, field, j):
+    return buf[field * LANES + j], buf[(field + 1) * LANES + j], buf[(field + 2) * LANES + j]
+
+
 # -- Newton onto the exact hit (`trace.tracing`) ---------------------------------------------
 # In this file, not one of its own: numba's cache watches only the file that defines a kernel, and a
 # cached caller of a changed callee in another file ran stale machine code (a segmentation fault).
@@ -515,9 +695,9 @@ SINGULAR_SINE = 1e-12
 
 
 @njit(inline="always", **JIT)
-def newton_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, ui, vi, O, D, i, tol,
-              max_steps, d, e, scratch):
-    """Newton on S(u, v) = O + tD for ray i on patch k from (ui, vi): (u, v, converged), S, S_u, S_v in d[:3].
+def newton_lanes(buf, n, last):
+    """One step of Newton on S(u, v) = O + tD at points 0..n−1 of a lane block (S, S_u, S_v evaluated at (u, v)):
+    the vector loop; `LANE_STATE` says which points are done.
 
     DESIGN.md, "Exact hit": the ray condition as two equations across the ray, r1 = e1·(S − O) = 0
     and r2 = e2·(S − O) = 0 with e1, e2 ⊥ D (`across_at`), Jacobian J = [[e1·S_u, e1·S_v],
@@ -525,41 +705,45 @@ def newton_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_of
     to the patch's domain. det J = D·(S_u × S_v): tiny at grazing rays and degenerate points,
     where Newton is not to be trusted (`SINGULAR_SINE`).
 
-    Converged once |(r1, r2)| <= tol, checked after each evaluation (at most max_steps steps,
-    max_steps + 1 evaluations); a singular Jacobian or a non-finite step stops it unconverged.
+    `CONVERGED` once |(r1, r2)| <= tol, checked after each evaluation (at most max_steps steps,
+    max_steps + 1 evaluations: ``last`` on the last); `STOPPED` unconverged at the last evaluation,
+    a singular Jacobian or a non-finite step. Every quantity is computed for every point and the
+    verdict selected (branch-free: the loop vectorises); a done point keeps its (u, v).
     """
-    across_at(D, i, e)
-    u0, u1, v0, v1 = domain[k, 0], domain[k, 1], domain[k, 2], domain[k, 3]
-    ok = False
-    for step in range(max_steps + 1):
-        point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, ui, vi, 1, d,
-                 scratch)
-        r0, r1, r2 = d[0, 0] - O[i, 0], d[0, 1] - O[i, 1], d[0, 2] - O[i, 2]
-        f1 = e[0, 0] * r0 + e[0, 1] * r1 + e[0, 2] * r2
-        f2 = e[1, 0] * r0 + e[1, 1] * r1 + e[1, 2] * r2
+    for j in range(n):
+        S0, S1, S2 = _field3(buf, LANE_D, j)
+        Su0, Su1, Su2 = _field3(buf, LANE_D + 3, j)
+        Sv0, Sv1, Sv2 = _field3(buf, LANE_D + 6, j)
+        e00, e01, e02 = _field3(buf, LANE_E, j)
+        e10, e11, e12 = _field3(buf, LANE_E + 3, j)
+        O0, O1, O2 = _field3(buf, LANE_O, j)
+        ui, vi, tol = buf[LANE_U * LANES + j], buf[LANE_V * LANES + j], buf[LANE_TOL * LANES + j]
+        r0, r1, r2 = S0 - O0, S1 - O1, S2 - O2
+        f1 = e00 * r0 + e01 * r1 + e02 * r2
+        f2 = e10 * r0 + e11 * r1 + e12 * r2
         # |(r1, r2)| <= tol, squared: math.hypot is a libm call; without it the fused pass takes 4–10 % less CPU
         # (the verdict differs only within an ulp of tol)
-        if f1 * f1 + f2 * f2 <= tol * tol:
-            ok = True
-            break
-        if step == max_steps:
-            break
-        a = e[0, 0] * d[1, 0] + e[0, 1] * d[1, 1] + e[0, 2] * d[1, 2]
-        b = e[0, 0] * d[2, 0] + e[0, 1] * d[2, 1] + e[0, 2] * d[2, 2]
-        c = e[1, 0] * d[1, 0] + e[1, 1] * d[1, 1] + e[1, 2] * d[1, 2]
-        dd = e[1, 0] * d[2, 0] + e[1, 1] * d[2, 1] + e[1, 2] * d[2, 2]
+        converged = f1 * f1 + f2 * f2 <= tol * tol
+        a = e00 * Su0 + e01 * Su1 + e02 * Su2
+        b = e00 * Sv0 + e01 * Sv1 + e02 * Sv2
+        c = e10 * Su0 + e11 * Su1 + e12 * Su2
+        dd = e10 * Sv0 + e11 * Sv1 + e12 * Sv2
         det = a * dd - b * c
-        len_u = math.sqrt(d[1, 0] ** 2 + d[1, 1] ** 2 + d[1, 2] ** 2)
-        len_v = math.sqrt(d[2, 0] ** 2 + d[2, 1] ** 2 + d[2, 2] ** 2)
-        if not abs(det) > SINGULAR_SINE * len_u * len_v:
-            break
+        len_u = math.sqrt(Su0 ** 2 + Su1 ** 2 + Su2 ** 2)
+        len_v = math.sqrt(Sv0 ** 2 + Sv1 ** 2 + Sv2 ** 2)
+        regular = abs(det) > SINGULAR_SINE * len_u * len_v
         du = (dd * f1 - b * f2) / det
         dv = (a * f2 - c * f1) / det
-        if not (math.isfinite(du) and math.isfinite(dv)):  # derivatives ~1e-296 pass the test, then overflow
-            break
-        ui = min(max(ui - du, u0), u1)
-        vi = min(max(vi - dv, v0), v1)
-    return ui, vi, ok
+        # derivatives ~1e-296 pass the singular test, then overflow
+        finite = (abs(du) < math.inf) & (abs(dv) < math.inf)
+        step = (not converged) & (not last) & regular & finite
+        u0, u1 = buf[LANE_DOMAIN * LANES + j], buf[(LANE_DOMAIN + 1) * LANES + j]
+        v0, v1 = buf[(LANE_DOMAIN + 2) * LANES + j], buf[(LANE_DOMAIN + 3) * LANES + j]
+        un = min(max(ui - du, u0), u1)
+        vn = min(max(vi - dv, v0), v1)
+        buf[LANE_U * LANES + j] = un if step else ui
+        buf[LANE_V * LANES + j] = vn if step else vi
+        buf[LANE_STATE * LANES + j] = CONVERGED if converged else (STEPPING if step else STOPPED)
 
 
 @njit(inline="always", **JIT)
@@ -614,8 +798,9 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
     For each mesh hit (triangle prim, Embree's barycentrics b1, b2, distance t_mesh): the start
     (u, v) on the triangle's patch (`barycentric_uv`), written to patch, u_start, v_start; where
     prim < 0, the start is read from them instead (`trace.tracing.refine`: Newton from a given
-    (u, v), the one compiled copy of Newton). Then Newton (`newton_at`) to the tolerance
-    tolerance · max(t_mesh, extent, |mesh point|_∞) (S's coordinates are not computed more finely);
+    (u, v), the one compiled copy of Newton). Then Newton (`newton_lanes`) to the tolerance
+    tolerance · max(t_mesh, extent, |mesh point|_∞) (S's coordinates are not computed more finely), LANES
+    rays at a time (`eval_lanes`, `newton_lanes`);
     whether the hit is ahead and near its mesh hit, and its t (`near_at`); whether an unconverged
     Newton stopped on the domain's edge (`on_domain_edge`); the unit normal n = (S_u × S_v)/|S_u × S_v|
     (not yet turned to the ray), cosine = n·D, and whether n is degenerate (`normal_at`).
@@ -623,26 +808,65 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
     scratch = new_scratch(max_degree)
     d = np.empty((6, 3))
     e = np.empty((2, 3))
-    for i in range(prim.shape[0]):
-        f = prim[i]
-        if f >= 0:
-            k = face_patch[f]
-            us, vs = barycentric_uv(faces, vertex_uv, f, b1[i], b2[i])
-        else:
-            k, us, vs = patch[i], u_start[i], v_start[i]
-        tm = t_mesh[i]
-        magnitude = max(abs(O[i, 0] + tm * D[i, 0]), abs(O[i, 1] + tm * D[i, 1]), abs(O[i, 2] + tm * D[i, 2]))
-        tol = tolerance * max(max(tm, extent), magnitude)
-        ui, vi, ok = newton_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, us, vs,
-                               O, D, i, tol, max_steps, d, e, scratch)
-        patch[i], u_start[i], v_start[i], u[i], v[i], converged[i] = k, us, vs, ui, vi, ok
-        for c in range(3):
-            S[i, c], Su[i, c], Sv[i, c] = d[0, c], d[1, c], d[2, c]
-        near[i], t[i] = near_at(S, Su, Sv, O, D, i, tm, band[k], jump_limit, grazing_allowance)
-        edge[i] = (not ok) and on_domain_edge(domain, k, ui, vi)
-        n0, n1, n2, bad = normal_at(domain, scale, k, Su, Sv, i, sine, vanishing)
-        normal[i, 0], normal[i, 1], normal[i, 2], degenerate[i] = n0, n1, n2, bad
-        cosine[i] = dot3(n0, n1, n2, D[i, 0], D[i, 1], D[i, 2])
+    buf = np.empty(LANE_FIELDS * LANES)
+    ray = np.empty(LANES, dtype=np.int64)
+    lane_patch = np.empty(LANES, dtype=np.int64)
+    base = np.empty(LANES, dtype=np.int64)
+    span_u = np.empty(LANES, dtype=np.int64)  # each point's span in u and v: `find_span_near`'s guesses
+    span_v = np.empty(LANES, dtype=np.int64)
+    for first in range(0, prim.shape[0], LANES):
+        m = min(LANES, prim.shape[0] - first)
+        for j in range(m):  # the starts, tolerances and the planes across the rays
+            i = first + j
+            f = prim[i]
+            if f >= 0:
+                k = face_patch[f]
+                us, vs = barycentric_uv(faces, vertex_uv, f, b1[i], b2[i])
+            else:
+                k, us, vs = patch[i], u_start[i], v_start[i]
+            tm = t_mesh[i]
+            magnitude = max(abs(O[i, 0] + tm * D[i, 0]), abs(O[i, 1] + tm * D[i, 1]), abs(O[i, 2] + tm * D[i, 2]))
+            patch[i], u_start[i], v_start[i] = k, us, vs
+            ray[j], lane_patch[j], span_u[j], span_v[j] = i, k, -1, -1
+            buf[LANE_U * LANES + j], buf[LANE_V * LANES + j] = us, vs
+            buf[LANE_TOL * LANES + j] = tolerance * max(max(tm, extent), magnitude)
+            across_at(D, i, e)
+            for c in range(3):
+                buf[(LANE_E + c) * LANES + j], buf[(LANE_E + 3 + c) * LANES + j] = e[0, c], e[1, c]
+                buf[(LANE_O + c) * LANES + j] = O[i, c]
+            for c in range(4):
+                buf[(LANE_DOMAIN + c) * LANES + j] = domain[k, c]
+        active = m
+        for step in range(max_steps + 1):  # Newton on the rays not yet done, which stay packed at the front
+            eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, lane_patch, base,
+                       span_u, span_v, buf, active, 1, d, scratch)
+            newton_lanes(buf, active, step == max_steps)
+            kept = 0
+            for j in range(active):
+                state = buf[LANE_STATE * LANES + j]
+                if state != STEPPING:
+                    i = ray[j]
+                    u[i], v[i], converged[i] = buf[LANE_U * LANES + j], buf[LANE_V * LANES + j], state == CONVERGED
+                    for c in range(3):
+                        S[i, c] = buf[(LANE_D + c) * LANES + j]
+                        Su[i, c] = buf[(LANE_D + 3 + c) * LANES + j]
+                        Sv[i, c] = buf[(LANE_D + 6 + c) * LANES + j]
+                    continue
+                if kept != j:
+                    ray[kept], lane_patch[kept], span_u[kept], span_v[kept] = ray[j], lane_patch[j], span_u[j], span_v[j]
+                    for field in range(LANE_U, LANE_DOMAIN + 4):
+                        buf[field * LANES + kept] = buf[field * LANES + j]
+                kept += 1
+            active = kept
+            if active == 0:
+                break
+        for i in range(first, first + m):
+            k, ok = patch[i], converged[i]
+            near[i], t[i] = near_at(S, Su, Sv, O, D, i, t_mesh[i], band[k], jump_limit, grazing_allowance)
+            edge[i] = (not ok) and on_domain_edge(domain, k, u[i], v[i])
+            n0, n1, n2, bad = normal_at(domain, scale, k, Su, Sv, i, sine, vanishing)
+            normal[i, 0], normal[i, 1], normal[i, 2], degenerate[i] = n0, n1, n2, bad
+            cosine[i] = dot3(n0, n1, n2, D[i, 0], D[i, 1], D[i, 2])
 
 
 @njit(inline="always", **JIT)
@@ -796,19 +1020,50 @@ def normal_curvatures(Su, Sv, Suu, Suv, Svv, n, w, out):
         out[i] = (L * a * a + 2.0 * M * a * b + N * b * b) / first
 
 
+@njit(inline="always", **JIT)
+def curvature_lanes(buf, n):
+    """`fundamental_forms_at` and `curvature_of` at points 0..n−1 of a lane block (derivatives in `LANE_D`…, unit
+    normal in `LANE_E`) into `LANE_CURVATURE`…: the vector loop."""
+    for j in range(n):
+        E, F, G, L, M, N = fundamental_forms_at(_field3(buf, LANE_D + 3, j), _field3(buf, LANE_D + 6, j),
+                                                _field3(buf, LANE_D + 9, j), _field3(buf, LANE_D + 12, j),
+                                                _field3(buf, LANE_D + 15, j), _field3(buf, LANE_E, j))
+        K, H, k1, k2 = curvature_of(E, F, G, L, M, N)
+        buf[LANE_CURVATURE * LANES + j], buf[(LANE_CURVATURE + 1) * LANES + j] = K, H
+        buf[(LANE_CURVATURE + 2) * LANES + j], buf[(LANE_CURVATURE + 3) * LANES + j] = k1, k2
+
+
 @njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2})",))
 def curvatures_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
                   patch, u, v, n, out):
     """K, H, κ1, κ2 of points (patch, u, v) with unit normals n into out (4, N), fused: `point_at` of order 2
-    and `curvature_of` per point in registers, no (N, 3) derivative arrays. Rows with patch < 0: NaN."""
+    and `curvature_of` per point, LANES points at a time (`eval_lanes`, `curvature_lanes`), no (N, 3) derivative
+    arrays. Rows with patch < 0: NaN."""
     scratch = new_scratch(max_degree)
     d = np.empty((6, 3))
-    for i in range(patch.shape[0]):
-        k = patch[i]
-        if k < 0:
-            out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
-            continue
-        point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, u[i], v[i], 2, d,
-                 scratch)
-        E, F, G, L, M, N = fundamental_forms_at(d[1], d[2], d[3], d[4], d[5], n[i])
-        out[0, i], out[1, i], out[2, i], out[3, i] = curvature_of(E, F, G, L, M, N)
+    buf = np.empty(LANE_FIELDS * LANES)
+    row = np.empty(LANES, dtype=np.int64)
+    lane_patch = np.empty(LANES, dtype=np.int64)
+    base = np.empty(LANES, dtype=np.int64)
+    span_u = np.empty(LANES, dtype=np.int64)  # each point's span in u and v: `find_span_near`'s guesses
+    span_v = np.empty(LANES, dtype=np.int64)
+    for first in range(0, patch.shape[0], LANES):
+        filled = 0
+        for i in range(first, min(first + LANES, patch.shape[0])):
+            k = patch[i]
+            if k < 0:
+                out[0, i] = out[1, i] = out[2, i] = out[3, i] = np.nan
+                continue
+            row[filled], lane_patch[filled] = i, k
+            buf[LANE_U * LANES + filled], buf[LANE_V * LANES + filled] = u[i], v[i]
+            for c in range(3):
+                buf[(LANE_E + c) * LANES + filled] = n[i, c]
+            filled += 1
+        span_u[:filled] = -1
+        span_v[:filled] = -1
+        eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, lane_patch, base,
+                   span_u, span_v, buf, filled, 2, d, scratch)
+        curvature_lanes(buf, filled)
+        for j in range(filled):
+            for r in range(4):
+                out[r, row[j]] = buf[(LANE_CURVATURE + r) * LANES + j]
