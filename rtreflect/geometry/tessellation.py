@@ -128,7 +128,7 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enc
                      np.full(len(uv), patch_index), np.isin(np.arange(len(uv)), rim), np.asarray(rim_edges, dtype=np.int64))
 
 
-#: Boundary vertices the seam restart asks the k-d tree for at first (more for points whose nearest all lie on their own face).
+#: Boundary vertices `Tessellation._across_by_query` asks the k-d query for at first (more for points whose nearest do not qualify).
 SEAM_NEIGHBOURS = 8
 
 
@@ -167,8 +167,7 @@ class Tessellation:
                 np.ascontiguousarray(self.face_patch, dtype=np.int64))
 
     def across_seam(self, points: np.ndarray, patch: np.ndarray, tried: np.ndarray | None = None,
-                    uv: np.ndarray | None = None, reach: np.ndarray | None = None,
-                    memo: tuple[np.ndarray, dict] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    uv: np.ndarray | None = None, reach: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """For points on the boundary of ``patch``: the nearest boundary vertex of another patch.
 
         ``tried`` (N, m) lists patches to pass over as well (neighbours already tried: where
@@ -177,40 +176,64 @@ class Tessellation:
         than half the patch's domain away: the other side of a closed face's seam (a revolved
         face's u = 0 and u = 2π), where the ray goes on on the same face.
 
-        ``reach`` (N,): only vertices within that distance of their point count (the search stops
-        widening for a point once its nearest reach beyond it: across a large face it would
-        otherwise walk the face's whole boundary).
+        ``reach`` (N,): only vertices within that distance of their point count (across a large face
+        the search would otherwise walk the face's whole boundary).
 
         Returns (patch, u, v) of that vertex, where a hit that ran off one face's edge
         can restart on its neighbour, and the distance to it (patch −1 and inf where there
-        is no other patch). A k-d tree over the boundary vertices: the SEAM_NEIGHBOURS nearest,
-        then more for the points whose nearest all belong to their own patch.
-
-        ``memo`` (ids (N,), {}): the same point asked again (the next try, with more faces ``tried``) under the same id
-        takes the k-d answers its id got before (`_nearest`): the same queries, each once.
+        is no other patch). A compiled walk of a k-d tree over the boundary vertices that skips the
+        vertices that do not qualify (`kernels.rims.nearest_across`). Where two qualifying vertices tie
+        (the same squared distance, another face or (u, v)), the order of scipy's k-d query decides, as
+        it did when the query served every point (`_across_by_query`: the SEAM_NEIGHBOURS nearest, then
+        more for the points whose nearest do not qualify); so every answer is the query's, bit for bit,
+        at a fraction of its cost (each query sorted its k nearest whether they qualified or not).
         """
         patch_out = np.full(len(points), -1)
         uv_out = np.full((len(points), 2), np.nan)
         dist_out = np.full(len(points), np.inf)
-        # One patch and no far side of its own seam to look for: no other vertex can qualify, and the tree
-        # (scipy.spatial: ~0.1 s to import) is not built.
+        # One patch and no far side of its own seam to look for: no other vertex can qualify.
         if len(self.boundary) == 0 or len(points) == 0 or (uv is None and self.single_patch):
             return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
-        tree, cand_patch = self._boundary_tree
+        lo, hi, start, end, left, order, vertices, finite = self._boundary_kd
+        cand_patch = self.vertex_patch[self.boundary]
         boundary_uv, half_span = self._boundary_uv
-        todo = np.arange(len(points))
+        points = np.ascontiguousarray(points, dtype=np.float64)
         patch = np.ascontiguousarray(patch, dtype=np.int64)
         uv = np.zeros((0, 2)) if uv is None else np.ascontiguousarray(uv, dtype=np.float64)
         tried = np.zeros((len(points), 0), dtype=np.int64) if tried is None else np.ascontiguousarray(tried, dtype=np.int64)
+        reach = np.zeros(0) if reach is None else np.ascontiguousarray(reach, dtype=np.float64)
+        best, dist, tie = np.empty(len(points), dtype=np.int64), np.empty(len(points)), np.empty(len(points), dtype=bool)
+        rims_kernel.nearest_across(lo, hi, start, end, left, order, vertices, cand_patch, boundary_uv, points, patch, uv,
+                                   half_span, tried, reach, best, dist, tie)
+        found = best >= 0
+        patch_out[found] = cand_patch[best[found]]
+        uv_out[found] = self.vertex_uv[self.boundary[best[found]]]
+        dist_out[found] = dist[found]
+        # Ties, and points or vertices the distances cannot rank (not finite): the k-d query's answer.
+        ask = np.flatnonzero(tie | ~np.isfinite(points).all(axis=1)) if finite else np.arange(len(points))
+        if len(ask):
+            patch_out[ask], uv_out[ask], dist_out[ask] = self._across_by_query(
+                points[ask], patch[ask], tried[ask], uv[ask] if len(uv) else uv, reach[ask] if len(reach) else reach)
+        return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
+
+    def _across_by_query(self, points, patch, tried, uv, reach) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`across_seam`'s (patch, (N, 2) uv, distance) by scipy's k-d query (arguments as the kernel takes them): the
+        SEAM_NEIGHBOURS nearest, then 8× more for the points whose nearest all fail to qualify
+        (`kernels.rims.first_across`: its face, the far side of its own closed face's seam, the faces tried, the reach)."""
+        patch_out = np.full(len(points), -1)
+        uv_out = np.full((len(points), 2), np.nan)
+        dist_out = np.full(len(points), np.inf)
+        tree, cand_patch = self._boundary_tree
+        boundary_uv, half_span = self._boundary_uv
+        todo = np.arange(len(points))
         k = SEAM_NEIGHBOURS
         while len(todo):
             k = min(k, len(self.boundary))
-            dist, nearest = _nearest(tree, points, todo, k, memo)
-            # The first qualifying column per row (`kernels.rims.first_across`: its face, the far side of its own
-            # closed face's seam, the faces tried, the reach), without (rows, k) temporaries.
+            dist, nearest = tree.query(points[todo], k=k)
+            dist, nearest = dist.reshape(len(todo), k), nearest.reshape(len(todo), k)
             first = np.empty(len(todo), dtype=np.int64)
             rims_kernel.first_across(nearest, dist, cand_patch, boundary_uv, patch[todo], uv[todo] if len(uv) else uv,
-                                     half_span, tried[todo], np.zeros(0) if reach is None else reach[todo], first)
+                                     half_span, tried[todo], reach[todo] if len(reach) else reach, first)
             found = first >= 0
             rows, best = todo[found], nearest[found, first[found]]
             patch_out[rows] = cand_patch[best]
@@ -218,9 +241,9 @@ class Tessellation:
             dist_out[rows] = dist[found, first[found]]
             if k == len(self.boundary):
                 break
-            more = ~found if reach is None else ~found & (dist[:, -1] <= reach[todo])  # some within reach not seen yet
+            more = ~found if len(reach) == 0 else ~found & (dist[:, -1] <= reach[todo])  # some within reach not seen yet
             todo, k = todo[more], 8 * k
-        return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
+        return patch_out, uv_out, dist_out
 
     @cached_property
     def single_patch(self) -> bool:
@@ -289,31 +312,18 @@ class Tessellation:
 
         return cKDTree(self.vertices[self.boundary]), self.vertex_patch[self.boundary]
 
-
-def _nearest(tree, points: np.ndarray, todo: np.ndarray, k: int, memo: tuple[np.ndarray, dict] | None
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """The k nearest boundary vertices (distances and indices, (n, k)) of ``points[todo]``; with ``memo`` (ids, answers
-    by k: sorted ids, distances, indices), the ids asked before at this k take their earlier answer, the rest are
-    queried and kept."""
-    if memo is None:
-        dist, nearest = tree.query(points[todo], k=k)
-        return dist.reshape(len(todo), k), nearest.reshape(len(todo), k)
-    ids, answers = memo
-    rows = ids[todo]
-    dist, nearest = np.empty((len(todo), k)), np.empty((len(todo), k), dtype=np.int64)
-    known, known_dist, known_nearest = answers.get(k, (np.zeros(0, dtype=np.int64), np.zeros((0, k)), np.zeros((0, k), dtype=np.int64)))
-    at = np.minimum(np.searchsorted(known, rows), max(len(known) - 1, 0))
-    have = (at < len(known)) & (known[at] == rows) if len(known) else np.zeros(len(rows), dtype=bool)
-    dist[have], nearest[have] = known_dist[at[have]], known_nearest[at[have]]
-    new = np.flatnonzero(~have)
-    if len(new):
-        d, i = tree.query(points[todo[new]], k=k)
-        dist[new], nearest[new] = d.reshape(len(new), k), i.reshape(len(new), k)
-        merged = np.concatenate([known, rows[new]])
-        order = np.argsort(merged, kind="stable")
-        answers[k] = (merged[order], np.concatenate([known_dist, dist[new]])[order],
-                      np.concatenate([known_nearest, nearest[new]])[order])
-    return dist, nearest
+    @cached_property
+    def _boundary_kd(self) -> tuple[np.ndarray, ...]:
+        """The boundary vertices' k-d tree for `across_seam` (`kernels.rims.kd_build`): its nodes' boxes (lo, hi),
+        runs (start, end) and first children (left), the vertex order, the vertices (B, 3) and whether all are finite
+        (else the k-d query answers every point)."""
+        vertices = np.ascontiguousarray(self.vertices[self.boundary], dtype=np.float64)
+        size = 4 * len(vertices) // rims_kernel.KD_LEAF + 2  # nodes: leaves hold over KD_LEAF / 2 vertices each
+        lo, hi = np.empty((size, 3)), np.empty((size, 3))
+        start, end, left = (np.empty(size, dtype=np.int64) for _ in range(3))
+        order = np.empty(len(vertices), dtype=np.int64)
+        count = rims_kernel.kd_build(vertices, rims_kernel.KD_LEAF, order, lo, hi, start, end, left) if len(vertices) else 0
+        return lo[:count], hi[:count], start[:count], end[:count], left[:count], order, vertices, bool(np.isfinite(vertices).all())
 
 
 def _chord_error(surface: NurbsSurface, mesh: PatchMesh) -> float:

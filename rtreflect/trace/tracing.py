@@ -367,12 +367,10 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
     reach = 2.0 * tessellation.edge_length[pk[seam]]
     restarted = [stuck]
-    memo = {}  # the k-d answers of each seam row's point `at`, asked again by the next try (`Tessellation.across_seam`)
     for attempt in range(SEAM_TRIES):
         if len(seam) == 0:
             break
-        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]), reach,
-                                                   memo=(seam, memo))
+        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]), reach)
         close = pn >= 0
         seam, at, tried, reach, pn, un, vn, gap = (x[close] for x in (seam, at, tried, reach, pn, un, vn, gap))
         if attempt == 0:
