@@ -18,6 +18,8 @@ Each part stresses one thing real exports contain (Open CASCADE through OCP; rhi
   small_fillet.step    a box with a 0.01 and a 2 fillet, beside a free edge and vertex (no surface)
   brep.igs, faces.igs  the shelled box through IGESControl_Writer, B-rep mode and faces mode
   sphere.3dm           a Rhino sphere (periodic, two poles)
+  union_big.step       a cylinder fused with a sphere and a crossing cylinder (trims are intersection curves),
+                       scaled to 10 m: OCCT's Segment puts two periodic faces one period past their pcurves
   rhino_mix.3dm        rhino3dm's builders: a bare rational surface, a capped cone, a revolved profile (seam and
                        poles), a pipe extrusion with a hole, a trimmed plane
 """
@@ -311,6 +313,23 @@ def small_fillet():
     return compound
 
 
+def union_curved(size: float = 50.0):
+    """A vertical cylinder (r 10) fused with a sphere (r 14) on its top and a crossing cylinder (r 7) along x: every
+    trim between them is an intersection curve. ``size``: the cylinder's height is scaled to it (50 as built)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Fuse
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeSphere
+    from OCP.gp import gp_Pnt, gp_Trsf
+
+    shape = BRepAlgoAPI_Fuse(_cylinder(0, 0, -20, (0, 0, 1), 10.0, 40.0), BRepPrimAPI_MakeSphere(gp_Pnt(0, 0, 20), 14.0).Shape()).Shape()
+    shape = BRepAlgoAPI_Fuse(shape, _cylinder(-25, 0, 0, (1, 0, 0), 7.0, 50.0)).Shape()
+    if size != 50.0:
+        trsf = gp_Trsf()
+        trsf.SetScale(gp_Pnt(0, 0, 0), size / 50.0)
+        shape = BRepBuilderAPI_Transform(shape, trsf, True).Shape()
+    return shape
+
+
 def write_step_in(shape, path: Path, unit: str) -> None:
     """A STEP file whose length unit is ``unit`` (Open CASCADE's ``write.step.unit``), e.g. "INCH"."""
     from OCP.Interface import Interface_Static
@@ -393,6 +412,7 @@ PARTS = {
     "reversed_face.step": lambda p: write_step(reversed_face(), p),
     "sliver.step": lambda p: write_step(sliver(), p),
     "small_fillet.step": lambda p: write_step(small_fillet(), p),
+    "union_big.step": lambda p: write_step(union_curved(10000.0), p),
     "brep.igs": lambda p: write_iges(shelled_box(), p),
     "faces.igs": lambda p: write_iges(shelled_box(), p, mode=0),
     "sphere.3dm": write_sphere_3dm,
