@@ -46,3 +46,35 @@ def test_periodic_face_cut_one_period_on_keeps_its_pcurves_parameters(tmp_path):
         # Not float rounding (test_cad_reader's 1e-11): the pcurves end 1.8e-9 past the cut surface (OCCT's tolerance),
         # so the end points are 2.5e-6 mm off on the 1.4 m cylinder.
         assert np.max(np.linalg.norm(ours - reference, axis=1)) <= ORIGINAL_TOLERANCE * model.diagonal, k
+
+
+def test_skirt_is_one_boundary_edge_wide_on_the_surface(tmp_path):
+    """union_big.step: the skirt hung outside a reader's mesh (`tessellation._with_skirt`, SKIRT_EDGES boundary
+    edges wide) was built perpendicular to each boundary edge in (u, v) as if u and v had the same units. On a
+    cylinder u is an angle and v a length: at 10 m a boundary edge 19 mm long in v threw its skirt 4.3 rad round the
+    1.4 m cylinder, a chord through the part. The faces' chord errors (2,000-2,600 mm) then set the offset of
+    reflected-ray origins off the surface (`Accelerator.surface_origins`): rays started past the part that blocks
+    them, and the render drew reflection lines OCCT's intersector finds blocked (validate: 149 misses). Measured on
+    the surface: every skirt vertex lies within 1.5 of its boundary edge's 3D length from the edge's end it hangs
+    from (one edge wide, some room for the surface's curvature and the domain's clamp)."""
+    from rtreflect.geometry.tessellation import tessellate_patch
+
+    path = tmp_path / "union_big.step"
+    sweep.PARTS[path.name](path)
+    for k, surface in enumerate(read_cad(path).surfaces):
+        mesh = tessellate_patch(surface, k, 4)
+        nodes = len(surface.mesh_uv[0])
+        # _with_skirt's quads: skirt vertices nodes + 2i, nodes + 2i + 1 hang from the i-th boundary edge (a, b);
+        # triangles (a, b, b_out) for every edge, then (a, b_out, a_out).
+        skirt = mesh.faces[len(surface.mesh_uv[1]):]
+        first, second = np.split(skirt, 2)
+        a, b, b_out, a_out = first[:, 0], first[:, 1], first[:, 2], second[:, 2]
+        assert np.all(a_out - nodes == 2 * np.arange(len(a))) and np.all(b_out == a_out + 1)
+        S = mesh.vertices
+        edge = np.linalg.norm(S[b] - S[a], axis=1)
+        reach = np.maximum(np.linalg.norm(S[a_out] - S[a], axis=1), np.linalg.norm(S[b_out] - S[b], axis=1))
+        assert np.all(reach <= 1.5 * edge + 1e-9 * surface_size(S)), (k, np.max(reach / edge))
+
+
+def surface_size(points: np.ndarray) -> float:
+    return float(np.linalg.norm(np.ptp(points, axis=0)))
