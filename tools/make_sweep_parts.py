@@ -18,6 +18,21 @@ Each part stresses one thing real exports contain (Open CASCADE through OCP; rhi
   small_fillet.step    a box with a 0.01 and a 2 fillet, beside a free edge and vertex (no surface)
   brep.igs, faces.igs  the shelled box through IGESControl_Writer, B-rep mode and faces mode
   sphere.3dm           a Rhino sphere (periodic, two poles)
+  union_big.step       a cylinder fused with a sphere and a crossing cylinder (trims are intersection curves),
+                       scaled to 10 m: OCCT's Segment puts two periodic faces one period past their pcurves
+  union.step, union.igs  the same at 50 mm, and through IGESControl_Writer
+  union_micro.step     the same at 1e-3 mm
+  union_far.step       the same at 50 mm, moved to (1e5, -1e5, 1e5)
+  sphere_pole_view.step  a sphere whose axis (its poles) points at the default 3/4 view's camera
+  cone_apex_view.step  a cone whose apex points at the default camera
+  torus_patch.step     a torus cut to 270° round and a half tube, its seam facing the camera
+  revolved_seam.step   a wavy B-spline profile revolved a full turn (poles at both ends), its seam facing the camera
+  loft_fillet_hole.step  a lofted solid with a through-hole whose top edge is filleted
+  instances.step       the filleted block three times (one TShape, rotated locations) and a mirrored copy
+  kink.step            one face of degree 3 × 7 with an interior C0 crease (a knot of multiplicity 3)
+  offset_face.step     a Geom_OffsetSurface of a B-spline (not a NURBS: OCCT approximates it)
+  rational_wild.step   a rational bicubic with weights from 0.05 to 20
+  extrusion_holes.3dm  rhino3dm: a polyline outline extruded with two round holes (caps: trimmed planes with holes)
   rhino_mix.3dm        rhino3dm's builders: a bare rational surface, a capped cone, a revolved profile (seam and
                        poles), a pipe extrusion with a hole, a trimmed plane
 """
@@ -311,6 +326,198 @@ def small_fillet():
     return compound
 
 
+def union_curved(size: float = 50.0):
+    """A vertical cylinder (r 10) fused with a sphere (r 14) on its top and a crossing cylinder (r 7) along x: every
+    trim between them is an intersection curve. ``size``: the cylinder's height is scaled to it (50 as built)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Fuse
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeSphere
+    from OCP.gp import gp_Pnt, gp_Trsf
+
+    shape = BRepAlgoAPI_Fuse(_cylinder(0, 0, -20, (0, 0, 1), 10.0, 40.0), BRepPrimAPI_MakeSphere(gp_Pnt(0, 0, 20), 14.0).Shape()).Shape()
+    shape = BRepAlgoAPI_Fuse(shape, _cylinder(-25, 0, 0, (1, 0, 0), 7.0, 50.0)).Shape()
+    if size != 50.0:
+        trsf = gp_Trsf()
+        trsf.SetScale(gp_Pnt(0, 0, 0), size / 50.0)
+        shape = BRepBuilderAPI_Transform(shape, trsf, True).Shape()
+    return shape
+
+
+def _moved(shape, offset):
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.gp import gp_Trsf, gp_Vec
+
+    trsf = gp_Trsf()
+    trsf.SetTranslation(gp_Vec(*offset))
+    return BRepBuilderAPI_Transform(shape, trsf, True).Shape()
+
+
+#: The default scene's 3/4 view direction (`exchange.partscene.ISO_FROM`): axes pointed at the camera.
+ISO_FROM = (0.55, -1.0, 0.75)
+
+
+def sphere_pole_view():
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeSphere
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    return BRepPrimAPI_MakeSphere(gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(*ISO_FROM)), 20.0).Shape()
+
+
+def cone_apex_view():
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCone
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    return BRepPrimAPI_MakeCone(gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(*ISO_FROM)), 15.0, 0.0, 25.0).Shape()
+
+
+def torus_patch():
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeTorus
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    axes = gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1), gp_Dir(ISO_FROM[0], ISO_FROM[1], 0))
+    return BRepPrimAPI_MakeTorus(axes, 30.0, 10.0, -math.pi / 2, math.pi / 2, 1.5 * math.pi).Shape()
+
+
+def revolved_seam():
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_Transform
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeRevol
+    from OCP.GeomAPI import GeomAPI_PointsToBSpline
+    from OCP.collections import Array1_gp_Pnt
+    from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt, gp_Trsf
+
+    radii = [0.001, 14, 9, 16, 8, 12, 0.001]
+    points = Array1_gp_Pnt(1, len(radii))
+    for k, r in enumerate(radii):
+        points.SetValue(k + 1, gp_Pnt(float(r), 0, 6.0 * k))
+    edge = BRepBuilderAPI_MakeEdge(GeomAPI_PointsToBSpline(points).Curve()).Edge()
+    axis = gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1))
+    turn = gp_Trsf()
+    turn.SetRotation(axis, math.atan2(ISO_FROM[1], ISO_FROM[0]))  # the profile (the seam) on the camera's side
+    edge = BRepBuilderAPI_Transform(edge, turn, True).Shape()
+    return BRepPrimAPI_MakeRevol(edge, axis, 2 * math.pi).Shape()
+
+
+def loft_fillet_hole():
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeWire
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepOffsetAPI import BRepOffsetAPI_ThruSections
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism
+    from OCP.BRep import BRep_Tool
+    from OCP.GeomAPI import GeomAPI_PointsToBSpline
+    from OCP.collections import Array1_gp_Pnt
+    from OCP.gp import gp_Pnt, gp_Vec
+
+    loft = BRepOffsetAPI_ThruSections(False, False)
+    for k, y in enumerate((0.0, 25.0, 50.0)):
+        points = Array1_gp_Pnt(1, 7)
+        for i in range(7):
+            points.SetValue(i + 1, gp_Pnt(10.0 * i, y, 10 + 3.0 * math.sin(0.8 * i + k)))
+        loft.AddWire(BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(GeomAPI_PointsToBSpline(points).Curve()).Edge()).Wire())
+    loft.Build()
+    solid = BRepPrimAPI_MakePrism(next(_faces(loft.Shape())), gp_Vec(0, 0, -15)).Shape()
+    solid = BRepAlgoAPI_Cut(solid, _cylinder(30, 25, -50, (0, 0, 1), 8.0, 100)).Shape()
+    fillet = BRepFilletAPI_MakeFillet(solid)
+    for edge in _edges(solid):  # the hole's top rim: on the r = 8 circle, above the prism's bottom
+        first, last = BRep_Tool.Range_s(edge)
+        p = BRep_Tool.Curve_s(edge, first, last).Value(0.5 * (first + last))
+        if abs(math.hypot(p.X() - 30, p.Y() - 25) - 8.0) < 1e-3 and p.Z() > 3:
+            fillet.Add(2.0, edge)
+    return fillet.Shape()
+
+
+def instances():
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Ax1, gp_Ax2, gp_Dir, gp_Pnt, gp_Trsf, gp_Vec
+
+    block = filleted_block()
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, block)
+    for k in (1, 2):  # repeated: the same TShape at new locations
+        turn, place = gp_Trsf(), gp_Trsf()
+        turn.SetRotation(gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1)), 0.4 * k)
+        place.SetTranslation(gp_Vec(60.0 * k, 0, 0))
+        place.Multiply(turn)
+        builder.Add(compound, block.Located(TopLoc_Location(place)))
+    mirror = gp_Trsf()
+    mirror.SetMirror(gp_Ax2(gp_Pnt(0, -30, 0), gp_Dir(0, 1, 0)))
+    builder.Add(compound, BRepBuilderAPI_Transform(block, mirror, True).Shape())
+    return compound
+
+
+def _bspline_face(poles, degree_u: int, degree_v: int, u_knots, weights=None):
+    """A face on a B-spline surface through ``poles`` (nested lists of xyz): clamped, ``u_knots`` (value,
+    multiplicity) pairs, v without interior knots."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.collections import Array1_double, Array1_int, Array2_double, Array2_gp_Pnt
+    from OCP.gp import gp_Pnt
+
+    nu, nv = len(poles), len(poles[0])
+    net = Array2_gp_Pnt(1, nu, 1, nv)
+    for i in range(nu):
+        for j in range(nv):
+            net.SetValue(i + 1, j + 1, gp_Pnt(*poles[i][j]))
+
+    def knots(pairs):
+        values, mults = Array1_double(1, len(pairs)), Array1_int(1, len(pairs))
+        for k, (value, mult) in enumerate(pairs):
+            values.SetValue(k + 1, value)
+            mults.SetValue(k + 1, mult)
+        return values, mults
+
+    uk, um = knots(u_knots)
+    vk, vm = knots([(0.0, degree_v + 1), (1.0, degree_v + 1)])
+    if weights is None:
+        surface = Geom_BSplineSurface(net, uk, vk, um, vm, degree_u, degree_v)
+    else:
+        w = Array2_double(1, nu, 1, nv)
+        for i in range(nu):
+            for j in range(nv):
+                w.SetValue(i + 1, j + 1, weights[i][j])
+        surface = Geom_BSplineSurface(net, w, uk, vk, um, vm, degree_u, degree_v)
+    return BRepBuilderAPI_MakeFace(surface, 1e-7).Face()
+
+
+def kink():
+    poles = [[(10.0 * i, 8.0 * j, 8.0 * abs(i - 3) / 3 + 3.0 * math.sin(j)) for j in range(8)] for i in range(7)]
+    return _bspline_face(poles, 3, 7, [(0.0, 4), (0.5, 3), (1.0, 4)])
+
+
+def offset_face():
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRep import BRep_Tool
+    from OCP.Geom import Geom_OffsetSurface
+
+    poles = [[(10.0 * i, 10.0 * j, 5.0 * math.sin(i) * math.cos(j)) for j in range(5)] for i in range(5)]
+    base = BRep_Tool.Surface_s(_bspline_face(poles, 4, 4, [(0.0, 5), (1.0, 5)]))
+    return BRepBuilderAPI_MakeFace(Geom_OffsetSurface(base, 3.0), 1e-7).Face()
+
+
+def rational_wild():
+    poles = [[(15.0 * i, 15.0 * j, 10.0 if (i, j) in ((1, 1), (2, 2)) else 0.0) for j in range(4)] for i in range(4)]
+    weights = [[20.0 if (i, j) == (1, 1) else 0.05 if (i, j) == (2, 2) else 1.0 for j in range(4)] for i in range(4)]
+    return _bspline_face(poles, 3, 3, [(0.0, 4), (1.0, 4)], weights)
+
+
+def write_extrusion_holes_3dm(path: Path) -> None:
+    import rhino3dm as r
+
+    model = new_3dm()
+    outline = r.Curve.CreateControlPointCurve([r.Point3d(40 * math.cos(t) * (1 + 0.2 * math.cos(2 * t)), 25 * math.sin(t), 0)
+                                               for t in [2 * math.pi * k / 16 for k in range(17)]], 1)
+    extrusion = r.Extrusion.Create(outline, 10.0, True)
+    for x in (-15.0, 15.0):
+        extrusion.AddInnerProfile(r.Circle(r.Point3d(x, 0, 0), 6.0).ToNurbsCurve())
+    model.Objects.AddExtrusion(extrusion)
+    save_3dm(model, path)
+
+
 def write_step_in(shape, path: Path, unit: str) -> None:
     """A STEP file whose length unit is ``unit`` (Open CASCADE's ``write.step.unit``), e.g. "INCH"."""
     from OCP.Interface import Interface_Static
@@ -393,6 +600,21 @@ PARTS = {
     "reversed_face.step": lambda p: write_step(reversed_face(), p),
     "sliver.step": lambda p: write_step(sliver(), p),
     "small_fillet.step": lambda p: write_step(small_fillet(), p),
+    "union_big.step": lambda p: write_step(union_curved(10000.0), p),
+    "union.step": lambda p: write_step(union_curved(), p),
+    "union.igs": lambda p: write_iges(union_curved(), p),
+    "union_micro.step": lambda p: write_step(union_curved(1e-3), p),
+    "union_far.step": lambda p: write_step(_moved(union_curved(), (1e5, -1e5, 1e5)), p),
+    "sphere_pole_view.step": lambda p: write_step(sphere_pole_view(), p),
+    "cone_apex_view.step": lambda p: write_step(cone_apex_view(), p),
+    "torus_patch.step": lambda p: write_step(torus_patch(), p),
+    "revolved_seam.step": lambda p: write_step(revolved_seam(), p),
+    "loft_fillet_hole.step": lambda p: write_step(loft_fillet_hole(), p),
+    "instances.step": lambda p: write_step(instances(), p),
+    "kink.step": lambda p: write_step(kink(), p),
+    "offset_face.step": lambda p: write_step(offset_face(), p),
+    "rational_wild.step": lambda p: write_step(rational_wild(), p),
+    "extrusion_holes.3dm": write_extrusion_holes_3dm,
     "brep.igs": lambda p: write_iges(shelled_box(), p),
     "faces.igs": lambda p: write_iges(shelled_box(), p, mode=0),
     "sphere.3dm": write_sphere_3dm,

@@ -202,6 +202,15 @@ def _snap_to_knots(value: float, knots: np.ndarray) -> float:
     return float(near[0]) if len(near) else value
 
 
+def _into_pcurves_period(knots: np.ndarray, lo: float, period: float) -> np.ndarray:
+    """A periodic direction's knots after `Segment`, moved by whole periods so the domain starts at ``lo``, the
+    pcurves' first parameter: where the trims and mesh (u, v) are. OCCT's `Segment` may return the span one period
+    on (pcurves from -1.8e-9 to 2π on knots 0..2π came back as 2π..4π); on a periodic surface S(u) = S(u + period),
+    so the shift keeps the geometry."""
+    shift = round((knots[0] - lo) / period) * period if period else 0.0
+    return knots - shift if shift else knots
+
+
 def bspline_of_face(face) -> NurbsSurface:
     """The converted face's B-spline surface, cut to the face's (u, v) bounds, as a `NurbsSurface` (no trim yet)."""
     from OCP.BRep import BRep_Tool
@@ -225,8 +234,10 @@ def bspline_of_face(face) -> NurbsSurface:
 
     uk = np.fromiter(surface.UKnots(), float)
     vk = np.fromiter(surface.VKnots(), float)
-    u0, u1 = cut(umin, umax, u_first, u_last, surface.IsUPeriodic(), surface.UPeriod() if surface.IsUPeriodic() else 0, uk)
-    v0, v1 = cut(vmin, vmax, v_first, v_last, surface.IsVPeriodic(), surface.VPeriod() if surface.IsVPeriodic() else 0, vk)
+    u_period = surface.UPeriod() if surface.IsUPeriodic() else 0.0
+    v_period = surface.VPeriod() if surface.IsVPeriodic() else 0.0
+    u0, u1 = cut(umin, umax, u_first, u_last, surface.IsUPeriodic(), u_period, uk)
+    v0, v1 = cut(vmin, vmax, v_first, v_last, surface.IsVPeriodic(), v_period, vk)
     whole = (u0, u1, v0, v1) == (u_first, u_last, v_first, v_last)
     clamped = (surface.UMultiplicity(1) == surface.UDegree() + 1 and surface.UMultiplicity(len(uk)) == surface.UDegree() + 1
                and surface.VMultiplicity(1) == surface.VDegree() + 1 and surface.VMultiplicity(len(vk)) == surface.VDegree() + 1)
@@ -250,8 +261,8 @@ def bspline_of_face(face) -> NurbsSurface:
         weights = np.fromiter(surface.WeightsArray(), float).reshape(nu, nv)  # never Weights(): it crashes OCP 8.0
     else:
         weights = np.ones((nu, nv))
-    knots_u = np.fromiter(surface.UKnotSequence(), float)
-    knots_v = np.fromiter(surface.VKnotSequence(), float)
+    knots_u = _into_pcurves_period(np.fromiter(surface.UKnotSequence(), float), u0, u_period)
+    knots_v = _into_pcurves_period(np.fromiter(surface.VKnotSequence(), float), v0, v_period)
     knots_u, poles, weights = clean_knots(knots_u, p, poles, weights, 0)
     knots_v, poles, weights = clean_knots(knots_v, q, poles, weights, 1)
     for direction, knots, degree, count in (("u", knots_u, p, poles.shape[0]), ("v", knots_v, q, poles.shape[1])):

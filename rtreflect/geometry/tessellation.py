@@ -107,7 +107,7 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enc
         uv, faces = np.asarray(nodes, dtype=np.float64).reshape(-1, 2), np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
         rim_edges = _boundary_edges(faces)  # on the trim: where a neighbouring face joins
         rim = np.unique(rim_edges)
-        uv, faces = _with_skirt(uv, faces, surface.domain)
+        uv, faces = _with_skirt(uv, faces, surface)
     else:
         breaks_u, breaks_v = surface.span_breaks()
         us, vs = span_samples(breaks_u, per_span), span_samples(breaks_v, per_span)
@@ -431,15 +431,24 @@ def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span
 #: A boundary chord cuts inside a face bulging beyond it by its sagitta, L²κ/8 ≤ L/2 while the
 #: loop turns by less than 4 rad per edge: a skirt one edge wide covers the face to its trim.
 SKIRT_EDGES = 1.0
+#: `_with_skirt` steps in the surface's metric unless EG − F² ≤ this × EG, sin² of the angle between S_u and S_v
+#: (scale-free): at a pole (S_u = 0) or where the partials are parallel the metric cannot size the step.
+SKIRT_SINGULAR = 1e-6
 
 
-def _with_skirt(uv: np.ndarray, faces: np.ndarray, domain) -> tuple[np.ndarray, np.ndarray]:
+def _with_skirt(uv: np.ndarray, faces: np.ndarray, surface: NurbsSurface) -> tuple[np.ndarray, np.ndarray]:
     """A reader's mesh with a strip of triangles outside every boundary edge, in (u, v) clamped to the domain.
 
     The reader's boundary nodes lie on the trim, its boundary edges are chords of it: rays between
     chord and trim would miss the mesh and never reach the exact face. The strip (SKIRT_EDGES wide)
     lies on the untrimmed surface beyond the face, so rays there are refined and tested against the
     trim like any other (tracing.py). The skirt's vertices come after the reader's.
+
+    Perpendicular to the edge and as long as it on the surface, not in (u, v): with the first fundamental form
+    I = [[E, F], [F, G]] at the edge's middle, the step w ∝ rot(I e) has eᵀ I w = 0, scaled to wᵀ I w = eᵀ I e.
+    (u and v have their own units: on a cylinder u is an angle and v a length, and a perpendicular in (u, v)
+    threw the skirt of a 10 m part's edge round the cylinder.) Where I is singular along the step (a pole),
+    the (u, v) perpendicular stands in.
     """
     if len(faces) == 0:
         return uv, faces
@@ -448,9 +457,19 @@ def _with_skirt(uv: np.ndarray, faces: np.ndarray, domain) -> tuple[np.ndarray, 
     once = _once(edges)
     a, b, c = edges[once, 0], edges[once, 1], third[once]
     along = uv[b] - uv[a]
-    out = np.column_stack([along[:, 1], -along[:, 0]])  # ⊥ the edge, turned away from the triangle's third vertex
-    out *= np.where(np.einsum("ij,ij->i", out, uv[c] - uv[a]) > 0, -1.0, 1.0)[:, None]
-    (u0, u1), (v0, v1) = domain
+    middle = surface.evaluate(*(0.5 * (uv[a] + uv[b])).T)
+    E = np.einsum("ij,ij->i", middle.Su, middle.Su)
+    F = np.einsum("ij,ij->i", middle.Su, middle.Sv)
+    G = np.einsum("ij,ij->i", middle.Sv, middle.Sv)
+    Ie = np.column_stack([E * along[:, 0] + F * along[:, 1], F * along[:, 0] + G * along[:, 1]])
+    length2 = np.einsum("ij,ij->i", along, Ie)  # eᵀ I e: the edge's squared length on the surface
+    out = np.column_stack([Ie[:, 1], -Ie[:, 0]])
+    out_length2 = E * out[:, 0] ** 2 + 2 * F * out[:, 0] * out[:, 1] + G * out[:, 1] ** 2
+    metric = (E * G - F * F > SKIRT_SINGULAR * E * G) & (length2 > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = np.where(metric[:, None], out * np.sqrt(length2 / out_length2)[:, None], np.column_stack([along[:, 1], -along[:, 0]]))
+    out *= np.where(np.einsum("ij,ij->i", out, uv[c] - uv[a]) > 0, -1.0, 1.0)[:, None]  # away from the triangle's third vertex
+    (u0, u1), (v0, v1) = surface.domain
     lo, hi = np.array([u0, v0]), np.array([u1, v1])
     a_out = np.clip(uv[a] + SKIRT_EDGES * out, lo, hi)
     b_out = np.clip(uv[b] + SKIRT_EDGES * out, lo, hi)
