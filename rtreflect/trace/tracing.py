@@ -48,7 +48,7 @@ import numpy as np
 
 from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
-from ..geometry.curvature import curvatures
+from ..geometry.curvature import curvatures, curvatures_at
 from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
@@ -450,6 +450,19 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     the mesh reaches into, so the ray meets it there and Newton starts near the nearer crossing.
     """
     rays = np.flatnonzero(status == VALID)
+    keep = np.abs(cosine[rays]) < OTHER_ROOT_COS
+    # A shallow cap needs |κ| ≥ (n·D)²/2Cδ, and |κ| ≤ max(|κ1|, |κ2|)(1 − (n·D)²) (the principal curvatures bound
+    # the normal curvature, the ray's tangential part is that long): rays that cannot pass are dropped before
+    # the order-2 evaluation (one compiled pass; the curvatures' NaN at degenerate points keeps the ray).
+    rest = rays[~keep]
+    if len(rest):
+        k = curvatures_at(surfaces, pk[rest], ur[rest], vr[rest], normal[rest])
+        c2 = cosine[rest] ** 2
+        bound = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error[pk[rest]] * (1.0 - c2)
+        with np.errstate(invalid="ignore"):
+            far = c2 > bound * np.maximum(np.abs(k.k1), np.abs(k.k2))
+        keep[~keep] = ~far
+        rays = rays[keep]
     if len(rays) == 0:
         return
     d2 = surfaces.evaluate(pk[rays], ur[rays], vr[rays], order=2)
