@@ -48,7 +48,7 @@ import numpy as np
 
 from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
-from ..geometry.curvature import curvatures
+from ..geometry.curvature import curvatures, curvatures_at
 from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
@@ -112,6 +112,12 @@ CORNER_VERTICES = 8
 #: Below this |N·D| a valid hit may be the farther of two close crossings of its sheet: the nearer one is
 #: sought (`_other_root`). As the second look's grazing threshold (78°): ~6% of the teapot's hits at 960×540.
 OTHER_ROOT_COS = 0.2
+#: At any |N·D| the nearer crossing is sought too where the ray's chord through the sheet's cap between its two
+#: crossings (depth (N·D)²/2κ) is no deeper than this many chord errors of the face: the mesh, within its chord
+#: error of the sheet, need not reach into such a cap (instances.step's sphere-corner fillets, r = 4, chord error
+#: 0.35: entries at |N·D| 0.22 and 0.32, caps 0.10 and 0.21 deep, were stored at their exits). ×2 as the second
+#: look's shell (`secondlook.SHELL_CHORDS`): the chord error is sampled, a triangle's interior may stray farther.
+OTHER_ROOT_CHORDS = 2.0
 
 VALID, MISS, UNRESOLVED = 0, 1, 2
 
@@ -427,7 +433,8 @@ def _over_closed_seam(surfaces: SurfaceSet, patch, u, v, derivs: SurfaceDerivati
 
 def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs, normal, cosine,
                 aside) -> None:
-    """Grazing valid hits: the nearer of the ray's two crossings of the same sheet, in place.
+    """Grazing valid hits, and those the mesh may have led past a shallow cap: the nearer of the ray's two crossings of
+    the same sheet, in place.
 
     A ray meeting a sheet at grazing incidence crosses it twice, close together; where the mesh
     lies on the wrong side of the sheet by a fraction of its chord error (at a face's rim, which
@@ -438,8 +445,24 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     parameter step per unit length of D's tangential part: the other crossing lies at s = 2(n·D)/κ.
     Where that is before the hit, Newton starts there on the same face; a valid point nearer than
     t₁ by more than float32 rounding replaces it. ``normal`` and ``cosine`` (n·D) as the kernel gives them.
+    Looked for below `OTHER_ROOT_COS`, and at any incidence where the ray's depth inside the cap between the
+    crossings, max |g| = (n·D)²/2|κ|, is within `OTHER_ROOT_CHORDS` chord errors of the face: a deeper cap
+    the mesh reaches into, so the ray meets it there and Newton starts near the nearer crossing.
     """
-    rays = np.flatnonzero((status == VALID) & (np.abs(cosine) < OTHER_ROOT_COS))
+    rays = np.flatnonzero(status == VALID)
+    keep = np.abs(cosine[rays]) < OTHER_ROOT_COS
+    # A shallow cap needs |κ| ≥ (n·D)²/2Cδ, and |κ| ≤ max(|κ1|, |κ2|)(1 − (n·D)²) (the principal curvatures bound
+    # the normal curvature, the ray's tangential part is that long): rays that cannot pass are dropped before
+    # the order-2 evaluation (one compiled pass; the curvatures' NaN at degenerate points keeps the ray).
+    rest = rays[~keep]
+    if len(rest):
+        k = curvatures_at(surfaces, pk[rest], ur[rest], vr[rest], normal[rest])
+        c2 = cosine[rest] ** 2
+        bound = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error[pk[rest]] * (1.0 - c2)
+        with np.errstate(invalid="ignore"):
+            far = c2 > bound * np.maximum(np.abs(k.k1), np.abs(k.k2))
+        keep[~keep] = ~far
+        rays = rays[keep]
     if len(rays) == 0:
         return
     d2 = surfaces.evaluate(pk[rays], ur[rays], vr[rays], order=2)
@@ -451,7 +474,8 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
         kappa = np.einsum("ij,ij->i", nr, d2.Suu * (du * du)[:, None] + 2.0 * d2.Suv * (du * dv)[:, None]
                           + d2.Svv * (dv * dv)[:, None])
         step = 2.0 * cr / kappa
-    ahead = np.isfinite(step) & (step < 0.0) & (tr[rays] + step > 0.0)
+        shallow = cr * cr <= 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error[pk[rays]] * np.abs(kappa)
+    ahead = np.isfinite(step) & (step < 0.0) & (tr[rays] + step > 0.0) & ((np.abs(cr) < OTHER_ROOT_COS) | shallow)
     rays, step, du, dv = rays[ahead], step[ahead], du[ahead], dv[ahead]
     if len(rays) == 0:
         return
