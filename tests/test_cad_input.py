@@ -570,8 +570,8 @@ import functools, signal, sys, threading
 from pathlib import Path
 import isolated_reads
 from rtreflect.exchange.isolation import read_isolated
-if "nohup" in sys.argv:
-    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+# Both dispositions set here: one inherited from the test's runner (nohup, a CI shell) must not decide the outcome.
+signal.signal(signal.SIGHUP, signal.SIG_IGN if "nohup" in sys.argv else signal.SIG_DFL)
 held, release = threading.Event(), threading.Event()
 def hold():
     with isolated_reads.LOCK:
