@@ -80,6 +80,36 @@ def test_skirt_is_one_boundary_edge_wide_on_the_surface(union_big):
         assert np.all(reach <= 1.5 * edge + 1e-9 * surface_size(S)), (k, np.max(reach / edge))
 
 
+
+def test_skirt_lies_outside_its_face_across_each_boundary_edge(union_big):
+    """The skirt's step is perpendicular to the boundary edge on the surface, not in (u, v): its side must be
+    decided in (u, v) by the edge's line, not by the step's dot product with the third vertex (on union_big's
+    cylinders, E/G up to ~1e4 with diagonal trim chords, that put skirts over their own face, leaving the gap
+    between chord and trim open). Every skirt vertex lies across its edge's line from the triangle's third
+    vertex, or on the line where the domain's clamp put it."""
+    from rtreflect.geometry.tessellation import _with_skirt
+
+    checked = 0
+    for surface in union_big[1].surfaces:
+        uv, faces = (np.asarray(x) for x in surface.mesh_uv)
+        uv, faces = uv.reshape(-1, 2).astype(float), faces.reshape(-1, 3)
+        all_uv, all_faces = _with_skirt(uv, faces, surface)
+        first = np.split(all_faces[len(faces):], 2)[0]  # (a, b, b_out) per boundary edge
+        third = {(int(f[i]), int(f[(i + 1) % 3])): int(f[(i + 2) % 3]) for f in faces for i in range(3)}
+        a, b, b_out = first.T
+        c = np.array([third[(int(x), int(y))] for x, y in zip(a, b)])
+
+        def side(p):  # sine of the angle from the edge a→b to p − a
+            e, q = all_uv[b] - all_uv[a], p - all_uv[a]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                return np.nan_to_num((e[:, 0] * q[:, 1] - e[:, 1] * q[:, 0])
+                                     / (np.linalg.norm(e, axis=1) * np.linalg.norm(q, axis=1)))
+
+        # A clamped vertex lies on the line to rounding (sines ~1e-9 of either sign); a folded skirt: sines ~0.1-1.
+        assert np.max(np.sign(side(all_uv[c])) * side(all_uv[b_out])) <= 1e-6
+        checked += len(a)
+    assert checked > 0
+
 def surface_size(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.ptp(points, axis=0)))
 

@@ -468,7 +468,11 @@ def _with_skirt(uv: np.ndarray, faces: np.ndarray, surface: NurbsSurface) -> tup
     metric = (E * G - F * F > SKIRT_SINGULAR * E * G) & (length2 > 0)
     with np.errstate(invalid="ignore", divide="ignore"):
         out = np.where(metric[:, None], out * np.sqrt(length2 / out_length2)[:, None], np.column_stack([along[:, 1], -along[:, 0]]))
-    out *= np.where(np.einsum("ij,ij->i", out, uv[c] - uv[a]) > 0, -1.0, 1.0)[:, None]  # away from the triangle's third vertex
+    # Both steps lie right of a→b in (u, v) (cross(e, rot(I e)) = −eᵀIe < 0; cross(e, rot e) = −|e|²): turned where
+    # the triangle's third vertex lies there too. A side test, not out·(c − a): a step perpendicular on the surface is
+    # not perpendicular in (u, v), and the dot product put skirts over their own face (E/G = 100, diagonal edges).
+    side = along[:, 0] * (uv[c] - uv[a])[:, 1] - along[:, 1] * (uv[c] - uv[a])[:, 0]
+    out *= np.where(side < 0, -1.0, 1.0)[:, None]
     (u0, u1), (v0, v1) = surface.domain
     lo, hi = np.array([u0, v0]), np.array([u1, v1])
     a_out = np.clip(uv[a] + SKIRT_EDGES * out, lo, hi)
