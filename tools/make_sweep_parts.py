@@ -1,6 +1,7 @@
 """Write a varied set of CAD parts nobody shipped, for the robustness sweep of the CAD readers (issue 12).
 
     python tools/make_sweep_parts.py OUTDIR        # every part below into OUTDIR (not parts/: not shipped)
+    python tools/make_sweep_parts.py OUTDIR NAME…  # only those parts
 
 Each part stresses one thing real exports contain (Open CASCADE through OCP; rhino3dm for the .3dm):
   sphere_hole.step     a sphere drilled through along x: poles, a periodic seam, two trimmed holes
@@ -627,6 +628,9 @@ def main() -> None:
     parser.add_argument("out", type=Path)
     parser.add_argument("names", nargs="*", help="only these parts")
     args = parser.parse_args()
+    unknown = sorted(set(args.names) - set(PARTS))
+    if unknown:
+        parser.error(f"no such part: {', '.join(unknown)} (known: {', '.join(PARTS)})")
     args.out.mkdir(parents=True, exist_ok=True)
     sys.path.insert(0, str(ROOT))
     from rtreflect.exchange.occt import silence_messages
