@@ -222,6 +222,7 @@ def new_scratch(max_degree):
             np.empty(m), np.empty(m))
 
 
+
 @njit(inline="always", **JIT)
 def power_rows(tau, inv_len, degree, order, out):
     """out[m, k] = d^m/dt^m τ^k = k!/(k−m)! τ^(k−m) / h^m for t = start + τ h, m <= order (the power form's basis)."""
@@ -615,6 +616,14 @@ STEPPING, CONVERGED, STOPPED = 0.0, 1.0, 2.0
 
 
 @njit(inline="always", **JIT)
+def new_lanes():
+    """A lane block's buffers (`eval_lanes`): the LANE_FIELDS × LANES field buffer, and per lane its row, patch,
+    span base and spans in u and v (`find_span_near`'s guesses)."""
+    return (np.empty(LANE_FIELDS * LANES), np.empty(LANES, dtype=np.int64), np.empty(LANES, dtype=np.int64),
+            np.empty(LANES, dtype=np.int64), np.empty(LANES, dtype=np.int64), np.empty(LANES, dtype=np.int64))
+
+
+@njit(inline="always", **JIT)
 def _store_coordinate(lane, j, c, derivatives, order):
     """Coordinate c of S and its derivatives (`rational_at`) into the lane fields `LANE_D`… of point j."""
     S, Su, Sv, Suu, Suv, Svv = derivatives
@@ -808,12 +817,7 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
     scratch = new_scratch(max_degree)
     d = np.empty((6, 3))
     e = np.empty((2, 3))
-    buf = np.empty(LANE_FIELDS * LANES)
-    ray = np.empty(LANES, dtype=np.int64)
-    lane_patch = np.empty(LANES, dtype=np.int64)
-    base = np.empty(LANES, dtype=np.int64)
-    span_u = np.empty(LANES, dtype=np.int64)  # each point's span in u and v: `find_span_near`'s guesses
-    span_v = np.empty(LANES, dtype=np.int64)
+    buf, ray, lane_patch, base, span_u, span_v = new_lanes()
     for first in range(0, prim.shape[0], LANES):
         m = min(LANES, prim.shape[0] - first)
         for j in range(m):  # the starts, tolerances and the planes across the rays
@@ -1041,12 +1045,7 @@ def curvatures_at(degree, count, knot_offset, knots, pw_offset, pw, domain, powe
     arrays. Rows with patch < 0: NaN."""
     scratch = new_scratch(max_degree)
     d = np.empty((6, 3))
-    buf = np.empty(LANE_FIELDS * LANES)
-    row = np.empty(LANES, dtype=np.int64)
-    lane_patch = np.empty(LANES, dtype=np.int64)
-    base = np.empty(LANES, dtype=np.int64)
-    span_u = np.empty(LANES, dtype=np.int64)  # each point's span in u and v: `find_span_near`'s guesses
-    span_v = np.empty(LANES, dtype=np.int64)
+    buf, row, lane_patch, base, span_u, span_v = new_lanes()
     for first in range(0, patch.shape[0], LANES):
         filled = 0
         for i in range(first, min(first + LANES, patch.shape[0])):
