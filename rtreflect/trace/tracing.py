@@ -449,6 +449,7 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     crossings, max |g| = (n·D)²/2|κ|, is within `OTHER_ROOT_CHORDS` chord errors of the face: a deeper cap
     the mesh reaches into, so the ray meets it there and Newton starts near the nearer crossing.
     """
+    cap = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error  # per face: a shallow cap's |κ| ≥ (n·D)²/cap
     rays = np.flatnonzero(status == VALID)
     keep = np.abs(cosine[rays]) < OTHER_ROOT_COS
     # A shallow cap needs |κ| ≥ (n·D)²/2Cδ, and |κ| ≤ max(|κ1|, |κ2|)(1 − (n·D)²) (the principal curvatures bound
@@ -458,7 +459,7 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     if len(rest):
         k = curvatures_at(surfaces, pk[rest], ur[rest], vr[rest], normal[rest])
         c2 = cosine[rest] ** 2
-        bound = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error[pk[rest]] * (1.0 - c2)
+        bound = cap[pk[rest]] * (1.0 - c2)
         with np.errstate(invalid="ignore"):
             far = c2 > bound * np.maximum(np.abs(k.k1), np.abs(k.k2))
         keep[~keep] = ~far
@@ -474,7 +475,7 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
         kappa = np.einsum("ij,ij->i", nr, d2.Suu * (du * du)[:, None] + 2.0 * d2.Suv * (du * dv)[:, None]
                           + d2.Svv * (dv * dv)[:, None])
         step = 2.0 * cr / kappa
-        shallow = cr * cr <= 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error[pk[rays]] * np.abs(kappa)
+        shallow = cr * cr <= cap[pk[rays]] * np.abs(kappa)
     ahead = np.isfinite(step) & (step < 0.0) & (tr[rays] + step > 0.0) & ((np.abs(cr) < OTHER_ROOT_COS) | shallow)
     rays, step, du, dv = rays[ahead], step[ahead], du[ahead], dv[ahead]
     if len(rays) == 0:
