@@ -360,7 +360,9 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
                     settle(running.pop(future), future)
         except BaseException:  # Ctrl-C (or a failing callback): stop the workers, their temporaries removed
             _terminate(pool)
-            pool.shutdown(wait=False, cancel_futures=True)
+            # Joined, not left running (the workers are gone, so it ends at once): a manager thread still alive at
+            # exit made the interpreter's shutdown write to its closed wake-up pipe ("Bad file descriptor" traceback).
+            pool.shutdown(wait=True, cancel_futures=True)
             raise
         pool.shutdown(wait=True)
     _drain(progress_queue, on_progress, started)
