@@ -18,7 +18,7 @@ from rtreflect.exchange.scene import load_scene
 from rtreflect.integrator import film
 from rtreflect.integrator.analytic import hard_coverage, neighbours, trapezoid_cdf
 from rtreflect.integrator.cull import BOX_MARGIN, ORIGIN_MARGIN, TINY, RayBox
-from rtreflect.kernels.pixels import bent_flags, edge_flags, scatter_picked, scatter_rows, stripe_candidates
+from rtreflect.kernels.pixels import bent_flags, edge_flags, scatter_picked, stripe_candidates
 from rtreflect.trace.camera import Camera, sample_offsets
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -236,7 +236,7 @@ def test_aov_channels_of_a_tile_are_each_array_rounded_once():
     assert np.array_equal(pixels[:, 4:], want, equal_nan=True) and not pixels[:, :4].any()
 
 
-def test_scatter_rows_is_numpy_fancy_assignment():
+def test_scatter_picked_of_every_row_in_order_is_numpy_fancy_assignment():
     rng = np.random.default_rng(29)
     dst = np.full((1000, 3), np.nan)
     want = dst.copy()
@@ -244,7 +244,7 @@ def test_scatter_rows_is_numpy_fancy_assignment():
     src = rng.normal(size=(400, 3))
     src[::9] = np.nan
     want[rows] = src
-    scatter_rows(dst, rows, src)
+    scatter_picked(dst, rows, src, np.arange(len(rows)))  # as the renderer's scatter of traced rows
     assert np.array_equal(dst, want, equal_nan=True)
 
 

@@ -421,22 +421,11 @@ def coverage_rgba(hit, weight, shade, shaded, surface, line, background, out):
 # -- rows of (N, 3) arrays ------------------------------------------------------------------------------------------
 
 
-@njit(**JIT, aot=("void(f8[:, ::1], i8[::1], f8[:, ::1])",))
-def scatter_rows(dst, rows, src):
-    """``dst[rows[k]] = src[k]`` for every k, row by row: numpy's fancy assignment of (N, 3) rows (~4× slower, it
-    copies element by element through its general index machinery). The values are copied, not computed.
-
-    Types: dst float64[:, :] (N, m), written; rows int64[:] (K); src float64[:, :] (K, m).
-    """
-    for k in range(rows.shape[0]):
-        for c in range(dst.shape[1]):
-            dst[rows[k], c] = src[k, c]
-
-
 @njit(**JIT, aot=("void(f8[:, ::1], i8[::1], f8[:, ::1], i8[::1])",))
 def scatter_picked(dst, rows, src, pick):
-    """``dst[rows[k]] = src[pick[k]]`` for every k: `scatter_rows` of the rows ``pick`` of ``src`` with no gathered
-    copy of them in between. The values are copied, not computed.
+    """``dst[rows[k]] = src[pick[k]]`` for every k, row by row: numpy's fancy assignment of (N, 3) rows (~4× slower,
+    it copies element by element through its general index machinery) of the rows ``pick`` of ``src`` with no
+    gathered copy of them in between (``pick`` an arange: ``dst[rows] = src``). The values are copied, not computed.
 
     Types: dst float64[:, :] (N, m), written; rows int64[:] (K); src float64[:, :] (M, m); pick int64[:] (K).
     """
