@@ -225,6 +225,38 @@ def test_one_sample_colour_is_the_general_sums_to_the_bit(weights, shaded, sampl
     assert np.array_equal(pixels[:, :4], want.astype(np.float32)) and not pixels[:, 4:].any()
 
 
+def _numpy_map_sums(hit, weight, surface_rgb, line_color, background):
+    """The map modes' colour as numpy computed it (`film.map_color` before it shared the compiled pass)."""
+    samples = hit.shape[1]
+    w = np.where(hit, weight, 0.0)
+    rgb = ((np.nan_to_num(surface_rgb) * np.where(hit, 1.0 - w, 0.0)[..., None]).sum(axis=1)
+           + w.sum(axis=1)[:, None] * np.asarray(line_color)
+           + (samples - hit.sum(axis=1))[:, None] * np.asarray(background)) / samples
+    return np.column_stack([rgb, hit.sum(axis=1) / samples])
+
+
+@pytest.mark.parametrize("samples", [1, 4, 9, 16, 25, 64, 144, 256])
+def test_map_colour_is_the_numpy_sums_to_the_bit(samples):
+    """`film.map_color` (a map mode's per-sample surface colours) by the compiled colour pass is numpy's sums to the
+    bit: its line weights summed pairwise, its colours in sample order, NaN colours as 0 and ±inf as ±max."""
+    rng = np.random.default_rng(37)
+    n = 20000 // samples + 50
+    hit = rng.uniform(size=(n, samples)) < 0.6
+    hit[:5] = False
+    weight = rng.uniform(size=(n, samples))
+    surface_rgb = rng.uniform(size=(n, samples, 3)) * np.exp(rng.normal(size=(n, samples, 3)) * 3)
+    surface_rgb[rng.uniform(size=(n, samples)) < 0.1] = np.nan
+    surface_rgb[7, 0] = (np.inf, -np.inf, np.nan)
+    line, back = (1.0, 0.9, 0.1), (0.05, 0.1, 0.2)
+    want = _numpy_map_sums(hit, weight, surface_rgb, line, back)
+    assert np.array_equal(film.map_color(hit, weight, surface_rgb, line, back), want, equal_nan=True)
+    pixels = np.zeros((n, len(film.CHANNELS)), dtype=np.float32)
+    film.map_color(hit, weight, surface_rgb, line, back, out=pixels[:, :4])
+    with np.errstate(over="ignore"):  # ±max rounds to ±inf in float32, as the tile's copy rounded it
+        want32 = want.astype(np.float32)
+    assert np.array_equal(pixels[:, :4], want32, equal_nan=True) and not pixels[:, 4:].any()
+
+
 def test_aov_channels_of_a_tile_are_each_array_rounded_once():
     rng = np.random.default_rng(23)
     n = 5000
