@@ -268,26 +268,16 @@ def test_aov_channels_of_a_tile_are_each_array_rounded_once():
     assert np.array_equal(pixels[:, 4:], want, equal_nan=True) and not pixels[:, :4].any()
 
 
-def test_scatter_picked_of_every_row_in_order_is_numpy_fancy_assignment():
-    rng = np.random.default_rng(29)
+@pytest.mark.parametrize("picked", [False, True])
+def test_scatter_picked_is_numpy_fancy_assignment_of_the_picked_rows(picked):
+    """``dst[rows] = src[pick]``; with pick an arange, ``dst[rows] = src`` (the renderer's scatter of traced rows)."""
+    rng = np.random.default_rng(31 if picked else 29)
     dst = np.full((1000, 3), np.nan)
     want = dst.copy()
     rows = rng.choice(1000, size=400, replace=False)
-    src = rng.normal(size=(400, 3))
+    src = rng.normal(size=(700 if picked else 400, 3))
     src[::9] = np.nan
-    want[rows] = src
-    scatter_picked(dst, rows, src, np.arange(len(rows)))  # as the renderer's scatter of traced rows
-    assert np.array_equal(dst, want, equal_nan=True)
-
-
-def test_scatter_picked_is_numpy_fancy_assignment_of_the_picked_rows():
-    rng = np.random.default_rng(31)
-    dst = np.full((1000, 3), np.nan)
-    want = dst.copy()
-    rows = rng.choice(1000, size=400, replace=False)
-    src = rng.normal(size=(700, 3))
-    src[::9] = np.nan
-    pick = rng.choice(700, size=400, replace=False)
+    pick = rng.choice(700, size=400, replace=False) if picked else np.arange(len(rows))
     want[rows] = src[pick]
     scatter_picked(dst, rows, src, pick)
     assert np.array_equal(dst, want, equal_nan=True)
