@@ -213,7 +213,7 @@ def _into_pcurves_period(knots: np.ndarray, lo: float, period: float) -> np.ndar
     on (pcurves from -1.8e-9 to 2π on knots 0..2π came back as 2π..4π); on a periodic surface S(u) = S(u + period),
     so the shift keeps the geometry. The shift is the whole number of periods the first knot lies at or beyond ``lo``
     (floor, to `PERIOD_SHIFT_SLACK`): the first knot lands in [lo, lo + period), the pcurves' range, never before
-    it (a nearest-integer rule sends a first knot k + ½ periods on to lo − ½ period for odd k, to lo + ½ for even)."""
+    it (a nearest-integer rule sends a first knot k + ½ periods on to lo − ½ period for odd k, lo + ½ for even)."""
     shift = math.floor((knots[0] - lo) / period + PERIOD_SHIFT_SLACK) * period if period else 0.0
     return knots - shift if shift else knots
 

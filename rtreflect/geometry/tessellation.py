@@ -181,11 +181,11 @@ class Tessellation:
 
         Returns (patch, u, v) of that vertex, where a hit that ran off one face's edge
         can restart on its neighbour, and the distance to it (patch −1 and inf where there
-        is no other patch, or where the point is not finite: a diverged Newton step has no vertex nearest it, and
-        neither scipy's query nor the tree walk can rank one). A compiled walk of a k-d tree over the boundary vertices that skips the
-        vertices that do not qualify (`kernels.rims.nearest_across`). Where two qualifying vertices tie
-        (the same squared distance, another face or (u, v)), the order of scipy's k-d query decides, as
-        it did when the query served every point (`_across_by_query`: the SEAM_NEIGHBOURS nearest, then
+        is no other patch, or where the point is not finite: a diverged Newton step has no vertex nearest it,
+        and neither scipy's query nor the tree walk can rank one). A compiled walk of a k-d tree over the
+        boundary vertices that skips the vertices that do not qualify (`kernels.rims.nearest_across`). Where two
+        qualifying vertices tie (the same squared distance, another face or (u, v)), the order of scipy's k-d
+        query decides, as it did when the query served every point (`_across_by_query`: the SEAM_NEIGHBOURS nearest, then
         more for the points whose nearest do not qualify); so every answer is the query's, bit for bit,
         at a fraction of its cost (each query sorted its k nearest whether they qualified or not).
         """

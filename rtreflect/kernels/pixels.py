@@ -402,8 +402,8 @@ def _finite_or_limit(x):
     "void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[:, :, ::1], f8[::1], f8[::1], f8[:, ::1])",
     "void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[:, :, ::1], f8[::1], f8[::1], f4[:, :])"))
 def coverage_rgba(hit, weight, shade, shaded, surface, colours, line, background, out):
-    """``out`` (P, 4) linear RGBA of pixels from their (P, s²) samples (`film.coverage_color`, `film.map_color`): per
-    pixel the line weights' sum L = Σ w, the surface's U = Σ (1 − w)·k·surface (or, a map mode, Σ (1 − w)·colour
+    """``out`` (P, 4) linear RGBA of pixels from their (P, s²) samples (`film.coverage_color`, `film.map_color`):
+    per pixel the line weights' sum L = Σ w, the surface's U = Σ (1 − w)·k·surface (a map mode: Σ (1 − w)·colour
     of each sample's own colour) and the hits' count H over its samples (a miss adds 0), then
     RGB = (L·line + U + (s² − H)·background)/s², A = H/s². L and Σ (1 − w)·k are summed as numpy sums a row
     (`_pairwise_sum`), a map mode's U in sample order (as numpy sums (P, s², 3) over its middle axis, each colour
