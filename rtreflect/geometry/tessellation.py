@@ -185,8 +185,8 @@ class Tessellation:
         and neither scipy's query nor the tree walk can rank one). A compiled walk of a k-d tree over the
         boundary vertices that skips the vertices that do not qualify (`kernels.rims.nearest_across`). Where two
         qualifying vertices tie (the same squared distance, another face or (u, v)), the order of scipy's k-d
-        query decides, as it did when the query served every point (`_across_by_query`: the SEAM_NEIGHBOURS nearest, then
-        more for the points whose nearest do not qualify); so every answer is the query's, bit for bit,
+        query decides, as it did when the query served every point (`_across_by_query`: the SEAM_NEIGHBOURS nearest,
+        then more for the points whose nearest do not qualify); so every answer is the query's, bit for bit,
         at a fraction of its cost (each query sorted its k nearest whether they qualified or not).
         """
         patch_out = np.full(len(points), -1)
