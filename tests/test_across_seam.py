@@ -140,3 +140,27 @@ def test_plate_restarts_as_brute_force():
     assert_as_brute_force(tessellation, points, patch, tried=tried, uv=uv, reach=2.0 * step)
     # Exactly on boundary vertices (coincident with the neighbours' at the B-rep's vertices and shared edges).
     assert_as_brute_force(tessellation, tessellation.vertices[pick], patch, uv=uv, reach=2.0 * step)
+
+
+def test_points_that_are_not_finite_have_no_neighbour():
+    """A NaN or infinite point (a diverged Newton step) answers "no neighbour" (patch −1, (u, v) NaN, distance inf)
+    and leaves the other rows' answers as they are alone (scipy's k-d query, which decides ties, refuses them)."""
+    tessellation = grid_tessellation()
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-3, 3, (40, 3))
+    points[::3] = tessellation.vertices[: len(points[::3])]  # ties: the k-d query's side is reached as well
+    patch = rng.integers(0, 4, len(points))
+    tried = rng.integers(-1, 4, (len(points), 1))
+    reach = rng.uniform(0.5, 3.0, len(points))
+    uv = rng.uniform(0, 2, (len(points), 2))
+    bad = np.array([1, 4, 5, 17, 39])
+    spoiled = points.copy()
+    spoiled[bad] = [[np.nan, 0.0, 0.0], [np.inf, 1.0, 1.0], [np.nan] * 3, [0.0, -np.inf, 0.0], [1.0, 1.0, np.nan]]
+    good = np.setdiff1d(np.arange(len(points)), bad)
+    for args in ((None, None, None), (tried, None, reach), (tried, uv, reach)):
+        got = tessellation.across_seam(spoiled, patch, *args)
+        alone = tessellation.across_seam(points[good], patch[good], *(None if a is None else a[good] for a in args))
+        np.testing.assert_array_equal(got[0][bad], -1)
+        assert np.isnan(got[1][bad]).all() and np.isnan(got[2][bad]).all() and np.isinf(got[3][bad]).all()
+        for column, expected in zip(got, alone):
+            np.testing.assert_array_equal(column[good], expected)

@@ -270,3 +270,21 @@ def test_3dm_trims_follow_the_exact_edges():
     for cap in model.surfaces[2:]:
         points = cap.evaluate(cap.trim.outer[:, 0], cap.trim.outer[:, 1]).S
         assert np.max(np.abs(np.hypot(points[:, 0] - 70, points[:, 1]) - 10)) < 1e-9
+
+
+@pytest.mark.parametrize("periods", [-2.5, -1.5, -0.5, 0.5, 1.5, 2.5, -1.0, 1.0, 2.0, 1.0 + 3e-10, 1.0 - 3e-10])
+def test_period_shift_puts_the_first_knot_in_the_pcurves_range(periods):
+    """`occt._into_pcurves_period`: knots `Segment` left some periods on from the pcurves' first parameter lo move
+    by whole periods so the first lands in [lo, lo + period) (to `PERIOD_SHIFT_SLACK`), the same side of lo whatever
+    the count: half-periods too (Python's round, half to even, sent 1.5 periods to lo − ½ period and 2.5 to lo + ½),
+    and a whole period off by OCCT's rounding (±3e-10 of one) lands on lo."""
+    from rtreflect.exchange.occt import PERIOD_SHIFT_SLACK, _into_pcurves_period
+
+    period, lo = 2.0 * np.pi, 0.3
+    knots = lo + periods * period + np.array([0.0, 0.0, 0.0, 0.0, 1.0, 2.5, 4.0, 4.0, 4.0, 4.0])
+    moved = _into_pcurves_period(knots, lo, period)
+    whole = (knots[0] - moved[0]) / period
+    assert abs(whole - round(whole)) < 1e-12  # by whole periods: the periodic surface's geometry kept
+    assert lo - PERIOD_SHIFT_SLACK * period <= moved[0] < lo + period
+    half = periods % 1.0 == 0.5
+    np.testing.assert_allclose(moved[0], lo + (0.5 * period if half else 0.0), rtol=0, atol=1e-8)

@@ -18,7 +18,7 @@ from rtreflect.exchange.scene import load_scene
 from rtreflect.integrator import film
 from rtreflect.integrator.analytic import hard_coverage, neighbours, trapezoid_cdf
 from rtreflect.integrator.cull import BOX_MARGIN, ORIGIN_MARGIN, TINY, RayBox
-from rtreflect.kernels.pixels import bent_flags, edge_flags, scatter_picked, scatter_rows, stripe_candidates
+from rtreflect.kernels.pixels import bent_flags, edge_flags, scatter_picked, stripe_candidates
 from rtreflect.trace.camera import Camera, sample_offsets
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -225,6 +225,38 @@ def test_one_sample_colour_is_the_general_sums_to_the_bit(weights, shaded, sampl
     assert np.array_equal(pixels[:, :4], want.astype(np.float32)) and not pixels[:, 4:].any()
 
 
+def _numpy_map_sums(hit, weight, surface_rgb, line_color, background):
+    """The map modes' colour as numpy computed it (`film.map_color` before it shared the compiled pass)."""
+    samples = hit.shape[1]
+    w = np.where(hit, weight, 0.0)
+    rgb = ((np.nan_to_num(surface_rgb) * np.where(hit, 1.0 - w, 0.0)[..., None]).sum(axis=1)
+           + w.sum(axis=1)[:, None] * np.asarray(line_color)
+           + (samples - hit.sum(axis=1))[:, None] * np.asarray(background)) / samples
+    return np.column_stack([rgb, hit.sum(axis=1) / samples])
+
+
+@pytest.mark.parametrize("samples", [1, 4, 9, 16, 25, 64, 144, 256])
+def test_map_colour_is_the_numpy_sums_to_the_bit(samples):
+    """`film.map_color` (a map mode's per-sample surface colours) by the compiled colour pass is numpy's sums to the
+    bit: its line weights summed pairwise, its colours in sample order, NaN colours as 0 and ±inf as ±max."""
+    rng = np.random.default_rng(37)
+    n = 20000 // samples + 50
+    hit = rng.uniform(size=(n, samples)) < 0.6
+    hit[:5] = False
+    weight = rng.uniform(size=(n, samples))
+    surface_rgb = rng.uniform(size=(n, samples, 3)) * np.exp(rng.normal(size=(n, samples, 3)) * 3)
+    surface_rgb[rng.uniform(size=(n, samples)) < 0.1] = np.nan
+    surface_rgb[7, 0] = (np.inf, -np.inf, np.nan)
+    line, back = (1.0, 0.9, 0.1), (0.05, 0.1, 0.2)
+    want = _numpy_map_sums(hit, weight, surface_rgb, line, back)
+    assert np.array_equal(film.map_color(hit, weight, surface_rgb, line, back), want, equal_nan=True)
+    pixels = np.zeros((n, len(film.CHANNELS)), dtype=np.float32)
+    film.map_color(hit, weight, surface_rgb, line, back, out=pixels[:, :4])
+    with np.errstate(over="ignore"):  # ±max rounds to ±inf in float32, as the tile's copy rounded it
+        want32 = want.astype(np.float32)
+    assert np.array_equal(pixels[:, :4], want32, equal_nan=True) and not pixels[:, 4:].any()
+
+
 def test_aov_channels_of_a_tile_are_each_array_rounded_once():
     rng = np.random.default_rng(23)
     n = 5000
@@ -236,26 +268,16 @@ def test_aov_channels_of_a_tile_are_each_array_rounded_once():
     assert np.array_equal(pixels[:, 4:], want, equal_nan=True) and not pixels[:, :4].any()
 
 
-def test_scatter_rows_is_numpy_fancy_assignment():
-    rng = np.random.default_rng(29)
+@pytest.mark.parametrize("picked", [False, True])
+def test_scatter_picked_is_numpy_fancy_assignment_of_the_picked_rows(picked):
+    """``dst[rows] = src[pick]``; with pick an arange, ``dst[rows] = src`` (the renderer's scatter of traced rows)."""
+    rng = np.random.default_rng(31 if picked else 29)
     dst = np.full((1000, 3), np.nan)
     want = dst.copy()
     rows = rng.choice(1000, size=400, replace=False)
-    src = rng.normal(size=(400, 3))
+    src = rng.normal(size=(700 if picked else 400, 3))
     src[::9] = np.nan
-    want[rows] = src
-    scatter_rows(dst, rows, src)
-    assert np.array_equal(dst, want, equal_nan=True)
-
-
-def test_scatter_picked_is_numpy_fancy_assignment_of_the_picked_rows():
-    rng = np.random.default_rng(31)
-    dst = np.full((1000, 3), np.nan)
-    want = dst.copy()
-    rows = rng.choice(1000, size=400, replace=False)
-    src = rng.normal(size=(700, 3))
-    src[::9] = np.nan
-    pick = rng.choice(700, size=400, replace=False)
+    pick = rng.choice(700, size=400, replace=False) if picked else np.arange(len(rows))
     want[rows] = src[pick]
     scatter_picked(dst, rows, src, pick)
     assert np.array_equal(dst, want, equal_nan=True)

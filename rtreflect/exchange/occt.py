@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import math
 import os
 import sys
 from dataclasses import dataclass, field
@@ -57,6 +58,10 @@ TRIM_MAX_ROUNDS = 14
 #: points closer than it are one point: pcurves meet their vertices and the domain's sides only to OCCT's
 #: tolerances (1e-16 on seams, 1e-9 at cut corners), and a loop touching itself there reads as self-intersecting.
 SIDE_SNAP = 1e-9
+#: A periodic direction's knots that start this fraction of a period before a whole-period shift from the pcurves'
+#: first parameter count as starting there (`_into_pcurves_period`): OCCT's parameters agree to its tolerances (1e-9
+#: of the domain at cut corners, `SIDE_SNAP`), far below it; a cut that is not a whole period away lies far above.
+PERIOD_SHIFT_SLACK = 1e-6
 #: Faces beyond which a progress bar is shown while a model loads (small parts load in well under a second).
 PROGRESS_FACES = 200
 
@@ -206,8 +211,10 @@ def _into_pcurves_period(knots: np.ndarray, lo: float, period: float) -> np.ndar
     """A periodic direction's knots after `Segment`, moved by whole periods so the domain starts at ``lo``, the
     pcurves' first parameter: where the trims and mesh (u, v) are. OCCT's `Segment` may return the span one period
     on (pcurves from -1.8e-9 to 2π on knots 0..2π came back as 2π..4π); on a periodic surface S(u) = S(u + period),
-    so the shift keeps the geometry."""
-    shift = round((knots[0] - lo) / period) * period if period else 0.0
+    so the shift keeps the geometry. The shift is the whole number of periods the first knot lies at or beyond ``lo``
+    (floor, to `PERIOD_SHIFT_SLACK`): the first knot lands in [lo, lo + period), the pcurves' range, never before
+    it (a nearest-integer rule sends a first knot k + ½ periods on to lo − ½ period for odd k, lo + ½ for even)."""
+    shift = math.floor((knots[0] - lo) / period + PERIOD_SHIFT_SLACK) * period if period else 0.0
     return knots - shift if shift else knots
 
 

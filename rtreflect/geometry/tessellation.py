@@ -181,11 +181,12 @@ class Tessellation:
 
         Returns (patch, u, v) of that vertex, where a hit that ran off one face's edge
         can restart on its neighbour, and the distance to it (patch −1 and inf where there
-        is no other patch). A compiled walk of a k-d tree over the boundary vertices that skips the
-        vertices that do not qualify (`kernels.rims.nearest_across`). Where two qualifying vertices tie
-        (the same squared distance, another face or (u, v)), the order of scipy's k-d query decides, as
-        it did when the query served every point (`_across_by_query`: the SEAM_NEIGHBOURS nearest, then
-        more for the points whose nearest do not qualify); so every answer is the query's, bit for bit,
+        is no other patch, or where the point is not finite: a diverged Newton step has no vertex nearest it,
+        and neither scipy's query nor the tree walk can rank one). A compiled walk of a k-d tree over the
+        boundary vertices that skips the vertices that do not qualify (`kernels.rims.nearest_across`). Where two
+        qualifying vertices tie (the same squared distance, another face or (u, v)), the order of scipy's k-d
+        query decides, as it did when the query served every point (`_across_by_query`: the SEAM_NEIGHBOURS nearest,
+        then more for the points whose nearest do not qualify); so every answer is the query's, bit for bit,
         at a fraction of its cost (each query sorted its k nearest whether they qualified or not).
         """
         patch_out = np.full(len(points), -1)
@@ -193,6 +194,13 @@ class Tessellation:
         dist_out = np.full(len(points), np.inf)
         # One patch and no far side of its own seam to look for: no other vertex can qualify.
         if len(self.boundary) == 0 or len(points) == 0 or (uv is None and self.single_patch):
+            return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
+        finite_rows = np.isfinite(points).all(axis=1)
+        if not finite_rows.all():  # the rows that are not finite: no neighbour (the answers above); the rest as ever
+            ok = np.flatnonzero(finite_rows)
+            patch_out[ok], uv_out[ok, 0], uv_out[ok, 1], dist_out[ok] = self.across_seam(
+                points[ok], np.asarray(patch)[ok], None if tried is None else np.asarray(tried)[ok],
+                None if uv is None else np.asarray(uv)[ok], None if reach is None else np.asarray(reach)[ok])
             return patch_out, uv_out[:, 0], uv_out[:, 1], dist_out
         lo, hi, start, end, left, order, vertices, finite = self._boundary_kd
         cand_patch = self.vertex_patch[self.boundary]
@@ -209,8 +217,8 @@ class Tessellation:
         patch_out[found] = cand_patch[best[found]]
         uv_out[found] = self.vertex_uv[self.boundary[best[found]]]
         dist_out[found] = dist[found]
-        # Ties, and points or vertices the distances cannot rank (not finite): the k-d query's answer.
-        ask = np.flatnonzero(tie | ~np.isfinite(points).all(axis=1)) if finite else np.arange(len(points))
+        # Ties, and vertices the distances cannot rank (not finite): the k-d query's answer.
+        ask = np.flatnonzero(tie) if finite else np.arange(len(points))
         if len(ask):
             patch_out[ask], uv_out[ask], dist_out[ask] = self._across_by_query(
                 points[ask], patch[ask], tried[ask], uv[ask] if len(uv) else uv, reach[ask] if len(reach) else reach)

@@ -50,23 +50,28 @@ def coverage_color(hit: np.ndarray, lit: np.ndarray, surface_color, line_color, 
     (`kernels.pixels.coverage_rgba`, which sums as numpy sums a row). ``out``: the (P, 4) block to fill (a tile's
     float32 colour columns, each value rounded once), else a new float64 one.
     """
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    return _rgba(hit, lit, np.ones((0, 0)) if shade is None else f64(shade), shade is not None, f64(surface_color),
+                 np.zeros((0, 0, 3)), line_color, background, out)
+
+
+def map_color(hit: np.ndarray, weight: np.ndarray, surface_rgb: np.ndarray, line_color, background,
+              out: np.ndarray | None = None) -> np.ndarray:
+    """(P, 4) linear RGBA from per-sample (P, s²) hit flags, line weights w in [0, 1] (lit flags: 0 or 1) and
+    (P, s², 3) surface colours (map modes): a hit shows w·line_color + (1 − w)·its surface colour (NaN as 0), by
+    the same compiled pass as `coverage_color`, each sample's colour in place of k·surface_color. ``out`` as there."""
+    return _rgba(hit, weight, np.ones((0, 0)), False, np.zeros(3), np.ascontiguousarray(surface_rgb, dtype=np.float64),
+                 line_color, background, out)
+
+
+def _rgba(hit, weight, shade, shaded, surface, colours, line_color, background, out):
+    """`kernels.pixels.coverage_rgba`'s arrays marshalled, into ``out`` or a new (P, 4) float64 block."""
     if out is None:
         out = np.empty((len(hit), 4))
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
-    coverage_rgba(np.ascontiguousarray(hit, dtype=bool), f64(lit), np.ones((0, 0)) if shade is None else f64(shade),
-                  shade is not None, f64(surface_color), f64(line_color), f64(background), out)
+    coverage_rgba(np.ascontiguousarray(hit, dtype=bool), f64(weight), shade, shaded, surface, colours, f64(line_color),
+                  f64(background), out)
     return out
-
-
-def map_color(hit: np.ndarray, weight: np.ndarray, surface_rgb: np.ndarray, line_color, background) -> np.ndarray:
-    """(P, 4) linear RGBA from per-sample (P, s²) hit flags, line weights w in [0, 1] (lit flags: 0 or 1) and
-    (P, s², 3) surface colours (map modes): a hit shows w·line_color + (1 − w)·its surface colour."""
-    samples = hit.shape[1]
-    w = np.where(hit, weight, 0.0)
-    rgb = ((np.nan_to_num(surface_rgb) * np.where(hit, 1.0 - w, 0.0)[..., None]).sum(axis=1)
-           + w.sum(axis=1)[:, None] * np.asarray(line_color)
-           + (samples - hit.sum(axis=1))[:, None] * np.asarray(background)) / samples
-    return np.column_stack([rgb, hit.sum(axis=1) / samples])
 
 
 class Film:

@@ -40,7 +40,7 @@ from ..exchange.scene import ANALYTIC, ImageSpec, Scene
 from ..geometry.curvature import curvatures_at
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
-from ..kernels.pixels import bent_flags, scatter_rows, stripe_candidates
+from ..kernels.pixels import bent_flags, scatter_picked, stripe_candidates
 from ..trace.secondlook import SecondLook
 from ..trace.tracing import Hits, occluded, trace
 
@@ -224,8 +224,8 @@ class Renderer:
             traced = self._trace(np.take(origins, rays, axis=0), np.take(directions, rays, axis=0))  # `shade`: np.take
             for name in Hits.__dataclass_fields__:
                 have, new = getattr(hits, name), getattr(traced, name)
-                if have.ndim == 2:  # P, N, S_u, S_v: compiled row copies (`kernels.pixels.scatter_rows`)
-                    scatter_rows(have, rays, np.ascontiguousarray(new))
+                if have.ndim == 2:  # P, N, S_u, S_v: compiled row copies (`kernels.pixels.scatter_picked`)
+                    scatter_picked(have, rays, np.ascontiguousarray(new), np.arange(len(rays)))
                 else:
                     have[rays] = new
         return hits

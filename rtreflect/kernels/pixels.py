@@ -382,25 +382,50 @@ def _pairwise_sum(a, n, stack):
     return 0.0 + sums[0]
 
 
-@njit(**JIT, aot=("void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[::1], f8[::1], f8[:, ::1])",
-                  "void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[::1], f8[::1], f4[:, :])"))
-def coverage_rgba(hit, weight, shade, shaded, surface, line, background, out):
-    """``out`` (P, 4) linear RGBA of pixels from their (P, s²) samples (`film.coverage_color`): per pixel the line
-    weights' sum L = Σ w, the surface's U = Σ (1 − w)·k and the hits' count H over its samples (a miss adds 0), then
-    RGB = (L·line + U·surface + (s² − H)·background)/s², A = H/s². L and U are summed as numpy sums a row
-    (`_pairwise_sum`), so the same bits as the sums of numpy arrays; with one sample they are the sample's own
-    values. Each value is rounded to ``out``'s type once.
+#: The largest finite float64 (`_finite_or_limit`, numpy's ``nan_to_num`` of +inf).
+FLOAT64_MAX = 1.7976931348623157e308
+
+
+@njit(inline="always", **JIT)
+def _finite_or_limit(x):
+    """numpy's ``nan_to_num`` of one value: NaN → 0, ±inf → ± the largest float64."""
+    if x != x:
+        return 0.0
+    if x == math.inf:
+        return FLOAT64_MAX
+    if x == -math.inf:
+        return -FLOAT64_MAX
+    return x
+
+
+@njit(**JIT, aot=(
+    "void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[:, :, ::1], f8[::1], f8[::1], f8[:, ::1])",
+    "void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[:, :, ::1], f8[::1], f8[::1], f4[:, :])"))
+def coverage_rgba(hit, weight, shade, shaded, surface, colours, line, background, out):
+    """``out`` (P, 4) linear RGBA of pixels from their (P, s²) samples (`film.coverage_color`, `film.map_color`):
+    per pixel the line weights' sum L = Σ w, the surface's U = Σ (1 − w)·k·surface (a map mode: Σ (1 − w)·colour
+    of each sample's own colour) and the hits' count H over its samples (a miss adds 0), then
+    RGB = (L·line + U + (s² − H)·background)/s², A = H/s². L and Σ (1 − w)·k are summed as numpy sums a row
+    (`_pairwise_sum`), a map mode's U in sample order (as numpy sums (P, s², 3) over its middle axis, each colour
+    as ``nan_to_num`` makes it), so the same bits as the sums of numpy arrays; with one sample they are the
+    sample's own values. Each value is rounded to ``out``'s type once.
 
     Types: hit bool[:, :] (P, s²); weight float64[:, :] (P, s²) (line weights, or lit flags as 0/1); shade
-    float64[:, :] (P, s², read where ``shaded``); shaded bool; surface, line, background float64[:] (3); out
-    float64[:, :] or float32[:, :] (P, 4), written (a float32 view of a tile's pixels: its rows strided).
+    float64[:, :] (P, s², read where ``shaded``); shaded bool; surface, line, background float64[:] (3); colours
+    float64[:, :, :] (P, s², 3) per-sample surface colours of a map mode (in place of surface and shade), or
+    (0, 0, 3); out float64[:, :] or float32[:, :] (P, 4), written (a float32 view of a tile's pixels: its rows
+    strided).
     """
     samples = hit.shape[1]
+    mapped = colours.shape[0] > 0
     lit = np.zeros(samples)
     unlit = np.zeros(samples)
+    mapped_sum = np.zeros(3)
     stack = np.empty((PAIRWISE_DEPTH, 3), dtype=np.int64)
     for i in range(out.shape[0]):
         n_hit = 0
+        for c in range(3):
+            mapped_sum[c] = 0.0
         for j in range(samples):
             if hit[i, j]:
                 w = weight[i, j]
@@ -410,33 +435,26 @@ def coverage_rgba(hit, weight, shade, shaded, surface, line, background, out):
             else:
                 lit[j] = 0.0
                 unlit[j] = 0.0
+            if mapped:
+                for c in range(3):
+                    mapped_sum[c] += _finite_or_limit(colours[i, j, c]) * unlit[j]
         n_lit = _pairwise_sum(lit, samples, stack)
-        n_unlit = _pairwise_sum(unlit, samples, stack)
+        n_unlit = 0.0 if mapped else _pairwise_sum(unlit, samples, stack)
         n_missed = float(samples - n_hit)
         for c in range(3):
-            out[i, c] = (n_lit * line[c] + n_unlit * surface[c] + n_missed * background[c]) / samples
+            u = mapped_sum[c] if mapped else n_unlit * surface[c]
+            out[i, c] = (n_lit * line[c] + u + n_missed * background[c]) / samples
         out[i, 3] = n_hit / samples
 
 
 # -- rows of (N, 3) arrays ------------------------------------------------------------------------------------------
 
 
-@njit(**JIT, aot=("void(f8[:, ::1], i8[::1], f8[:, ::1])",))
-def scatter_rows(dst, rows, src):
-    """``dst[rows[k]] = src[k]`` for every k, row by row: numpy's fancy assignment of (N, 3) rows (~4× slower, it
-    copies element by element through its general index machinery). The values are copied, not computed.
-
-    Types: dst float64[:, :] (N, m), written; rows int64[:] (K); src float64[:, :] (K, m).
-    """
-    for k in range(rows.shape[0]):
-        for c in range(dst.shape[1]):
-            dst[rows[k], c] = src[k, c]
-
-
 @njit(**JIT, aot=("void(f8[:, ::1], i8[::1], f8[:, ::1], i8[::1])",))
 def scatter_picked(dst, rows, src, pick):
-    """``dst[rows[k]] = src[pick[k]]`` for every k: `scatter_rows` of the rows ``pick`` of ``src`` with no gathered
-    copy of them in between. The values are copied, not computed.
+    """``dst[rows[k]] = src[pick[k]]`` for every k, row by row: numpy's fancy assignment of (N, 3) rows (~4× slower,
+    it copies element by element through its general index machinery) of the rows ``pick`` of ``src`` with no
+    gathered copy of them in between (``pick`` an arange: ``dst[rows] = src``). The values are copied, not computed.
 
     Types: dst float64[:, :] (N, m), written; rows int64[:] (K); src float64[:, :] (M, m); pick int64[:] (K).
     """
