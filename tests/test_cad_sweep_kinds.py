@@ -159,3 +159,53 @@ def test_revolved_seam_lip_is_the_first_hit(tmp_path):
     shape, _, _, _ = occt_faces(path)
     expected = np.einsum("ij,ij->i", occt_nearest(shape, origins, directions) - origins, directions)
     np.testing.assert_allclose(hits.t, expected, rtol=0, atol=POINT_TOLERANCE * renderer.tessellation.extent)
+
+
+def test_collapsed_sides_are_the_poles(tmp_path):
+    """`SurfaceSet.collapsed` (a side whose image is one point: Newton stopped there has not left the face) against
+    Open CASCADE: every degenerated edge of a converted face (a sphere's poles, a cone's apex) lies on a collapsed side
+    of that face's domain (its pcurve's (u, v)); a side holding a B-rep edge that is not degenerated is collapsed only
+    where that edge is shorter than 1e-4 of the face's net (revolved_seam.step's circles of radius 0.001 round the axis,
+    which close the revolved profile's ends, closed form 2π·0.001); every other side is not."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Curve2d
+    from OCP.GCPnts import GCPnts_AbscissaPoint
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    from rtreflect.geometry.surfaces import COLLAPSED_FRACTION, SurfaceSet
+
+    seen = {"degenerated": 0, "short": 0, "long": 0}
+    for name in ("sphere_pole_view.step", "cone_apex_view.step", "revolved_seam.step"):
+        path = tmp_path / name
+        sweep.PARTS[name](path)
+        model = read_cad(path)
+        collapsed = SurfaceSet(model.surfaces).collapsed
+        _, _, _, faces = occt_faces(path)
+        for k, (surface, face) in enumerate(zip(model.surfaces, faces)):
+            (u0, u1), (v0, v1) = surface.domain
+            expected = np.zeros(4, dtype=bool)
+            explorer = TopExp_Explorer(face, TopAbs_EDGE)
+            while explorer.More():
+                edge = TopoDS.Edge(explorer.Current())
+                explorer.Next()
+                pcurve = BRepAdaptor_Curve2d(edge, face)
+                mid = pcurve.Value(0.5 * (pcurve.FirstParameter() + pcurve.LastParameter()))
+                u, v = mid.X(), mid.Y()
+                scale = 1e-9 * max(u1 - u0, v1 - v0)
+                sides = np.array([abs(u - u0), abs(u - u1), abs(v - v0), abs(v - v1)]) <= scale
+                if BRep_Tool.Degenerated_s(edge):
+                    assert sides.any(), (name, k, u, v)
+                    expected |= sides
+                    seen["degenerated"] += 1
+                    continue
+                length = GCPnts_AbscissaPoint.Length_s(BRepAdaptor_Curve(edge))
+                if length <= COLLAPSED_FRACTION * surface.size:
+                    expected |= sides
+                    seen["short"] += 1
+                else:
+                    seen["long"] += 1
+            np.testing.assert_array_equal(collapsed[k], expected, err_msg=f"{name} face {k}")
+    assert seen["degenerated"] >= 3 and seen["short"] == 2 and seen["long"] > 0, seen
