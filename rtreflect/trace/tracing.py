@@ -17,8 +17,8 @@ Embree from just beyond the previous one (vectorised over the rays still open, a
 `MAX_CANDIDATES` per ray). Every candidate is refined and classified:
 
 - *valid*: Newton converged near its mesh hit, ahead of the origin, inside its face's trim;
-- *miss*: the surface is not there: the refinement left the face (ran off the patch's domain
-  or out of its trim) and no neighbouring face across that edge takes it (a restart on the
+- *miss*: the surface is not there: the refinement left the face (ran off the patch's domain, not
+  through a collapsed side, a pole, which is one point in 3D: the search below decides there; or out of its trim) and no neighbouring face across that edge takes it (a restart on the
   nearest face sharing the edge, `Tessellation.across_seam`; where it stops on a closed face's seam,
   again from the seam's other side, `_over_closed_seam`), or a Levenberg–Marquardt search
   for the ray–surface distance stalls at a positive minimum (the ray passes the surface's
