@@ -44,6 +44,13 @@ CAD_EXTRA = "pip install 'rtreflect[cad]'"
 #: (hits are refined onto the exact surface), so it can be coarse: 2e-3 keeps a 200-face part near
 #: 10k nodes and meshing near 0.1 s.
 MESH_DEFLECTION = 2e-3
+#: The mesh deflection is relative to the part's diagonal, taken first from the control points' box (cheap, but loose:
+#: the converted rational faces of a revolution can put control points far out). Where that box's diagonal exceeds the
+#: faces' own (`faces_bounds`, from the mesh nodes and trims on the surfaces) more than this many times, the faces are
+#: meshed again at the deflection the true diagonal asks for: the sweep's revolved_seam.step (2,653 against 138.5) was
+#: meshed to 4.8 from its surface, asked for 0.28, and its chord error widened every ray's error band across the part.
+#: The shipped parts' boxes are within 1.5× of their faces' (the vase's), so their meshes are unchanged.
+REMESH_RATIO = 2.0
 #: Mesh angular deflection (radians): bounds the normal turn across a triangle on small, curved features
 #: (OCCT's default; finer multiplies the nodes on small fillets without helping Newton).
 MESH_ANGLE = 0.5
@@ -659,7 +666,7 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     stem = name or path.stem
     # Keys unique per read: a scene that reads one file twice must not join the two copies' faces.
     _, key_of = edge_keys(converted, f"{path}|{stem}|{next(_READS)}")
-    surfaces, skipped, reversed_flags = [], [], []
+    surfaces, skipped, reversed_flags, meshed = [], [], [], []
     with tqdm(faces, desc=f"reading {path.name}", unit="face", leave=False, file=sys.stderr,
               disable=None if len(faces) > PROGRESS_FACES else True) as bar:
         for index, face in enumerate(bar):
@@ -693,9 +700,18 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
                 object.__setattr__(surface, key, value)
             surfaces.append(surface)
             reversed_flags.append(reversed_face)
+            meshed.append(face)
     if not surfaces:
         raise SceneError(path, "", f"no face of the {len(faces)} could be read (first: face {skipped[0][0]}: {skipped[0][1]})")
-    return CadModel(surfaces, unit, unit_note, faces_bounds(surfaces), len(faces), skipped, reversed_flags)
+    bounds = faces_bounds(surfaces)
+    tight = float(np.linalg.norm(bounds[1] - bounds[0]))
+    if np.isfinite(tight) and 0 < tight and REMESH_RATIO * tight < diagonal:
+        for surface, face, reversed_face in zip(surfaces, meshed, reversed_flags):
+            BRepMesh_IncrementalMesh(face, MESH_DEFLECTION * tight, False, MESH_ANGLE, False)
+            object.__setattr__(surface, "mesh_uv", mesh_of_face(face, reversed_face))
+            BRepTools.Clean_s(face)
+        bounds = faces_bounds(surfaces)
+    return CadModel(surfaces, unit, unit_note, bounds, len(faces), skipped, reversed_flags)
 
 
 def faces_bounds(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray]:

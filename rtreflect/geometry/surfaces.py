@@ -38,6 +38,14 @@ VANISHING_PARTIAL = 1e-8
 #: periodic face's seam, whose two sides' control rows agree to float64 rounding (~1e-15 of the reach); as
 #: `seams.CLOSED_FRACTION` for a curve's ends.
 CLOSED_FRACTION = 1e-12
+#: A side of a patch's domain is collapsed (a pole: a sphere's, a cone's apex, a revolved profile ending on or next
+#: to its axis) where its control row spans at most this fraction of the net's size: the side's image lies in the
+#: row's convex hull (clamped knots, weights > 0), so within that of one point. Exact poles span ~1e-16 of the size
+#: (float rounding), the sides of the shipped and sweep parts' faces at least 0.04; revolved_seam.step's profile
+#: ends 0.001 off the axis, 1.7e-6 of its net. The tracer re-decides Newton's stops on such a side by the
+#: Levenberg–Marquardt search (`trace.tracing._candidates`), never worse than the stop itself: the fraction only
+#: bounds how often the search runs.
+COLLAPSED_FRACTION = 1e-4
 
 
 class SurfaceDerivatives(NamedTuple):
@@ -341,6 +349,18 @@ class SurfaceSet:
         """Per-point parameter domain bounds (u0, u1, v0, v1)."""
         rows = self._domain_table[np.asarray(patch)]
         return rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3]
+
+    @cached_property
+    def collapsed(self) -> np.ndarray:
+        """Per patch (P, 4): whether its sides u = u₀, u = u₁, v = v₀, v = v₁ are collapsed to a point, to
+        `COLLAPSED_FRACTION` of its net's size (the bounding-box diagonal of the side's control row: the side's
+        image lies in the row's convex hull). Newton that runs onto such a side has not left the face through it."""
+        out = np.zeros((len(self.patches), 4), dtype=bool)
+        for k, surface in enumerate(self.patches):
+            P = surface.points
+            for side, row in enumerate((P[0], P[-1], P[:, 0], P[:, -1])):
+                out[k, side] = np.linalg.norm(np.ptp(row, axis=0)) <= COLLAPSED_FRACTION * surface.size
+        return out
 
     @cached_property
     def closed(self) -> np.ndarray:

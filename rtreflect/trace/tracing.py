@@ -17,8 +17,8 @@ Embree from just beyond the previous one (vectorised over the rays still open, a
 `MAX_CANDIDATES` per ray). Every candidate is refined and classified:
 
 - *valid*: Newton converged near its mesh hit, ahead of the origin, inside its face's trim;
-- *miss*: the surface is not there: the refinement left the face (ran off the patch's domain
-  or out of its trim) and no neighbouring face across that edge takes it (a restart on the
+- *miss*: the surface is not there: the refinement left the face (ran off the patch's domain, not
+  through a collapsed side, a pole, which is one point in 3D: the search below decides there; or out of its trim) and no neighbouring face across that edge takes it (a restart on the
   nearest face sharing the edge, `Tessellation.across_seam`; where it stops on a closed face's seam,
   again from the seam's other side, `_over_closed_seam`), or a Levenberg–Marquardt search
   for the ray–surface distance stalls at a positive minimum (the ray passes the surface's
@@ -345,9 +345,15 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     status = np.full(n, UNRESOLVED)
     inside = surfaces.on_face(pk, ur, vr)
     status[conv & near & inside] = VALID
-    left = edge | (conv & near & ~inside)  # ran off the face: the ray may go on on a neighbour, else it misses
+    # Newton stopped on a collapsed side (a pole) has not left the face: the side is one point in 3D, and near it
+    # Newton's steps in the parameter along it are wild (|S_u| → 0). The search decides there, as inside the face.
+    pole = np.flatnonzero(edge)
+    pole = pole[_on_collapsed_side(surfaces, pk[pole], ur[pole], vr[pole])]
+    off = edge.copy()
+    off[pole] = False
+    left = off | (conv & near & ~inside)  # ran off the face: the ray may go on on a neighbour, else it misses
     # Newton failed inside the face, or went to another sheet: search for the ray's distance to the surface instead.
-    stuck = np.flatnonzero(~(conv & near) & ~edge)
+    stuck = np.flatnonzero(~(conv & near) & ~off)
     if len(stuck):
         tol = NEWTON_TOLERANCE * np.maximum(tm[stuck], tessellation.extent)
         u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
@@ -400,6 +406,13 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     _normals(surfaces, pk, derivs, D, np.flatnonzero(aside), normal, cosine, degenerate)
     t = np.where(status == VALID, tr, tm)
     return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside)
+
+
+def _on_collapsed_side(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
+    """Whether (u, v) lies on a collapsed side of its patch's domain (`SurfaceSet.collapsed`: a pole)."""
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    side = surfaces.collapsed[np.asarray(patch, dtype=np.int64)]
+    return (side[:, 0] & (u == u0)) | (side[:, 1] & (u == u1)) | (side[:, 2] & (v == v0)) | (side[:, 3] & (v == v1))
 
 
 def _over_closed_seam(surfaces: SurfaceSet, patch, u, v, derivs: SurfaceDerivatives, converged, edge, O, D, t_mesh,
