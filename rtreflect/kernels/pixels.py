@@ -139,6 +139,9 @@ def box_keep(origins, directions, low, high, tiny, keep):
     "void(f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f4[:, :])",
     "void(f8[:, :], f8[:, :], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f8[:], f4[:, :])",
     "void(f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1])",
+    # One pixel's float32 columns (the analytic path's miss pixel, a one-pixel block): numpy flags a one-row view
+    # contiguous.
+    "void(f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f4[:, ::1])",
 ))
 def aov_columns(P, N, u, v, patch, Z, f, line_id, line_dist, phi, K, H, k1, k2, out):
     """The AOV channels of a tile in `integrator.film.AOV_CHANNELS` order (P and N three columns each, then one
@@ -383,7 +386,9 @@ def _pairwise_sum(a, n, stack):
 
 
 @njit(**JIT, aot=("void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[::1], f8[::1], f8[:, ::1])",
-                  "void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[::1], f8[::1], f4[:, :])"))
+                  "void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[::1], f8[::1], f4[:, :])",
+                  # one pixel's float32 colour columns (a one-row view is flagged contiguous)
+                  "void(b1[:, ::1], f8[:, ::1], f8[:, ::1], b1, f8[::1], f8[::1], f8[::1], f4[:, ::1])"))
 def coverage_rgba(hit, weight, shade, shaded, surface, line, background, out):
     """``out`` (P, 4) linear RGBA of pixels from their (P, s²) samples (`film.coverage_color`): per pixel the line
     weights' sum L = Σ w, the surface's U = Σ (1 − w)·k and the hits' count H over its samples (a miss adds 0), then
