@@ -64,3 +64,34 @@ def test_nothing_to_hit_culls_nothing_and_a_ray_inside_the_box_is_kept():
     beside = np.array([[0.0, 5, 0], [5.0, 0, 0], [5.0, 0, 0]])
     along = np.array([[1.0, 0, 0], [1.0, 0, 0], [-1.0, 0, 0]])
     assert box.may_hit(beside, along).tolist() == [2]
+
+
+@pytest.mark.parametrize("name, camera", [("peer.toml", {}), ("peer.toml", {"projection": "orthographic", "view_height": 3.0}),
+                                          ("peer.toml", {"eye": [0.0, -0.5, 0.3]}), ("hood.toml", {})])
+def test_every_centre_ray_the_box_keeps_is_in_the_pixel_window(name, camera):
+    """The window the analytic path forms rays in (`RayBox.pixel_window`) holds every pixel whose centre ray the
+    slab test keeps, each at least a pixel inside it (the ring the edge test reads), for a perspective and an
+    orthographic camera, and an eye close over the surface (the box partly behind it: the whole image)."""
+    path = ROOT / ("bench" if name == "peer.toml" else "scenes") / name
+    scene = small(path, ANALYTIC, 192, 108)
+    scene = replace(scene, camera=replace(scene.camera, **{k: np.asarray(v) if k == "eye" else v for k, v in camera.items()}))
+    renderer = Renderer(scene)
+    rows, cols = renderer.window
+    kept = renderer.ray_box.keep(*renderer.camera.rays(*np.divmod(np.arange(192 * 108), 192))).reshape(108, 192)
+    assert kept.any()
+    assert not (kept & ~_ringed(rows, cols, kept.shape)).any()
+    if "eye" in camera:
+        assert (rows, cols) == (slice(0, 108), slice(0, 192))
+    else:
+        assert (rows.stop - rows.start) * (cols.stop - cols.start) < 0.5 * kept.size  # it does cut the image
+
+
+def _ringed(rows: slice, cols: slice, shape) -> np.ndarray:
+    """Pixels of the window one pixel in from its sides, except where a side is the image's border."""
+    inner = np.zeros(shape, dtype=bool)
+    r0 = rows.start if rows.start == 0 else rows.start + 1
+    r1 = rows.stop if rows.stop == shape[0] else rows.stop - 1
+    c0 = cols.start if cols.start == 0 else cols.start + 1
+    c1 = cols.stop if cols.stop == shape[1] else cols.stop - 1
+    inner[r0:r1, c0:c1] = True
+    return inner

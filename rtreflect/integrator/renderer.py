@@ -19,6 +19,7 @@ import time
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Callable, Iterator
 
 import numpy as np
@@ -79,12 +80,24 @@ class Shading:
     # Ulmet's f (the f AOV; NaN where no hit), from the tubes' pass over the reflected rays (`TubeReach.f`).
     f: np.ndarray | None = None
 
+    @classmethod
+    def unshaded(cls, hits: Hits, origins: np.ndarray, directions: np.ndarray) -> "Shading":
+        """Every ray's shading as where it hit nothing (to be filled in where ``hits`` hit: `Renderer.shade`)."""
+        n_rays = len(origins)
+        return cls(hits, origins, directions, np.full_like(directions, np.nan), np.full(n_rays, -1),
+                   np.full(n_rays, np.nan), np.zeros(n_rays, dtype=bool), level=np.full(n_rays, -1),
+                   f=np.full(n_rays, np.nan))
+
     def take(self, rows: np.ndarray | slice) -> "Shading":
-        """The rays ``rows`` (indices: copies; a slice: views)."""
-        hits = Hits(**{k: getattr(self.hits, k)[rows] for k in Hits.__dataclass_fields__})
-        some = lambda x: None if x is None else x[rows]  # noqa: E731
-        return Shading(hits, self.origins[rows], self.directions[rows], self.s[rows], self.line_id[rows],
-                       self.line_dist[rows], self.lit[rows], some(self.surface_rgb), some(self.stripe_dist),
+        """The rays ``rows`` (indices: copies, gathered by np.take, ~4× faster than fancy indexing of (N, 3) rows;
+        a slice: views)."""
+        if not isinstance(rows, slice) and rows.dtype == bool:
+            rows = np.flatnonzero(rows)
+        pick = (lambda x: x[rows]) if isinstance(rows, slice) else (lambda x: np.take(x, rows, axis=0))  # noqa: E731
+        hits = Hits(**{k: pick(getattr(self.hits, k)) for k in Hits.__dataclass_fields__})
+        some = lambda x: None if x is None else pick(x)  # noqa: E731
+        return Shading(hits, pick(self.origins), pick(self.directions), pick(self.s), pick(self.line_id),
+                       pick(self.line_dist), pick(self.lit), some(self.surface_rgb), some(self.stripe_dist),
                        some(self.level), some(self.offset), some(self.level_t),
                        some(self.f))
 
@@ -212,6 +225,7 @@ class Renderer:
         # those met): a ray missing both meshes' box is a miss without asking Embree (`cull`).
         self.ray_box = RayBox(self.tessellation.vertices,
                               *(() if self.second_look is None else (self.second_look.shell_mesh.vertices,)))
+        self._window: tuple[RayBox | None, tuple[slice, slice]] = (None, (slice(0, 0), slice(0, 0)))  # `window`
 
     def trace(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
         """Exact first hits of camera rays; rays that miss every mesh's box (`cull`) are not traced: miss values."""
@@ -248,12 +262,9 @@ class Renderer:
         """
         hits = self.trace(origins, directions)
         n_rays = len(origins)
-        s = np.full_like(directions, np.nan)
-        lit = np.zeros(n_rays, dtype=bool)
-        line_id, line_dist = np.full(n_rays, -1), np.full(n_rays, np.nan)
+        shading = Shading.unshaded(hits, origins, directions)
+        s, lit, line_id, line_dist = shading.s, shading.lit, shading.line_id, shading.line_dist
         idx = np.flatnonzero(hits.hit)
-        shading = Shading(hits, origins, directions, s, line_id, line_dist, lit, level=np.full(n_rays, -1),
-                          f=np.full(n_rays, np.nan))
         if len(idx) == 0:
             return shading
         # np.take: the same rows as hits.P[idx], gathered ~4× faster (numpy's fancy indexing of (N, 3) rows is slow).
@@ -416,6 +427,26 @@ class Renderer:
         out[:] = rgba
         return out
 
+    @property
+    def window(self) -> tuple[slice, slice]:
+        """(rows, columns) of the pixels whose centre rays `ray_box` may keep (`cull.RayBox.pixel_window`), for the
+        analytic path; found once per box (a test may swap the box)."""
+        box, window = self._window
+        if box is not self.ray_box:
+            self._window = self.ray_box, self.ray_box.pixel_window(self.camera)
+        return self._window[1]
+
+    @cached_property
+    def _miss_pixel(self) -> np.ndarray:
+        """The 22 float32 values of a pixel whose centre ray hits nothing (analytic path): its colour (line weight 0)
+        and AOVs as `colour` and `aovs` give them for such a ray, so the same bits as when it is traced and culled."""
+        pixel = np.empty((1, len(CHANNELS)), dtype=np.float32)
+        origins, directions = np.zeros((1, 3)), np.zeros((1, 3))
+        shading = Shading.unshaded(Hits.blank(1, np.zeros(1, dtype=bool)), origins, directions)
+        self.colour(shading, np.zeros(1), 1, pixel[:, :4])
+        aov_planes(self.aovs(shading), pixel[:, 4:])
+        return pixel[0]
+
     def _render_analytic(self, start: int, stop: int, out: np.ndarray) -> Tile:
         """`render_span` for ``samples = "analytic"`` (`analytic`): centre rays with a halo, the stripes' coverage in
         closed form, and the edge pixels supersampled.
@@ -423,14 +454,36 @@ class Renderer:
         The edge test reads each pixel's 8 neighbours, and whether a pixel's footprint reaches a stripe is first
         bounded by its own neighbours' σ (the gradient is then evaluated only where it may), so the centre rays
         of the span's rows and two rows on either side are traced: a pixel's value depends only on the rays of
-        the pixels around it, never on where the span ends.
+        the pixels around it, never on where the span ends. Only those within the `window` of pixels whose rays
+        may meet a mesh (`cull`) are formed and traced: every pixel outside it is a miss (`_miss_pixel`), and
+        the window keeps a ring of such pixels around the hits, so the neighbour tests see the same pixels.
         """
         image = self.scene.image
         width, height = image.width, image.height
         first, last = start // width, (stop - 1) // width
-        r0, r1 = max(0, first - 2), min(height - 1, last + 2)
-        shape = (r1 - r0 + 1, width)
-        rows, cols = np.divmod(np.arange(r0 * width, (r1 + 1) * width), width)
+        halo_rays = (min(height - 1, last + 2) - max(0, first - 2) + 1) * width  # counted as traced, culled or not
+        window_rows, window_cols = self.window
+        r0, r1 = max(0, first - 2, window_rows.start), min(height - 1, last + 2, window_rows.stop - 1)
+        c0, c1 = window_cols.start, window_cols.stop
+        out[:] = self._miss_pixel
+        # The span's own pixels inside the window: per own row, the run of its columns there.
+        own_rows = np.arange(max(first, r0), min(last, r1) + 1)
+        low = np.maximum(own_rows * width + c0, start)
+        high = np.minimum(own_rows * width + c1, stop)
+        low, high = low[high > low], high[high > low]
+        if len(low) == 0:
+            return Tile(start, stop, out, halo_rays, 0, 0, 0)
+        runs = high - low
+        pixels = np.repeat(low - np.cumsum(runs) + runs, runs) + np.arange(runs.sum())  # the runs, concatenated
+        shape = (r1 - r0 + 1, c1 - c0)
+        rows = np.repeat(np.arange(r0, r1 + 1), shape[1])
+        cols = np.tile(np.arange(c0, c1), shape[0])
+        own_at = (pixels // width - r0) * shape[1] + pixels % width - c0  # own pixels' places in the window's rays
+        # One run in both (the window spans the image's width, or one row): slices, so views, not copies.
+        whole = own_at[-1] - own_at[0] + 1 == len(own_at) and pixels[-1] - pixels[0] + 1 == len(pixels)
+        own = slice(int(own_at[0]), int(own_at[-1]) + 1) if whole else own_at
+        block = out[pixels[0] - start:pixels[-1] + 1 - start] if whole else \
+            np.empty((len(pixels), len(CHANNELS)), dtype=np.float32)
         with self.clock.stage("camera rays"):
             origins, directions = self.camera.rays(rows, cols)
         shading = self.shade(origins, directions, occlude=False)
@@ -449,7 +502,7 @@ class Renderer:
             hit_grid = shading.hits.hit.reshape(shape)
             hit_cols = np.flatnonzero(hit_grid.any(axis=0))
             hit_rows = np.flatnonzero(hit_grid.any(axis=1))
-            cs = slice(max(0, hit_cols[0] - 1), min(width, hit_cols[-1] + 2)) if len(hit_cols) else slice(0, 0)
+            cs = slice(max(0, hit_cols[0] - 1), min(shape[1], hit_cols[-1] + 2)) if len(hit_cols) else slice(0, 0)
             rs = slice(max(0, hit_rows[0] - 1), min(shape[0], hit_rows[-1] + 2)) if len(hit_rows) else slice(0, 0)
             crop = (rs.stop - rs.start, cs.stop - cs.start)
             grid = lambda x: x.reshape(shape + x.shape[1:])[rs, cs]  # noqa: E731 (a (rows, columns) view of the crop)
@@ -460,9 +513,6 @@ class Renderer:
             want[:max(0, first - 1 - r0)] = False
             want[last + 2 - r0:] = False
         centre = self.centre_stripes(shading, rows, cols, sigma, want.ravel())
-        # The span's own rays are one run of the halo's: a slice, so their shading is taken as views, not copies.
-        first_own = start - r0 * width
-        own = slice(first_own, stop - r0 * width)
         edge = np.zeros(shape, dtype=bool)
         with self.clock.stage("analytic AA"):
             if crop[1]:
@@ -481,10 +531,10 @@ class Renderer:
                         edge[rs, cs] |= np.abs(other - rgb).max(axis=2) > MAP_STEP
             edge = edge.ravel()[own]
         mine = shading.take(own)
-        rgba = self.colour(mine, np.where(centre.blocked[own], 0.0, centre.coverage[own]), 1, out[:, :4])
+        rgba = self.colour(mine, np.where(centre.blocked[own], 0.0, centre.coverage[own]), 1, block[:, :4])
         fell_back = mine.hits.fallback.copy()
         fallbacks = int(fell_back.sum())
-        rays = len(rows)
+        rays = halo_rays
         edges = np.flatnonzero(edge)
         # Edge pixels' samples in chunks of at most the span's own pixel count: no more rays at once than the tile
         # was sized for (`tiling`, one ray per pixel).
@@ -492,12 +542,14 @@ class Renderer:
         for part in np.array_split(edges, max(1, -(-len(edges) // chunk))):
             if len(part) == 0:
                 continue
-            rgba[part], samples, traced = self.supersample(rows[first_own + part], cols[first_own + part], EDGE_SAMPLES)
+            rgba[part], samples, traced = self.supersample(rows[own][part], cols[own][part], EDGE_SAMPLES)
             rays += traced
             fallbacks += int(samples.hits.fallback.sum())
             fell_back[part] |= samples.hits.fallback.reshape(len(part), -1).any(axis=1)
         aovs = self.aovs(mine)
-        aov_planes(aovs, out[:, 4:])
+        aov_planes(aovs, block[:, 4:])
+        if not whole:
+            out[pixels - start] = block
         return Tile(start, stop, out, rays, fallbacks, int(fell_back.sum()), len(edges))
 
     def stripe_offsets(self, shading: Shading) -> np.ndarray:
