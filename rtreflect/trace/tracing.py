@@ -572,6 +572,9 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     # A planar neighbour is met where the ray crosses its plane: rows whose crossing cannot win below are not refined.
     may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], band, skip, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
+    # Any neighbour lies in its control net's hull: rows whose ray stays clear of it where a win could lie are not refined.
+    may = _may_win_in_hull(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], band, skip, slack)
+    rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     if len(rays) == 0:
         return
     u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
@@ -622,6 +625,57 @@ def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D
     never = (tp + margin <= 0.0) | (tp - margin >= tr - slack) | (np.abs(tp - tm) - margin > reach)
     may[rows[never]] = False
     return may
+
+
+def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, band, skip, slack) -> np.ndarray:
+    """Which (ray, neighbour) rows of `_rim_neighbours` may win: False only where the ray's stretch on which a winning
+    hit could lie passes clear of the neighbour's control net, whatever Newton from any start converges to. For the
+    curved neighbours (a planar one's crossing is known: `_may_win_on_plane`).
+
+    A winning point S is converged, so within tol (`NEWTON_TOLERANCE` × max(t_mesh, extent, |O + t_mesh D|)) of the
+    ray, at t = (S − O)·D with t > 0, |t − t_mesh| within the band's reach at its largest (`GRAZING_ALLOWANCE`) and
+    t below the kept hit's by float32 rounding: on the segment t ∈ [max(0, t_mesh − reach), min(t_mesh + reach,
+    t_kept − slack)]. With weights > 0 the surface lies in its net's convex hull (Piegl and Tiller, *The NURBS Book*,
+    property 4.5 of rational surfaces), so in the net's slab along any unit direction m: min m·P ≤ m·S ≤ max m·P, and
+    m·S lies within tol of the segment's range of m·X. A row whose segment range, widened by tol (and 1000× tol for
+    the rounding of both), misses the net's slab along the axes (its bounding box) or its plane's normal (`_net_boxes`)
+    cannot win. On the plate at 960×540: a hole's fillet from the top plane and its wall from the fillet lie below
+    the face the ray meets first (3 of 4 such rows); a wall from its fillet does not separate so.
+    """
+    may = np.ones(len(pn), dtype=bool)
+    lo, hi, normal, low, high, positive = _net_boxes(tessellation, surfaces)
+    rows = np.flatnonzero(positive[pn] & ~_net_planes(tessellation, surfaces)[3][pn])  # planes: `_may_win_on_plane`'s
+    if len(rows) == 0:
+        return may
+    k, O, D, tm, tr = pn[rows], O[rows], D[rows], tm[rows], tr[rows]
+    tol = NEWTON_TOLERANCE * np.maximum(np.maximum(tm, tessellation.extent), np.linalg.norm(O + tm[:, None] * D, axis=1))
+    margin = tol + 1000.0 * tol
+    reach = BAND_CHORDS * band[k] * GRAZING_ALLOWANCE + skip
+    t0, t1 = np.maximum(tm - reach, 0.0), np.minimum(tm + reach, tr - slack)
+    A, B = O + t0[:, None] * D, O + t1[:, None] * D
+    # Per axis, then along the net plane's normal: the segment's range against the slab, widened by the margin.
+    clear = np.any((np.minimum(A, B) - margin[:, None] > hi[k]) | (np.maximum(A, B) + margin[:, None] < lo[k]), axis=1)
+    a, b = np.einsum("ij,ij->i", A, normal[k]), np.einsum("ij,ij->i", B, normal[k])
+    clear |= (np.minimum(a, b) - margin > high[k]) | (np.maximum(a, b) + margin < low[k])
+    # An empty stretch (the kept hit before it) cannot hold a win either; NaN compares False: such rows are refined.
+    clear |= t0 > t1
+    may[rows[clear]] = False
+    return may
+
+
+def _net_boxes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
+    """Per face, its control net's slabs (`_may_win_in_hull`): the bounding box lo, hi (P, 3), the net plane's unit
+    normal m (P, 3) and the range low, high (P,) of m·P over the net, and whether its weights are all > 0 (else no
+    hull holds the surface). Built once per tessellation, on first use (kept in its ``__dict__``, as `_net_planes` is)."""
+    cached = tessellation.__dict__.get("_net_boxes")
+    if cached is None:
+        _, normal, _, positive = surfaces.net_planes
+        nets = [s.points.reshape(-1, 3) for s in surfaces.patches]
+        lo, hi = np.array([x.min(axis=0) for x in nets]).reshape(-1, 3), np.array([x.max(axis=0) for x in nets]).reshape(-1, 3)
+        along = [x @ m for x, m in zip(nets, normal)]
+        low, high = np.array([x.min() for x in along]), np.array([x.max() for x in along])
+        cached = tessellation.__dict__["_net_boxes"] = (lo, hi, normal, low, high, positive)
+    return cached
 
 
 def _net_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
