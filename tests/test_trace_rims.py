@@ -154,7 +154,8 @@ def test_rim_rows_dropped_clear_of_the_neighbours_hull_could_not_win(monkeypatch
 
     monkeypatch.setattr(tracing, "refine", spy)
     hits, faces = run()
-    monkeypatch.setattr(tracing, "_may_win_in_hull", lambda tessellation, surfaces, pn, *a: np.ones(len(pn), dtype=bool))
+    monkeypatch.setattr(tracing, "_may_win_in_hull",
+                        lambda tessellation, surfaces, rays, pn, *a: np.ones(len(pn), dtype=bool))
     every, every_faces = run()
     for name in ("hit", "patch", "u", "v", "t", "P", "N", "fallback", "aside", "Su", "Sv"):
         np.testing.assert_array_equal(getattr(hits, name), getattr(every, name), err_msg=name)

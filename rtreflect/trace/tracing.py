@@ -573,7 +573,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], band, skip, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     # Any neighbour lies in its control net's hull: rows whose ray stays clear of it where a win could lie are not refined.
-    may = _may_win_in_hull(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], band, skip, slack)
+    may = _may_win_in_hull(tessellation, surfaces, rays, pn, O, D, tm, tr, band, skip, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     if len(rays) == 0:
         return
@@ -627,7 +627,8 @@ def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D
     return may
 
 
-def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, band, skip, slack) -> np.ndarray:
+def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, rays, pn, O, D, tm, tr, band, skip,
+                     slack) -> np.ndarray:
     """Which (ray, neighbour) rows of `_rim_neighbours` may win: False only where the ray's stretch on which a winning
     hit could lie passes clear of the neighbour's control net, whatever Newton from any start converges to. For the
     curved neighbours (a planar one's crossing is known: `_may_win_on_plane`).
@@ -639,34 +640,24 @@ def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D,
     property 4.5 of rational surfaces), so in the net's slab along any unit direction m: min m·P ≤ m·S ≤ max m·P, and
     m·S lies within tol of the segment's range of m·X. A row whose segment range, widened by tol (and 1000× tol for
     the rounding of both), misses the net's slab along the axes (its bounding box) or its plane's normal (`_net_boxes`)
-    cannot win. On the plate at 960×540: a hole's fillet from the top plane and its wall from the fillet lie below
-    the face the ray meets first (3 of 4 such rows); a wall from its fillet does not separate so.
+    cannot win. Rows (``rays``, ``pn``) of the candidates' arrays O, D, tm, tr; by the compiled kernel
+    `kernels.rims.clear_of_hulls`. On the plate at 960×540: a hole's fillet from the top plane and its wall from the
+    fillet lie below the face the ray meets first (3 of 4 such rows); a wall from its fillet does not separate so.
     """
-    may = np.ones(len(pn), dtype=bool)
-    lo, hi, normal, low, high, positive = _net_boxes(tessellation, surfaces)
-    rows = np.flatnonzero(positive[pn] & ~_net_planes(tessellation, surfaces)[3][pn])  # planes: `_may_win_on_plane`'s
-    if len(rows) == 0:
-        return may
-    k, O, D, tm, tr = pn[rows], O[rows], D[rows], tm[rows], tr[rows]
-    tol = NEWTON_TOLERANCE * np.maximum(np.maximum(tm, tessellation.extent), np.linalg.norm(O + tm[:, None] * D, axis=1))
-    margin = tol + 1000.0 * tol
-    reach = BAND_CHORDS * band[k] * GRAZING_ALLOWANCE + skip
-    t0, t1 = np.maximum(tm - reach, 0.0), np.minimum(tm + reach, tr - slack)
-    A, B = O + t0[:, None] * D, O + t1[:, None] * D
-    # Per axis, then along the net plane's normal: the segment's range against the slab, widened by the margin.
-    clear = np.any((np.minimum(A, B) - margin[:, None] > hi[k]) | (np.maximum(A, B) + margin[:, None] < lo[k]), axis=1)
-    a, b = np.einsum("ij,ij->i", A, normal[k]), np.einsum("ij,ij->i", B, normal[k])
-    clear |= (np.minimum(a, b) - margin > high[k]) | (np.maximum(a, b) + margin < low[k])
-    # An empty stretch (the kept hit before it) cannot hold a win either; NaN compares False: such rows are refined.
-    clear |= t0 > t1
-    may[rows[clear]] = False
-    return may
+    lo, hi, normal, low, high, hull = _net_boxes(tessellation, surfaces)
+    clear = np.empty(len(pn), dtype=bool)
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    rims_kernel.clear_of_hulls(np.ascontiguousarray(rays, dtype=np.int64), np.ascontiguousarray(pn, dtype=np.int64),
+                               f64(O), f64(D), f64(tm), f64(tr), BAND_CHORDS * band * GRAZING_ALLOWANCE + skip, lo, hi,
+                               normal, low, high, hull, NEWTON_TOLERANCE, float(tessellation.extent), float(slack), clear)
+    return ~clear
 
 
 def _net_boxes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
     """Per face, its control net's slabs (`_may_win_in_hull`): the bounding box lo, hi (P, 3), the net plane's unit
-    normal m (P, 3) and the range low, high (P,) of m·P over the net, and whether its weights are all > 0 (else no
-    hull holds the surface). Built once per tessellation, on first use (kept in its ``__dict__``, as `_net_planes` is)."""
+    normal m (P, 3) and the range low, high (P,) of m·P over the net, and whether they bound a curved face: weights all
+    > 0 (else no hull holds the surface) and not planar (`_net_planes`: `_may_win_on_plane` decides those). Built once
+    per tessellation, on first use (kept in its ``__dict__``, as `_net_planes` is)."""
     cached = tessellation.__dict__.get("_net_boxes")
     if cached is None:
         _, normal, _, positive = surfaces.net_planes
@@ -674,7 +665,8 @@ def _net_boxes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.nda
         lo, hi = np.array([x.min(axis=0) for x in nets]).reshape(-1, 3), np.array([x.max(axis=0) for x in nets]).reshape(-1, 3)
         along = [x @ m for x, m in zip(nets, normal)]
         low, high = np.array([x.min() for x in along]), np.array([x.max() for x in along])
-        cached = tessellation.__dict__["_net_boxes"] = (lo, hi, normal, low, high, positive)
+        hull = positive & ~_net_planes(tessellation, surfaces)[3]
+        cached = tessellation.__dict__["_net_boxes"] = tuple(np.ascontiguousarray(x) for x in (lo, hi, normal, low, high, hull))
     return cached
 
 
