@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -124,3 +125,39 @@ def test_rim_rows_dropped_on_a_planar_neighbour_could_not_win(monkeypatch):
         np.testing.assert_array_equal(getattr(hits, name), getattr(every, name), err_msg=name)
     assert hits.aside.sum() >= 10  # rim wins happen here
     assert (every_faces == 0).sum() > 5000 and (faces == 0).sum() < 0.05 * (every_faces == 0).sum()
+
+
+def test_rim_rows_dropped_clear_of_the_neighbours_hull_could_not_win(monkeypatch):
+    """`tracing._may_win_in_hull` skips refining a face across the rim where the ray's stretch that could hold a
+    winning hit passes clear of that face's control net (its bounding box, its plane's slab): on the plate (960×540 of
+    the default view, every 4th row) the hits are bit for bit those with every such row refined, and the fillets'
+    rows from the top plane and the walls' rows from the fillets (the fillet and the wall lie below the face the ray
+    meets) are no longer refined for most of them."""
+    from rtreflect.trace import tracing
+
+    renderer = Renderer(resolve(load_scene(PARTS / "plate.step").with_image(960, 540, 1)))
+    rows, cols = np.divmod(np.arange(960 * 540), 960)
+    pick = rows % 4 == 0
+    origins, directions = renderer.camera.rays(rows[pick], cols[pick])
+    refined = []
+    refine = tracing.refine
+
+    def spy(surfaces, patch, *args):
+        if sys._getframe(1).f_code.co_name == "_rim_neighbours":  # the rim rows only
+            refined.append(np.asarray(patch).copy())
+        return refine(surfaces, patch, *args)
+
+    def run():
+        refined.clear()
+        hits = trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
+        return hits, np.concatenate(refined)
+
+    monkeypatch.setattr(tracing, "refine", spy)
+    hits, faces = run()
+    monkeypatch.setattr(tracing, "_may_win_in_hull",
+                        lambda tessellation, surfaces, rays, pn, *a: np.ones(len(pn), dtype=bool))
+    every, every_faces = run()
+    for name in ("hit", "patch", "u", "v", "t", "P", "N", "fallback", "aside", "Su", "Sv"):
+        np.testing.assert_array_equal(getattr(hits, name), getattr(every, name), err_msg=name)
+    assert hits.aside.sum() >= 10  # rim wins happen here
+    assert len(every_faces) > 10000 and len(faces) < 0.4 * len(every_faces)

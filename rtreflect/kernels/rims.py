@@ -202,3 +202,38 @@ def nearest_across(lo, hi, start, end, left, order, vertices, cand_patch, bounda
                       or boundary_uv[c, 1] != boundary_uv[b, 1]):
                     tied = True
         best[i], dist[i], tie[i] = b, math.sqrt(b2) if b >= 0 else math.inf, tied
+
+
+@njit(**JIT, aot=(
+    "void(i8[::1], i8[::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
+    "f8[::1], f8[::1], b1[::1], f8, f8, f8, b1[::1])",
+))
+def clear_of_hulls(rays, patch, O, D, t_mesh, t_kept, reach, lo, hi, normal, low, high, hull, tolerance, extent, slack,
+                   clear):
+    """Per row j (ray i = rays[j], face k = patch[j] with ``hull[k]``: weights > 0): ``clear[j]`` True where the ray's
+    segment t ∈ [max(t_mesh − reach[k], 0), min(t_mesh + reach[k], t_kept − slack)] (empty: clear too), widened by
+    tol + 1000 tol (tol = tolerance · max(t_mesh, extent, |O + t_mesh D|)), misses face k's control net's slabs: its
+    box lo[k], hi[k] along the axes, or [low[k], high[k]] along the unit normal[k] (`trace.tracing._may_win_in_hull`).
+    The segment's range along a direction is that of its two ends; NaN compares False: not clear."""
+    for j in range(rays.shape[0]):
+        i, k = rays[j], patch[j]
+        clear[j] = False
+        if not hull[k]:
+            continue
+        tm = t_mesh[i]
+        m0, m1, m2 = O[i, 0] + tm * D[i, 0], O[i, 1] + tm * D[i, 1], O[i, 2] + tm * D[i, 2]
+        tol = tolerance * max(max(tm, extent), math.sqrt(m0 * m0 + m1 * m1 + m2 * m2))
+        margin = tol + 1000.0 * tol
+        t0, t1 = max(tm - reach[k], 0.0), min(tm + reach[k], t_kept[i] - slack)
+        if t0 > t1:
+            clear[j] = True
+            continue
+        a_n = b_n = 0.0
+        for c in range(3):
+            a, b = O[i, c] + t0 * D[i, c], O[i, c] + t1 * D[i, c]
+            if min(a, b) - margin > hi[k, c] or max(a, b) + margin < lo[k, c]:
+                clear[j] = True
+            a_n += a * normal[k, c]
+            b_n += b * normal[k, c]
+        if min(a_n, b_n) - margin > high[k] or max(a_n, b_n) + margin < low[k]:
+            clear[j] = True

@@ -585,6 +585,9 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     # A planar neighbour is met where the ray crosses its plane: rows whose crossing cannot win below are not refined.
     may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], band, skip, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
+    # Any neighbour lies in its control net's hull: rows whose ray stays clear of it where a win could lie are not refined.
+    may = _may_win_in_hull(tessellation, surfaces, rays, pn, O, D, tm, tr, band, skip, slack)
+    rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     if len(rays) == 0:
         return
     u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
@@ -635,6 +638,49 @@ def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D
     never = (tp + margin <= 0.0) | (tp - margin >= tr - slack) | (np.abs(tp - tm) - margin > reach)
     may[rows[never]] = False
     return may
+
+
+def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, rays, pn, O, D, tm, tr, band, skip,
+                     slack) -> np.ndarray:
+    """Which (ray, neighbour) rows of `_rim_neighbours` may win: False only where the ray's stretch on which a winning
+    hit could lie passes clear of the neighbour's control net, whatever Newton from any start converges to. For the
+    curved neighbours (a planar one's crossing is known: `_may_win_on_plane`).
+
+    A winning point S is converged, so within tol (`NEWTON_TOLERANCE` × max(t_mesh, extent, |O + t_mesh D|)) of the
+    ray, at t = (S − O)·D with t > 0, |t − t_mesh| within the band's reach at its largest (`GRAZING_ALLOWANCE`) and
+    t below the kept hit's by float32 rounding: on the segment t ∈ [max(0, t_mesh − reach), min(t_mesh + reach,
+    t_kept − slack)]. With weights > 0 the surface lies in its net's convex hull (Piegl and Tiller, *The NURBS Book*,
+    property 4.5 of rational surfaces), so in the net's slab along any unit direction m: min m·P ≤ m·S ≤ max m·P, and
+    m·S lies within tol of the segment's range of m·X. A row whose segment range, widened by tol (and 1000× tol for
+    the rounding of both), misses the net's slab along the axes (its bounding box) or its plane's normal (`_net_boxes`)
+    cannot win. Rows (``rays``, ``pn``) of the candidates' arrays O, D, tm, tr; by the compiled kernel
+    `kernels.rims.clear_of_hulls`. On the plate at 960×540: a hole's fillet from the top plane and its wall from the
+    fillet lie below the face the ray meets first (3 of 4 such rows); a wall from its fillet does not separate so.
+    """
+    lo, hi, normal, low, high, hull = _net_boxes(tessellation, surfaces)
+    clear = np.empty(len(pn), dtype=bool)
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
+    rims_kernel.clear_of_hulls(np.ascontiguousarray(rays, dtype=np.int64), np.ascontiguousarray(pn, dtype=np.int64),
+                               f64(O), f64(D), f64(tm), f64(tr), BAND_CHORDS * band * GRAZING_ALLOWANCE + skip, lo, hi,
+                               normal, low, high, hull, NEWTON_TOLERANCE, float(tessellation.extent), float(slack), clear)
+    return ~clear
+
+
+def _net_boxes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
+    """Per face, its control net's slabs (`_may_win_in_hull`): the bounding box lo, hi (P, 3), the net plane's unit
+    normal m (P, 3) and the range low, high (P,) of m·P over the net, and whether they bound a curved face: weights all
+    > 0 (else no hull holds the surface) and not planar (`_net_planes`: `_may_win_on_plane` decides those). Built once
+    per tessellation, on first use (kept in its ``__dict__``, as `_net_planes` is)."""
+    cached = tessellation.__dict__.get("_net_boxes")
+    if cached is None:
+        _, normal, _, positive = surfaces.net_planes
+        nets = [s.points.reshape(-1, 3) for s in surfaces.patches]
+        lo, hi = np.array([x.min(axis=0) for x in nets]).reshape(-1, 3), np.array([x.max(axis=0) for x in nets]).reshape(-1, 3)
+        along = [x @ m for x, m in zip(nets, normal)]
+        low, high = np.array([x.min() for x in along]), np.array([x.max() for x in along])
+        hull = positive & ~_net_planes(tessellation, surfaces)[3]
+        cached = tessellation.__dict__["_net_boxes"] = tuple(np.ascontiguousarray(x) for x in (lo, hi, normal, low, high, hull))
+    return cached
 
 
 def _net_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, ...]:
