@@ -1,6 +1,6 @@
 """The tracer's curvatures reused by the AOV stage (issue 14, goal 2): `tracing._other_root`'s prefilter computes
-K, H, κ1, κ2 at most hits; they travel in `Hits.curvature` (turned with N, `tracing.turned_curvatures`) so the AOV
-stage computes only the others. The AOVs must be the same bits as one fresh kernel pass at every hit
+K, H, κ1, κ2 at most hits, with the normal facing the ray as the tracer stores it; they travel in `Hits.curvature`
+so the AOV stage computes only the others. The AOVs must be the same bits as one fresh kernel pass at every hit
 (`curvatures_at` with N as stored), which is the reference here.
 """
 
@@ -15,7 +15,6 @@ from rtreflect.geometry.curvature import curvatures_at
 from rtreflect.geometry.surfaces import SurfaceSet
 from rtreflect.integrator.autorig import resolve
 from rtreflect.integrator.renderer import Renderer
-from rtreflect.trace.tracing import turned_curvatures
 
 from test_curvature import SQRT_HALF, revolve
 
@@ -24,7 +23,9 @@ def bits(x: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=np.float64).view(np.uint64)
 
 
-def test_turned_curvatures_are_the_kernels_at_the_opposite_normal_bit_for_bit_and_zeros_are_left_to_compute():
+def test_opposite_normal_gives_minus_h_and_swapped_minus_kappas_bit_for_bit_so_the_prefilter_bound_is_the_same():
+    """`_other_root` now takes its curvatures with the normal facing the ray (to hand them to the AOVs): its prefilter
+    reads max(|κ1|, |κ2|), which must not change by a bit; the kernel's values at −n are (K, −H, −κ2, −κ1) exactly."""
     torus = revolve([(4.0, 0.0, 1.0), (4.0, 1.0, SQRT_HALF), (3.0, 1.0, 1.0)])
     corners = np.array([[[x, y, 0.3 + 0.2 * x - 0.1 * y] for y in (0.0, 1.0)] for x in (0.0, 1.0)])  # a tilted plane
     plane = NurbsSurface(1, 1, [0.0, 0.0, 1.0, 1.0], [0.0, 0.0, 1.0, 1.0], corners, np.ones((2, 2)))
@@ -33,22 +34,14 @@ def test_turned_curvatures_are_the_kernels_at_the_opposite_normal_bit_for_bit_an
     patch = rng.integers(0, 2, 600)
     u, v = rng.uniform(0.05, 0.95, (2, len(patch)))
     n = surfaces.normals(patch, u, v, surfaces.evaluate(patch, u, v, order=1))
-    mine = np.column_stack(curvatures_at(surfaces, patch, u, v, n))
-    turned = np.column_stack(curvatures_at(surfaces, patch, u, v, -n))
-    rows = np.flatnonzero(rng.random(len(patch)) < 0.7)
-    have = mine.copy()
-    turned_curvatures(have, rows)
-    flipped = np.zeros(len(patch), dtype=bool)
-    flipped[rows] = True
-    known = ~np.isnan(have[:, 0])
-    # Every curved point turned is the kernel's value at −n, to the bit; the plane's zeros are left to compute.
-    assert np.array_equal(bits(have[flipped & known]), bits(turned[flipped & known]))
-    assert np.all(known[flipped & (patch == 0)])
-    # A zero (a plane's H, κ1, κ2) may come out −0 from one normal and +0 from the other: left to compute.
-    zeros = np.array([[0.0, 0.0, 0.0, 0.0], [-1.0, 0.5, 0.0, -2.0], [np.nan] * 4, [1.0, 2.0, 3.0, 1.0]])
-    turned_curvatures(zeros, np.arange(4))
-    assert np.isnan(zeros[:3]).all() and np.array_equal(zeros[3], [1.0, -2.0, -1.0, -3.0])
-    assert np.array_equal(bits(have[~flipped]), bits(mine[~flipped]))  # rows not turned: untouched
+    K, H, k1, k2 = curvatures_at(surfaces, patch, u, v, n)
+    K2, H2, k12, k22 = curvatures_at(surfaces, patch, u, v, -n)
+    assert np.array_equal(bits(np.maximum(np.abs(k1), np.abs(k2))), bits(np.maximum(np.abs(k12), np.abs(k22))))
+    nonzero = (H != 0) & (k1 != 0) & (k2 != 0) & (K != 0)
+    assert nonzero[patch == 0].all()
+    assert np.array_equal(bits(K2[nonzero]), bits(K[nonzero]))
+    for got, want in ((H2, -H), (k12, -k2), (k22, -k1)):
+        assert np.array_equal(bits(got[nonzero]), bits(want[nonzero]))
 
 
 @pytest.mark.parametrize("name", ["scenes/teapot.toml", "scenes/hood_curvature.toml", "parts/plate.step"])

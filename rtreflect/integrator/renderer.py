@@ -347,10 +347,8 @@ class Renderer:
             # K, H, κ1, κ2 from the fundamental forms at the exact hit, signed with N as written (facing the ray):
             # the tracer's where it had them (`Hits.curvature`, the same kernel's values), one kernel pass over the
             # other hits (NaN where none hit).
-            curv = np.full((4, len(hits.hit)), np.nan)
-            have = hits.hit & ~np.isnan(hits.curvature[:, 0])
-            curv[:, have] = hits.curvature[have].T
-            rest = np.flatnonzero(hits.hit & ~have)
+            curv = np.ascontiguousarray(hits.curvature.T)  # NaN where no hit
+            rest = np.flatnonzero(hits.hit & np.isnan(curv[0]))
             if len(rest):
                 curv[:, rest] = curvatures_at(self.surfaces, hits.patch[rest], hits.u[rest], hits.v[rest],
                                               np.take(hits.N, rest, axis=0))

@@ -160,7 +160,7 @@ class Hits:
     Su: np.ndarray
     Sv: np.ndarray
     #: (N, 4) K, H, κ1, κ2 at the hit, signed with N as stored, where the tracer already had them (`_other_root`'s
-    #: prefilter), else NaN: the AOV stage computes only the NaN rows, not every hit a second time.
+    #: prefilter, the same kernel at the same point and normal), else NaN: the AOV stage computes only the NaN rows.
     curvature: np.ndarray
 
     @classmethod
@@ -169,19 +169,6 @@ class Hits:
         return cls(hit, np.full(n, -1), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan),
                    np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
                    np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 4), np.nan))
-
-
-def turned_curvatures(curvature: np.ndarray, rows: np.ndarray) -> None:
-    """``curvature`` (N, 4) rows (K, H, κ1, κ2) for the normal n of ``rows`` turned to −n, in place: (K, −H, −κ2, −κ1).
-
-    Exact, bit for bit, as `kernels.nurbs.curvature_of` would compute them from −n, wherever all four are nonzero:
-    II = (L, M, N) changes sign exactly (each product does, rounding to nearest is symmetric), so do H's sums and
-    κ1,2 = H ± √(H² − K), while K and H² are unchanged. A zero may come out as −0 on one side and +0 on the other
-    (x − x is +0 either way): such rows (and NaN ones) are set to NaN, for the AOV stage to compute.
-    """
-    c = curvature[rows]
-    exact = np.all(c != 0.0, axis=1) & ~np.isnan(c).any(axis=1)
-    curvature[rows] = np.where(exact[:, None], np.column_stack([c[:, 0], -c[:, 1], -c[:, 3], -c[:, 2]]), np.nan)
 
 
 def facing(normals: np.ndarray, directions: np.ndarray, cosine: np.ndarray | None = None) -> np.ndarray:
@@ -335,7 +322,7 @@ class _Candidates:
     start_u: np.ndarray  # the mesh hit's interpolated (u, v): kept by an unresolved candidate
     start_v: np.ndarray
     aside: np.ndarray  # bool: VALID by `_other_root` or `_rim_neighbours`, not the mesh hit's own refinement
-    curvature: np.ndarray  # (n, 4) K, H, κ1, κ2 for ``normal`` (not turned) where `_other_root` had them, else NaN
+    curvature: np.ndarray  # (n, 4) K, H, κ1, κ2 for ``normal`` turned to face the ray where `_other_root` had them
 
 
 def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1, b2, tm) -> _Candidates:
@@ -469,8 +456,9 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     Looked for below `OTHER_ROOT_COS`, and at any incidence where the ray's depth inside the cap between the
     crossings, max |g| = (n·D)²/2|κ|, is within `OTHER_ROOT_CHORDS` chord errors of the face: a deeper cap
     the mesh reaches into, so the ray meets it there and Newton starts near the nearer crossing.
-    ``curvature`` (n, 4): where given, the prefilter's K, H, κ1, κ2 (for ``normal``) are kept in its rows, the AOV
-    stage's curvatures at the same point (`Hits.curvature`); the caller resets the rows whose hit it replaces.
+    ``curvature`` (n, 4): where given, the prefilter's K, H, κ1, κ2 are kept in its rows, taken with the normal turned
+    to face the ray as `trace` stores it (`facing`: n·D ≤ 0), so they are the AOV stage's (`Hits.curvature`); the
+    caller resets the rows whose hit it replaces.
     """
     cap = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error  # per face: a shallow cap's |κ| ≥ (n·D)²/cap
     rays = np.flatnonzero(status == VALID)
@@ -480,7 +468,9 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     # the order-2 evaluation (one compiled pass; the curvatures' NaN at degenerate points keeps the ray).
     rest = rays[~keep]
     if len(rest):
-        k = curvatures_at(surfaces, pk[rest], ur[rest], vr[rest], normal[rest])
+        # With −n, (K, H, κ1, κ2) become (K, −H, −κ2, −κ1) (II changes sign; exactly so, rounding to nearest being
+        # symmetric, but for the sign of a zero), so max(|κ1|, |κ2|) is the same either way: the normal facing the ray.
+        k = curvatures_at(surfaces, pk[rest], ur[rest], vr[rest], facing(normal[rest], D[rest], cosine[rest]))
         if curvature is not None:
             curvature[rest] = np.column_stack(k)
         c2 = cosine[rest] ** 2
@@ -832,7 +822,6 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 kept = SurfaceDerivatives(*(x[bad] for x in c.derivs[:3]))
                 normal[bad] = surfaces.normals(c.patch[bad], c.u[bad], c.v[bad], kept)
                 cosine[bad] = np.einsum("ij,ij->i", normal[bad], D[bad])
-            turned_curvatures(c.curvature, np.flatnonzero(cosine > 0))  # as `facing` turns those normals
             facing(normal, D, cosine)
             _put_rows((hits.P, hits.Su, hits.Sv, hits.N, hits.curvature), rows,
                       (c.derivs.S, c.derivs.Su, c.derivs.Sv, normal, c.curvature), pick)
