@@ -356,8 +356,13 @@ class Renderer:
                 phi[idx] = self.mode.phi(SurfacePoints(hits.P[idx], hits.N[idx], shading.s[idx], hits.patch[idx],
                                                        hits.u[idx], hits.v[idx]))
             # K, H, κ1, κ2 from the fundamental forms at the exact hit, signed with N as written (facing the ray):
-            # one kernel pass over every ray (NaN where none hit).
-            curv = curvatures_at(self.surfaces, np.where(hits.hit, hits.patch, -1), hits.u, hits.v, hits.N)
+            # the tracer's where it had them (`Hits.curvature`, the same kernel's values), one kernel pass over the
+            # other hits (NaN where none hit).
+            curv = np.ascontiguousarray(hits.curvature.T)  # NaN where no hit
+            rest = np.flatnonzero(hits.hit & np.isnan(curv[0]))
+            if len(rest):
+                curv[:, rest] = curvatures_at(self.surfaces, hits.patch[rest], hits.u[rest], hits.v[rest],
+                                              np.take(hits.N, rest, axis=0))
         return {"P": hits.P, "N": hits.N, "u": hits.u, "v": hits.v, "patch": hits.patch.astype(np.float64),
                 "Z": hits.t, "f": f, "line.id": shading.line_id.astype(np.float64), "line.dist": shading.line_dist,
                 "phi": phi, "K": curv[0], "H": curv[1], "k1": curv[2], "k2": curv[3], "shading": shading}

@@ -346,7 +346,7 @@ class SecondLook:
             slack = FLOAT32_SLACK * self.tessellation.extent
             nearer = again.hit & ~again.fallback & (again.t < kept - slack)
             rows = rays[nearer]
-            for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside", "Su", "Sv"):
+            for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside", "Su", "Sv", "curvature"):
                 getattr(hits, name)[rows] = getattr(again, name)[nearer]
             hits.fallback[rays[again.fallback]] = True
             self._from_shell(hits, origins, directions, far, rays, entry)
@@ -401,3 +401,4 @@ class SecondLook:
         hits.P[rays], hits.aside[rays] = derivs.S, True
         hits.Su[rays], hits.Sv[rays] = derivs.Su, derivs.Sv
         hits.N[rays] = facing(self.surfaces.normals(patch, u, v, derivs), D)
+        hits.curvature[rays] = np.nan  # not known at the new hits: the AOV stage computes them

@@ -54,7 +54,7 @@ from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
 from ..kernels import nurbs as nurbs_kernel
 from ..kernels import rims as rims_kernel
-from ..kernels.pixels import scatter_picked
+from ..kernels.pixels import scatter_picked, scatter_rows
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance (or the part's size),
 #: and at least to the hit's distance from the origin: S's coordinates cannot be computed more finely than
@@ -159,13 +159,16 @@ class Hits:
     #: (N, 3) S_u and S_v at (u, v), as the kernel that found the hit had them (NaN on the mesh-normals path).
     Su: np.ndarray
     Sv: np.ndarray
+    #: (N, 4) K, H, κ1, κ2 at the hit, signed with N as stored, where the tracer already had them (`_other_root`'s
+    #: prefilter, the same kernel at the same point and normal), else NaN: the AOV stage computes only the NaN rows.
+    curvature: np.ndarray
 
     @classmethod
     def blank(cls, n: int, hit: np.ndarray) -> "Hits":
         """Rows for n rays flagged ``hit``, every value still that of a miss: to be filled in where hit."""
         return cls(hit, np.full(n, -1), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan),
                    np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
-                   np.full((n, 3), np.nan), np.full((n, 3), np.nan))
+                   np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 4), np.nan))
 
 
 def facing(normals: np.ndarray, directions: np.ndarray, cosine: np.ndarray | None = None) -> np.ndarray:
@@ -319,6 +322,7 @@ class _Candidates:
     start_u: np.ndarray  # the mesh hit's interpolated (u, v): kept by an unresolved candidate
     start_v: np.ndarray
     aside: np.ndarray  # bool: VALID by `_other_root` or `_rim_neighbours`, not the mesh hit's own refinement
+    curvature: np.ndarray  # (n, 4) K, H, κ1, κ2 for ``normal`` turned to face the ray where `_other_root` had them
 
 
 def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1, b2, tm) -> _Candidates:
@@ -401,11 +405,15 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         seam, at, reach, tried = seam[~ok3], at[~ok3], reach[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
     _normals(surfaces, pk, derivs, D, np.concatenate(restarted), normal, cosine, degenerate)
     aside = np.zeros(n, dtype=bool)
-    _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside)
+    curvature = np.full((n, 4), np.nan)
+    _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside, curvature)
     _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band, aside)
-    _normals(surfaces, pk, derivs, D, np.flatnonzero(aside), normal, cosine, degenerate)
+    moved = np.flatnonzero(aside)
+    _normals(surfaces, pk, derivs, D, moved, normal, cosine, degenerate)
+    curvature[moved] = np.nan  # found beside: not the point the curvatures were taken at
+    curvature[degenerate] = np.nan  # the normal kept there is the limit (`trace`), not the one they were taken with
     t = np.where(status == VALID, tr, tm)
-    return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside)
+    return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside, curvature)
 
 
 def _on_collapsed_side(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
@@ -445,7 +453,7 @@ def _over_closed_seam(surfaces: SurfaceSet, patch, u, v, derivs: SurfaceDerivati
 
 
 def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs, normal, cosine,
-                aside) -> None:
+                aside, curvature: np.ndarray | None = None) -> None:
     """Grazing valid hits, and those the mesh may have led past a shallow cap: the nearer of the ray's two crossings of
     the same sheet, in place.
 
@@ -461,6 +469,9 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     Looked for below `OTHER_ROOT_COS`, and at any incidence where the ray's depth inside the cap between the
     crossings, max |g| = (n·D)²/2|κ|, is within `OTHER_ROOT_CHORDS` chord errors of the face: a deeper cap
     the mesh reaches into, so the ray meets it there and Newton starts near the nearer crossing.
+    ``curvature`` (n, 4): where given, the prefilter's K, H, κ1, κ2 are kept in its rows, taken with the normal turned
+    to face the ray as `trace` stores it (`facing`: n·D ≤ 0), so they are the AOV stage's (`Hits.curvature`); the
+    caller resets the rows whose hit it replaces.
     """
     cap = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error  # per face: a shallow cap's |κ| ≥ (n·D)²/cap
     rays = np.flatnonzero(status == VALID)
@@ -470,7 +481,13 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     # the order-2 evaluation (one compiled pass; the curvatures' NaN at degenerate points keeps the ray).
     rest = rays[~keep]
     if len(rest):
-        k = curvatures_at(surfaces, pk[rest], ur[rest], vr[rest], normal[rest])
+        # With −n, (K, H, κ1, κ2) become (K, −H, −κ2, −κ1) (II changes sign; exactly so, rounding to nearest being
+        # symmetric, but for the sign of a zero), so max(|κ1|, |κ2|) is the same either way: the normal facing the ray.
+        turned = np.take(normal, rest, axis=0)
+        turned[cosine[rest] > 0] *= -1.0  # as `facing` turns them
+        k = curvatures_at(surfaces, pk[rest], ur[rest], vr[rest], turned)
+        if curvature is not None:  # compiled row copies (`_put_rows`)
+            scatter_rows(curvature, rest, np.ascontiguousarray(np.stack(k, axis=1)))
         c2 = cosine[rest] ** 2
         bound = cap[pk[rest]] * (1.0 - c2)
         with np.errstate(invalid="ignore"):
@@ -867,7 +884,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 normal[bad] = surfaces.normals(c.patch[bad], c.u[bad], c.v[bad], kept)
                 cosine[bad] = np.einsum("ij,ij->i", normal[bad], D[bad])
             facing(normal, D, cosine)
-            _put_rows((hits.P, hits.Su, hits.Sv, hits.N), rows, (c.derivs.S, c.derivs.Su, c.derivs.Sv, normal), pick)
+            _put_rows((hits.P, hits.Su, hits.Sv, hits.N, hits.curvature), rows,
+                      (c.derivs.S, c.derivs.Su, c.derivs.Sv, normal, c.curvature), pick)
             cos[rows] = np.abs(cosine[pick])
         # Go on where a mesh hit behind this one could still carry a nearer exact hit.
         # An unresolved candidate does not stop the search: the exact hit may lie behind it.
