@@ -54,7 +54,7 @@ from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
 from ..kernels import nurbs as nurbs_kernel
 from ..kernels import rims as rims_kernel
-from ..kernels.pixels import scatter_picked, scatter_rows
+from ..kernels.pixels import scatter_picked
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance (or the part's size),
 #: and at least to the hit's distance from the origin: S's coordinates cannot be computed more finely than
@@ -486,8 +486,8 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
         turned = np.take(normal, rest, axis=0)
         turned[cosine[rest] > 0] *= -1.0  # as `facing` turns them
         k = curvatures_at(surfaces, pk[rest], ur[rest], vr[rest], turned)
-        if curvature is not None:  # compiled row copies (`_put_rows`)
-            scatter_rows(curvature, rest, np.ascontiguousarray(np.stack(k, axis=1)))
+        if curvature is not None:  # compiled row copies
+            scatter_picked(curvature, rest, np.ascontiguousarray(np.stack(k, axis=1)), np.arange(len(rest)))
         c2 = cosine[rest] ** 2
         bound = cap[pk[rest]] * (1.0 - c2)
         with np.errstate(invalid="ignore"):
