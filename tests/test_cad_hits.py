@@ -204,3 +204,27 @@ def test_assembly_grazing_pixel_keeps_the_nearer_crossing():
     expected = np.einsum("ij,ij->i", occt_nearest(shape, origins, directions) - origins, directions)
     assert np.isfinite(expected).all() and hits.hit.all() and not hits.fallback.any()
     np.testing.assert_allclose(hits.t, expected, rtol=0, atol=POINT_TOLERANCE * renderer.tessellation.extent)
+
+
+def test_plate_hole_wall_grazing_entry_is_the_first_hit():
+    """plate.step at its default size, 960×551, pixel (425, 750) (validate: "1 pixels store an exact hit behind a
+    nearer exact surface point"): the pixel-centre ray skims a hole's wall (|N·D| = 0.012) and met the wall's mesh at
+    its top rim, between the wall's two crossings of the cylinder it lies on (t = 74.08, above the wall, and 74.2007,
+    on it). Newton ran off the wall's top edge towards the first, the ray went on to the hole's floor at t = 78.97.
+    OCCT's nearest intersection is the wall at 74.2007; the coarse trace must find it itself (the other crossing,
+    `tracing._crossing_on_face`), not only the second look. The ray is fixed here (a small image's renderer traces
+    it: the mesh does not depend on the image size)."""
+    from rtreflect.trace.tracing import trace
+
+    renderer = Renderer(resolve(load_scene(PARTS / "plate.step").with_image(96, 54, 1)))
+    origins = np.array([[94.55390631719692, -50.66616988096895, 52.255039905236075]])
+    directions = np.array([[-0.03440050746000912, 0.7489916745764776, -0.6616857838140527]])
+    shape, _, _, faces = occt_faces(PARTS / "plate.step")
+    reference = occt_nearest(shape, origins, directions)
+    expected = np.einsum("ij,ij->i", reference - origins, directions)
+    tolerance = POINT_TOLERANCE * renderer.tessellation.extent
+    for hits in (trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions),
+                 renderer.trace(origins, directions)):
+        assert hits.hit.all() and not hits.fallback.any()
+        np.testing.assert_allclose(hits.t, expected, rtol=0, atol=tolerance)
+        on_face_checks(faces[int(hits.patch[0])], hits.P[0], hits.N[0], tolerance)

@@ -383,6 +383,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
     reach = 2.0 * tessellation.edge_length[pk[seam]]
     restarted = [stuck]
+    # Every row that left its face, and that face: its sheet's other crossing may lie on it (`_crossing_on_face`).
+    gone, gone_patch = seam, pk[seam]
     for attempt in range(SEAM_TRIES):
         if len(seam) == 0:
             break
@@ -403,8 +405,12 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
             have[won] = new[ok3]
         restarted.append(won)
         seam, at, reach, tried = seam[~ok3], at[~ok3], reach[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
+    crossed = _crossing_on_face(tessellation, surfaces, gone, gone_patch, O, D, tm, us, vs, band, status, pk, ur, vr, tr,
+                                derivs)
+    restarted.append(crossed)
     _normals(surfaces, pk, derivs, D, np.concatenate(restarted), normal, cosine, degenerate)
     aside = np.zeros(n, dtype=bool)
+    aside[crossed] = True
     curvature = np.full((n, 4), np.nan)
     _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside, curvature)
     _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band, aside)
@@ -520,6 +526,68 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     ur[won], vr[won], tr[won], aside[won] = u3[ok3], v3[ok3], t3[ok3], True
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[ok3]
+
+
+def _crossing_on_face(tessellation: Tessellation, surfaces: SurfaceSet, rows, patch, O, D, tm, us, vs, band, status, pk,
+                      ur, vr, tr, derivs) -> np.ndarray:
+    """Candidates ``rows`` whose refinement left their face ``patch`` (per row: Newton ran off its domain's edge or
+    converged outside its trim) at grazing incidence: the ray's other crossing of the same sheet, on the face, in
+    place. Returns the rows it made VALID (or nearer: where a neighbour across the edge took the ray, its hit stays
+    unless this one lies before it by more than float32 rounding).
+
+    The mirror case of `_other_root`: a ray grazing a sheet crosses it twice, close together, and Newton from a mesh
+    hit between the crossings may go to either. Where it goes to the one beyond the face's edge, the ray left the
+    face there, but the other may lie on it (parts/plate.step at 960×551, pixel (425, 750): a ray skimming a hole's
+    wall at |N·D| = 0.012 met the wall's mesh at its top rim, v = 4.2, between the wall's crossings at t = 74.08 and
+    74.2007; Newton ran off v = 4.2 towards the first, on the cylinder's extension above the wall where the fillet
+    curves away, and the ray went on to the hole's floor 4.8 farther). To second order about the mesh hit's (u, v)
+    (point S₀, unit normal n, δ the parameter step per unit length of D's tangential part, κ = n·S''(δ, δ) as in
+    `_other_root`) the ray's height over the sheet at O + (t_mesh + s) D is g(s) = h₀ + (n·D) s − ½ κ s², with
+    h₀ = n·(O + t_mesh D − S₀): the crossings lie at s = ((n·D) ± √((n·D)² + 2κ h₀))/κ (both at the closest
+    approach s = (n·D)/κ where the model's root is complex: the sheet may still come that close). Newton starts from
+    both on the same face; the nearest point that converges, within reach of the mesh hit (`_near_mesh_hit`) and on
+    the face wins. Looked for where `_other_root` looks: |n·D| < `OTHER_ROOT_COS` at the mesh hit's (u, v), or the
+    cap between the crossings no deeper than `OTHER_ROOT_CHORDS` chord errors of the face.
+    """
+    if len(rows) == 0:
+        return rows
+    cap = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error  # per face: a shallow cap's |κ| ≥ (n·D)²/cap
+    O, D, tm, u, v = O[rows], D[rows], tm[rows], us[rows], vs[rows]
+    d2 = surfaces.evaluate(patch, u, v, order=2)
+    n = surfaces.normals(patch, u, v, d2)
+    c = np.einsum("ij,ij->i", n, D)
+    h0 = np.einsum("ij,ij->i", n, O + tm[:, None] * D - d2.S)
+    du, dv = parameter_steps(d2.Su, d2.Sv, D - c[:, None] * n)
+    with np.errstate(invalid="ignore", over="ignore"):  # κ ~ 0: no second crossing, dropped below
+        kappa = np.einsum("ij,ij->i", n, d2.Suu * (du * du)[:, None] + 2.0 * d2.Suv * (du * dv)[:, None]
+                          + d2.Svv * (dv * dv)[:, None])
+        shallow = c * c <= cap[patch] * np.abs(kappa)
+        root = np.sqrt(np.maximum(c * c + 2.0 * kappa * h0, 0.0))
+        grazing = np.isfinite(kappa) & (kappa != 0.0) & ((np.abs(c) < OTHER_ROOT_COS) | shallow)
+    if not grazing.any():
+        return rows[:0]
+    rows, patch, O, D, tm, u, v, c, kappa, root, du, dv = (x[grazing] for x in
+                                                          (rows, patch, O, D, tm, u, v, c, kappa, root, du, dv))
+    m = len(rows)
+    # Both crossings of every row in one refinement: rows 0..m−1 the one at s₋, m..2m−1 the one at s₊.
+    s = np.concatenate([(c - root) / kappa, (c + root) / kappa])
+    k2, O2, D2, tm2 = (np.concatenate([x, x]) for x in (patch, O, D, tm))
+    u0, u1, v0, v1 = surfaces.domains(k2)
+    starts_u = np.clip(np.tile(u, 2) + s * np.tile(du, 2), u0, u1)
+    starts_v = np.clip(np.tile(v, 2) + s * np.tile(dv, 2), v0, v1)
+    u3, v3, d3, ok3 = refine(surfaces, k2, starts_u, starts_v, O2, D2, tm2 + s, tessellation.extent)
+    near3, t3 = _near_mesh_hit(d3, k2, O2, D2, tm2, band)
+    ok3 &= near3 & surfaces.on_face(k2, u3, v3)
+    t3 = np.where(ok3, t3, np.inf)
+    pick = np.where(t3[m:] < t3[:m], np.arange(m) + m, np.arange(m))  # the nearer of each row's two
+    best = t3[pick]
+    # A neighbour's hit across the edge (the ray's next face there) stays unless this one is nearer beyond rounding.
+    win = np.isfinite(best) & ((status[rows] != VALID) | (best < tr[rows] - FLOAT32_SLACK * tessellation.extent))
+    won, pick = rows[win], pick[win]
+    pk[won], ur[won], vr[won], tr[won], status[won] = k2[pick], u3[pick], v3[pick], t3[pick], VALID
+    for have, new in zip(derivs[:3], d3[:3]):
+        have[won] = new[pick]
+    return won
 
 
 def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
