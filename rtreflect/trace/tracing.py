@@ -323,6 +323,7 @@ class _Candidates:
     start_v: np.ndarray
     aside: np.ndarray  # bool: VALID by `_other_root` or `_rim_neighbours`, not the mesh hit's own refinement
     curvature: np.ndarray  # (n, 4) K, H, κ1, κ2 for ``normal`` turned to face the ray where `_other_root` had them
+    crossed: np.ndarray  # bool: VALID by `_crossing_on_face` (the other crossing of a sheet the refinement left)
 
 
 def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1, b2, tm) -> _Candidates:
@@ -419,7 +420,10 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     curvature[moved] = np.nan  # found beside: not the point the curvatures were taken at
     curvature[degenerate] = np.nan  # the normal kept there is the limit (`trace`), not the one they were taken with
     t = np.where(status == VALID, tr, tm)
-    return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside, curvature)
+    crossed_rows = np.zeros(n, dtype=bool)
+    crossed_rows[crossed] = status[crossed] == VALID  # (a nearer aside hit may have replaced it since: still on its sheet)
+    return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside, curvature,
+                       crossed_rows)
 
 
 def _on_collapsed_side(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
@@ -909,6 +913,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     rays, start, limit = np.arange(n), None, far
     # Past a mesh hit by float32 rounding of the scene's largest coordinates, with margin.
     skip = float32_rounding(tessellation)
+    slack = FLOAT32_SLACK * tessellation.extent
+    crossing = np.zeros(n, dtype=bool)  # the kept hit is a `_crossing_on_face` one
     for _ in range(MAX_CANDIDATES):
         if len(rays) == 0:
             break
@@ -934,13 +940,18 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
         at = slice(None) if every else rays
         with clock.stage("newton (exact hit)"):
             c = _candidates(tessellation, surfaces, O, D, mesh.prim, mesh.b1, mesh.b2, mesh.t)
-            take = (c.status == VALID) & (c.t < best[at]) & (c.t < far[at])
+            # A hit by `_crossing_on_face` is often a root another candidate's refinement reaches too (Newton's
+            # tolerance apart): it wins only nearer by more than float32 rounding, and yields to a mesh-led hit within it.
+            nearer = np.where(c.crossed, c.t < best[at] - slack,
+                              (c.t < best[at]) | (crossing[at] & (c.t < best[at] + slack)))
+            take = (c.status == VALID) & nearer & (c.t < far[at])
             # The candidates kept (`pick`) and their rays (`rows`): slices where every ray keeps its candidate (the
             # common case), no gathers.
             pick = slice(None) if take.all() else np.flatnonzero(take)
             rows = at if isinstance(pick, slice) else rays[pick]
             best[rows], hits.patch[rows], hits.u[rows], hits.v[rows] = c.t[pick], c.patch[pick], c.u[pick], c.v[pick]
             hits.aside[rows] = c.aside[pick]
+            crossing[rows] = c.crossed[pick]
             odd = np.flatnonzero((c.status == UNRESOLVED) & (mesh.t < doubt[at]))
             doubt[rays[odd]] = mesh.t[odd]
         with clock.stage("exact normals"):
