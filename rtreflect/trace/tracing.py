@@ -87,6 +87,12 @@ STATIONARY_COSINE = 1e-6
 #: row) the step is a vanishing fraction of the gradient step and still does not descend: a minimum
 #: to float precision (on the 206-face plate, rays passing a fillet's silhouette 0.02 away stalled so).
 STALLED_DAMPING = 1e9
+#: The search crawls, and stops undecided (`_passes_by` decides), where this many accepted steps in a row lowered |r|
+#: by less than the fraction `CRAWL_GAIN`: by a positive minimum where a column of J nearly vanishes (a silhouette
+#: along a latitude circle: S_v along the ray, sweep part sphere_pole_view.step) Gauss–Newton's steps creep and
+#: `STATIONARY_COSINE` is out of reach. A search heading for a hit (|r| → 0) gains far more per step.
+CRAWL_STEPS = 10
+CRAWL_GAIN = 1e-4
 
 #: Newton steps on the ray–surface distance where the search (`_rescue`) stops undecided (`_passes_by`): it starts
 #: close to the minimum, where Newton converges quadratically.
@@ -244,7 +250,8 @@ def _rescue(surfaces: SurfaceSet, patch, u, v, origins, directions, tol, steps: 
     converged, stationary, edge = (np.empty(n, dtype=bool) for _ in range(3))
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
     nurbs_kernel.rescue(*surfaces.table.args, np.ascontiguousarray(patch, dtype=np.int64), u, v, f64(origins),
-                        f64(directions), f64(tol), RESCUE_STEPS if steps is None else steps, STATIONARY_COSINE, STALLED_DAMPING, S, Su, Sv,
+                        f64(directions), f64(tol), RESCUE_STEPS if steps is None else steps, STATIONARY_COSINE, STALLED_DAMPING, CRAWL_STEPS,
+                        CRAWL_GAIN, S, Su, Sv,
                         converged, stationary, edge)
     return u, v, SurfaceDerivatives(S, Su, Sv), converged, stationary, edge
 
