@@ -54,12 +54,15 @@ def closest_line_distance(R: np.ndarray, s: np.ndarray, B: np.ndarray, c: np.nda
     return float(np.linalg.norm(R + t * s - (B + tau * c))), float(t)
 
 
-def levenberg_marquardt(surfaces, patch, u, v, origins, directions, tol, steps, stationary_cosine, stalled_damping):
+def levenberg_marquardt(surfaces, patch, u, v, origins, directions, tol, steps, stationary_cosine, stalled_damping,
+                        crawl_steps=0, crawl_gain=0.0):
     """The ray–surface distance search of `trace.tracing._rescue`, in numpy over all rays (its implementation before
     it was compiled), as the reference of the kernel `kernels.nurbs.rescue`.
 
     Levenberg–Marquardt on r = (e1·(S − O), e2·(S − O)), Marquardt's scaling (JᵀJ + λ diag JᵀJ), λ from
-    1e-3, /3 on a step that lowers |r|, ×4 otherwise. Returns (u, v, S, converged, stationary, edge).
+    1e-3, /3 on a step that lowers |r|, ×4 otherwise; stops undecided where ``crawl_steps`` accepted steps lowered
+    |r| by less than the fraction ``crawl_gain`` (checked at the start and every crawl_steps-th accepted point).
+    Returns (u, v, S, converged, stationary, edge, crawled).
     Dot products summed in coordinate order, as the kernel's.
     """
     def dot(a, b):
@@ -76,7 +79,8 @@ def levenberg_marquardt(surfaces, patch, u, v, origins, directions, tol, steps, 
     lam = np.full(n, 1e-3)
     d = surfaces.evaluate(patch, u, v)
     S, Su, Sv = d.S.copy(), d.Su.copy(), d.Sv.copy()
-    converged, stationary = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    converged, stationary, crawled = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    accepted, fresh, mark = np.ones(n, dtype=int), np.ones(n, dtype=bool), np.zeros(n)
     active = np.arange(n)
     for _ in range(steps):
         rel = S[active] - origins[active]
@@ -92,6 +96,13 @@ def levenberg_marquardt(surfaces, patch, u, v, origins, directions, tol, steps, 
         flat = ~done & (~(cosine > stationary_cosine) | (lam[active] > stalled_damping))
         stationary[active[flat]] = True
         keep = ~done & ~flat
+        if crawl_steps > 0:
+            check = keep & fresh[active] & (accepted[active] % crawl_steps == 1 % crawl_steps)
+            crawl = check & (accepted[active] > 1) & (rn > (1.0 - crawl_gain) * mark[active])
+            crawled[active[crawl]] = True
+            mark[active[check & ~crawl]] = rn[check & ~crawl]
+            keep &= ~crawl
+        fresh[active] = False
         active, a, b, c, dd, g1, g2, rn = (x[keep] for x in (active, a, b, c, dd, g1, g2, rn))
         if len(active) == 0:
             break
@@ -109,6 +120,8 @@ def levenberg_marquardt(surfaces, patch, u, v, origins, directions, tol, steps, 
         take = active[better]
         u[take], v[take] = tu[better], tv[better]
         S[take], Su[take], Sv[take] = trial.S[better], trial.Su[better], trial.Sv[better]
+        accepted[take] += 1
+        fresh[take] = True
         lam[active] = np.where(better, lam[active] / 3.0, lam[active] * 4.0)
     edge = ~converged & ((u == u0) | (u == u1) | (v == v0) | (v == v1))
-    return u, v, S, converged, stationary & ~edge, edge
+    return u, v, S, converged, stationary & ~edge, edge, crawled

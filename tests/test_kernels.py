@@ -316,11 +316,12 @@ def test_compiled_rescue_answers_as_the_numpy_search():
     tol = np.full(n, tracing.NEWTON_TOLERANCE * 3.0)
     got = tracing._rescue(surfaces, k, us, vs, O, D, tol)
     want = levenberg_marquardt(surfaces, k, us, vs, O, D, tol, tracing.RESCUE_STEPS, tracing.STATIONARY_COSINE,
-                               tracing.STALLED_DAMPING)
+                               tracing.STALLED_DAMPING, tracing.CRAWL_STEPS, tracing.CRAWL_GAIN)
     for name, a, b in (("u", got[0], want[0]), ("v", got[1], want[1]), ("S", got[2].S, want[2]),
                        ("converged", got[3], want[3]), ("stationary", got[4], want[4]), ("edge", got[5], want[5])):
         np.testing.assert_array_equal(a, b, err_msg=name)
     assert got[3].sum() > 100 and got[4].sum() > 10, (got[3].sum(), got[4].sum())  # both verdicts exercised
+    assert want[6].sum() > 0, "no ray crawls: the crawl stop is not exercised"
 
 
 def test_second_process_loads_every_kernel_from_the_cache():

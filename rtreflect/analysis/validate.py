@@ -26,7 +26,8 @@ lies within `END_MARGIN_PX` of it, sits beyond the analytic line's end and is le
 
 **Misses** (both directions): analytic contour points with no traced centre of the same
 tube within `MISS_RADIUS_PX`, counted only away from silhouettes, patch edges, occlusion
-boundaries and the image border (the pixel is `CLEAN_MARGIN_PX` from any such pixel, and
+boundaries, pixels whose reflected ray is blocked (lines seen along a ray) and the image border
+(the pixel is `CLEAN_MARGIN_PX` from any such pixel, and
 the point is `END_MARGIN_PX` along the contour from a polyline end); plus traced centres
 with no analytic contour of their tube within `SEARCH_RADIUS_PX`.
 
@@ -588,6 +589,14 @@ def traced_centres(renderer: Renderer, aovs: PixelAOVs,
                          np.concatenate(second_pixel))
 
 
+def blocked_pixels(renderer: Renderer, aovs: PixelAOVs) -> np.ndarray:
+    """(H, W) True where the pixel's reflected ray is blocked before the light plane (`_unblocked`), on hit pixels."""
+    pixels = np.flatnonzero((aovs.patch.ravel() >= 0) & np.isfinite(aovs.f.ravel()))
+    blocked = np.zeros(aovs.f.size, dtype=bool)
+    blocked[pixels] = ~_unblocked(renderer, aovs, pixels)
+    return blocked.reshape(aovs.f.shape)
+
+
 def _filter_unblocked(renderer: Renderer, aovs: PixelAOVs, centres: TracedCentres) -> TracedCentres:
     """The centres whose two pixels see the tube: reflected rays unblocked (line.id already says it is ahead)."""
     pixels = np.unique(np.concatenate([centres.pixel_a, centres.pixel_b]))
@@ -746,14 +755,20 @@ def _checkable_points(contours: ContourLines, light: int, clean: np.ndarray) -> 
 
 
 def clean_pixels(renderer: Renderer, aovs: PixelAOVs,
-                 pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> np.ndarray:
+                 pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None,
+                 blocked: np.ndarray | None = None) -> np.ndarray:
     """(H, W) True where every pixel within CLEAN_MARGIN_PX hits one smooth piece of one patch (see module doc).
 
     ``pairs``: `_resolved_pairs` of these AOVs (for one line's neighbour gap, or the geometry alone).
+    ``blocked``: (H, W) pixels whose reflected ray meets the surface before the light plane (`blocked_pixels`,
+    lines seen along a ray): no line is drawn there, so a contour within the margin runs along the edge of a
+    reflected occluder, where the traced pairs straddling it are left out.
     """
     pairs = pairs if pairs is not None else _resolved_pairs(renderer, aovs)
     height, width = aovs.f.shape
     bad = ~(aovs.patch >= 0) | aovs.fallback
+    if blocked is not None:
+        bad = bad | blocked
     flat_bad = bad.ravel().copy()
     for axis in (1, 0):
         index = np.arange(height * width).reshape(height, width)
@@ -869,11 +884,12 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
     c_k = spec.levels
     gaps = neighbour_gaps(c_k)
     clean_by_gap: dict[float, np.ndarray] = {}  # few distinct gaps in a scene: one clean map each
+    blocked = blocked_pixels(renderer, aovs) if spec.along_ray else None
 
     def clean_for(gap: float) -> np.ndarray:
         if gap not in clean_by_gap:
             clean_by_gap[gap] = clean_pixels(renderer, aovs, pairs if math.isinf(gap) else
-                                             _resolved_pairs(renderer, aovs, gap))
+                                             _resolved_pairs(renderer, aovs, gap), blocked)
         return clean_by_gap[gap]
 
     reports, all_dev, counted, reasons, notes = [], [], [], [], []

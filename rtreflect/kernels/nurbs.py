@@ -888,17 +888,20 @@ def stationary_points(g1, g2, jacobian_square, rn, stationary_cosine, out):
         out[i] = stationary_at(g1[i], g2[i], jacobian_square[i], rn[i], stationary_cosine)
 
 
-@njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, i8, f8, f8, {F2}, {F2}, {F2}, {B1}, {B1}, {B1})",))
+@njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, i8, f8, f8, i8, f8, {F2}, {F2}, {F2}, {B1}, {B1}, {B1})",))
 def rescue(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
-           patch, u, v, O, D, tol, steps, stationary_cosine, stalled_damping, S, Su, Sv, converged, stationary, edge):
+           patch, u, v, O, D, tol, steps, stationary_cosine, stalled_damping, crawl_steps, crawl_gain, S, Su, Sv,
+           converged, stationary, edge):
     """Levenberg–Marquardt on the ray residual r = (e1·(S − O), e2·(S − O)) where Newton failed (`trace.tracing._rescue`).
 
     Per ray from (u, v), in place: damping λ = 1e-3; each step solves (JᵀJ + λ diag JᵀJ) δ = −Jᵀr
     (Marquardt's scaling: invariant under rescaling u or v), clamps to the domain and keeps the trial
     point where it lowers |r| (λ /= 3), else λ *= 4. Stops converged at |r| <= tol, stationary where
     r is normal to the tangent plane (cosine of Jᵀr against |J||r| not above stationary_cosine) or
-    λ > stalled_damping; at most ``steps`` steps. S, S_u, S_v at the final (u, v); edge: not
-    converged and on the domain's edge (then not stationary).
+    λ > stalled_damping; at most ``steps`` steps. Stops undecided (neither) where the search crawls:
+    ``crawl_steps`` accepted steps in a row lowered |r| by less than the fraction ``crawl_gain`` (checked at
+    every crawl_steps-th accepted point, after the two tests; crawl_steps = 0: never). S, S_u, S_v at the final
+    (u, v); edge: not converged and on the domain's edge (then not stationary).
     """
     scratch = new_scratch(max_degree)
     d = np.empty((6, 3))
@@ -913,6 +916,7 @@ def rescue(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offse
         ok = flat = False
         tu, tv, rn = ui, vi, 0.0
         step, start = 0, True
+        accepted, mark = 0, 0.0  # accepted points so far, |r| at the last crawl check
         while True:  # one evaluation site (the start, then each trial point): each copy of point_at costs seconds to compile
             point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, tu, tv, 1, trial,
                      scratch)
@@ -925,6 +929,7 @@ def rescue(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offse
                 better = trial_r < rn
                 lam = lam / 3.0 if better else lam * 4.0
             if better:
+                accepted += 1
                 ui, vi = tu, tv
                 for r in range(3):
                     for c in range(3):
@@ -947,6 +952,11 @@ def rescue(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offse
                 if stationary_at(g1, g2, a * a + b * b + c * c + dd * dd, rn, stationary_cosine) or lam > stalled_damping:
                     flat = True
                     break
+                if crawl_steps > 0 and accepted % crawl_steps == 1 % crawl_steps and better:
+                    if accepted > 1 and rn > (1.0 - crawl_gain) * mark:
+                        break  # crawling: undecided, for `_passes_by`
+                    mark = rn
+                better = False  # checked once per accepted point
                 A11, A12, A22 = a * a + c * c, a * b + c * dd, b * b + dd * dd
                 M11, M22 = A11 * (1.0 + lam), A22 * (1.0 + lam)
                 det = M11 * M22 - A12 * A12
