@@ -95,10 +95,9 @@ def test_shipped_renders_decide_every_sample(name):
     assert stats.fallbacks == 0, f"{stats.fallbacks} fallbacks in {stats.fallback_pixels} pixels"
 
 
-def test_rim_rows_dropped_on_a_planar_neighbour_could_not_win(monkeypatch):
-    """`tracing._may_win_on_plane` skips refining a planar face across the rim where its plane's crossing cannot be a
-    winning hit: on the plate (960×540 of the default view, every 4th row), the hits are bit for bit those with every
-    row refined, and the top plane, the neighbour of its 100 holes' fillets, is no longer refined for most of them."""
+def _plate_trace_counting_refinements(monkeypatch, caller=None):
+    """A function tracing the plate (960×540 of the default view, every 4th row) that returns its hits and the faces
+    `tracing.refine` was called on (only the calls from the function named ``caller``, where given)."""
     from rtreflect.trace import tracing
 
     renderer = Renderer(resolve(load_scene(PARTS / "plate.step").with_image(960, 540, 1)))
@@ -109,7 +108,8 @@ def test_rim_rows_dropped_on_a_planar_neighbour_could_not_win(monkeypatch):
     refine = tracing.refine
 
     def spy(surfaces, patch, *args):
-        refined.append(np.asarray(patch).copy())
+        if caller is None or sys._getframe(1).f_code.co_name == caller:
+            refined.append(np.asarray(patch).copy())
         return refine(surfaces, patch, *args)
 
     def run():
@@ -118,6 +118,16 @@ def test_rim_rows_dropped_on_a_planar_neighbour_could_not_win(monkeypatch):
         return hits, np.concatenate(refined)
 
     monkeypatch.setattr(tracing, "refine", spy)
+    return run
+
+
+def test_rim_rows_dropped_on_a_planar_neighbour_could_not_win(monkeypatch):
+    """`tracing._may_win_on_plane` skips refining a planar face across the rim where its plane's crossing cannot be a
+    winning hit: on the plate (960×540 of the default view, every 4th row), the hits are bit for bit those with every
+    row refined, and the top plane, the neighbour of its 100 holes' fillets, is no longer refined for most of them."""
+    from rtreflect.trace import tracing
+
+    run = _plate_trace_counting_refinements(monkeypatch)
     hits, faces = run()
     monkeypatch.setattr(tracing, "_may_win_on_plane", lambda tessellation, surfaces, pn, *a: np.ones(len(pn), dtype=bool))
     every, every_faces = run()
@@ -135,24 +145,7 @@ def test_rim_rows_dropped_clear_of_the_neighbours_hull_could_not_win(monkeypatch
     meets) are no longer refined for most of them."""
     from rtreflect.trace import tracing
 
-    renderer = Renderer(resolve(load_scene(PARTS / "plate.step").with_image(960, 540, 1)))
-    rows, cols = np.divmod(np.arange(960 * 540), 960)
-    pick = rows % 4 == 0
-    origins, directions = renderer.camera.rays(rows[pick], cols[pick])
-    refined = []
-    refine = tracing.refine
-
-    def spy(surfaces, patch, *args):
-        if sys._getframe(1).f_code.co_name == "_rim_neighbours":  # the rim rows only
-            refined.append(np.asarray(patch).copy())
-        return refine(surfaces, patch, *args)
-
-    def run():
-        refined.clear()
-        hits = trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
-        return hits, np.concatenate(refined)
-
-    monkeypatch.setattr(tracing, "refine", spy)
+    run = _plate_trace_counting_refinements(monkeypatch, caller="_rim_neighbours")
     hits, faces = run()
     monkeypatch.setattr(tracing, "_may_win_in_hull",
                         lambda tessellation, surfaces, rays, pn, *a: np.ones(len(pn), dtype=bool))
