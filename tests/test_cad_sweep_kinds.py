@@ -211,6 +211,34 @@ def test_collapsed_sides_are_the_poles(tmp_path):
     assert seen["degenerated"] >= 3 and seen["short"] == 2 and seen["long"] > 0, seen
 
 
+def test_a_failing_finer_mesh_keeps_the_first_one(tmp_path, monkeypatch):
+    """revolved_seam.step is meshed twice (its control box overstates the part, `occt.REMESH_RATIO`). Where Open
+    CASCADE raises on the finer mesh, or it comes back empty, the face keeps the mesh it read with: no traceback
+    (the re-mesh had no guard: an exception there escaped even --skip-bad-faces)."""
+    from rtreflect.exchange import occt
+
+    path = tmp_path / "revolved_seam.step"
+    sweep.PARTS[path.name](path)
+    read = occt.mesh_of_face
+    first = []
+
+    def once_then(outcome):
+        def mesh_of_face(face, reversed_face):
+            if not first:
+                first.append(read(face, reversed_face))
+                return first[0]
+            if outcome is None:
+                return None
+            raise RuntimeError("Standard_Failure")
+        return mesh_of_face
+
+    for outcome in (None, "raise"):
+        first.clear()
+        monkeypatch.setattr(occt, "mesh_of_face", once_then(outcome))
+        (surface,) = read_cad(path).surfaces
+        assert surface.mesh_uv is first[0], outcome
+
+
 def test_revolved_seam_mesh_is_within_its_deflection(tmp_path):
     """revolved_seam.step: the converted revolution's control points span 2,653 for a part 138.5 across, and the mesh
     deflection was taken relative to that box (`occt.MESH_DEFLECTION` × 2,653 = 5.3): BRepMesh's mesh lay 4.8 from the

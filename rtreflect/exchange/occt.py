@@ -707,9 +707,14 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     tight = float(np.linalg.norm(bounds[1] - bounds[0]))
     if np.isfinite(tight) and 0 < tight and REMESH_RATIO * tight < diagonal:
         for surface, face, reversed_face in zip(surfaces, meshed, reversed_flags):
-            BRepMesh_IncrementalMesh(face, MESH_DEFLECTION * tight, False, MESH_ANGLE, False)
-            object.__setattr__(surface, "mesh_uv", mesh_of_face(face, reversed_face))
+            try:
+                BRepMesh_IncrementalMesh(face, MESH_DEFLECTION * tight, False, MESH_ANGLE, False)
+                finer = mesh_of_face(face, reversed_face)
+            except Exception:  # an OCCT exception on the finer mesh: the face read, its first mesh stands
+                finer = None
             BRepTools.Clean_s(face)
+            if finer is not None:  # an empty finer mesh keeps the first one too
+                object.__setattr__(surface, "mesh_uv", finer)
         bounds = faces_bounds(surfaces)
     return CadModel(surfaces, unit, unit_note, bounds, len(faces), skipped, reversed_flags)
 
