@@ -472,6 +472,25 @@ def _over_closed_seam(surfaces: SurfaceSet, patch, u, v, derivs: SurfaceDerivati
     return won
 
 
+def _curvature_along_ray(d2, n, D, c):
+    """The sheet's normal curvature along the ray, κ = n·S''(δ, δ), and δ = (du, dv), the parameter step per unit
+    length of D's tangential part D_T = D − (n·D) n: least squares of [S_u S_v] δ = D_T (the 2×2 normal equations).
+    The ray's height over the sheet is then g(s) = h₀ + (n·D) s − ½ κ s² to second order (`_other_root`,
+    `_crossing_on_face`); κ is inf or NaN where the second derivatives overflow."""
+    du, dv = parameter_steps(d2.Su, d2.Sv, D - c[:, None] * n)
+    with np.errstate(invalid="ignore", over="ignore"):
+        kappa = np.einsum("ij,ij->i", n, d2.Suu * (du * du)[:, None] + 2.0 * d2.Suv * (du * dv)[:, None]
+                          + d2.Svv * (dv * dv)[:, None])
+    return kappa, du, dv
+
+
+def _may_cross_twice(c, kappa, cap):
+    """Where the ray's two crossings of its sheet may both matter: grazing (|n·D| < `OTHER_ROOT_COS`), or a cap
+    between them no deeper than ``cap`` = 2·`OTHER_ROOT_CHORDS` chord errors of the face ((n·D)²/2|κ| ≤ that)."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        return (np.abs(c) < OTHER_ROOT_COS) | (c * c <= cap * np.abs(kappa))
+
+
 def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs, normal, cosine,
                 aside, curvature: np.ndarray | None = None) -> None:
     """Grazing valid hits, and those the mesh may have led past a shallow cap: the nearer of the ray's two crossings of
@@ -518,15 +537,10 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
         return
     d2 = surfaces.evaluate(pk[rays], ur[rays], vr[rays], order=2)
     nr, cr, Dr = normal[rays], cosine[rays], D[rays]
-    tangential = Dr - cr[:, None] * nr
-    # δ = (du, dv): least squares of [S_u S_v] δ = D_T (the 2×2 normal equations).
-    du, dv = parameter_steps(d2.Su, d2.Sv, tangential)
+    kappa, du, dv = _curvature_along_ray(d2, nr, Dr, cr)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # κ ~ 0: no finite root, dropped below
-        kappa = np.einsum("ij,ij->i", nr, d2.Suu * (du * du)[:, None] + 2.0 * d2.Suv * (du * dv)[:, None]
-                          + d2.Svv * (dv * dv)[:, None])
         step = 2.0 * cr / kappa
-        shallow = cr * cr <= cap[pk[rays]] * np.abs(kappa)
-    ahead = np.isfinite(step) & (step < 0.0) & (tr[rays] + step > 0.0) & ((np.abs(cr) < OTHER_ROOT_COS) | shallow)
+    ahead = np.isfinite(step) & (step < 0.0) & (tr[rays] + step > 0.0) & _may_cross_twice(cr, kappa, cap[pk[rays]])
     rays, step, du, dv = rays[ahead], step[ahead], du[ahead], dv[ahead]
     if len(rays) == 0:
         return
@@ -571,13 +585,10 @@ def _crossing_on_face(tessellation: Tessellation, surfaces: SurfaceSet, rows, pa
     n = surfaces.normals(patch, u, v, d2)
     c = np.einsum("ij,ij->i", n, D)
     h0 = np.einsum("ij,ij->i", n, O + tm[:, None] * D - d2.S)
-    du, dv = parameter_steps(d2.Su, d2.Sv, D - c[:, None] * n)
+    kappa, du, dv = _curvature_along_ray(d2, n, D, c)
     with np.errstate(invalid="ignore", over="ignore"):  # κ ~ 0: no second crossing, dropped below
-        kappa = np.einsum("ij,ij->i", n, d2.Suu * (du * du)[:, None] + 2.0 * d2.Suv * (du * dv)[:, None]
-                          + d2.Svv * (dv * dv)[:, None])
-        shallow = c * c <= cap[patch] * np.abs(kappa)
         root = np.sqrt(np.maximum(c * c + 2.0 * kappa * h0, 0.0))
-        grazing = np.isfinite(kappa) & (kappa != 0.0) & ((np.abs(c) < OTHER_ROOT_COS) | shallow)
+    grazing = np.isfinite(kappa) & (kappa != 0.0) & _may_cross_twice(c, kappa, cap[patch])
     if not grazing.any():
         return rows[:0]
     rows, patch, O, D, tm, u, v, c, kappa, root, du, dv = (x[grazing] for x in
