@@ -18,7 +18,7 @@ from rtreflect.exchange.scene import load_scene
 from rtreflect.integrator import film
 from rtreflect.integrator.analytic import hard_coverage, neighbours, trapezoid_cdf
 from rtreflect.integrator.cull import BOX_MARGIN, ORIGIN_MARGIN, TINY, RayBox
-from rtreflect.kernels.pixels import bent_flags, edge_flags, scatter_picked, stripe_candidates
+from rtreflect.kernels.pixels import bent_flags, edge_flags, footprint_ends, scatter_picked, stripe_candidates
 from rtreflect.trace.camera import Camera, sample_offsets
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -281,3 +281,49 @@ def test_scatter_picked_is_numpy_fancy_assignment_of_the_picked_rows(picked):
     want[rows] = src[pick]
     scatter_picked(dst, rows, src, pick)
     assert np.array_equal(dst, want, equal_nan=True)
+
+
+# -- the analytic path's footprint ----------------------------------------------------------------------------------
+
+def numpy_room(x, step, low, high):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(step > 0, (high - x) / step, np.where(step < 0, (low - x) / step, 1.0))
+    return np.clip(np.nan_to_num(room, nan=0.0), 0.0, 1.0)
+
+
+def test_footprint_ends_are_the_numpy_form_to_the_bit_and_stay_in_the_domain():
+    """The four half-pixel ends (u, v) ± ½λ(du, dv) held in the patch's domain (`Renderer.centre_stripes`), against
+    the numpy form they replaced, signs of zero included (a step from the low end gives λ = −0.0 in both); and the
+    witness: every end lies in the domain, and a step that fits is not shortened."""
+    rng = np.random.default_rng(37)
+    n = 20000
+    u0, v0 = rng.uniform(-1, 0, size=n), rng.uniform(0, 2, size=n)
+    u1, v1 = u0 + rng.uniform(0.1, 2, size=n), v0 + rng.uniform(0.1, 2, size=n)
+    u, v = rng.uniform(u0, u1), rng.uniform(v0, v1)
+    u[::7], v[::11], u[::13], v[::17] = u0[::7], v1[::11], u1[::13], v0[::17]  # on the domain's sides
+    steps = rng.normal(size=(n, 2, 2)) * rng.choice([1e-4, 0.05, 3.0], size=(n, 1, 1))
+    steps[::5, 0, 0], steps[::9, 1, 1], steps[::19, 1, 0], steps[::23, 0, 1] = 0.0, -0.0, np.nan, np.inf
+    want_u, want_v, want_share = [], [], []
+    for axis in range(2):
+        du, dv = 0.5 * steps[:, axis, 0], 0.5 * steps[:, axis, 1]
+        for sign in (1.0, -1.0):
+            lam = np.minimum(numpy_room(u, sign * du, u0, u1), numpy_room(v, sign * dv, v0, v1))
+            want_share.append(lam)
+            with np.errstate(invalid="ignore"):  # 0·∞
+                want_u.append(u + sign * lam * du)
+                want_v.append(v + sign * lam * dv)
+    domains = np.stack([u0, u1, v0, v1], axis=1)  # strided columns, as `SurfaceSet.domains` gives them
+    ends_u, ends_v, shares = np.empty((3, 4 * n))
+    footprint_ends(u, v, steps, domains[:, 0], domains[:, 1], domains[:, 2], domains[:, 3], ends_u, ends_v, shares)
+    for got, want in ((ends_u, want_u), (ends_v, want_v), (shares, want_share)):
+        want = np.concatenate(want)
+        assert np.array_equal(got, want, equal_nan=True) and np.array_equal(np.signbit(got), np.signbit(want))
+    assert (-0.0 == shares).any() and np.signbit(shares).any()  # the −0.0 case is met
+    ok = np.isfinite(ends_u) & np.isfinite(ends_v)
+    assert ok.mean() > 0.8
+    rounding = 1e-14  # u + λ·du with λ = (u1 − u)/du lands on u1 up to the rounding of the two operations
+    assert np.all((np.tile(u0, 4) - rounding <= ends_u)[ok] & (ends_u <= np.tile(u1, 4) + rounding)[ok])
+    assert np.all((np.tile(v0, 4) - rounding <= ends_v)[ok] & (ends_v <= np.tile(v1, 4) + rounding)[ok])
+    inside = (np.abs(u - 0.5 * (u0 + u1)) + np.abs(steps[:, 0, 0]) < 0.5 * (u1 - u0)) & \
+        (np.abs(v - 0.5 * (v0 + v1)) + np.abs(steps[:, 0, 1]) < 0.5 * (v1 - v0))
+    assert inside.any() and np.all(shares[:n][inside] == 1.0) and np.all(shares[n:2 * n][inside] == 1.0)

@@ -41,7 +41,7 @@ from ..exchange.scene import ANALYTIC, ImageSpec, Scene
 from ..geometry.curvature import curvatures_at
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
-from ..kernels.pixels import bent_flags, scatter_picked, stripe_candidates
+from ..kernels.pixels import bent_flags, footprint_ends, scatter_picked, stripe_candidates
 from ..trace.secondlook import SecondLook
 from ..trace.tracing import Hits, occluded, trace
 
@@ -153,13 +153,6 @@ class RenderResult:
         if name not in CHANNELS:
             raise ValueError(f"no channel {name!r}; the channels are {', '.join(CHANNELS)} (and P, N as vectors)")
         return self.film.channel(name)
-
-
-def _room(x: np.ndarray, step: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """Largest λ in [0, 1] with x + λ·step inside [low, high]."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        room = np.where(step > 0, (high - x) / step, np.where(step < 0, (low - x) / step, 1.0))
-    return np.clip(np.nan_to_num(room, nan=0.0), 0.0, 1.0)
 
 
 @dataclass
@@ -594,19 +587,13 @@ class Renderer:
                 Su, Sv = (rows3(hits.Su), rows3(hits.Sv)) if self.vertex_normals is None else \
                     self.surfaces.evaluate(patch, u, v)[1:3]
                 steps = uv_footprint(self.camera, rows[idx], cols[idx], rows3(hits.P), n, Su, Sv)
-                u0, u1, v0, v1 = self.surfaces.domains(patch)
-                # The four ends (u, v) ± ½ (du, dv)/dx and /dy, σ at all of them in one pass (rows are independent).
-                shares, ends_u, ends_v = [], [], []
-                for axis in range(2):
-                    du, dv = 0.5 * steps[:, axis, 0], 0.5 * steps[:, axis, 1]
-                    for sign in (1.0, -1.0):
-                        # The share of the half-pixel step that stays in the patch's domain (it is clamped there).
-                        lam = _room(u, sign * du, u0, u1)
-                        lam = np.minimum(lam, _room(v, sign * dv, v0, v1))
-                        shares.append(lam)
-                        ends_u.append(u + sign * lam * du)
-                        ends_v.append(v + sign * lam * dv)
-                ends = self._offset_at(np.tile(patch, 4), np.concatenate(ends_u), np.concatenate(ends_v),
+                # The four ends (u, v) ± ½ (du, dv)/dx and /dy, each step shortened to the share of it that stays in
+                # the patch's domain (it is clamped there): one compiled pass (`kernels.pixels.footprint_ends`); σ at
+                # all of them in one pass (rows are independent).
+                ends_u, ends_v, shares = np.empty((3, 4 * len(idx)))
+                footprint_ends(u, v, steps, *self.surfaces.domains(patch), ends_u, ends_v, shares)
+                shares = shares.reshape(4, -1)
+                ends = self._offset_at(np.tile(patch, 4), ends_u, ends_v,
                                        np.tile(n, (4, 1)), np.tile(k, 4)).reshape(4, -1)
                 with np.errstate(divide="ignore", invalid="ignore"):
                     for axis in range(2):

@@ -12,6 +12,7 @@ the same bits (numba compiles without fast-math, so no reassociation or fused mu
 - `aov_columns`: the AOV arrays written into a tile's float32 channels (`integrator.film.aov_planes`), each
   value rounded to float32 once.
 - `coverage_rgba`: a pixel's colour from its samples (`integrator.film.coverage_color`), summed as numpy sums.
+- `footprint_ends`: the ends of a pixel's footprint in (u, v), held in the patch's domain (`integrator.analytic`).
 
 Argument types (for an ahead-of-time signature) are given in each docstring; all arrays C-contiguous.
 """
@@ -461,6 +462,46 @@ def coverage_rgba(hit, weight, shade, shaded, surface, colours, line, background
             u = mapped_sum[c] if mapped else n_unlit * surface[c]
             out[i, c] = (n_lit * line[c] + u + n_missed * background[c]) / samples
         out[i, 3] = n_hit / samples
+
+
+# -- the analytic path's pixel footprint ----------------------------------------------------------------------------
+
+
+@njit(inline="always", **JIT)
+def _room(x, step, low, high):
+    """Largest λ in [0, 1] with x + λ·step inside [low, high] (0 where that is NaN), as numpy's
+    ``clip(nan_to_num(where(step > 0, (high − x)/step, where(step < 0, (low − x)/step, 1)), nan=0), 0, 1)``:
+    clip keeps −0.0 (a step from the low end), as numpy's does."""
+    room = (high - x) / step if step > 0 else ((low - x) / step if step < 0 else 1.0)
+    if room != room:
+        return 0.0
+    room = 0.0 if room < 0.0 else room
+    return 1.0 if room > 1.0 else room
+
+
+@njit(**JIT, aot=(
+    "void(f8[::1], f8[::1], f8[:, :, ::1], f8[:], f8[:], f8[:], f8[:], f8[::1], f8[::1], f8[::1])",
+))
+def footprint_ends(u, v, steps, u0, u1, v0, v1, ends_u, ends_v, shares):
+    """The four ends (u, v) ± ½λ (du, dv) of a pixel's footprint along x and along y (`integrator.analytic`), each
+    step shortened by the share λ of it that stays in the patch's domain [u0, u1] × [v0, v1] (`_room` in u and in
+    v, the smaller): ends m·N + i for point i, m = 2·axis + (0 for +, 1 for −).
+
+    Types: u, v float64[:] (N); steps float64[:, :, :] (N, 2, 2), [[du/dx, dv/dx], [du/dy, dv/dy]]; u0, u1, v0, v1
+    float64[:] (N, any stride); ends_u, ends_v, shares float64[:] (4N), written.
+    """
+    n = u.shape[0]
+    for axis in range(2):
+        for half in range(2):
+            sign = 1.0 if half == 0 else -1.0
+            m = (2 * axis + half) * n
+            for i in range(n):
+                du = 0.5 * steps[i, axis, 0]
+                dv = 0.5 * steps[i, axis, 1]
+                lam = _nan_min(_room(u[i], sign * du, u0[i], u1[i]), _room(v[i], sign * dv, v0[i], v1[i]))
+                shares[m + i] = lam
+                ends_u[m + i] = u[i] + sign * lam * du
+                ends_v[m + i] = v[i] + sign * lam * dv
 
 
 # -- rows of (N, 3) arrays ------------------------------------------------------------------------------------------
