@@ -165,19 +165,23 @@ class UlmetField:
         for _ in range(NEWTON_STEPS):
             if len(active) == 0:
                 break
+            # f first, ∇f only where Newton goes on: a converged point would waste its two differences.
+            f0 = self.f(patch[active], u[active], v[active])
+            r = f0 - c[active]
+            done = np.abs(r) <= NEWTON_TOLERANCE * scale
+            ok[active[done]] = True
+            going = ~done & np.isfinite(r)
+            active, r, f0 = active[going], r[going], f0[going]
             p, ua, va = patch[active], u[active], v[active]
             su = np.where(ua + hu[active] <= u1[active], hu[active], -hu[active])
             sv = np.where(va + hv[active] <= v1[active], hv[active], -hv[active])
-            values = self.f(np.concatenate([p, p, p]), np.concatenate([ua, ua + su, ua]),
-                            np.concatenate([va, va, va + sv])).reshape(3, -1)
-            r = values[0] - c[active]
+            values = self.f(np.concatenate([p, p]), np.concatenate([ua + su, ua]),
+                            np.concatenate([va, va + sv])).reshape(2, -1)
             # ∇f in unit-square coordinates: ∂f/∂(u/(u1 − u0)) = (u1 − u0) ∂f/∂u.
-            gu = np.where(hold_u[active], 0.0, (values[1] - values[0]) / su * (u1[active] - u0[active]))
-            gv = np.where(hold_v[active], 0.0, (values[2] - values[0]) / sv * (v1[active] - v0[active]))
-            done = np.abs(r) <= NEWTON_TOLERANCE * scale
-            ok[active[done]] = True
+            gu = np.where(hold_u[active], 0.0, (values[0] - f0) / su * (u1[active] - u0[active]))
+            gv = np.where(hold_v[active], 0.0, (values[1] - f0) / sv * (v1[active] - v0[active]))
             g2 = gu * gu + gv * gv
-            step = ~done & np.isfinite(r) & np.isfinite(g2) & (g2 > 0)
+            step = np.isfinite(g2) & (g2 > 0)
             active, r, gu, gv, g2 = (x[step] for x in (active, r, gu, gv, g2))
             u[active] = np.clip(u[active] - r * gu / g2 * (u1[active] - u0[active]), u0[active], u1[active])
             v[active] = np.clip(v[active] - r * gv / g2 * (v1[active] - v0[active]), v0[active], v1[active])
@@ -436,14 +440,20 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.
     px, depth = field.project(np.full(len(chains.u), k), chains.u, chains.v)
     front = depth > 0
     width, height = field.camera.width, field.camera.height
+    # settled[i]: segment (i, i + 1) passed (or was left out) and its ends have not moved since, so the same
+    # test would give the same answer: it is not polished again in later rounds (most segments settle early).
+    settled = np.zeros(len(chains.u), dtype=bool)
     for _ in range(SUBDIVISION_ROUNDS):
         seg = chains.segments()
+        seg = seg[~settled[seg]]
         # Only what can be seen needs refining: both ends polished and in front, the segment near the image.
         lo = np.minimum(px[seg], px[seg + 1])
         hi = np.maximum(px[seg], px[seg + 1])
         near_image = ((hi[:, 0] >= -IMAGE_MARGIN_PX) & (lo[:, 0] <= width + IMAGE_MARGIN_PX)
                       & (hi[:, 1] >= -IMAGE_MARGIN_PX) & (lo[:, 1] <= height + IMAGE_MARGIN_PX))
-        seg = seg[chains.ok[seg] & chains.ok[seg + 1] & front[seg] & front[seg + 1] & near_image]
+        wanted = chains.ok[seg] & chains.ok[seg + 1] & front[seg] & front[seg + 1] & near_image
+        settled[seg[~wanted]] = True
+        seg = seg[wanted]
         if len(seg) == 0:
             break
         mid_u = 0.5 * (chains.u[seg] + chains.u[seg + 1])
@@ -457,10 +467,12 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.
         off = np.linalg.norm(mpx - chord_mid, axis=1)
         split = ~((length <= MAX_SEGMENT_PX) & (off <= CHORD_TOLERANCE_PX)) | ~np.isfinite(length)
         split &= half > 1e-9 * cell  # nothing left to split
+        settled[seg[~split]] = True
         if not split.any():
             break
         seg, mu, mv, mok, mpx, mdepth = seg[split], mu[split], mv[split], mok[split], mpx[split], mdepth[split]
         chains.insert(seg, mu, mv, mok)
+        settled = np.insert(settled, seg + 1, False)  # both halves of a split segment are new
         px = np.insert(px, seg + 1, mpx, axis=0)
         front = np.insert(front, seg + 1, mdepth > 0)
 
