@@ -408,9 +408,10 @@ def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float
 
 
 def _cut_points(field: UlmetField, patch: np.ndarray, light: np.ndarray, ua, va, ub, vb, good_a: np.ndarray,
-                cell: float):
+                cell: np.ndarray):
     """Bisect segments whose ends differ in class (a good, b not, or the reverse) down to the boundary.
 
+    ``cell``: per segment, its patch's grid cell (`_patch_chains`), the farthest a polished midpoint may move.
     Returns the last point on the good side of each segment.
     """
     good_u = np.where(good_a, ua, ub)
@@ -419,18 +420,50 @@ def _cut_points(field: UlmetField, patch: np.ndarray, light: np.ndarray, ua, va,
     bad_v = np.where(good_a, vb, va)
     c = field.levels[light]
     for _ in range(BISECTION_STEPS):
-        mu, mv, ok = field.polish(patch, 0.5 * (good_u + bad_u), 0.5 * (good_v + bad_v), c, np.full(len(patch), cell))
+        mu, mv, ok = field.polish(patch, 0.5 * (good_u + bad_u), 0.5 * (good_v + bad_v), c, cell)
         mid_good = ok & field.seen(patch, mu, mv)
         good_u, good_v = np.where(mid_good, mu, good_u), np.where(mid_good, mv, good_v)
         bad_u, bad_v = np.where(mid_good, bad_u, mu), np.where(mid_good, bad_v, mv)
     return good_u, good_v
 
 
+@dataclass
+class _Classified:
+    """Patch k's polished, subdivided chains with each vertex's class (`UlmetField.seen`), awaiting the cut points
+    of the segments ``change`` whose ends differ in class. Kept apart from the cuts so `analytic_contours` bisects
+    every patch's cuts together: ten rounds of a few dozen eye rays per patch cost the tracer's fixed overhead
+    each, and a point's bisection does not depend on the others'."""
+
+    k: int
+    chains: _Chains
+    px: np.ndarray
+    chain_light: np.ndarray
+    good: np.ndarray
+    change: np.ndarray
+    cell: float
+
+    def cut_args(self) -> tuple[np.ndarray, ...]:
+        """`_cut_points`' per-segment arguments (patch, light, ua, va, ub, vb, good_a, cell) for ``change``."""
+        c, n = self.change, len(self.change)
+        light = self.chain_light[self.chains.chain[c]]
+        return (np.full(n, self.k), light, self.chains.u[c], self.chains.v[c], self.chains.u[c + 1],
+                self.chains.v[c + 1], self.good[c], np.full(n, self.cell))
+
+
 def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """(tube index, (n, 2) array of (u, v), (n, 2) image positions) of every visible contour piece on patch k."""
+    classified = _classify(field, k)
+    if classified is None:
+        return []
+    cut_u, cut_v = _cut_points(field, *classified.cut_args())
+    return _pieces(field, classified, cut_u, cut_v)
+
+
+def _classify(field: UlmetField, k: int) -> _Classified | None:
+    """Patch k's level sets polished, subdivided and classified (steps 1–5 but the cuts' bisection); None if none."""
     chains, chain_light, cell = _patch_chains(field, k)
     if len(chains.u) == 0:
-        return []
+        return None
     c_of = lambda rows: field.levels[chain_light[chains.chain[rows]]]  # noqa: E731
     every = np.arange(len(chains.u))
     pk = np.full(len(chains.u), k)
@@ -476,14 +509,17 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.
         px = np.insert(px, seg + 1, mpx, axis=0)
         front = np.insert(front, seg + 1, mdepth > 0)
 
-    light = chain_light[chains.chain]
     good = chains.ok & field.seen(np.full(len(chains.u), k), chains.u, chains.v)
-
-    # Cut where the class changes, at the boundary found by bisection.
+    # Cut where the class changes, at the boundary found by bisection (`_cut_points`).
     seg = chains.segments()
-    change = seg[good[seg] != good[seg + 1]]
-    cut_u, cut_v = _cut_points(field, np.full(len(change), k), light[change], chains.u[change], chains.v[change],
-                               chains.u[change + 1], chains.v[change + 1], good[change], cell)
+    return _Classified(k, chains, px, chain_light, good, seg[good[seg] != good[seg + 1]], cell)
+
+
+def _pieces(field: UlmetField, classified: _Classified, cut_u: np.ndarray,
+            cut_v: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """`patch_contours`' pieces: the classified chains with the cut points inserted, split into runs of good vertices."""
+    k, chains, px, chain_light = classified.k, classified.chains, classified.px, classified.chain_light
+    good, change = classified.good, classified.change
     # A good vertex followed by a bad one: append the cut after it; a bad one followed by a good one: before the good one.
     u, v, chain, keep = chains.u, chains.v, chains.chain, good
     ends_after = change[good[change]]
@@ -516,10 +552,20 @@ def analytic_contours(field: UlmetField, progress=None) -> ContourLines:
     """Every tube's visible reflection line as projected polylines (the contour theorem, section 4)."""
     levels = field.levels
     per_light: dict[int, list[Polyline]] = {j: [] for j in range(len(levels))}
+    classified = []
     for k in range(len(field.surfaces)):
-        for light, uv, px in patch_contours(field, k):
-            per_light[light].append(Polyline(k, uv, px))
+        found = _classify(field, k)
+        if found is not None:
+            classified.append(found)
         if progress:
             progress(1)
+    # Every patch's cuts bisected together (`_Classified`), then handed back patch by patch.
+    args = [c.cut_args() for c in classified]
+    if args:
+        cut_u, cut_v = _cut_points(field, *(np.concatenate(column) for column in zip(*args)))
+        bounds = np.cumsum([len(c.change) for c in classified])[:-1]
+        for c, cu, cv in zip(classified, np.split(cut_u, bounds), np.split(cut_v, bounds)):
+            for light, uv, px in _pieces(field, c, cu, cv):
+                per_light[light].append(Polyline(c.k, uv, px))
     lines = [ContourLine(j, float(levels[j]), per_light[j]) for j in range(len(levels))]
     return ContourLines(field.camera.width, field.camera.height, lines)
