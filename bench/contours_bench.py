@@ -4,7 +4,8 @@
 
 Per scene (default: the teapot): a small warm-up render (kernels compiled or loaded), then, back to
 back, the scene's default render and its analytic contours (`contours.field_of`, as `--overlay` and
-`validate` compute them), each the best of ``--repeat``, and the ratio contours/render (goal: ≤ 0.6).
+`validate` compute them), each the best of ``--repeat``, and the ratio contours/render (goal: ≤ 0.6);
+then `--overlay`'s drawing of them (`overlay.coverage`) and (contours + drawing)/render.
 Also the contour point count, so a speed-up that drops points shows. A shared machine makes seconds
 noisy: read the ratio.
 """
@@ -16,6 +17,7 @@ import time
 from pathlib import Path
 
 from rtreflect.analysis.contours import analytic_contours, field_of
+from rtreflect.analysis.overlay import coverage
 from rtreflect.exchange.load import load_scene
 from rtreflect.integrator.autorig import resolve
 from rtreflect.integrator.renderer import Renderer
@@ -49,8 +51,12 @@ def main() -> None:
         found = []
         contours = best_of(args.repeat, lambda: found.append(analytic_contours(field)))
         points = sum(len(p.px) for line in found[-1].lines for p in line.polylines)
+        spec = renderer.scene
+        drawn = best_of(args.repeat, lambda: coverage(found[-1], args.width, args.height, spec.render.overlay_width))
         print(f"{Path(path).stem} {args.width}x{args.height}: render {render:.2f} s, contours {contours:.2f} s, "
-              f"contours/render {contours / render:.2f} ({points} contour points)", flush=True)
+              f"contours/render {contours / render:.2f} ({points} contour points); the overlay's drawing "
+              f"(`overlay.coverage`) {drawn:.2f} s, (contours + drawing)/render {(contours + drawn) / render:.2f}",
+              flush=True)
 
 
 if __name__ == "__main__":
