@@ -230,3 +230,42 @@ def test_pixel_footprint_is_one_pixel_in_the_image(projection):
         step = camera.pixel_footprint(np.array([depth]))[0]
         a, b = camera.project(np.array([centre, centre + step * q]))
         assert np.linalg.norm(b - a) == pytest.approx(1.0, rel=1e-12)
+
+
+def test_eye_sees_at_grazing_incidence_follows_the_spheres_closed_form():
+    """Contour points beside a sphere's silhouette, n·a = c from 1e-3 down to 1e-7 on either side.
+
+    Closed form: the camera's ray through R (|R| = r) meets the sphere again at R + 2r(n·a)(−a), so a point
+    with c > 0 is the ray's first crossing (seen) and one with c < 0 lies 2r|c| behind the other crossing
+    (hidden, unless that is within `SAME_POINT` of the part's size: the same point). The exact hit's error along
+    a grazing ray grows as 1/c (measured: 2.2e-6 at c = −1e-6, where r = 1.5), so the rule is checked where the
+    gap is at least ten margins, and visible points must stay seen down to c = 1e-7 (a margin too tight for the
+    hits' error would hide them: validate would lose contour points, never gain false ones).
+    """
+    from test_modes import SQRT_HALF, revolve, solid_scene
+    from rtreflect.analysis.contours import SAME_POINT, eye_sees
+    from rtreflect.integrator.autorig import resolve
+
+    r = 1.5
+    sphere = revolve([(r, 0.0, 1.0), (r, r, SQRT_HALF), (0.0, r, 1.0)], 2)  # upper hemisphere, rational
+    renderer = Renderer(resolve(solid_scene(sphere, {})))
+    E = np.asarray(renderer.camera.spec.eye, dtype=float)
+    d = np.linalg.norm(E)
+    e1 = E / d
+    e2 = np.array([0.0, 0.0, 1.0]) - e1[2] * e1
+    e2 /= np.linalg.norm(e2)
+    c = np.array([1e-3, 1e-4, 1e-5, 1e-6, 1e-7, -1e-4, -1e-3, -1e-2])
+    # R = r(cos θ e1 + sin θ e2): n·a = (d cos θ − r)/|E − R| rises with cos θ; bisect for each c.
+    lo, hi = np.zeros(len(c)), np.ones(len(c))
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        above = (d * mid - r) / np.sqrt(d * d - 2 * d * r * mid + r * r) > c
+        lo, hi = np.where(above, lo, mid), np.where(above, mid, hi)
+    cos_t = 0.5 * (lo + hi)
+    R = r * (cos_t[:, None] * e1 + np.sqrt(1 - cos_t * cos_t)[:, None] * e2)
+    a = (E - R) / np.linalg.norm(E - R, axis=1)[:, None]
+    np.testing.assert_allclose(np.einsum("ij,ij->i", R / r, a), c, rtol=1e-6, atol=1e-12)
+    assert np.all(R[:, 2] > 0), "on the hemisphere"
+    hidden_side = c < 0
+    assert np.all(2 * r * -c[hidden_side] >= 10 * SAME_POINT * renderer.tessellation.extent)
+    np.testing.assert_array_equal(eye_sees(renderer, renderer.camera, R, a), ~hidden_side)

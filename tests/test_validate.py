@@ -435,3 +435,46 @@ def test_line_coverage_inverts_shaded_weighted_blends():
     rgba = coverage_color(hit, weight, surface, line, background, np.repeat(k[:, None], 9, axis=1))
     expected = np.where(hit, weight, 0).sum(axis=1) / 9
     np.testing.assert_allclose(line_coverage(rgba, k[:, None] * surface, line, background), expected, atol=1e-12)
+
+
+def _within(mask: np.ndarray, r: int) -> np.ndarray:
+    """Pixels within Chebyshev distance r of a True pixel of mask (the square neighbourhood `clean_pixels` grows)."""
+    height, width = mask.shape
+    padded = np.pad(mask, r)
+    return np.any([padded[r + dy:r + dy + height, r + dx:r + dx + width]
+                   for dy in range(-r, r + 1) for dx in range(-r, r + 1)], axis=0)
+
+
+def test_misses_beside_a_blocked_reflected_ray_are_not_counted_and_only_there(monkeypatch):
+    """The blocked-margin rule: an analytic point within CLEAN_MARGIN_PX of a pixel whose reflected ray is blocked
+    is no miss; one farther from every blocked pixel still is.
+
+    Tube 4's traced centres are removed (as `lost_line`), so each of its analytic points in clean view is a
+    miss. Blocked pixels on the ring exactly CLEAN_MARGIN_PX from its points' pixels clear every miss (fails if
+    the rule is dropped or its margin shrunk); blocked pixels everywhere at least CLEAN_MARGIN_PX + 1 away leave
+    the misses as they were (fails if the margin reached farther, or applied to misses away from a blocked pixel).
+    """
+    from rtreflect.analysis import validate as V
+    from rtreflect.analysis.contours import analytic_contours, field_of
+
+    renderer = Renderer(load_scene(SCENES / "hood.toml").with_image(WIDTH, HEIGHT, 1))
+    aovs = film_aovs(renderer, renderer.render().film)
+    aovs.line_id[aovs.line_id == 4] = -1.0
+    contours = analytic_contours(field_of(renderer))
+    real_blocked = V.blocked_pixels(renderer, aovs)
+    assert not real_blocked.any(), "the hood's reflected rays all reach the light plane: the only blocked pixels are ours"
+    line4 = np.zeros(aovs.f.shape, dtype=bool)
+    px = np.concatenate([p.px for p in contours.lines[4].polylines])
+    inside = (px[:, 0] >= 0) & (px[:, 0] < WIDTH) & (px[:, 1] >= 0) & (px[:, 1] < HEIGHT)
+    line4[np.floor(px[inside, 1]).astype(int), np.floor(px[inside, 0]).astype(int)] = True
+    margin = V.CLEAN_MARGIN_PX
+
+    def misses_with(blocked: np.ndarray) -> int:
+        monkeypatch.setattr(V, "blocked_pixels", lambda renderer, aovs: blocked)
+        return V.compare(renderer, aovs, contours, V.DEFAULT_TOLERANCE_PX).lines[4].misses
+
+    alone = misses_with(real_blocked)
+    assert alone >= 20, "tube 4 without traced centres must miss"
+    ring = _within(line4, margin) & ~_within(line4, margin - 1)
+    assert misses_with(ring) == 0
+    assert misses_with(~_within(line4, margin)) == alone

@@ -165,19 +165,23 @@ class UlmetField:
         for _ in range(NEWTON_STEPS):
             if len(active) == 0:
                 break
+            # f first, ∇f only where Newton goes on: a converged point would waste its two differences.
+            f0 = self.f(patch[active], u[active], v[active])
+            r = f0 - c[active]
+            done = np.abs(r) <= NEWTON_TOLERANCE * scale
+            ok[active[done]] = True
+            going = ~done & np.isfinite(r)
+            active, r, f0 = active[going], r[going], f0[going]
             p, ua, va = patch[active], u[active], v[active]
             su = np.where(ua + hu[active] <= u1[active], hu[active], -hu[active])
             sv = np.where(va + hv[active] <= v1[active], hv[active], -hv[active])
-            values = self.f(np.concatenate([p, p, p]), np.concatenate([ua, ua + su, ua]),
-                            np.concatenate([va, va, va + sv])).reshape(3, -1)
-            r = values[0] - c[active]
+            values = self.f(np.concatenate([p, p]), np.concatenate([ua + su, ua]),
+                            np.concatenate([va, va + sv])).reshape(2, -1)
             # ∇f in unit-square coordinates: ∂f/∂(u/(u1 − u0)) = (u1 − u0) ∂f/∂u.
-            gu = np.where(hold_u[active], 0.0, (values[1] - values[0]) / su * (u1[active] - u0[active]))
-            gv = np.where(hold_v[active], 0.0, (values[2] - values[0]) / sv * (v1[active] - v0[active]))
-            done = np.abs(r) <= NEWTON_TOLERANCE * scale
-            ok[active[done]] = True
+            gu = np.where(hold_u[active], 0.0, (values[0] - f0) / su * (u1[active] - u0[active]))
+            gv = np.where(hold_v[active], 0.0, (values[1] - f0) / sv * (v1[active] - v0[active]))
             g2 = gu * gu + gv * gv
-            step = ~done & np.isfinite(r) & np.isfinite(g2) & (g2 > 0)
+            step = np.isfinite(g2) & (g2 > 0)
             active, r, gu, gv, g2 = (x[step] for x in (active, r, gu, gv, g2))
             u[active] = np.clip(u[active] - r * gu / g2 * (u1[active] - u0[active]), u0[active], u1[active])
             v[active] = np.clip(v[active] - r * gv / g2 * (v1[active] - v0[active]), v0[active], v1[active])
@@ -404,9 +408,10 @@ def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float
 
 
 def _cut_points(field: UlmetField, patch: np.ndarray, light: np.ndarray, ua, va, ub, vb, good_a: np.ndarray,
-                cell: float):
+                cell: np.ndarray):
     """Bisect segments whose ends differ in class (a good, b not, or the reverse) down to the boundary.
 
+    ``cell``: per segment, its patch's grid cell (`_patch_chains`), the farthest a polished midpoint may move.
     Returns the last point on the good side of each segment.
     """
     good_u = np.where(good_a, ua, ub)
@@ -415,18 +420,50 @@ def _cut_points(field: UlmetField, patch: np.ndarray, light: np.ndarray, ua, va,
     bad_v = np.where(good_a, vb, va)
     c = field.levels[light]
     for _ in range(BISECTION_STEPS):
-        mu, mv, ok = field.polish(patch, 0.5 * (good_u + bad_u), 0.5 * (good_v + bad_v), c, np.full(len(patch), cell))
+        mu, mv, ok = field.polish(patch, 0.5 * (good_u + bad_u), 0.5 * (good_v + bad_v), c, cell)
         mid_good = ok & field.seen(patch, mu, mv)
         good_u, good_v = np.where(mid_good, mu, good_u), np.where(mid_good, mv, good_v)
         bad_u, bad_v = np.where(mid_good, bad_u, mu), np.where(mid_good, bad_v, mv)
     return good_u, good_v
 
 
+@dataclass
+class _Classified:
+    """Patch k's polished, subdivided chains with each vertex's class (`UlmetField.seen`), awaiting the cut points
+    of the segments ``change`` whose ends differ in class. Kept apart from the cuts so `analytic_contours` bisects
+    every patch's cuts together: ten rounds of a few dozen eye rays per patch cost the tracer's fixed overhead
+    each, and a point's bisection does not depend on the others'."""
+
+    k: int
+    chains: _Chains
+    px: np.ndarray
+    chain_light: np.ndarray
+    good: np.ndarray
+    change: np.ndarray
+    cell: float
+
+    def cut_args(self) -> tuple[np.ndarray, ...]:
+        """`_cut_points`' per-segment arguments (patch, light, ua, va, ub, vb, good_a, cell) for ``change``."""
+        c, n = self.change, len(self.change)
+        light = self.chain_light[self.chains.chain[c]]
+        return (np.full(n, self.k), light, self.chains.u[c], self.chains.v[c], self.chains.u[c + 1],
+                self.chains.v[c + 1], self.good[c], np.full(n, self.cell))
+
+
 def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """(tube index, (n, 2) array of (u, v), (n, 2) image positions) of every visible contour piece on patch k."""
+    classified = _classify(field, k)
+    if classified is None:
+        return []
+    cut_u, cut_v = _cut_points(field, *classified.cut_args())
+    return _pieces(field, classified, cut_u, cut_v)
+
+
+def _classify(field: UlmetField, k: int) -> _Classified | None:
+    """Patch k's level sets polished, subdivided and classified (steps 1–5 but the cuts' bisection); None if none."""
     chains, chain_light, cell = _patch_chains(field, k)
     if len(chains.u) == 0:
-        return []
+        return None
     c_of = lambda rows: field.levels[chain_light[chains.chain[rows]]]  # noqa: E731
     every = np.arange(len(chains.u))
     pk = np.full(len(chains.u), k)
@@ -436,14 +473,20 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.
     px, depth = field.project(np.full(len(chains.u), k), chains.u, chains.v)
     front = depth > 0
     width, height = field.camera.width, field.camera.height
+    # settled[i]: segment (i, i + 1) passed (or was left out) and its ends have not moved since, so the same
+    # test would give the same answer: it is not polished again in later rounds (most segments settle early).
+    settled = np.zeros(len(chains.u), dtype=bool)
     for _ in range(SUBDIVISION_ROUNDS):
         seg = chains.segments()
+        seg = seg[~settled[seg]]
         # Only what can be seen needs refining: both ends polished and in front, the segment near the image.
         lo = np.minimum(px[seg], px[seg + 1])
         hi = np.maximum(px[seg], px[seg + 1])
         near_image = ((hi[:, 0] >= -IMAGE_MARGIN_PX) & (lo[:, 0] <= width + IMAGE_MARGIN_PX)
                       & (hi[:, 1] >= -IMAGE_MARGIN_PX) & (lo[:, 1] <= height + IMAGE_MARGIN_PX))
-        seg = seg[chains.ok[seg] & chains.ok[seg + 1] & front[seg] & front[seg + 1] & near_image]
+        wanted = chains.ok[seg] & chains.ok[seg + 1] & front[seg] & front[seg + 1] & near_image
+        settled[seg[~wanted]] = True
+        seg = seg[wanted]
         if len(seg) == 0:
             break
         mid_u = 0.5 * (chains.u[seg] + chains.u[seg + 1])
@@ -457,21 +500,26 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.
         off = np.linalg.norm(mpx - chord_mid, axis=1)
         split = ~((length <= MAX_SEGMENT_PX) & (off <= CHORD_TOLERANCE_PX)) | ~np.isfinite(length)
         split &= half > 1e-9 * cell  # nothing left to split
+        settled[seg[~split]] = True
         if not split.any():
             break
         seg, mu, mv, mok, mpx, mdepth = seg[split], mu[split], mv[split], mok[split], mpx[split], mdepth[split]
         chains.insert(seg, mu, mv, mok)
+        settled = np.insert(settled, seg + 1, False)  # both halves of a split segment are new
         px = np.insert(px, seg + 1, mpx, axis=0)
         front = np.insert(front, seg + 1, mdepth > 0)
 
-    light = chain_light[chains.chain]
     good = chains.ok & field.seen(np.full(len(chains.u), k), chains.u, chains.v)
-
-    # Cut where the class changes, at the boundary found by bisection.
+    # Cut where the class changes, at the boundary found by bisection (`_cut_points`).
     seg = chains.segments()
-    change = seg[good[seg] != good[seg + 1]]
-    cut_u, cut_v = _cut_points(field, np.full(len(change), k), light[change], chains.u[change], chains.v[change],
-                               chains.u[change + 1], chains.v[change + 1], good[change], cell)
+    return _Classified(k, chains, px, chain_light, good, seg[good[seg] != good[seg + 1]], cell)
+
+
+def _pieces(field: UlmetField, classified: _Classified, cut_u: np.ndarray,
+            cut_v: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """`patch_contours`' pieces: the classified chains with the cut points inserted, split into runs of good vertices."""
+    k, chains, px, chain_light = classified.k, classified.chains, classified.px, classified.chain_light
+    good, change = classified.good, classified.change
     # A good vertex followed by a bad one: append the cut after it; a bad one followed by a good one: before the good one.
     u, v, chain, keep = chains.u, chains.v, chains.chain, good
     ends_after = change[good[change]]
@@ -504,10 +552,20 @@ def analytic_contours(field: UlmetField, progress=None) -> ContourLines:
     """Every tube's visible reflection line as projected polylines (the contour theorem, section 4)."""
     levels = field.levels
     per_light: dict[int, list[Polyline]] = {j: [] for j in range(len(levels))}
+    classified = []
     for k in range(len(field.surfaces)):
-        for light, uv, px in patch_contours(field, k):
-            per_light[light].append(Polyline(k, uv, px))
+        found = _classify(field, k)
+        if found is not None:
+            classified.append(found)
         if progress:
             progress(1)
+    # Every patch's cuts bisected together (`_Classified`), then handed back patch by patch.
+    args = [c.cut_args() for c in classified]
+    if args:
+        cut_u, cut_v = _cut_points(field, *(np.concatenate(column) for column in zip(*args)))
+        bounds = np.cumsum([len(c.change) for c in classified])[:-1]
+        for c, cu, cv in zip(classified, np.split(cut_u, bounds), np.split(cut_v, bounds)):
+            for light, uv, px in _pieces(field, c, cu, cv):
+                per_light[light].append(Polyline(c.k, uv, px))
     lines = [ContourLine(j, float(levels[j]), per_light[j]) for j in range(len(levels))]
     return ContourLines(field.camera.width, field.camera.height, lines)
