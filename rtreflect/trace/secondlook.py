@@ -257,6 +257,7 @@ class SecondLook:
         self._skip = float32_rounding(tessellation)
         self.isolated = isolated(self.shell_mesh, self._reach / GRAZING_COS + 2.0 * self._skip)
         self._planes = clear_sides(tessellation, surfaces, flat(tessellation, surfaces))
+        self._any_clear = bool(self._planes[2].any())
         self._lock = threading.Lock()
         self._fine: tuple[Tessellation, Accelerator] | None = None
 
@@ -324,6 +325,8 @@ class SecondLook:
         """Rays whose kept hit lies on a plane supporting the scene, from its clear side (`clear_sides`): none nearer."""
         centre, normal, clear = self._planes
         out = np.zeros(len(origins), dtype=bool)
+        if not self._any_clear:  # no face supports the scene (any curved scene): 1.4 ms of gathers per 65536 rays
+            return out
         rays = np.flatnonzero(hits.hit)
         rays = rays[clear[hits.patch[rays]].any(axis=1)]
         if len(rays):

@@ -947,6 +947,9 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             else:  # beyond the last mesh hit: an any-hit test first, the full query only where it finds something
                 shifted = O + start[:, None] * D
                 some = accelerator.occluded(shifted, D, limit - start)
+                if not some.any():  # the common case (no sheet behind the first): no empty gathers and query
+                    rays = rays[:0]
+                    break
                 rays, O, D, shifted, start, limit = (x[some] for x in (rays, O, D, shifted, start, limit))
                 mesh = accelerator.intersect(shifted, D, limit - start)
                 mesh = mesh._replace(t=mesh.t + start)
