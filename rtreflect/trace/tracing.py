@@ -406,14 +406,20 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
             # The faces meeting at a corner have their boundary vertices there within a mesh edge of each other: a
             # later try's lies within the first neighbour's edge length of its vertex (`SEAM_CORNER_EDGES`).
             reach = np.minimum(reach, gap + SEAM_CORNER_EDGES * tessellation.edge_length[pn])
-        u3, v3, d3, ok3, edge3 = refine_all(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)[:5]
-        _over_closed_seam(surfaces, pn, u3, v3, d3, ok3, edge3, O[seam], D[seam], tm[seam], tessellation.extent)
-        near3, t3 = _near_mesh_hit(d3, pn, O[seam], D[seam], tm[seam], band)
-        ok3 &= near3 & surfaces.on_face(pn, u3, v3)
-        won = seam[ok3]
-        pk[won], ur[won], vr[won], tr[won], status[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], VALID
+        # Only the restarts that may win (`_may_win_restart`): the rest go on to the next try as a loss would.
+        go = np.flatnonzero(_may_win_restart(tessellation, surfaces, seam, pn, O, D, tm, band))
+        ray = seam[go]
+        u3, v3, d3, ok, edge3 = refine_all(surfaces, pn[go], un[go], vn[go], O[ray], D[ray], tm[ray],
+                                           tessellation.extent)[:5]
+        _over_closed_seam(surfaces, pn[go], u3, v3, d3, ok, edge3, O[ray], D[ray], tm[ray], tessellation.extent)
+        near3, t3 = _near_mesh_hit(d3, pn[go], O[ray], D[ray], tm[ray], band)
+        ok &= near3 & surfaces.on_face(pn[go], u3, v3)
+        ok3 = np.zeros(len(seam), dtype=bool)
+        ok3[go] = ok
+        won = ray[ok]
+        pk[won], ur[won], vr[won], tr[won], status[won] = pn[go[ok]], u3[ok], v3[ok], t3[ok], VALID
         for have, new in zip(derivs[:3], d3[:3]):
-            have[won] = new[ok3]
+            have[won] = new[ok]
         restarted.append(won)
         seam, at, reach, tried = seam[~ok3], at[~ok3], reach[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
     crossed = _crossing_on_face(tessellation, surfaces, gone, gone_patch, O, D, tm, us, vs, band, status, pk, ur, vr, tr,
@@ -434,6 +440,23 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     crossed_rows[crossed] = status[crossed] == VALID  # (a nearer aside hit may have replaced it since: still on its sheet)
     return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside, curvature,
                        crossed_rows)
+
+
+def _may_win_restart(tessellation: Tessellation, surfaces: SurfaceSet, rows, pn, O, D, tm, band) -> np.ndarray:
+    """Which seam restarts (ray ``rows`` of the candidates' arrays O, D, tm, on neighbour ``pn``) may win: False only
+    where no point the restart could converge to passes its tests, whatever Newton (or `_over_closed_seam`) does.
+
+    A winning point S is converged (within Newton's tol of the ray), ahead (t > 0) and near the mesh hit M = O +
+    t_mesh D: |S − M| ≤ `JUMP_LIMIT` × band[k] × the grazing allowance, at most `GRAZING_ALLOWANCE` (`_near_mesh_hit`),
+    so |t − t_mesh| ≤ |S − M| lies within that reach; no kept hit bounds it. The same bounds as `_rim_neighbours`'
+    rows with that reach: a planar neighbour's crossing (`_may_win_on_plane`), a curved one's control net hull
+    (`_may_win_in_hull`). On the plate at 960×540: the hole's wall tried from the top plane, far below the plane's
+    mesh hit over the hole.
+    """
+    reach = JUMP_LIMIT * GRAZING_ALLOWANCE * band
+    kept = np.full(len(tm), np.inf)  # a restart replaces a miss: no nearer hit bounds it
+    may = _may_win_on_plane(tessellation, surfaces, pn, O[rows], D[rows], tm[rows], kept[rows], reach, 0.0)
+    return may & _may_win_in_hull(tessellation, surfaces, rows, pn, O, D, tm, kept, reach, 0.0)
 
 
 def _on_collapsed_side(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
@@ -612,7 +635,6 @@ def _crossing_on_face(tessellation: Tessellation, surfaces: SurfaceSet, rows, pa
     pk[won], ur[won], vr[won], tr[won], status[won] = k2[pick], u3[pick], v3[pick], t3[pick], VALID
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[pick]
-    return won
 
 
 def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -693,10 +715,11 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     rays, pn = np.concatenate([rays[close], rays[near[row]]]), np.concatenate([pn[close], cp[row, col]])
     un, vn = np.concatenate([un[close], cuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1]])
     # A planar neighbour is met where the ray crosses its plane: rows whose crossing cannot win below are not refined.
-    may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], band, skip, slack)
+    win_reach = BAND_CHORDS * band * GRAZING_ALLOWANCE + skip  # the reach test below at its largest allowance
+    may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], win_reach, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     # Any neighbour lies in its control net's hull: rows whose ray stays clear of it where a win could lie are not refined.
-    may = _may_win_in_hull(tessellation, surfaces, rays, pn, O, D, tm, tr, band, skip, slack)
+    may = _may_win_in_hull(tessellation, surfaces, rays, pn, O, D, tm, tr, win_reach, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     if len(rays) == 0:
         return
@@ -720,16 +743,17 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
         have[won] = new[pick]
 
 
-def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, band, skip, slack) -> np.ndarray:
-    """Which (ray, neighbour) rows of `_rim_neighbours` may win: False only where the neighbour is planar (`_net_planes`)
-    and its crossing cannot pass the winning tests (ahead, within the band's reach of the mesh hit, nearer than the kept
-    hit by float32 rounding), whatever Newton from any start converges to.
+def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, reach, slack) -> np.ndarray:
+    """Which (ray, neighbour) rows of `_rim_neighbours` (or seam restarts, `_may_win_restart`) may win: False only
+    where the neighbour is planar (`_net_planes`) and its crossing cannot pass the winning tests (ahead, within
+    ``reach[k]`` of the mesh hit along the ray, nearer than the kept hit ``tr`` by ``slack``), whatever Newton from
+    any start converges to.
 
     A converged point S lies within |r⊥| ≤ tol of the ray (Newton's test, tol = `NEWTON_TOLERANCE` × max(t_mesh,
     extent, |O + t_mesh D|)) and, in its net's convex hull (weights > 0), within the net's deviation ρ of the plane
     (point c, unit normal n); so its t = (S − O)·D lies within (ρ + tol)/|n·D| of the ray's crossing of that plane,
-    t_p = n·(c − O)/(n·D), plus 1000× tol for the rounding of both. The band's reach is taken at its largest
-    (`GRAZING_ALLOWANCE`). On the plate at 960×540 the faces across the rim of its holes' fillets include the big top
+    t_p = n·(c − O)/(n·D), plus 1000× tol for the rounding of both. ``reach`` per face: the caller's reach test at
+    its largest allowance (`GRAZING_ALLOWANCE`). On the plate at 960×540 the faces across the rim of its holes' fillets include the big top
     plane, whose crossing lies far from the fillet's mesh hit for all but a few of those rays.
     """
     may = np.ones(len(pn), dtype=bool)
@@ -743,24 +767,23 @@ def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D
     with np.errstate(divide="ignore", invalid="ignore"):
         tp = np.einsum("ij,ij->i", normal[k], centre[k] - O) / nd
         margin = (deviation[k] + tol) / np.abs(nd) + 1000.0 * tol
-    reach = BAND_CHORDS * band[k] * GRAZING_ALLOWANCE + skip
     # Comparisons with NaN or inf (a ray along the plane) are False: such rows are refined.
-    never = (tp + margin <= 0.0) | (tp - margin >= tr - slack) | (np.abs(tp - tm) - margin > reach)
+    never = (tp + margin <= 0.0) | (tp - margin >= tr - slack) | (np.abs(tp - tm) - margin > reach[k])
     may[rows[never]] = False
     return may
 
 
-def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, rays, pn, O, D, tm, tr, band, skip,
+def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, rays, pn, O, D, tm, tr, reach,
                      slack) -> np.ndarray:
     """Which (ray, neighbour) rows of `_rim_neighbours` may win: False only where the ray's stretch on which a winning
     hit could lie passes clear of the neighbour's control net, whatever Newton from any start converges to. For the
     curved neighbours (a planar one's crossing is known: `_may_win_on_plane`).
 
     A winning point S is converged, so within tol (`NEWTON_TOLERANCE` × max(t_mesh, extent, |O + t_mesh D|)) of the
-    ray, at t = (S − O)·D with t > 0, |t − t_mesh| within the band's reach at its largest (`GRAZING_ALLOWANCE`) and
-    t below the kept hit's by float32 rounding: on the segment t ∈ [max(0, t_mesh − reach), min(t_mesh + reach,
-    t_kept − slack)]. With weights > 0 the surface lies in its net's convex hull (Piegl and Tiller, *The NURBS Book*,
-    property 4.5 of rational surfaces), so in the net's slab along any unit direction m: min m·P ≤ m·S ≤ max m·P, and
+    ray, at t = (S − O)·D with t > 0, |t − t_mesh| within ``reach[k]`` (the caller's reach test at its largest
+    allowance, `GRAZING_ALLOWANCE`) and t below the kept hit's by ``slack``: on the segment t ∈ [max(0, t_mesh −
+    reach), min(t_mesh + reach, t_kept − slack)]. With weights > 0 the surface lies in its net's convex hull (Piegl
+    and Tiller, *The NURBS Book*, property 4.5 of rational surfaces), so in the net's slab along any unit direction m: min m·P ≤ m·S ≤ max m·P, and
     m·S lies within tol of the segment's range of m·X. A row whose segment range, widened by tol (and 1000× tol for
     the rounding of both), misses the net's slab along the axes (its bounding box) or its plane's normal (`_net_boxes`)
     cannot win. Rows (``rays``, ``pn``) of the candidates' arrays O, D, tm, tr; by the compiled kernel
@@ -771,7 +794,7 @@ def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, rays, pn,
     clear = np.empty(len(pn), dtype=bool)
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
     rims_kernel.clear_of_hulls(np.ascontiguousarray(rays, dtype=np.int64), np.ascontiguousarray(pn, dtype=np.int64),
-                               f64(O), f64(D), f64(tm), f64(tr), BAND_CHORDS * band * GRAZING_ALLOWANCE + skip, lo, hi,
+                               f64(O), f64(D), f64(tm), f64(tr), f64(reach), lo, hi,
                                normal, low, high, hull, NEWTON_TOLERANCE, float(tessellation.extent), float(slack), clear)
     return ~clear
 
