@@ -412,6 +412,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         u3, v3, d3, ok, edge3 = refine_all(surfaces, pn[go], un[go], vn[go], O[ray], D[ray], tm[ray],
                                            tessellation.extent)[:5]
         _over_closed_seam(surfaces, pn[go], u3, v3, d3, ok, edge3, O[ray], D[ray], tm[ray], tessellation.extent)
+        _search_at_pole(surfaces, pn[go], un[go], vn[go], u3, v3, d3, ok, edge3, O[ray], D[ray], tm[ray],
+                        tessellation.extent)
         near3, t3 = _near_mesh_hit(d3, pn[go], O[ray], D[ray], tm[ray], band)
         ok &= near3 & surfaces.on_face(pn[go], u3, v3)
         ok3 = np.zeros(len(seam), dtype=bool)
@@ -488,6 +490,29 @@ def _over_closed_seam(surfaces: SurfaceSet, patch, u, v, derivs: SurfaceDerivati
     us = np.where(on_u[rows], np.where(u[rows] == u0[rows], u1[rows], u0[rows]), u[rows])
     vs = np.where(on_v[rows], np.where(v[rows] == v0[rows], v1[rows], v0[rows]), v[rows])
     u2, v2, d2, ok2 = refine(surfaces, patch[rows], us, vs, O[rows], D[rows], t_mesh[rows], extent)
+    won = rows[ok2]
+    u[won], v[won], converged[won], edge[won] = u2[ok2], v2[ok2], True, False
+    for have, new in zip(derivs[:3], d2[:3]):
+        have[won] = new[ok2]
+    return won
+
+
+def _search_at_pole(surfaces: SurfaceSet, patch, us, vs, u, v, derivs: SurfaceDerivatives, converged, edge, O, D,
+                    t_mesh, extent) -> np.ndarray:
+    """Restarts (from ``us``, ``vs``) whose Newton stopped unconverged on a collapsed side of their patch (a pole,
+    `_on_collapsed_side`): the search for the ray's distance (`_rescue`) from the same start instead, in place where
+    it converges. Returns the rows replaced.
+
+    The collapsed-side rule of the mesh hits' own refinement (`_candidates`): the side is one point in 3D, so Newton
+    stopping there has not left the face, and near it Newton's steps in the parameter along the side are wild
+    (|S_u| → 0). A seam restart onto a face with a pole (a sphere's cap, a cone's apex) stopped there missed.
+    """
+    rows = np.flatnonzero(~converged & edge)
+    rows = rows[_on_collapsed_side(surfaces, patch[rows], u[rows], v[rows])]
+    if len(rows) == 0:
+        return rows
+    tol = NEWTON_TOLERANCE * np.maximum(t_mesh[rows], extent)  # as `_candidates`' search
+    u2, v2, d2, ok2 = _rescue(surfaces, patch[rows], us[rows], vs[rows], O[rows], D[rows], tol)[:4]
     won = rows[ok2]
     u[won], v[won], converged[won], edge[won] = u2[ok2], v2[ok2], True, False
     for have, new in zip(derivs[:3], d2[:3]):
