@@ -432,14 +432,15 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     aside[crossed] = True
     curvature = np.full((n, 4), np.nan)
     _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside, curvature)
-    _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band, aside)
+    beside = _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band, aside)
     moved = np.flatnonzero(aside)
     _normals(surfaces, pk, derivs, D, moved, normal, cosine, degenerate)
     curvature[moved] = np.nan  # found beside: not the point the curvatures were taken at
     curvature[degenerate] = np.nan  # the normal kept there is the limit (`trace`), not the one they were taken with
     t = np.where(status == VALID, tr, tm)
     crossed_rows = np.zeros(n, dtype=bool)
-    crossed_rows[crossed] = status[crossed] == VALID  # (a nearer aside hit may have replaced it since: still on its sheet)
+    crossed_rows[crossed] = status[crossed] == VALID  # (`_other_root` may have replaced it since: still on its sheet)
+    crossed_rows[beside] = False  # another face's hit now: `trace` weighs it as any mesh-led one
     return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside, curvature,
                        crossed_rows)
 
@@ -660,6 +661,7 @@ def _crossing_on_face(tessellation: Tessellation, surfaces: SurfaceSet, rows, pa
     pk[won], ur[won], vr[won], tr[won], status[won] = k2[pick], u3[pick], v3[pick], t3[pick], VALID
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[pick]
+    return won
 
 
 def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -685,8 +687,9 @@ def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray
 
 
 def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, status, pk, ur, vr, tr, derivs,
-                    band, aside) -> None:
+                    band, aside) -> np.ndarray:
     """Valid hits on a triangle at its face's rim: the neighbouring face across the rim refined too, in place.
+    Returns the rows whose hit it replaced.
 
     Another face's triangle can meet the ray at the mesh hit's own distance, to float32 rounding: where
     faces join (a reader's mesh with a row of slivers lying in the neighbouring face's plane, faces
@@ -705,7 +708,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     not: pixels there keep their face).
     """
     if not tessellation.has_rim_neighbours:  # no face has a neighbour (a single patch): nothing across any rim
-        return
+        return np.zeros(0, dtype=np.int64)
     patch_of, uv_of, gap_of = tessellation.rim_neighbour
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
@@ -747,7 +750,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     may = _may_win_in_hull(tessellation, surfaces, rays, pn, O, D, tm, tr, win_reach, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     if len(rays) == 0:
-        return
+        return rays
     u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
     t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
     # Only the hit a triangle at the mesh hit's distance leads to (the one the next query skips): within
@@ -766,6 +769,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     pk[won], ur[won], vr[won], tr[won], aside[won] = pn[pick], u3[pick], v3[pick], t3[pick], True
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[pick]
+    return won
 
 
 def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, reach, slack) -> np.ndarray:
