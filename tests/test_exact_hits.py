@@ -194,8 +194,8 @@ def test_restart_stopped_on_a_pole_is_searched():
     """A seam restart whose Newton stops on a collapsed side of the neighbour (a pole, `SurfaceSet.collapsed`) has not
     left that face: the side is one point in 3D. The mesh hit's own refinement hands such a stop to the search
     (`_candidates`); a restart counted it a loss (the ray went on behind the face). `_search_at_pole` searches from the
-    restart's start: on a cone z = 1 − r (apex at v = 0) the vertical rays at x₀ meet it at (x₀, 0, 1 − x₀), and
-    started from boundary vertices at other (u, v) Newton runs onto the apex for many of them."""
+    restart's start: on a cone z = 1 − r (apex at v = 0) the vertical rays at x₀ meet it at (x₀, 0, 1 − x₀),
+    and started from boundary vertices at other (u, v) Newton runs onto the apex for many of them."""
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -205,7 +205,8 @@ def test_restart_stopped_on_a_pole_is_searched():
     from rtreflect.trace.tracing import _on_collapsed_side, _search_at_pole, refine_all
 
     surfaces = SurfaceSet([revolved(np.array([[0.0, 1.0], [1.0, 0.0]]), np.ones(2), 1, np.array([0, 0, 1, 1.0]))])
-    x0, us, vs = (g.ravel() for g in np.meshgrid([0.01, 0.03, 0.1], [0.5, 1.0, 1.5, 2.0, 2.5, 3.0], [0.05, 0.1, 0.2, 0.4]))
+    grid = np.meshgrid([0.01, 0.03, 0.1], [0.5, 1.0, 1.5, 2.0, 2.5, 3.0], [0.05, 0.1, 0.2, 0.4])
+    x0, us, vs = (g.ravel() for g in grid)  # the ray's x, the restart's start (u, v)
     n = len(x0)
     origins = np.column_stack([x0, np.zeros(n), np.full(n, 3.0)])
     directions = np.tile([0.0, 0.0, -1.0], (n, 1))

@@ -183,7 +183,8 @@ def test_seam_restarts_dropped_clear_of_the_neighbour_could_not_win(monkeypatch)
 
     monkeypatch.setattr(tracing, "refine_all", spy)
     hits, restarts = run()
-    monkeypatch.setattr(tracing, "_may_win_restart", lambda tessellation, surfaces, rows, pn, *a: np.ones(len(pn), dtype=bool))
+    monkeypatch.setattr(tracing, "_may_win_restart",
+                        lambda tessellation, surfaces, rows, pn, *a: np.ones(len(pn), dtype=bool))
     every, every_restarts = run()
     for name in ("hit", "patch", "u", "v", "t", "P", "N", "fallback", "aside", "Su", "Sv"):
         np.testing.assert_array_equal(getattr(hits, name), getattr(every, name), err_msg=name)

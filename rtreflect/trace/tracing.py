@@ -449,11 +449,11 @@ def _may_win_restart(tessellation: Tessellation, surfaces: SurfaceSet, rows, pn,
     """Which seam restarts (ray ``rows`` of the candidates' arrays O, D, tm, on neighbour ``pn``) may win: False only
     where no point the restart could converge to passes its tests, whatever Newton (or `_over_closed_seam`) does.
 
-    A winning point S is converged (within Newton's tol of the ray), ahead (t > 0) and near the mesh hit M = O +
-    t_mesh D: |S − M| ≤ `JUMP_LIMIT` × band[k] × the grazing allowance, at most `GRAZING_ALLOWANCE` (`_near_mesh_hit`),
-    so |t − t_mesh| ≤ |S − M| lies within that reach; no kept hit bounds it. The same bounds as `_rim_neighbours`'
-    rows with that reach: a planar neighbour's crossing (`_may_win_on_plane`), a curved one's control net hull
-    (`_may_win_in_hull`). On the plate at 960×540: the hole's wall tried from the top plane, far below the plane's
+    A winning point S is converged (within Newton's tol of the ray), ahead (t > 0) and near the mesh hit
+    M = O + t_mesh D: |S − M| ≤ `JUMP_LIMIT` × band[k] × the grazing allowance, at most `GRAZING_ALLOWANCE`
+    (`_near_mesh_hit`), so |t − t_mesh| ≤ |S − M| lies within that reach; no kept hit bounds it. The same bounds
+    as `_rim_neighbours`' rows with that reach: a planar neighbour's crossing (`_may_win_on_plane`), a curved one's
+    control net hull (`_may_win_in_hull`). On the plate at 960×540: the hole's wall tried from the top plane, far below the plane's
     mesh hit over the hole.
     """
     reach = JUMP_LIMIT * GRAZING_ALLOWANCE * band
@@ -782,8 +782,9 @@ def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D
     extent, |O + t_mesh D|)) and, in its net's convex hull (weights > 0), within the net's deviation ρ of the plane
     (point c, unit normal n); so its t = (S − O)·D lies within (ρ + tol)/|n·D| of the ray's crossing of that plane,
     t_p = n·(c − O)/(n·D), plus 1000× tol for the rounding of both. ``reach`` per face: the caller's reach test at
-    its largest allowance (`GRAZING_ALLOWANCE`). On the plate at 960×540 the faces across the rim of its holes' fillets include the big top
-    plane, whose crossing lies far from the fillet's mesh hit for all but a few of those rays.
+    its largest allowance (`GRAZING_ALLOWANCE`). On the plate at 960×540 the faces across the rim of its holes'
+    fillets include the big top plane, whose crossing lies far from the fillet's mesh hit for all but a few of
+    those rays.
     """
     may = np.ones(len(pn), dtype=bool)
     centre, normal, deviation, planar = _net_planes(tessellation, surfaces)
@@ -804,18 +805,19 @@ def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D
 
 def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, rays, pn, O, D, tm, tr, reach,
                      slack) -> np.ndarray:
-    """Which (ray, neighbour) rows of `_rim_neighbours` may win: False only where the ray's stretch on which a winning
-    hit could lie passes clear of the neighbour's control net, whatever Newton from any start converges to. For the
-    curved neighbours (a planar one's crossing is known: `_may_win_on_plane`).
+    """Which (ray, neighbour) rows of `_rim_neighbours` (or seam restarts, `_may_win_restart`) may win: False only
+    where the ray's stretch on which a winning hit could lie passes clear of the neighbour's control net, whatever
+    Newton from any start converges to. For the curved neighbours (a planar one's crossing is known:
+    `_may_win_on_plane`).
 
     A winning point S is converged, so within tol (`NEWTON_TOLERANCE` × max(t_mesh, extent, |O + t_mesh D|)) of the
     ray, at t = (S − O)·D with t > 0, |t − t_mesh| within ``reach[k]`` (the caller's reach test at its largest
     allowance, `GRAZING_ALLOWANCE`) and t below the kept hit's by ``slack``: on the segment t ∈ [max(0, t_mesh −
     reach), min(t_mesh + reach, t_kept − slack)]. With weights > 0 the surface lies in its net's convex hull (Piegl
-    and Tiller, *The NURBS Book*, property 4.5 of rational surfaces), so in the net's slab along any unit direction m: min m·P ≤ m·S ≤ max m·P, and
-    m·S lies within tol of the segment's range of m·X. A row whose segment range, widened by tol (and 1000× tol for
-    the rounding of both), misses the net's slab along the axes (its bounding box) or its plane's normal (`_net_boxes`)
-    cannot win. Rows (``rays``, ``pn``) of the candidates' arrays O, D, tm, tr; by the compiled kernel
+    and Tiller, *The NURBS Book*, property 4.5 of rational surfaces), so in the net's slab along any unit direction
+    m: min m·P ≤ m·S ≤ max m·P, and m·S lies within tol of the segment's range of m·X. A row whose segment range,
+    widened by tol (and 1000× tol for the rounding of both), misses the net's slab along the axes (its bounding box)
+    or its plane's normal (`_net_boxes`) cannot win. Rows (``rays``, ``pn``) of the candidates' arrays O, D, tm, tr; by the compiled kernel
     `kernels.rims.clear_of_hulls`. On the plate at 960×540: a hole's fillet from the top plane and its wall from the
     fillet lie below the face the ray meets first (3 of 4 such rows); a wall from its fillet does not separate so.
     """
