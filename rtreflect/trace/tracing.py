@@ -453,8 +453,9 @@ def _may_win_restart(tessellation: Tessellation, surfaces: SurfaceSet, rows, pn,
     M = O + t_mesh D: |S − M| ≤ `JUMP_LIMIT` × band[k] × the grazing allowance, at most `GRAZING_ALLOWANCE`
     (`_near_mesh_hit`), so |t − t_mesh| ≤ |S − M| lies within that reach; no kept hit bounds it. The same bounds
     as `_rim_neighbours`' rows with that reach: a planar neighbour's crossing (`_may_win_on_plane`), a curved one's
-    control net hull (`_may_win_in_hull`). On the plate at 960×540: the hole's wall tried from the top plane, far below the plane's
-    mesh hit over the hole.
+    control net hull (`_may_win_in_hull`). On the plate at 960×540 it drops 2,182 of 55,509 restarts (all of them
+    losers): that reach, 80 chord errors of the neighbour (2.4–6.4 there), spans a hole's fillet (radius 0.8), so
+    the walls tried from the top plane over a hole (10,209, 949 win) mostly stay in their nets' hulls.
     """
     reach = JUMP_LIMIT * GRAZING_ALLOWANCE * band
     kept = np.full(len(tm), np.inf)  # a restart replaces a miss: no nearer hit bounds it
@@ -817,8 +818,8 @@ def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, rays, pn,
     and Tiller, *The NURBS Book*, property 4.5 of rational surfaces), so in the net's slab along any unit direction
     m: min m·P ≤ m·S ≤ max m·P, and m·S lies within tol of the segment's range of m·X. A row whose segment range,
     widened by tol (and 1000× tol for the rounding of both), misses the net's slab along the axes (its bounding box)
-    or its plane's normal (`_net_boxes`) cannot win. Rows (``rays``, ``pn``) of the candidates' arrays O, D, tm, tr; by the compiled kernel
-    `kernels.rims.clear_of_hulls`. On the plate at 960×540: a hole's fillet from the top plane and its wall from the
+    or its plane's normal (`_net_boxes`) cannot win. Rows (``rays``, ``pn``) of the candidates' arrays O, D, tm,
+    tr; by the compiled kernel `kernels.rims.clear_of_hulls`. On the plate at 960×540: a hole's fillet from the top plane and its wall from the
     fillet lie below the face the ray meets first (3 of 4 such rows); a wall from its fillet does not separate so.
     """
     lo, hi, normal, low, high, hull = _net_boxes(tessellation, surfaces)
