@@ -819,8 +819,9 @@ def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, rays, pn,
     m: min m·P ≤ m·S ≤ max m·P, and m·S lies within tol of the segment's range of m·X. A row whose segment range,
     widened by tol (and 1000× tol for the rounding of both), misses the net's slab along the axes (its bounding box)
     or its plane's normal (`_net_boxes`) cannot win. Rows (``rays``, ``pn``) of the candidates' arrays O, D, tm,
-    tr; by the compiled kernel `kernels.rims.clear_of_hulls`. On the plate at 960×540: a hole's fillet from the top plane and its wall from the
-    fillet lie below the face the ray meets first (3 of 4 such rows); a wall from its fillet does not separate so.
+    tr; by the compiled kernel `kernels.rims.clear_of_hulls`. On the plate at 960×540: a hole's fillet from the top
+    plane and its wall from the fillet lie below the face the ray meets first (3 of 4 such rows); a wall from its
+    fillet does not separate so.
     """
     lo, hi, normal, low, high, hull = _net_boxes(tessellation, surfaces)
     clear = np.empty(len(pn), dtype=bool)
