@@ -150,6 +150,79 @@ def test_coincident_triangle_of_the_face_across_the_edge_is_not_skipped():
     assert_same_hits(hits, np.zeros(len(origins), dtype=int), t_a, tessellation.extent)
 
 
+def test_hit_replaced_across_the_rim_is_no_longer_a_crossing_hit(monkeypatch):
+    """`_candidates`' ``crossed`` (the kept hit is `_crossing_on_face`'s, which `trace` lets win only nearer by float32
+    rounding) must describe the hit it returns: where `_rim_neighbours` replaced that hit by another face's, the row is
+    an ordinary hit again. The wedge above (B's mesh a hair above A's plane, every ray's hit moved to A across the rim),
+    each of B's valid hits claimed as a crossing hit first (a stand-in for `_crossing_on_face`): after the rim's
+    replacement none of A's hits may stay flagged crossed (they did: the flag was taken before the rim's look)."""
+    from rtreflect.geometry.surfaces import SurfaceSet
+    from rtreflect.geometry.tessellation import tessellate
+    from rtreflect.trace import tracing
+    from rtreflect.trace.accelerator import Accelerator
+
+    a = plane_patch([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], name="A")
+    b = plane_patch([0.0, 0.0, -0.1], [1.0, 0.0, 0.1], [0.0, 1.0, 0.0], name="B")
+    tessellation = tessellate([a, b], 2)
+    vertices = tessellation.vertices.copy()
+    vertices[tessellation.vertex_patch == 1, 2] = 1e-6
+    chord = tessellation.chord_error.copy()
+    chord[1] = 0.1
+    tessellation = replace(tessellation, vertices=vertices, chord_error=chord)
+    surfaces = SurfaceSet([a, b])
+    x, y = np.meshgrid(np.linspace(0.05, 0.95, 19), np.linspace(0.05, 0.95, 19))
+    O = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)])
+    D = np.tile([0.0, 0.0, -1.0], (len(O), 1))
+    mesh = Accelerator(tessellation).intersect(O, D)
+    assert (mesh.prim >= 0).all()
+    claimed = []
+
+    def claim(tessellation, surfaces, rows, patch, O, D, tm, us, vs, band, status, *rest):
+        rows = np.flatnonzero(status == tracing.VALID)
+        claimed.append(rows)
+        return rows
+
+    monkeypatch.setattr(tracing, "_crossing_on_face", claim)
+    c = tracing._candidates(tessellation, surfaces, O, D, mesh.prim, mesh.b1, mesh.b2, mesh.t)
+    moved = c.aside & (c.patch == 0)
+    assert len(claimed[0]) > 100 and moved.sum() > 100  # B's hits claimed, then moved to A across the rim
+    assert not (c.crossed & moved).any()
+    assert c.crossed[np.setdiff1d(claimed[0], np.flatnonzero(moved))].all()  # the rest keep their flag
+
+
+def test_restart_stopped_on_a_pole_is_searched():
+    """A seam restart whose Newton stops on a collapsed side of the neighbour (a pole, `SurfaceSet.collapsed`) has not
+    left that face: the side is one point in 3D. The mesh hit's own refinement hands such a stop to the search
+    (`_candidates`); a restart counted it a loss (the ray went on behind the face). `_search_at_pole` searches from the
+    restart's start: on a cone z = 1 − r (apex at v = 0) the vertical rays at x₀ meet it at (x₀, 0, 1 − x₀),
+    and started from boundary vertices at other (u, v) Newton runs onto the apex for many of them."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_surfaces import revolved
+
+    from rtreflect.geometry.surfaces import SurfaceSet
+    from rtreflect.trace.tracing import _on_collapsed_side, _search_at_pole, refine_all
+
+    surfaces = SurfaceSet([revolved(np.array([[0.0, 1.0], [1.0, 0.0]]), np.ones(2), 1, np.array([0, 0, 1, 1.0]))])
+    grid = np.meshgrid([0.01, 0.03, 0.1], [0.5, 1.0, 1.5, 2.0, 2.5, 3.0], [0.05, 0.1, 0.2, 0.4])
+    x0, us, vs = (g.ravel() for g in grid)  # the ray's x, the restart's start (u, v)
+    n = len(x0)
+    origins = np.column_stack([x0, np.zeros(n), np.full(n, 3.0)])
+    directions = np.tile([0.0, 0.0, -1.0], (n, 1))
+    patch = np.zeros(n, dtype=np.int64)
+    t_mesh = 2.0 + x0
+    u, v, derivs, converged, edge = refine_all(surfaces, patch, us, vs, origins, directions, t_mesh, 3.0)[:5]
+    pole = np.flatnonzero(~converged & edge & _on_collapsed_side(surfaces, patch, u, v))
+    assert len(pole) >= 10  # what a restart stopped at before: a loss
+    won = _search_at_pole(surfaces, patch, us, vs, u, v, derivs, converged, edge, origins, directions, t_mesh, 3.0)
+    assert len(won) >= 10 and np.isin(won, pole).all()
+    assert converged[won].all() and not edge[won].any()
+    expected = np.column_stack([x0, np.zeros(n), 1.0 - x0])[won]
+    np.testing.assert_allclose(derivs.S[won], expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(v[won], x0[won], rtol=0, atol=1e-12)
+
+
 # --- Issue 12: trimmed faces -------------------------------------------------------------------------
 
 

@@ -406,14 +406,22 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
             # The faces meeting at a corner have their boundary vertices there within a mesh edge of each other: a
             # later try's lies within the first neighbour's edge length of its vertex (`SEAM_CORNER_EDGES`).
             reach = np.minimum(reach, gap + SEAM_CORNER_EDGES * tessellation.edge_length[pn])
-        u3, v3, d3, ok3, edge3 = refine_all(surfaces, pn, un, vn, O[seam], D[seam], tm[seam], tessellation.extent)[:5]
-        _over_closed_seam(surfaces, pn, u3, v3, d3, ok3, edge3, O[seam], D[seam], tm[seam], tessellation.extent)
-        near3, t3 = _near_mesh_hit(d3, pn, O[seam], D[seam], tm[seam], band)
-        ok3 &= near3 & surfaces.on_face(pn, u3, v3)
-        won = seam[ok3]
-        pk[won], ur[won], vr[won], tr[won], status[won] = pn[ok3], u3[ok3], v3[ok3], t3[ok3], VALID
+        # Only the restarts that may win (`_may_win_restart`): the rest go on to the next try as a loss would.
+        go = np.flatnonzero(_may_win_restart(tessellation, surfaces, seam, pn, O, D, tm, band))
+        ray = seam[go]
+        u3, v3, d3, ok, edge3 = refine_all(surfaces, pn[go], un[go], vn[go], O[ray], D[ray], tm[ray],
+                                           tessellation.extent)[:5]
+        _over_closed_seam(surfaces, pn[go], u3, v3, d3, ok, edge3, O[ray], D[ray], tm[ray], tessellation.extent)
+        _search_at_pole(surfaces, pn[go], un[go], vn[go], u3, v3, d3, ok, edge3, O[ray], D[ray], tm[ray],
+                        tessellation.extent)
+        near3, t3 = _near_mesh_hit(d3, pn[go], O[ray], D[ray], tm[ray], band)
+        ok &= near3 & surfaces.on_face(pn[go], u3, v3)
+        ok3 = np.zeros(len(seam), dtype=bool)
+        ok3[go] = ok
+        won = ray[ok]
+        pk[won], ur[won], vr[won], tr[won], status[won] = pn[go[ok]], u3[ok], v3[ok], t3[ok], VALID
         for have, new in zip(derivs[:3], d3[:3]):
-            have[won] = new[ok3]
+            have[won] = new[ok]
         restarted.append(won)
         seam, at, reach, tried = seam[~ok3], at[~ok3], reach[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
     crossed = _crossing_on_face(tessellation, surfaces, gone, gone_patch, O, D, tm, us, vs, band, status, pk, ur, vr, tr,
@@ -424,16 +432,35 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     aside[crossed] = True
     curvature = np.full((n, 4), np.nan)
     _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside, curvature)
-    _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band, aside)
+    beside = _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band, aside)
     moved = np.flatnonzero(aside)
     _normals(surfaces, pk, derivs, D, moved, normal, cosine, degenerate)
     curvature[moved] = np.nan  # found beside: not the point the curvatures were taken at
     curvature[degenerate] = np.nan  # the normal kept there is the limit (`trace`), not the one they were taken with
     t = np.where(status == VALID, tr, tm)
     crossed_rows = np.zeros(n, dtype=bool)
-    crossed_rows[crossed] = status[crossed] == VALID  # (a nearer aside hit may have replaced it since: still on its sheet)
+    crossed_rows[crossed] = status[crossed] == VALID  # (`_other_root` may have replaced it since: still on its sheet)
+    crossed_rows[beside] = False  # another face's hit now: `trace` weighs it as any mesh-led one
     return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside, curvature,
                        crossed_rows)
+
+
+def _may_win_restart(tessellation: Tessellation, surfaces: SurfaceSet, rows, pn, O, D, tm, band) -> np.ndarray:
+    """Which seam restarts (ray ``rows`` of the candidates' arrays O, D, tm, on neighbour ``pn``) may win: False only
+    where no point the restart could converge to passes its tests, whatever Newton (or `_over_closed_seam`) does.
+
+    A winning point S is converged (within Newton's tol of the ray), ahead (t > 0) and near the mesh hit
+    M = O + t_mesh D: |S − M| ≤ `JUMP_LIMIT` × band[k] × the grazing allowance, at most `GRAZING_ALLOWANCE`
+    (`_near_mesh_hit`), so |t − t_mesh| ≤ |S − M| lies within that reach; no kept hit bounds it. The same bounds
+    as `_rim_neighbours`' rows with that reach: a planar neighbour's crossing (`_may_win_on_plane`), a curved one's
+    control net hull (`_may_win_in_hull`). On the plate at 960×540 it drops 2,182 of 55,509 restarts (all of them
+    losers): that reach, 80 chord errors of the neighbour (2.4–6.4 there), spans a hole's fillet (radius 0.8), so
+    the walls tried from the top plane over a hole (10,209, 949 win) mostly stay in their nets' hulls.
+    """
+    reach = JUMP_LIMIT * GRAZING_ALLOWANCE * band
+    kept = np.full(len(tm), np.inf)  # a restart replaces a miss: no nearer hit bounds it
+    may = _may_win_on_plane(tessellation, surfaces, pn, O[rows], D[rows], tm[rows], kept[rows], reach, 0.0)
+    return may & _may_win_in_hull(tessellation, surfaces, rows, pn, O, D, tm, kept, reach, 0.0)
 
 
 def _on_collapsed_side(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
@@ -465,6 +492,29 @@ def _over_closed_seam(surfaces: SurfaceSet, patch, u, v, derivs: SurfaceDerivati
     us = np.where(on_u[rows], np.where(u[rows] == u0[rows], u1[rows], u0[rows]), u[rows])
     vs = np.where(on_v[rows], np.where(v[rows] == v0[rows], v1[rows], v0[rows]), v[rows])
     u2, v2, d2, ok2 = refine(surfaces, patch[rows], us, vs, O[rows], D[rows], t_mesh[rows], extent)
+    won = rows[ok2]
+    u[won], v[won], converged[won], edge[won] = u2[ok2], v2[ok2], True, False
+    for have, new in zip(derivs[:3], d2[:3]):
+        have[won] = new[ok2]
+    return won
+
+
+def _search_at_pole(surfaces: SurfaceSet, patch, us, vs, u, v, derivs: SurfaceDerivatives, converged, edge, O, D,
+                    t_mesh, extent) -> np.ndarray:
+    """Restarts (from ``us``, ``vs``) whose Newton stopped unconverged on a collapsed side of their patch (a pole,
+    `_on_collapsed_side`): the search for the ray's distance (`_rescue`) from the same start instead, in place where
+    it converges. Returns the rows replaced.
+
+    The collapsed-side rule of the mesh hits' own refinement (`_candidates`): the side is one point in 3D, so Newton
+    stopping there has not left the face, and near it Newton's steps in the parameter along the side are wild
+    (|S_u| → 0). A seam restart onto a face with a pole (a sphere's cap, a cone's apex) stopped there missed.
+    """
+    rows = np.flatnonzero(~converged & edge)
+    rows = rows[_on_collapsed_side(surfaces, patch[rows], u[rows], v[rows])]
+    if len(rows) == 0:
+        return rows
+    tol = NEWTON_TOLERANCE * np.maximum(t_mesh[rows], extent)  # as `_candidates`' search
+    u2, v2, d2, ok2 = _rescue(surfaces, patch[rows], us[rows], vs[rows], O[rows], D[rows], tol)[:4]
     won = rows[ok2]
     u[won], v[won], converged[won], edge[won] = u2[ok2], v2[ok2], True, False
     for have, new in zip(derivs[:3], d2[:3]):
@@ -638,8 +688,9 @@ def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray
 
 
 def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, status, pk, ur, vr, tr, derivs,
-                    band, aside) -> None:
+                    band, aside) -> np.ndarray:
     """Valid hits on a triangle at its face's rim: the neighbouring face across the rim refined too, in place.
+    Returns the rows whose hit it replaced.
 
     Another face's triangle can meet the ray at the mesh hit's own distance, to float32 rounding: where
     faces join (a reader's mesh with a row of slivers lying in the neighbouring face's plane, faces
@@ -658,7 +709,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     not: pixels there keep their face).
     """
     if not tessellation.has_rim_neighbours:  # no face has a neighbour (a single patch): nothing across any rim
-        return
+        return np.zeros(0, dtype=np.int64)
     patch_of, uv_of, gap_of = tessellation.rim_neighbour
     rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
@@ -693,13 +744,14 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     rays, pn = np.concatenate([rays[close], rays[near[row]]]), np.concatenate([pn[close], cp[row, col]])
     un, vn = np.concatenate([un[close], cuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1]])
     # A planar neighbour is met where the ray crosses its plane: rows whose crossing cannot win below are not refined.
-    may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], band, skip, slack)
+    win_reach = BAND_CHORDS * band * GRAZING_ALLOWANCE + skip  # the reach test below at its largest allowance
+    may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], win_reach, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     # Any neighbour lies in its control net's hull: rows whose ray stays clear of it where a win could lie are not refined.
-    may = _may_win_in_hull(tessellation, surfaces, rays, pn, O, D, tm, tr, band, skip, slack)
+    may = _may_win_in_hull(tessellation, surfaces, rays, pn, O, D, tm, tr, win_reach, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     if len(rays) == 0:
-        return
+        return rays
     u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
     t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
     # Only the hit a triangle at the mesh hit's distance leads to (the one the next query skips): within
@@ -718,19 +770,22 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     pk[won], ur[won], vr[won], tr[won], aside[won] = pn[pick], u3[pick], v3[pick], t3[pick], True
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[pick]
+    return won
 
 
-def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, band, skip, slack) -> np.ndarray:
-    """Which (ray, neighbour) rows of `_rim_neighbours` may win: False only where the neighbour is planar (`_net_planes`)
-    and its crossing cannot pass the winning tests (ahead, within the band's reach of the mesh hit, nearer than the kept
-    hit by float32 rounding), whatever Newton from any start converges to.
+def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, reach, slack) -> np.ndarray:
+    """Which (ray, neighbour) rows of `_rim_neighbours` (or seam restarts, `_may_win_restart`) may win: False only
+    where the neighbour is planar (`_net_planes`) and its crossing cannot pass the winning tests (ahead, within
+    ``reach[k]`` of the mesh hit along the ray, nearer than the kept hit ``tr`` by ``slack``), whatever Newton from
+    any start converges to.
 
     A converged point S lies within |r⊥| ≤ tol of the ray (Newton's test, tol = `NEWTON_TOLERANCE` × max(t_mesh,
     extent, |O + t_mesh D|)) and, in its net's convex hull (weights > 0), within the net's deviation ρ of the plane
     (point c, unit normal n); so its t = (S − O)·D lies within (ρ + tol)/|n·D| of the ray's crossing of that plane,
-    t_p = n·(c − O)/(n·D), plus 1000× tol for the rounding of both. The band's reach is taken at its largest
-    (`GRAZING_ALLOWANCE`). On the plate at 960×540 the faces across the rim of its holes' fillets include the big top
-    plane, whose crossing lies far from the fillet's mesh hit for all but a few of those rays.
+    t_p = n·(c − O)/(n·D), plus 1000× tol for the rounding of both. ``reach`` per face: the caller's reach test at
+    its largest allowance (`GRAZING_ALLOWANCE`). On the plate at 960×540 the faces across the rim of its holes'
+    fillets include the big top plane, whose crossing lies far from the fillet's mesh hit for all but a few of
+    those rays.
     """
     may = np.ones(len(pn), dtype=bool)
     centre, normal, deviation, planar = _net_planes(tessellation, surfaces)
@@ -743,35 +798,36 @@ def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D
     with np.errstate(divide="ignore", invalid="ignore"):
         tp = np.einsum("ij,ij->i", normal[k], centre[k] - O) / nd
         margin = (deviation[k] + tol) / np.abs(nd) + 1000.0 * tol
-    reach = BAND_CHORDS * band[k] * GRAZING_ALLOWANCE + skip
     # Comparisons with NaN or inf (a ray along the plane) are False: such rows are refined.
-    never = (tp + margin <= 0.0) | (tp - margin >= tr - slack) | (np.abs(tp - tm) - margin > reach)
+    never = (tp + margin <= 0.0) | (tp - margin >= tr - slack) | (np.abs(tp - tm) - margin > reach[k])
     may[rows[never]] = False
     return may
 
 
-def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, rays, pn, O, D, tm, tr, band, skip,
+def _may_win_in_hull(tessellation: Tessellation, surfaces: SurfaceSet, rays, pn, O, D, tm, tr, reach,
                      slack) -> np.ndarray:
-    """Which (ray, neighbour) rows of `_rim_neighbours` may win: False only where the ray's stretch on which a winning
-    hit could lie passes clear of the neighbour's control net, whatever Newton from any start converges to. For the
-    curved neighbours (a planar one's crossing is known: `_may_win_on_plane`).
+    """Which (ray, neighbour) rows of `_rim_neighbours` (or seam restarts, `_may_win_restart`) may win: False only
+    where the ray's stretch on which a winning hit could lie passes clear of the neighbour's control net, whatever
+    Newton from any start converges to. For the curved neighbours (a planar one's crossing is known:
+    `_may_win_on_plane`).
 
     A winning point S is converged, so within tol (`NEWTON_TOLERANCE` × max(t_mesh, extent, |O + t_mesh D|)) of the
-    ray, at t = (S − O)·D with t > 0, |t − t_mesh| within the band's reach at its largest (`GRAZING_ALLOWANCE`) and
-    t below the kept hit's by float32 rounding: on the segment t ∈ [max(0, t_mesh − reach), min(t_mesh + reach,
-    t_kept − slack)]. With weights > 0 the surface lies in its net's convex hull (Piegl and Tiller, *The NURBS Book*,
-    property 4.5 of rational surfaces), so in the net's slab along any unit direction m: min m·P ≤ m·S ≤ max m·P, and
-    m·S lies within tol of the segment's range of m·X. A row whose segment range, widened by tol (and 1000× tol for
-    the rounding of both), misses the net's slab along the axes (its bounding box) or its plane's normal (`_net_boxes`)
-    cannot win. Rows (``rays``, ``pn``) of the candidates' arrays O, D, tm, tr; by the compiled kernel
-    `kernels.rims.clear_of_hulls`. On the plate at 960×540: a hole's fillet from the top plane and its wall from the
-    fillet lie below the face the ray meets first (3 of 4 such rows); a wall from its fillet does not separate so.
+    ray, at t = (S − O)·D with t > 0, |t − t_mesh| within ``reach[k]`` (the caller's reach test at its largest
+    allowance, `GRAZING_ALLOWANCE`) and t below the kept hit's by ``slack``: on the segment t ∈ [max(0, t_mesh −
+    reach), min(t_mesh + reach, t_kept − slack)]. With weights > 0 the surface lies in its net's convex hull (Piegl
+    and Tiller, *The NURBS Book*, property 4.5 of rational surfaces), so in the net's slab along any unit direction
+    m: min m·P ≤ m·S ≤ max m·P, and m·S lies within tol of the segment's range of m·X. A row whose segment range,
+    widened by tol (and 1000× tol for the rounding of both), misses the net's slab along the axes (its bounding box)
+    or its plane's normal (`_net_boxes`) cannot win. Rows (``rays``, ``pn``) of the candidates' arrays O, D, tm,
+    tr; by the compiled kernel `kernels.rims.clear_of_hulls`. On the plate at 960×540: a hole's fillet from the top
+    plane and its wall from the fillet lie below the face the ray meets first (3 of 4 such rows); a wall from its
+    fillet does not separate so.
     """
     lo, hi, normal, low, high, hull = _net_boxes(tessellation, surfaces)
     clear = np.empty(len(pn), dtype=bool)
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
     rims_kernel.clear_of_hulls(np.ascontiguousarray(rays, dtype=np.int64), np.ascontiguousarray(pn, dtype=np.int64),
-                               f64(O), f64(D), f64(tm), f64(tr), BAND_CHORDS * band * GRAZING_ALLOWANCE + skip, lo, hi,
+                               f64(O), f64(D), f64(tm), f64(tr), f64(reach), lo, hi,
                                normal, low, high, hull, NEWTON_TOLERANCE, float(tessellation.extent), float(slack), clear)
     return ~clear
 
