@@ -67,3 +67,41 @@ def test_chord_error_is_the_mesh_to_surface_distance_on_a_non_uniform_face(tmp_p
     chord = float(tessellation.chord_error[0])
     assert chord >= truth, (chord, truth)
     assert chord <= 4.0 * truth, (chord, truth)
+
+
+def test_trims_of_a_remeshed_face_are_sampled_to_the_faces_own_extent(tmp_path_factory):
+    """union.step (a cylinder fused with a sphere and a crossing cylinder: trims are intersection curves): the converted
+    faces' control points span 2.06× the faces' own box, so the reader meshes them again (`occt.REMESH_RATIO`), but it
+    sampled their trims to `TRIM_TOLERANCE` × the loose box's diagonal. Every trim polyline's segment midpoint, mapped
+    by OCCT's face surface, now lies within that tolerance of the true diagonal from the face's edges (OCCT's 3D edge
+    curves, `GeomAPI_ProjectPointOnCurve`)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Surface
+    from OCP.GeomAPI import GeomAPI_ProjectPointOnCurve
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+    from OCP.gp import gp_Pnt
+
+    path, model = _part(tmp_path_factory, "union.step")
+    tolerance = TRIM_TOLERANCE * model.diagonal
+    worst = 0.0
+    for surface, face in zip(model.surfaces, occt_faces(path)[3]):
+        curves, explorer = [], TopExp_Explorer(face, TopAbs_EDGE)
+        while explorer.More():
+            edge = TopoDS.Edge(explorer.Current())
+            explorer.Next()
+            if not BRep_Tool.Degenerated_s(edge):
+                curves.append(BRep_Tool.Curve_s(edge, 0.0, 1.0))
+        adaptor = BRepAdaptor_Surface(face)
+        for loop in (surface.trim.outer, *surface.trim.holes):
+            closed = np.concatenate([loop, loop[:1]])
+            for u, v in 0.5 * (closed[:-1] + closed[1:]):
+                point = adaptor.Value(float(u), float(v))
+                distance = np.inf
+                for curve in curves:
+                    projection = GeomAPI_ProjectPointOnCurve(point, curve)
+                    if projection.NbPoints():
+                        distance = min(distance, projection.LowerDistance())
+                worst = max(worst, distance)
+    assert worst <= tolerance, (worst, tolerance)
