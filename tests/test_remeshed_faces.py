@@ -105,3 +105,25 @@ def test_trims_of_a_remeshed_face_are_sampled_to_the_faces_own_extent(tmp_path_f
                         distance = min(distance, projection.LowerDistance())
                 worst = max(worst, distance)
     assert worst <= tolerance, (worst, tolerance)
+
+
+def test_grazing_ray_on_a_non_uniform_face_is_decided(tmp_path_factory):
+    """revolved_seam.step at 480×270 in its automatic scene: the one Newton fallback. A ray grazing the surface (from the
+    camera's eye) met its mesh 12 times within the error band (`tracing.BAND_CHORDS` chord errors, ×10 at grazing
+    incidence: 127 mm with the overstated 6.3 mm chord error) behind its exact hit, and was still open after
+    `tracing.MAX_CANDIDATES`. With the chord error measured (0.78) the band is 8× narrower: decided, at OCCT's nearest hit."""
+    from test_cad_hits import POINT_TOLERANCE, occt_nearest
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+
+    path, _ = _part(tmp_path_factory, "revolved_seam.step")
+    renderer = Renderer(resolve(load_scene(path).with_image(480, 270, 1)))
+    origins = np.array([[51.440762806239746, -93.66753671489523, 74.80966466572133]])
+    directions = np.array([[-0.4382165110093459, 0.7212903264030993, -0.5363828432342951]])
+    hits = renderer.trace(origins, directions)
+    shape, _, _, _ = occt_faces(path)
+    expected = np.einsum("ij,ij->i", occt_nearest(shape, origins, directions) - origins, directions)
+    assert np.isfinite(expected).all() and hits.hit.all() and not hits.fallback.any()
+    np.testing.assert_allclose(hits.t, expected, rtol=0, atol=POINT_TOLERANCE * renderer.tessellation.extent)
