@@ -60,3 +60,54 @@ def test_shell_restart_that_stops_on_a_pole_is_searched(tmp_path):
     expected = np.einsum("ij,ij->i", occt_nearest(shape, origins, directions) - origins, directions)
     assert hits.hit.all() and np.isfinite(expected).all()
     np.testing.assert_allclose(hits.t, expected, rtol=0, atol=POINT_TOLERANCE * renderer.tessellation.extent)
+
+
+def test_pole_stop_left_undecided_goes_on_to_the_face_sharing_the_pole(tmp_path, monkeypatch):
+    """A sphere cut in two along meridians (`ShapeUpgrade_ShapeDivideClosed`), its poles facing the default camera: the
+    two faces share each pole and no edge there. A mesh hit on the first face beside the pole whose ray meets the
+    second face: Newton stops on the pole; with the search switched off (`RESCUE_STEPS` = 0, so it leaves the stop
+    undecided, as it does where it runs out of steps) and `_passes_by` finding no positive minimum, the candidate
+    stayed unresolved (a fallback) though the neighbour across the pole holds the hit. Now it is tried there
+    (`tracing._across_pole`) and found: OCCT's nearest hit, on the second face."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeSphere
+    from OCP.ShapeUpgrade import ShapeUpgrade_ShapeDivideClosed
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    from rtreflect.trace import tracing
+
+    sphere = BRepPrimAPI_MakeSphere(gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(*sweep.ISO_FROM)), 20.0).Shape()
+    divide = ShapeUpgrade_ShapeDivideClosed(sphere)
+    divide.SetNbSplitPoints(1)
+    divide.Perform()
+    path = tmp_path / "sphere_halves.step"
+    sweep.write_step_in(divide.Result(), path, "MM")
+    renderer = Renderer(resolve(load_scene(path).with_image(160, 90, 1)))
+    surfaces, tessellation = renderer.surfaces, renderer.tessellation
+    assert len(surfaces) == 2
+    rows, cols = np.meshgrid(np.arange(90), np.arange(160), indexing="ij")
+    origins, directions = renderer.camera.rays(rows.ravel(), cols.ravel())
+    hits = tracing.trace(renderer.accelerator, tessellation, surfaces, origins, directions)
+    (u0,), (u1,), (v0,), (v1,) = surfaces.domains(np.array([1]))
+    beside = np.flatnonzero(hits.hit & (hits.patch == 1) & (np.minimum(np.abs(hits.v - v0), np.abs(hits.v - v1)) < 0.1))
+    corners = tessellation.vertex_uv[tessellation.faces]
+    monkeypatch.setattr(tracing, "RESCUE_STEPS", 0)
+    tried = 0
+    shape, _, _, _ = occt_faces(path)
+    for ray in beside:
+        side = v0 if abs(hits.v[ray] - v0) < abs(hits.v[ray] - v1) else v1
+        at_pole = np.flatnonzero((corners[:, :, 1] == side).any(axis=1) & (tessellation.face_patch == 0))
+        O, D, t = origins[ray:ray + 1], directions[ray:ray + 1], hits.t[ray:ray + 1]
+        for prim in at_pole:
+            b = np.array([0.2])
+            patch, u, v = tessellation.start_parameters(np.array([prim]), b, b)
+            u, v, _, converged, edge = tracing.refine_all(surfaces, patch, u, v, O, D, t, tessellation.extent)[:5]
+            if converged[0] or not edge[0] or not tracing._on_collapsed_side(surfaces, patch, u, v)[0]:
+                continue  # Newton does not stop on the pole from there
+            c = tracing._candidates(tessellation, surfaces, O, D, np.array([prim]), b, b, t)
+            expected = np.einsum("ij,ij->i", occt_nearest(shape, O, D) - O, D)
+            assert c.status[0] == tracing.VALID and c.patch[0] == 1, (ray, prim, c.status, c.patch)
+            np.testing.assert_allclose(c.t, expected, rtol=0, atol=POINT_TOLERANCE * tessellation.extent)
+            tried += 1
+            if tried == 5:
+                return
+    assert tried, "no mesh hit beside the pole whose Newton stops on it"
