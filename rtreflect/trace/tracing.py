@@ -453,7 +453,8 @@ def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points,
                  tr, derivs) -> np.ndarray:
     """Candidates ``rows`` whose Newton stopped on a pole (at ``points``) that neither the search nor `_passes_by`
     decides (UNRESOLVED), tried on the face sharing the pole: its boundary vertex nearest the pole
-    (`Tessellation.across_seam`, within two of the face's mesh edges), from which the search (`_rescue`, not Newton:
+    (`Tessellation.across_seam`, within two of the face's mesh edges), moved onto the meridian towards the mesh hit and
+    off the pole (`_meridian_towards`), from which the search (`_rescue`, not Newton:
     at a pole |S_u| = 0 and Newton's step along u is wild there too) looks for the ray on that face. In place where it
     converges near the mesh hit, on that face (VALID); the others stay unresolved. Returns the rows replaced.
 
@@ -488,7 +489,8 @@ POLE_SNAP = 1e-9
 
 
 def _meridian_towards(surfaces: SurfaceSet, patch, u, v, X) -> tuple[np.ndarray, np.ndarray]:
-    """(u, v) on a collapsed side (a pole) moved along it to the meridian that leaves the pole towards the points X.
+    """(u, v) on a collapsed side (a pole) moved along it to the meridian that leaves the pole towards the points X, and
+    down that meridian by h = |X − S| / |S_v| (where X lies, to first order).
 
     At a pole on v = v_p, S(u, v_p + h) ≈ S(u, v_p) + h S_v(u, v_p) (S_u = 0 there): every u is the same point, and the
     meridian heading to X is the u whose S_v, turned into the domain, points most nearly at X − S; from there the search
