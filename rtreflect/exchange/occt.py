@@ -12,7 +12,8 @@ Steps (DESIGN.md, "CAD input"; measured facts in the project's OCP notes):
    (`clean_knots`). Weights are read with ``WeightsArray()`` whenever either rational flag is set.
 3. Trims: the outer wire (``BRepTools.OuterWire_s``) and the holes, each edge's pcurve
    (``BRepAdaptor_Curve2d``, seam edges once per orientation, pole edges included) sampled by
-   bisection until the polyline's midpoints lie within `TRIM_TOLERANCE` × the part's diagonal
+   bisection until the polyline's midpoints lie within `TRIM_TOLERANCE` × the part's diagonal (the faces' own
+   box's where the control points' box overstates it, `REMESH_RATIO`)
    of the pcurve's **in model space** (measured on the surface with rtreflect's evaluator).
 4. ``mesh_uv``: ``BRepMesh_IncrementalMesh`` on each converted face, the nodes' (u, v) and the
    triangles (flipped on reversed faces so they wind like the face's normal).
@@ -49,7 +50,8 @@ MESH_DEFLECTION = 2e-3
 #: faces' own (`faces_bounds`, from the mesh nodes and trims on the surfaces) more than this many times, the faces are
 #: meshed again at the deflection the true diagonal asks for: the sweep's revolved_seam.step (2,653 against 138.5) was
 #: meshed to 4.8 from its surface, asked for 0.28, and its chord error widened every ray's error band across the part.
-#: The shipped parts' boxes are within 1.5× of their faces' (the vase's), so their meshes are unchanged.
+#: The trims are sampled again then too, to `TRIM_TOLERANCE` × the true diagonal.
+#: The shipped parts' boxes are within 1.5× of their faces' (the vase's), so their meshes and trims are unchanged.
 REMESH_RATIO = 2.0
 #: Mesh angular deflection (radians): bounds the normal turn across a triangle on small, curved features
 #: (OCCT's default; finer multiplies the nodes on small fillets without helping Newton).
@@ -715,6 +717,13 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
             BRepTools.Clean_s(face)
             if finer is not None:  # an empty finer mesh keeps the first one too
                 object.__setattr__(surface, "mesh_uv", finer)
+            # The trims too were sampled to the loose box's tolerance (19× the true one on revolved_seam.step).
+            try:
+                trim = trim_of_face(face, surface, TRIM_TOLERANCE * tight, trims_onto_edges, surface.trim.edges)
+            except Exception:  # the face read at the loose tolerance: its first trim stands
+                trim = None
+            if trim is not None:
+                object.__setattr__(surface, "trim", trim)
         bounds = faces_bounds(surfaces)
     return CadModel(surfaces, unit, unit_note, bounds, len(faces), skipped, reversed_flags)
 

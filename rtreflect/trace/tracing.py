@@ -25,6 +25,8 @@ Embree from just beyond the previous one (vectorised over the rays still open, a
   silhouette; Newton on the distance decides where the search runs out of steps, `_passes_by`);
 - *unresolved*: neither could be shown (Newton and the search failed in the face's interior, or
   the search, run too where Newton converged on another sheet, converged on it far from its mesh hit).
+  A Newton stop on a pole left so is tried on a face sharing the pole first (`_across_pole`: a sphere
+  cut in two along meridians has its halves meet there, at one point, not along an edge).
 
 Two places beside a valid candidate's mesh hit are refined too (`_rim_neighbours`: the faces across
 its triangle's rim, whose coincident triangle the next query skips; `_other_root`: the nearer of two
@@ -369,6 +371,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     left = off | (conv & near & ~inside)  # ran off the face: the ray may go on on a neighbour, else it misses
     # Newton failed inside the face, or went to another sheet: search for the ray's distance to the surface instead.
     stuck = np.flatnonzero(~(conv & near) & ~off)
+    pole_point = derivs.S[pole].copy()  # where Newton stopped on a pole (`_across_pole` starts there)
+    restarted = [stuck]
     if len(stuck):
         tol = NEWTON_TOLERANCE * np.maximum(tm[stuck], tessellation.extent)
         u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
@@ -384,7 +388,11 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         undecided = np.flatnonzero(~ok2 & ~flat2 & ~edge2)
         if len(undecided):
             rows = stuck[undecided]
-            status[rows[_passes_by(surfaces, pk[rows], u2[undecided], v2[undecided], O[rows], D[rows], tol[undecided])]] = MISS
+            passes = _passes_by(surfaces, pk[rows], u2[undecided], v2[undecided], O[rows], D[rows], tol[undecided])
+            status[rows[passes]] = MISS
+            at_pole = np.isin(pole, rows[~passes])
+            restarted.append(_across_pole(tessellation, surfaces, pole[at_pole], pole_point[at_pole], O, D, tm, band,
+                                          status, pk, ur, vr, tr, derivs))
     seam = np.flatnonzero(left)
     status[seam] = MISS
     # From the edge point Newton stopped at (a domain edge), or the mesh hit (a trim edge, where the
@@ -393,7 +401,6 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     tried = np.zeros((len(seam), 0), dtype=int)  # neighbours tried so far (the patch itself: by `across_seam`)
     # A neighbour shares the edge: its boundary vertex lies within a mesh edge of the point.
     reach = 2.0 * tessellation.edge_length[pk[seam]]
-    restarted = [stuck]
     # Every row that left its face, and that face: its sheet's other crossing may lie on it (`_crossing_on_face`).
     gone, gone_patch = seam, pk[seam]
     for attempt in range(SEAM_TRIES):
@@ -461,6 +468,92 @@ def _may_win_restart(tessellation: Tessellation, surfaces: SurfaceSet, rows, pn,
     kept = np.full(len(tm), np.inf)  # a restart replaces a miss: no nearer hit bounds it
     may = _may_win_on_plane(tessellation, surfaces, pn, O[rows], D[rows], tm[rows], kept[rows], reach, 0.0)
     return may & _may_win_in_hull(tessellation, surfaces, rows, pn, O, D, tm, kept, reach, 0.0)
+
+
+#: Levenberg–Marquardt steps of `_across_pole`'s search on the face sharing the pole: from the pole, one point in 3D
+#: with the hit beside it, it converges in a few (a sphere cut in two: 20 reach the hit), as the second look's
+#: `secondlook.SHELL_RESCUE_STEPS` from its shell starts.
+POLE_RESCUE_STEPS = 60
+
+
+def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points, O, D, tm, band, status, pk, ur, vr,
+                 tr, derivs) -> np.ndarray:
+    """Candidates ``rows`` whose Newton stopped on a pole (at ``points``) that neither the search nor `_passes_by`
+    decides (UNRESOLVED), tried on the face sharing the pole: its boundary vertex nearest the pole
+    (`Tessellation.across_seam`, within two of the face's mesh edges), moved onto the meridian towards the mesh hit and
+    off the pole (`_meridian_towards`), from which the search (`_rescue`, not Newton:
+    at a pole |S_u| = 0 and Newton's step along u is wild there too) looks for the ray on that face. In place where it
+    converges near the mesh hit, on that face (VALID); the others stay unresolved. Returns the rows replaced.
+
+    Faces sharing one pole (a sphere cut in two along meridians) meet at that point only, not along an edge: the
+    tracer's seam restart, which follows Newton off a domain edge, never led there.
+    """
+    if len(rows) == 0:
+        return rows
+    pn, un, vn, _ = tessellation.across_seam(points, pk[rows], None, np.column_stack([ur[rows], vr[rows]]),
+                                             2.0 * tessellation.edge_length[pk[rows]])
+    close = pn >= 0
+    rows, pn, un, vn = rows[close], pn[close], un[close], vn[close]
+    if len(rows) == 0:
+        return rows
+    un, vn = _meridian_towards(surfaces, pn, un, vn, O[rows] + tm[rows, None] * D[rows])
+    tol = NEWTON_TOLERANCE * np.maximum(tm[rows], tessellation.extent)
+    u2, v2, d2, ok2 = _rescue(surfaces, pn, un, vn, O[rows], D[rows], tol, POLE_RESCUE_STEPS)[:4]
+    near2, t2 = _near_mesh_hit(d2, pn, O[rows], D[rows], tm[rows], band)
+    ok2 &= near2 & surfaces.on_face(pn, u2, v2)
+    won = rows[ok2]
+    pk[won], ur[won], vr[won], tr[won], status[won] = pn[ok2], u2[ok2], v2[ok2], t2[ok2], VALID
+    for have, new in zip(derivs[:3], d2[:3]):
+        have[won] = new[ok2]
+    return won
+
+
+#: Parameters along a pole's collapsed side that `_meridian_towards` compares (a meridian every 1/64 of the range).
+POLE_MERIDIANS = 64
+#: A reader's mesh node within this fraction of the domain of a collapsed side lies on the pole: the nodes meet the
+#: domain's sides only to OCCT's tolerances (`exchange.occt.SIDE_SNAP`, the same figure).
+POLE_SNAP = 1e-9
+
+
+def _meridian_towards(surfaces: SurfaceSet, patch, u, v, X) -> tuple[np.ndarray, np.ndarray]:
+    """(u, v) on a collapsed side (a pole) moved along it to the meridian that leaves the pole towards the points X, and
+    down that meridian by h = |X − S| / |S_v| (where X lies, to first order).
+
+    At a pole on v = v_p, S(u, v_p + h) ≈ S(u, v_p) + h S_v(u, v_p) (S_u = 0 there): every u is the same point, and the
+    meridian heading to X is the u whose S_v, turned into the domain, points most nearly at X − S; from there the search
+    does not have to turn u at the pole, where its steps in u are wild (u ↔ v for a pole on a side u = u_p). Of
+    `POLE_MERIDIANS` + 1 parameters spread along the side; points not on a collapsed side are returned as given.
+    """
+    u, v = np.array(u, dtype=np.float64), np.array(v, dtype=np.float64)
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    side = surfaces.collapsed[np.asarray(patch, dtype=np.int64)]
+    eu, ev = POLE_SNAP * (u1 - u0), POLE_SNAP * (v1 - v0)
+    on_v = (side[:, 2] & (np.abs(v - v0) <= ev)) | (side[:, 3] & (np.abs(v - v1) <= ev))
+    on_u = ~on_v & ((side[:, 0] & (np.abs(u - u0) <= eu)) | (side[:, 1] & (np.abs(u - u1) <= eu)))
+    v = np.where(on_v, np.where(np.abs(v - v0) <= ev, v0, v1), v)  # onto the side itself
+    u = np.where(on_u, np.where(np.abs(u - u0) <= eu, u0, u1), u)
+    s = np.linspace(0.0, 1.0, POLE_MERIDIANS + 1)
+    for rows, along, fixed, lo, hi, lo_fixed, hi_fixed, inward, order in (
+            (np.flatnonzero(on_v), u, v, u0, u1, v0, v1, np.where(v == v0, 1.0, -1.0), "v"),
+            (np.flatnonzero(on_u), v, u, v0, v1, u0, u1, np.where(u == u0, 1.0, -1.0), "u")):
+        if len(rows) == 0:
+            continue
+        tries = (lo[rows, None] + s[None] * (hi - lo)[rows, None]).ravel()
+        at = np.repeat(fixed[rows].copy(), len(s))
+        k = np.repeat(np.asarray(patch)[rows], len(s))
+        d = surfaces.evaluate(k, *((tries, at) if order == "v" else (at, tries)))
+        leave = (d.Sv if order == "v" else d.Su) * np.repeat(inward[rows], len(s))[:, None]
+        towards = np.repeat(X[rows], len(s), axis=0) - d.S
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cosine = np.einsum("ij,ij->i", leave, towards) / (np.linalg.norm(leave, axis=1) * np.linalg.norm(towards, axis=1))
+        pick = np.arange(len(rows)) * len(s) + np.argmax(np.nan_to_num(cosine, nan=-2.0).reshape(len(rows), len(s)), axis=1)
+        along[rows] = tries[pick]
+        # And off the pole along that meridian by h = |X − S| / |S_v|, to first order where X lies: the search's steps
+        # from the pole itself ran into the domain's edge (a sphere cut in two).
+        with np.errstate(invalid="ignore", divide="ignore"):
+            h = np.nan_to_num(np.linalg.norm(towards[pick], axis=1) / np.linalg.norm(leave[pick], axis=1))
+        fixed[rows] = np.clip(fixed[rows] + inward[rows] * h, lo_fixed[rows], hi_fixed[rows])
+    return u, v
 
 
 def _on_collapsed_side(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
