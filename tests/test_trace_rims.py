@@ -95,9 +95,10 @@ def test_shipped_renders_decide_every_sample(name):
     assert stats.fallbacks == 0, f"{stats.fallbacks} fallbacks in {stats.fallback_pixels} pixels"
 
 
-def _plate_trace_counting_refinements(monkeypatch, caller=None):
+def _plate_trace_counting_refinements(monkeypatch, caller=None, spied="refine"):
     """A function tracing the plate (960×540 of the default view, every 4th row) that returns its hits and the faces
-    `tracing.refine` was called on (only the calls from the function named ``caller``, where given)."""
+    `tracing.<spied>` (`refine`, or `refine_all`) was called on (only the calls from the function named ``caller``,
+    where given)."""
     from rtreflect.trace import tracing
 
     renderer = Renderer(resolve(load_scene(PARTS / "plate.step").with_image(960, 540, 1)))
@@ -105,7 +106,7 @@ def _plate_trace_counting_refinements(monkeypatch, caller=None):
     pick = rows % 4 == 0
     origins, directions = renderer.camera.rays(rows[pick], cols[pick])
     refined = []
-    refine = tracing.refine
+    refine = getattr(tracing, spied)
 
     def spy(surfaces, patch, *args):
         if caller is None or sys._getframe(1).f_code.co_name == caller:
@@ -115,9 +116,9 @@ def _plate_trace_counting_refinements(monkeypatch, caller=None):
     def run():
         refined.clear()
         hits = trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
-        return hits, np.concatenate(refined)
+        return hits, np.concatenate(refined) if refined else np.zeros(0, dtype=int)
 
-    monkeypatch.setattr(tracing, "refine", spy)
+    monkeypatch.setattr(tracing, spied, spy)
     return run
 
 
@@ -164,28 +165,13 @@ def test_seam_restarts_dropped_clear_of_the_neighbour_could_not_win(monkeypatch)
     no longer run."""
     from rtreflect.trace import tracing
 
-    renderer = Renderer(resolve(load_scene(PARTS / "plate.step").with_image(960, 540, 1)))
-    rows, cols = np.divmod(np.arange(960 * 540), 960)
-    pick = rows % 4 == 0
-    origins, directions = renderer.camera.rays(rows[pick], cols[pick])
-    tries = []
-    refine_all = tracing.refine_all
-
-    def spy(surfaces, patch, *args):
-        if sys._getframe(1).f_code.co_name == "_candidates":  # the seam restarts' Newton
-            tries.append(len(patch))
-        return refine_all(surfaces, patch, *args)
-
-    def run():
-        tries.clear()
-        hits = trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
-        return hits, sum(tries)
-
-    monkeypatch.setattr(tracing, "refine_all", spy)
-    hits, restarts = run()
+    # The seam restarts' Newton is the `refine_all` called from `_candidates` itself.
+    run = _plate_trace_counting_refinements(monkeypatch, caller="_candidates", spied="refine_all")
+    hits, restarted = run()
     monkeypatch.setattr(tracing, "_may_win_restart",
                         lambda tessellation, surfaces, rows, pn, *a: np.ones(len(pn), dtype=bool))
-    every, every_restarts = run()
+    every, every_restarted = run()
+    restarts, every_restarts = len(restarted), len(every_restarted)
     for name in ("hit", "patch", "u", "v", "t", "P", "N", "fallback", "aside", "Su", "Sv"):
         np.testing.assert_array_equal(getattr(hits, name), getattr(every, name), err_msg=name)
     assert every_restarts > 10000 and restarts < every_restarts - 300

@@ -54,9 +54,8 @@ from dataclasses import replace
 import numpy as np
 
 from .accelerator import Accelerator, MeshHits
-from .tracing import (FLOAT32_SLACK, NEWTON_TOLERANCE, VALID, Hits, _normals, _on_collapsed_side, _other_root,
-                      _over_closed_seam, _rescue,
-                      facing, float32_rounding, refine_all, trace)
+from .tracing import (FLOAT32_SLACK, VALID, Hits, _normals, _other_root, _over_closed_seam, _rescue, _search_tolerance,
+                      _stopped_at_pole, facing, float32_rounding, refine_all, trace)
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
 from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
@@ -382,10 +381,10 @@ class SecondLook:
         # Newton from a start far along a grazing ray can fail where the ray does meet the sheet: search there.
         # (Not where Newton ran off the face's domain: the ray leaves the face there, as `tracing._candidates` decides;
         # but a stop on a collapsed side, a pole, which is one point in 3D, has not left it: the search decides there.)
-        off = edge & ~_on_collapsed_side(self.surfaces, patch, u, v)
+        off = edge & ~_stopped_at_pole(self.surfaces, patch, u, v, edge)
         stuck = np.flatnonzero(~converged & ~off)
         if len(stuck):
-            tol = NEWTON_TOLERANCE * np.maximum(entry.t[rays][stuck], self.tessellation.extent)
+            tol = _search_tolerance(entry.t[rays][stuck], self.tessellation.extent)
             u2, v2, d2, ok2, _, _ = _rescue(self.surfaces, patch[stuck], u0[stuck], v0[stuck], O[stuck], D[stuck], tol,
                                             SHELL_RESCUE_STEPS)
             u[stuck], v[stuck], converged[stuck] = u2, v2, ok2

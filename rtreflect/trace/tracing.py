@@ -364,17 +364,16 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     status[conv & near & inside] = VALID
     # Newton stopped on a collapsed side (a pole) has not left the face: the side is one point in 3D, and near it
     # Newton's steps in the parameter along it are wild (|S_u| → 0). The search decides there, as inside the face.
-    pole = np.flatnonzero(edge)
-    pole = pole[_on_collapsed_side(surfaces, pk[pole], ur[pole], vr[pole])]
-    off = edge.copy()
-    off[pole] = False
+    at_pole = _stopped_at_pole(surfaces, pk, ur, vr, edge)
+    pole = np.flatnonzero(at_pole)
+    off = edge & ~at_pole
     left = off | (conv & near & ~inside)  # ran off the face: the ray may go on on a neighbour, else it misses
     # Newton failed inside the face, or went to another sheet: search for the ray's distance to the surface instead.
     stuck = np.flatnonzero(~(conv & near) & ~off)
     pole_point = derivs.S[pole].copy()  # where Newton stopped on a pole (`_across_pole` starts there)
     restarted = [stuck]
     if len(stuck):
-        tol = NEWTON_TOLERANCE * np.maximum(tm[stuck], tessellation.extent)
+        tol = _search_tolerance(tm[stuck], tessellation.extent)
         u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
         near2, t2 = _near_mesh_hit(d2, pk[stuck], O[stuck], D[stuck], tm[stuck], band)
         in2 = surfaces.on_face(pk[stuck], u2, v2)
@@ -497,7 +496,7 @@ def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points,
     if len(rows) == 0:
         return rows
     un, vn = _meridian_towards(surfaces, pn, un, vn, O[rows] + tm[rows, None] * D[rows])
-    tol = NEWTON_TOLERANCE * np.maximum(tm[rows], tessellation.extent)
+    tol = _search_tolerance(tm[rows], tessellation.extent)
     u2, v2, d2, ok2 = _rescue(surfaces, pn, un, vn, O[rows], D[rows], tol, POLE_RESCUE_STEPS)[:4]
     near2, t2 = _near_mesh_hit(d2, pn, O[rows], D[rows], tm[rows], band)
     ok2 &= near2 & surfaces.on_face(pn, u2, v2)
@@ -563,6 +562,21 @@ def _on_collapsed_side(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
     return (side[:, 0] & (u == u0)) | (side[:, 1] & (u == u1)) | (side[:, 2] & (v == v0)) | (side[:, 3] & (v == v1))
 
 
+def _stopped_at_pole(surfaces: SurfaceSet, patch, u, v, edge) -> np.ndarray:
+    """Which Newton stops on a domain edge (``edge``) lie on a collapsed side (`_on_collapsed_side`: a pole). Such a
+    stop has not left the face, whose side there is one point in 3D: the search decides it, as inside the face."""
+    at_pole = np.zeros(len(edge), dtype=bool)
+    rows = np.flatnonzero(edge)
+    at_pole[rows] = _on_collapsed_side(surfaces, np.asarray(patch)[rows], np.asarray(u)[rows], np.asarray(v)[rows])
+    return at_pole
+
+
+def _search_tolerance(t, extent) -> np.ndarray:
+    """The distance |r| at which the search (`_rescue`) from a start at ray distance ``t`` counts as on the ray: Newton's
+    tolerance at that distance, `NEWTON_TOLERANCE` × max(t, the scene's extent)."""
+    return NEWTON_TOLERANCE * np.maximum(t, extent)
+
+
 def _over_closed_seam(surfaces: SurfaceSet, patch, u, v, derivs: SurfaceDerivatives, converged, edge, O, D, t_mesh,
                       extent) -> np.ndarray:
     """Newton that stopped unconverged on a closed face's seam, restarted from the same point's parameters on the
@@ -602,11 +616,10 @@ def _search_at_pole(surfaces: SurfaceSet, patch, us, vs, u, v, derivs: SurfaceDe
     stopping there has not left the face, and near it Newton's steps in the parameter along the side are wild
     (|S_u| → 0). A seam restart onto a face with a pole (a sphere's cap, a cone's apex) stopped there missed.
     """
-    rows = np.flatnonzero(~converged & edge)
-    rows = rows[_on_collapsed_side(surfaces, patch[rows], u[rows], v[rows])]
+    rows = np.flatnonzero(~converged & _stopped_at_pole(surfaces, patch, u, v, edge))
     if len(rows) == 0:
         return rows
-    tol = NEWTON_TOLERANCE * np.maximum(t_mesh[rows], extent)  # as `_candidates`' search
+    tol = _search_tolerance(t_mesh[rows], extent)
     u2, v2, d2, ok2 = _rescue(surfaces, patch[rows], us[rows], vs[rows], O[rows], D[rows], tol)[:4]
     won = rows[ok2]
     u[won], v[won], converged[won], edge[won] = u2[ok2], v2[ok2], True, False
