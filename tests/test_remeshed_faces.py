@@ -67,6 +67,22 @@ def test_chord_error_is_the_mesh_to_surface_distance_on_a_non_uniform_face(tmp_p
     chord = float(tessellation.chord_error[0])
     assert chord >= truth, (chord, truth)
     assert chord <= 4.0 * truth, (chord, truth)
+    # The direction the shell needs: the surface lies within the chord error of its mesh between the samples too.
+    # Surface points over a dense barycentric grid of every triangle's (u, v); their distance to the mesh bounded from
+    # above by the nearest of the triangles under their 8 nearest mesh samples (trimesh's exact closest point on each).
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    n = 8
+    bary = np.array([(i / n, j / n, 1 - (i + j) / n) for i in range(n + 1) for j in range(n + 1 - i)])
+    uv = np.einsum("bk,fkd->fbd", bary, mesh.uv[mesh.faces]).reshape(-1, 2)
+    on_surface = model.surfaces[0].evaluate(uv[:, 0], uv[:, 1]).S
+    on_mesh = np.einsum("bk,fkd->fbd", bary, mesh.vertices[mesh.faces]).reshape(-1, 3)
+    _, nearest = cKDTree(on_mesh).query(on_surface, k=8)
+    triangles = mesh.vertices[mesh.faces][nearest // len(bary)].reshape(-1, 3, 3)
+    points = np.repeat(on_surface, 8, axis=0)
+    distance = np.linalg.norm(trimesh.triangles.closest_point(triangles, points) - points, axis=1).reshape(-1, 8).min(axis=1)
+    assert distance.max() <= chord, (distance.max(), chord)
 
 
 def test_trims_of_a_remeshed_face_are_sampled_to_the_faces_own_extent(tmp_path_factory):
