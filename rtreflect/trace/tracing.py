@@ -425,9 +425,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         ok3 = np.zeros(len(seam), dtype=bool)
         ok3[go] = ok
         won = ray[ok]
-        pk[won], ur[won], vr[won], tr[won], status[won] = pn[go[ok]], u3[ok], v3[ok], t3[ok], VALID
-        for have, new in zip(derivs[:3], d3[:3]):
-            have[won] = new[ok]
+        _store(won, ok, pn[go], u3, v3, t3, d3, pk, ur, vr, tr, derivs)
+        status[won] = VALID
         restarted.append(won)
         seam, at, reach, tried = seam[~ok3], at[~ok3], reach[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
     crossed = _crossing_on_face(tessellation, surfaces, gone, gone_patch, O, D, tm, us, vs, band, status, pk, ur, vr, tr,
@@ -449,6 +448,21 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     crossed_rows[beside] = False  # another face's hit now: `trace` weighs it as any mesh-led one
     return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside, curvature,
                        crossed_rows)
+
+
+def _store(won, pick, patch, u, v, t, derivatives: SurfaceDerivatives, pk, ur, vr, tr, derivs: SurfaceDerivatives):
+    """A refinement's points ``pick`` (indices or a mask of its rows: face ``patch``, (u, v), ray distance t, S and its
+    first derivatives) stored as the candidates of rays ``won``, in place; the caller flags them (VALID, ``aside``)."""
+    pk[won], ur[won], vr[won], tr[won] = patch[pick], u[pick], v[pick], t[pick]
+    for have, new in zip(derivs[:3], derivatives[:3]):
+        have[won] = new[pick]
+
+
+def _rim_reach(band, allowance, skip):
+    """How far from its mesh hit (in t) a rim neighbour's hit may win (`_rim_neighbours`): `BAND_CHORDS` of the
+    neighbour's chord errors, grown as 1/cos θ there (``allowance``, at most `GRAZING_ALLOWANCE`: the filters
+    `_may_win_on_plane` and `_may_win_in_hull` take that largest), plus the step the next mesh query skips."""
+    return BAND_CHORDS * band * allowance + skip
 
 
 def _may_win_restart(tessellation: Tessellation, surfaces: SurfaceSet, rows, pn, O, D, tm, band) -> np.ndarray:
@@ -501,9 +515,8 @@ def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points,
     near2, t2 = _near_mesh_hit(d2, pn, O[rows], D[rows], tm[rows], band)
     ok2 &= near2 & surfaces.on_face(pn, u2, v2)
     won = rows[ok2]
-    pk[won], ur[won], vr[won], tr[won], status[won] = pn[ok2], u2[ok2], v2[ok2], t2[ok2], VALID
-    for have, new in zip(derivs[:3], d2[:3]):
-        have[won] = new[ok2]
+    _store(won, ok2, pn, u2, v2, t2, d2, pk, ur, vr, tr, derivs)
+    status[won] = VALID
     return won
 
 
@@ -765,9 +778,8 @@ def _crossing_on_face(tessellation: Tessellation, surfaces: SurfaceSet, rows, pa
     # A neighbour's hit across the edge (the ray's next face there) stays unless this one is nearer beyond rounding.
     win = np.isfinite(best) & ((status[rows] != VALID) | (best < tr[rows] - FLOAT32_SLACK * tessellation.extent))
     won, pick = rows[win], pick[win]
-    pk[won], ur[won], vr[won], tr[won], status[won] = k2[pick], u3[pick], v3[pick], t3[pick], VALID
-    for have, new in zip(derivs[:3], d3[:3]):
-        have[won] = new[pick]
+    _store(won, pick, k2, u3, v3, t3, d3, pk, ur, vr, tr, derivs)
+    status[won] = VALID
     return won
 
 
@@ -850,7 +862,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     rays, pn = np.concatenate([rays[close], rays[near[row]]]), np.concatenate([pn[close], cp[row, col]])
     un, vn = np.concatenate([un[close], cuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1]])
     # A planar neighbour is met where the ray crosses its plane: rows whose crossing cannot win below are not refined.
-    win_reach = BAND_CHORDS * band * GRAZING_ALLOWANCE + skip  # the reach test below at its largest allowance
+    win_reach = _rim_reach(band, GRAZING_ALLOWANCE, skip)  # the reach test below at its largest allowance
     may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], win_reach, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     # Any neighbour lies in its control net's hull: rows whose ray stays clear of it where a win could lie are not refined.
@@ -866,16 +878,15 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     with np.errstate(divide="ignore", invalid="ignore"):
         cos = np.abs(np.einsum("ij,ij->i", cross, D[rays])) / np.linalg.norm(cross, axis=1)
     allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
-    reach = BAND_CHORDS * band[pn] * allowance + skip
+    reach = _rim_reach(band[pn], allowance, skip)
     ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
     # A ray with several faces refined (a corner): its nearest valid hit wins.
     pick = np.flatnonzero(ok3)
     pick = pick[np.lexsort((t3[pick], rays[pick]))]
     pick = pick[np.r_[True, rays[pick][1:] != rays[pick][:-1]]] if len(pick) else pick
     won = rays[pick]
-    pk[won], ur[won], vr[won], tr[won], aside[won] = pn[pick], u3[pick], v3[pick], t3[pick], True
-    for have, new in zip(derivs[:3], d3[:3]):
-        have[won] = new[pick]
+    _store(won, pick, pn, u3, v3, t3, d3, pk, ur, vr, tr, derivs)
+    aside[won] = True
     return won
 
 
