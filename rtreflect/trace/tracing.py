@@ -48,6 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import clearance
 from .accelerator import Accelerator, MeshHits
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.curvature import curvatures, curvatures_at
@@ -1093,10 +1094,12 @@ def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values:
 
 def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet,
           origins: np.ndarray, directions: np.ndarray, clock: StageClock = NULL_CLOCK,
-          max_distance: np.ndarray | None = None) -> Hits:
+          max_distance: np.ndarray | None = None, clear: bool = True) -> Hits:
     """Exact first hits of rays (origins, unit directions), both (N, 3) float64 (module doc).
 
-    With ``max_distance`` (N,), only hits with t below it count.
+    With ``max_distance`` (N,), only hits with t below it count. ``clear``: the any-hit test past a mesh hit is
+    skipped where the BVH's clearance cones prove it finds nothing (`clearance`; built for traces of at least
+    `clearance.MIN_RAYS` rays): the same hits, fewer queries.
     """
     n = len(origins)
     far = np.full(n, np.inf) if max_distance is None else np.asarray(max_distance, dtype=np.float64)
@@ -1109,7 +1112,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     skip = float32_rounding(tessellation)
     slack = FLOAT32_SLACK * tessellation.extent
     crossing = np.zeros(n, dtype=bool)  # the kept hit is a `_crossing_on_face` one
-    for _ in range(MAX_CANDIDATES):
+    cones = clearance.cones(accelerator, tessellation, skip) if clear and n >= clearance.MIN_RAYS else None
+    for query in range(MAX_CANDIDATES):
         if len(rays) == 0:
             break
         # The first query is of every ray (rays = 0..n−1): the given arrays themselves, not gathered copies.
@@ -1168,6 +1172,10 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
         limit = np.minimum(far[at], best[at] + _band(tessellation, cos[at]))
         nxt = mesh.t + skip
         go = nxt < limit
+        if cones is not None and query < MAX_CANDIDATES - 1:
+            # Where the mesh around the hit's triangle provably leaves the segment clear (`clearance`), the any-hit
+            # test would find nothing: not asked. (Not after the last query: a ray still open there is a fallback.)
+            cones.drop(O, D, mesh.prim, nxt, limit, go)
         rays, start, limit = rays[go], nxt[go], limit[go]
     open_rays = rays  # still had candidates to examine after MAX_CANDIDATES
     hits.hit[:] = np.isfinite(best)
