@@ -82,7 +82,7 @@ def test_every_cleared_segment_is_one_embree_finds_nothing_on(chord):
     assert found.sum() > 100
 
 
-def test_a_triangle_whose_neighbour_folds_over_it_is_not_cleared():
+def test_a_triangle_whose_neighbour_folds_over_it_has_no_cone():
     """Two triangles sharing an edge, the second folded back over the first (150°): no cone bounds it (slope ∞)."""
     vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0.2, 0.2, 0.1]])
     scene = SimpleNamespace(vertices=vertices, faces=np.array([[0, 1, 2], [1, 2, 3]]), chord_error=np.array([0.1]),
@@ -92,14 +92,25 @@ def test_a_triangle_whose_neighbour_folds_over_it_is_not_cleared():
     assert cones.slope[0] == np.inf
 
 
-def test_traces_with_and_without_the_cones_are_bit_identical():
-    """The teapot (spout and handle meet the body: sheets closer than the band) at 96×64 = 6144 rays."""
+def test_traces_with_and_without_the_cones_are_bit_identical(monkeypatch):
+    """The teapot (spout and handle meet the body: sheets closer than the band) at 96×64 = 6144 rays, its cones
+    built whatever their cost (`clearance.REACH_PER_RADIUS`: the teapot's reach is 2 median radii)."""
+    monkeypatch.setattr(clearance, "REACH_PER_RADIUS", np.inf)
     renderer = Renderer(resolve(load_scene(ROOT / "scenes" / "teapot.toml").with_image(96, 64, 1)))
     rows, cols = np.divmod(np.arange(96 * 64), 96)
     origins, directions = renderer.camera.rays(rows, cols)
     assert len(origins) >= clearance.MIN_RAYS
     args = renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions
     with_cones, without = trace(*args), trace(*args, clear=False)
+    assert np.isfinite(renderer.accelerator._cones.slope).mean() > 0.5  # the cones were there to skip queries
     for name in ("hit", "patch", "u", "v", "t", "P", "N", "fallback", "aside", "Su", "Sv", "curvature"):
         a, b = getattr(with_cones, name), getattr(without, name)
         assert a.tobytes() == b.tobytes(), name
+
+
+def test_a_scene_whose_reach_spans_many_triangles_builds_no_cones():
+    """parts/plate.step-like cost: the reach (16 chord errors) beyond `REACH_PER_RADIUS` median radii: None."""
+    scene = folded_scene(0.5)
+    assert clearance.build(Accelerator(scene), scene, float32_rounding(scene), clearance.REACH_PER_RADIUS) is None
+    scene = folded_scene(0.002)
+    assert clearance.build(Accelerator(scene), scene, float32_rounding(scene), clearance.REACH_PER_RADIUS) is not None

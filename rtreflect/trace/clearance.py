@@ -52,6 +52,11 @@ REACH_ROUNDINGS = 4.0
 #: watertight test ("Watertight ray/triangle intersection", JCGT 2013) rounds each corner's offset from it (½ ulp)
 #: before its exact edge tests: ~2 ulps in all. A quarter (~4 ulps) leaves twice that.
 EMBREE_FRACTION = 0.25
+#: The cones are built only where the reach is at most this many median triangle radii: the ball then holds about a
+#: triangle's ring of neighbours (the bench scenes: 0.46 and 0.63); past it the pairs grow as the reach's cube and
+#: the cones clear little (parts/plate.step at 2.6: 16.6M pairs, 1.5 s CPU, every slope ∞ where its faces' meshes
+#: overlap along their seams; the teapot at 2.0: 55 % finite).
+REACH_PER_RADIUS = 1.0
 #: Traces of fewer rays do not build the cones (their BVH, such as the second look's finer mesh, may never see
 #: enough rays to repay ~1 µs a triangle).
 MIN_RAYS = 4096
@@ -84,41 +89,45 @@ class Cones:
                           f64(limit), self.rounding, self.reach, go)
 
 
-def cones(accelerator: Accelerator, tessellation: Tessellation, rounding: float) -> Cones:
-    """The BVH's clearance cones, built on first use (``rounding``: `tracing.float32_rounding` of the tessellation)."""
-    cached = accelerator.__dict__.get("_cones")
-    if cached is None:
+def cones(accelerator: Accelerator, tessellation: Tessellation, rounding: float) -> Cones | None:
+    """The BVH's clearance cones, built on first use (``rounding``: `tracing.float32_rounding` of the tessellation);
+    None where they would cost more than they clear (`REACH_PER_RADIUS`)."""
+    if "_cones" not in accelerator.__dict__:
         with _lock:
-            cached = accelerator.__dict__.get("_cones")
-            if cached is None:
-                cached = accelerator.__dict__["_cones"] = build(accelerator, tessellation, rounding)
-    return cached
+            if "_cones" not in accelerator.__dict__:
+                accelerator.__dict__["_cones"] = build(accelerator, tessellation, rounding, REACH_PER_RADIUS)
+    return accelerator.__dict__["_cones"]
 
 
-def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float) -> Cones:
-    """The cones of the BVH's triangles (module doc): slopes over every pair that may meet a triangle's ball."""
+def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
+          reach_per_radius: float = np.inf) -> Cones | None:
+    """The cones of the BVH's triangles (module doc): slopes over every pair that may meet a triangle's ball (None
+    where the reach exceeds ``reach_per_radius`` median triangle radii)."""
     vertices32 = accelerator._vertices  # the BVH's own float32 corners: the triangles Embree tests
     faces = np.ascontiguousarray(accelerator._faces, dtype=np.int64)
     vertices = vertices32.astype(np.float64)
-    # A corner's first copy (by its float32 coordinates): faces meeting along a seam share points, not indices.
-    _, first_copy = np.unique(vertices32, axis=0, return_inverse=True)
-    canon = np.ascontiguousarray(first_copy.reshape(-1)[faces], dtype=np.int64)
-    corners = np.ascontiguousarray(vertices[faces].reshape(-1, 9))
     a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
-    normal = np.cross(b - a, c - a)
-    size = np.linalg.norm(normal, axis=1)
-    good = size > 0.0
-    normal = np.divide(normal, size[:, None], out=np.zeros_like(normal), where=good[:, None])
-    good &= np.isfinite(normal).all(axis=1)
     centre = (a + b + c) / 3.0
     radius = np.sqrt(np.max([np.einsum("ij,ij->i", x - centre, x - centre) for x in (a, b, c)], axis=0))
     radius = radius * (1.0 + PAD) + PAD * rounding
     chord = float(tessellation.chord_error.max(initial=0.0))
     reach = REACH_CHORDS * chord + REACH_ROUNDINGS * rounding
+    if len(faces) == 0 or reach > reach_per_radius * float(np.median(radius)):
+        return None
+    normal = np.cross(b - a, c - a)
+    size = np.linalg.norm(normal, axis=1)
+    good = size > 0.0
+    normal = np.divide(normal, size[:, None], out=np.zeros_like(normal), where=good[:, None])
+    good &= np.isfinite(normal).all(axis=1)
+    normal = np.ascontiguousarray(normal)
+    # A corner's first copy (by its float32 coordinates): faces meeting along a seam share points, not indices.
+    _, first_copy = np.unique(vertices32, axis=0, return_inverse=True)
+    canon = np.ascontiguousarray(first_copy.reshape(-1)[faces], dtype=np.int64)
     slope = np.where(good, 0.0, np.inf)
     for first, second in _pairs(centre, radius, reach):
-        kernel.pair_slopes(vertices, faces, canon, np.ascontiguousarray(normal), first, second, slope)
-    return Cones(corners, np.ascontiguousarray(normal), np.ascontiguousarray(centre), radius, slope,
+        kernel.pair_slopes(vertices, faces, canon, normal, first, second, slope)
+    corners = np.ascontiguousarray(vertices[faces].reshape(-1, 9))
+    return Cones(corners, normal, np.ascontiguousarray(centre), radius, slope,
                  np.asarray(accelerator.centre, dtype=np.float64), EMBREE_FRACTION * rounding, reach)
 
 
