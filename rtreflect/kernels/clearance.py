@@ -56,6 +56,8 @@ def pair_slopes(vertices, faces, canon, normal, first, second, slope):
                         + n2 * (vertices[b, 2] - vertices[a, 2]))
         best = math.inf
         for line in range(6):
+            if best <= slope[i]:
+                break  # this pair cannot raise T's slope: its other lines need not be tried
             # Lines 0..2: the edge from corner e to e+1; 3..5: the vertex v = line − 3.
             e = line % 3
             p = faces[i, e]
@@ -105,6 +107,8 @@ def pair_slopes(vertices, faces, canon, normal, first, second, slope):
                     rho = max(rho, abs(h[m]) / d)
                 else:
                     ok = False
+                if not ok or rho >= best:
+                    break
             if ok and rho < best:
                 best = rho
         if best > slope[i]:

@@ -145,10 +145,14 @@ def _pairs(centre: np.ndarray, radius: np.ndarray, reach: float):
     for i, (ga, ta) in enumerate(zip(groups, trees)):
         for gb, tb in zip(groups[i:], trees[i:]):
             bound = (float(radius[ga].max()) + reach + float(radius[gb].max())) * (1.0 + PAD)
-            near = ta.sparse_distance_matrix(tb, bound, output_type="ndarray")
-            first, second = ga[near["i"]], gb[near["j"]]
-            keep = near["v"] <= (radius[first] + reach + radius[second]) * (1.0 + PAD)
+            if ga is gb:  # within a class: each pair once (query_pairs: i < j), no distances kept
+                near = ta.query_pairs(bound, output_type="ndarray")
+                first, second = ga[near[:, 0]], ga[near[:, 1]]
+            else:
+                near = ta.sparse_distance_matrix(tb, bound, output_type="ndarray")
+                first, second = ga[near["i"]], gb[near["j"]]
+            gap = np.linalg.norm(centre[first] - centre[second], axis=1)
+            keep = gap <= (radius[first] + reach + radius[second]) * (1.0 + PAD)
             first, second = first[keep], second[keep]
             yield first, second
-            if ga is not gb:
-                yield second, first
+            yield second, first
