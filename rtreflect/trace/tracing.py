@@ -1112,7 +1112,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     skip = float32_rounding(tessellation)
     slack = FLOAT32_SLACK * tessellation.extent
     crossing = np.zeros(n, dtype=bool)  # the kept hit is a `_crossing_on_face` one
-    cones = clearance.cones(accelerator, tessellation, skip) if clear and n >= clearance.MIN_RAYS else None
+    with clock.stage("clearance cones"):  # built on a BVH's first large trace, then looked up
+        cones = clearance.cones(accelerator, tessellation, skip) if clear and n >= clearance.MIN_RAYS else None
     for query in range(MAX_CANDIDATES):
         if len(rays) == 0:
             break
