@@ -470,14 +470,17 @@ def _may_win_restart(tessellation: Tessellation, surfaces: SurfaceSet, rows, pn,
     where no point the restart could converge to passes its tests, whatever Newton (or `_over_closed_seam`) does.
 
     A winning point S is converged (within Newton's tol of the ray), ahead (t > 0) and near the mesh hit
-    M = O + t_mesh D: |S − M| ≤ `JUMP_LIMIT` × band[k] × the grazing allowance, at most `GRAZING_ALLOWANCE`
-    (`_near_mesh_hit`), so |t − t_mesh| ≤ |S − M| lies within that reach; no kept hit bounds it. The same bounds
-    as `_rim_neighbours`' rows with that reach: a planar neighbour's crossing (`_may_win_on_plane`), a curved one's
-    control net hull (`_may_win_in_hull`). On the plate at 960×540 it drops 2,182 of 55,509 restarts (all of them
-    losers): that reach, 80 chord errors of the neighbour (2.4–6.4 there), spans a hole's fillet (radius 0.8), so
-    the walls tried from the top plane over a hole (10,209, 949 win) mostly stay in their nets' hulls.
+    M = O + t_mesh D: |S − M| within the kernel's reach at the point's incidence (`_near_mesh_hit`,
+    `kernels.nurbs.jump_reach`), at most its reach at a grazing ray (cos θ = 0: `JUMP_LIMIT` × band[k] ×
+    `GRAZING_ALLOWANCE`), so |t − t_mesh| ≤ |S − M| lies within that largest reach; no kept hit bounds it. The
+    same bounds as `_rim_neighbours`' rows with that reach: a planar neighbour's crossing (`_may_win_on_plane`), a
+    curved one's control net hull (`_may_win_in_hull`). On the plate at 960×540 it drops 2,182 of 55,509 restarts
+    (all of them losers): that reach, 80 chord errors of the neighbour (2.4–6.4 there), spans a hole's fillet
+    (radius 0.8), so the walls tried from the top plane over a hole (10,209, 949 win) mostly stay in their nets' hulls.
     """
-    reach = JUMP_LIMIT * GRAZING_ALLOWANCE * band
+    reach = np.empty(len(band))
+    # The kernel's own reach (one formula with `_near_mesh_hit`'s test) at cos θ = 0, where it is largest.
+    nurbs_kernel.jump_reaches(np.ascontiguousarray(band, dtype=np.float64), 0.0, JUMP_LIMIT, GRAZING_ALLOWANCE, reach)
     kept = np.full(len(tm), np.inf)  # a restart replaces a miss: no nearer hit bounds it
     may = _may_win_on_plane(tessellation, surfaces, pn, O[rows], D[rows], tm[rows], kept[rows], reach, 0.0)
     return may & _may_win_in_hull(tessellation, surfaces, rows, pn, O, D, tm, kept, reach, 0.0)
