@@ -37,7 +37,7 @@ import numpy as np
 from ..errors import SceneError
 from ..geometry.knots import MIN_KNOT_SPAN, knot_vector_problem
 from ..geometry.patches import patch_problem
-from ..geometry.surfaces import NurbsSurface
+from ..geometry.surfaces import SIDE_SNAP, NurbsSurface
 
 #: What to install for CAD input (pyproject.toml's [cad] extra).
 CAD_EXTRA = "pip install 'rtreflect[cad]'"
@@ -63,10 +63,6 @@ TRIM_TOLERANCE = 1e-5
 TRIM_START_SEGMENTS = 8
 #: Bisection rounds at most: 8 · 2^14 points an edge is far beyond any real edge's need.
 TRIM_MAX_ROUNDS = 14
-#: (u, v) closer than this fraction of the domain to one of its sides is put on that side, and consecutive loop
-#: points closer than it are one point: pcurves meet their vertices and the domain's sides only to OCCT's
-#: tolerances (1e-16 on seams, 1e-9 at cut corners), and a loop touching itself there reads as self-intersecting.
-SIDE_SNAP = 1e-9
 #: A periodic direction's knots that start this fraction of a period before a whole-period shift from the pcurves'
 #: first parameter count as starting there (`_into_pcurves_period`): OCCT's parameters agree to its tolerances (1e-9
 #: of the domain at cut corners, `SIDE_SNAP`), far below it; a cut that is not a whole period away lies far above.
@@ -387,6 +383,8 @@ def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float, onto_edges: 
     if not pieces:
         raise FaceError("a wire of the face has no edges")
     loop = np.concatenate(pieces)
+    # (u, v) within `SIDE_SNAP` of the domain of a side is put on it, and consecutive points so close are one point:
+    # pcurves meet their vertices and the sides only to OCCT's tolerances; a loop touching itself reads as crossing.
     close = SIDE_SNAP * np.array([hi - lo for lo, hi in surface.domain])
     for axis, (lo, hi) in enumerate(surface.domain):
         loop[np.abs(loop[:, axis] - lo) < close[axis], axis] = lo

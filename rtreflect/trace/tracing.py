@@ -525,9 +525,6 @@ def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points,
 
 #: Parameters along a pole's collapsed side that `_meridian_towards` compares (a meridian every 1/64 of the range).
 POLE_MERIDIANS = 64
-#: A reader's mesh node within this fraction of the domain of a collapsed side lies on the pole: the nodes meet the
-#: domain's sides only to OCCT's tolerances (`exchange.occt.SIDE_SNAP`, the same figure).
-POLE_SNAP = 1e-9
 
 
 def _meridian_towards(surfaces: SurfaceSet, patch, u, v, X) -> tuple[np.ndarray, np.ndarray]:
@@ -542,7 +539,9 @@ def _meridian_towards(surfaces: SurfaceSet, patch, u, v, X) -> tuple[np.ndarray,
     u, v = np.array(u, dtype=np.float64), np.array(v, dtype=np.float64)
     u0, u1, v0, v1 = surfaces.domains(patch)
     side = surfaces.collapsed[np.asarray(patch, dtype=np.int64)]
-    eu, ev = POLE_SNAP * (u1 - u0), POLE_SNAP * (v1 - v0)
+    # A reader's mesh node this close to a collapsed side lies on the pole (`geometry.surfaces.SIDE_SNAP`).
+    snap = surface_module.SIDE_SNAP
+    eu, ev = snap * (u1 - u0), snap * (v1 - v0)
     on_v = (side[:, 2] & (np.abs(v - v0) <= ev)) | (side[:, 3] & (np.abs(v - v1) <= ev))
     on_u = ~on_v & ((side[:, 0] & (np.abs(u - u0) <= eu)) | (side[:, 1] & (np.abs(u - u1) <= eu)))
     v = np.where(on_v, np.where(np.abs(v - v0) <= ev, v0, v1), v)  # onto the side itself
