@@ -389,9 +389,11 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
             rows = stuck[undecided]
             passes = _passes_by(surfaces, pk[rows], u2[undecided], v2[undecided], O[rows], D[rows], tol[undecided])
             status[rows[passes]] = MISS
-            at_pole = np.isin(pole, rows[~passes])
-            restarted.append(_across_pole(tessellation, surfaces, pole[at_pole], pole_point[at_pole], O, D, tm, band,
-                                          status, pk, ur, vr, tr, derivs))
+        # A pole stop still unresolved (the search undecided, or converged on the face far from the mesh hit: on
+        # another crossing of the ray) is tried on the face sharing the pole.
+        at_pole = (status[pole] == UNRESOLVED) & ~left[pole]
+        restarted.append(_across_pole(tessellation, surfaces, pole[at_pole], pole_point[at_pole], O, D, tm, band,
+                                      status, pk, ur, vr, tr, derivs))
     seam = np.flatnonzero(left)
     status[seam] = MISS
     # From the edge point Newton stopped at (a domain edge), or the mesh hit (a trim edge, where the
@@ -494,8 +496,9 @@ POLE_RESCUE_STEPS = 60
 
 def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points, O, D, tm, band, status, pk, ur, vr,
                  tr, derivs) -> np.ndarray:
-    """Candidates ``rows`` whose Newton stopped on a pole (at ``points``) that neither the search nor `_passes_by`
-    decides (UNRESOLVED), tried on the face sharing the pole: its boundary vertex nearest the pole
+    """Candidates ``rows`` whose Newton stopped on a pole (at ``points``) left UNRESOLVED (neither the search nor
+    `_passes_by` decides, or the search converged on the face far from the mesh hit: on another crossing of the ray,
+    a cone's apex shared by two faces), tried on the face sharing the pole: its boundary vertex nearest the pole
     (`Tessellation.across_seam`, within two of the face's mesh edges), moved onto the meridian towards the mesh hit and
     off the pole (`_meridian_towards`), from which the search (`_rescue`, not Newton:
     at a pole |S_u| = 0 and Newton's step along u is wild there too) looks for the ray on that face. In place where it
