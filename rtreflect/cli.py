@@ -128,11 +128,18 @@ def warn(scene_path, message: str) -> None:
 STRICT_HELP = "Exit 1 when a render prints a warning (empty image, no lines reflected, lines missing most of the part)."
 
 
-def _print_notes(scenes) -> None:
-    """What each scene's CAD files gave (faces, unit, bounding box, skipped faces), before rendering."""
+def _print_notes(scenes) -> bool:
+    """What each scene's CAD files gave (faces, unit, bounding box, skipped faces), before rendering; a note that is a
+    warning (a face read short of the reader's promise, `exchange.cad.WARNING`) on stderr. Returns whether one was."""
+    from .exchange.cad import WARNING
+
+    warned = False
     for scene in scenes:
         for line in getattr(scene, "notes", ()):
-            click.echo(line)
+            warning = line.startswith(WARNING)
+            click.echo(line, err=warning)
+            warned = warned or warning
+    return warned
 
 
 class OverlayValueCommand(click.Command):
@@ -227,8 +234,7 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
         fail(exc)
     if removed:
         click.echo(f"{outdir}: {removed_note(removed)}")
-    _print_notes(loaded)
-    warned = False
+    warned = _print_notes(loaded)
     for scene in loaded:
         image = scene.image
         try:
@@ -640,7 +646,7 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         sys.exit(stop_status(exc))
     if removed:
         click.echo(f"{outdir}: {removed_note(removed)}")
-    _print_notes([job.scene for job in loaded if job.scene is not None])
+    notes_warned = _print_notes([job.scene for job in loaded if job.scene is not None])
     for report in reports:
         _print_scene(report)
     order = {str(job.path): i for i, job in enumerate(loaded)}
@@ -683,7 +689,7 @@ def batch(paths, outdir, recursive, jobs, force, report_path, max_memory, schedu
         _check_batch(reports, loaded, outdir, run_validate, golden_dir, require if run_continuity else None)
     failed = _finish_batch(reports, order, outdir, report_path, start, where, html_path=html_path,
                            junit_path=junit_path)
-    warned = any(getattr(report, "warnings", None) for report in reports)
+    warned = notes_warned or any(getattr(report, "warnings", None) for report in reports)
     sys.exit(EXIT_CHECK_FAILED if failed or (strict and warned) else 0)
 
 

@@ -297,6 +297,35 @@ def test_fused_refinement_of_mesh_hits_against_its_steps():
     assert (np.abs(c.cosine[valid]) < tracing.OTHER_ROOT_COS).any()
 
 
+def test_restart_filter_reach_bounds_the_near_test_at_every_incidence():
+    """`tracing._may_win_restart` skips seam restarts whose every winning point would lie beyond the largest reach of
+    the near-mesh-hit test: that reach is the kernel's own formula (`nurbs.jump_reaches` at cos θ = 0), not a copy.
+    Against the test itself (`nurbs.near_mesh_hits`): a refined point at distance r off its mesh hit, its tangent plane
+    tilted to every incidence from facing the ray to grazing (and a degenerate normal), is near only for r within
+    that largest reach, and at grazing incidence it is near all the way to it (closed form: 8 × 10 chord errors)."""
+    band = np.array([1e-3, 0.3, 2.0])
+    largest = np.empty(len(band))
+    nurbs.jump_reaches(band, 0.0, tracing.JUMP_LIMIT, tracing.GRAZING_ALLOWANCE, largest)
+    np.testing.assert_array_equal(largest, tracing.JUMP_LIMIT * tracing.GRAZING_ALLOWANCE * band)
+    theta = np.r_[np.linspace(0.0, 0.5 * np.pi, 41), np.nan]  # NaN: S_u = 0, no normal
+    fraction = np.r_[0.0, 0.5, 1.0 - 1e-9, 1.0 + 1e-9, 2.0]
+    k, th, f = (x.ravel() for x in np.meshgrid(np.arange(len(band)), theta, fraction, indexing="ij"))
+    n = len(k)
+    t_mesh = 5.0
+    O, D = np.zeros((n, 3)), np.tile([0.0, 0.0, 1.0], (n, 1))
+    S = np.column_stack([f * largest[k], np.zeros(n), np.full(n, t_mesh)])  # off the mesh hit across the ray
+    c, s = np.cos(np.nan_to_num(th)), np.sin(np.nan_to_num(th))
+    Su = np.where(np.isnan(th)[:, None], 0.0, np.column_stack([c, np.zeros(n), -s]))  # S_u × S_v = (sin θ, 0, cos θ)
+    Sv = np.tile([0.0, 1.0, 0.0], (n, 1))
+    near, t = np.empty(n, dtype=bool), np.empty(n)
+    nurbs.near_mesh_hits(k.astype(np.int64), S, Su, Sv, O, D, np.full(n, t_mesh), band, tracing.JUMP_LIMIT,
+                         tracing.GRAZING_ALLOWANCE, near, t)
+    assert not near[f > 1.0].any()  # nothing the filter drops could have passed
+    grazing = (th == 0.5 * np.pi) & (f <= 1.0)
+    assert near[grazing].all() and grazing.sum() == 3 * len(band)
+    np.testing.assert_array_equal(t, t_mesh)
+
+
 def test_compiled_rescue_answers_as_the_numpy_search():
     """Rays passing just above and below the teapot's surface at grazing incidence, the search started off the
     answer: the kernel's Levenberg–Marquardt reaches the same (u, v), S and verdicts (converged, stationary, on

@@ -111,3 +111,54 @@ def test_pole_stop_left_undecided_goes_on_to_the_face_sharing_the_pole(tmp_path,
             if tried == 5:
                 return
     assert tried, "no mesh hit beside the pole whose Newton stops on it"
+
+
+def test_pole_stop_whose_search_converges_far_goes_on_to_the_face_sharing_the_apex(tmp_path):
+    """A cone cut in two along meridians (`ShapeUpgrade_ShapeDivideClosed`), its apex facing the default camera: the two
+    faces share the apex and no edge there. A ray enters the second face beside the apex and leaves through the first
+    3.7 farther; a mesh hit on the first face's triangle at the apex (t = the entry's) sends Newton onto the apex, where
+    it stops, and the search from the mesh hit converges on the ray's exit through the first face: on the ray, but
+    beyond the reach of the mesh hit. The candidate stayed unresolved (a fallback; the ray went on past the entry, to
+    the cone's far side): the face sharing the pole was tried only where the search stayed undecided. Now any pole stop
+    left unresolved is tried there (`tracing._across_pole`), and found: OCCT's nearest hit, on the second face."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeCone
+    from OCP.ShapeUpgrade import ShapeUpgrade_ShapeDivideClosed
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    from rtreflect.trace import tracing
+
+    axis = np.array(sweep.ISO_FROM) / np.linalg.norm(sweep.ISO_FROM)
+    cone = BRepPrimAPI_MakeCone(gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(*axis)), 15.0, 0.0, 25.0).Shape()
+    divide = ShapeUpgrade_ShapeDivideClosed(cone)
+    divide.SetNbSplitPoints(1)
+    divide.Perform()
+    path = tmp_path / "cone_halves.step"
+    sweep.write_step_in(divide.Result(), path, "MM")
+    renderer = Renderer(resolve(load_scene(path).with_image(160, 90, 1)))
+    surfaces, tessellation = renderer.surfaces, renderer.tessellation
+    (u0,), (u1,), (v0,), (v1,) = surfaces.domains(np.array([0]))
+    assert surfaces.collapsed[0, 2] and surfaces.collapsed[1, 2]  # both faces end at the apex, v = v0
+    O = np.array([[64.68506105058178, 21.16805508583975, -36.49864186919903]])
+    D = np.array([[-0.6848195626998844, -0.45748347965392133, 0.5672133922848429]])
+    shape, _, _, _ = occt_faces(path)
+    expected = np.einsum("ij,ij->i", occt_nearest(shape, O, D) - O, D)
+    assert np.isfinite(expected).all()
+    corners = tessellation.vertex_uv[tessellation.faces]
+    at_apex = np.flatnonzero((corners[:, :, 1] == v0).any(axis=1) & (tessellation.face_patch == 0))
+    band = tessellation.chord_error + tracing.FLOAT32_SLACK * tessellation.extent
+    b, tried = np.array([0.01]), 0
+    for prim in at_apex:
+        patch, u, v = tessellation.start_parameters(np.array([prim]), b, b)
+        un, vn, _, converged, edge = tracing.refine_all(surfaces, patch, u, v, O, D, expected, tessellation.extent)[:5]
+        if converged[0] or not edge[0] or not tracing._on_collapsed_side(surfaces, patch, un, vn)[0]:
+            continue  # Newton does not stop on the apex from there
+        tol = tracing._search_tolerance(expected, tessellation.extent)
+        _, _, d2, found = tracing._rescue(surfaces, patch, u, v, O, D, tol)[:4]
+        near, _ = tracing._near_mesh_hit(d2, patch, O, D, expected, band)
+        if not found[0] or near[0]:
+            continue  # the search does not converge far from the mesh hit from there
+        c = tracing._candidates(tessellation, surfaces, O, D, np.array([prim]), b, b, expected)
+        assert c.status[0] == tracing.VALID and c.patch[0] == 1, (prim, c.status, c.patch)
+        np.testing.assert_allclose(c.t, expected, rtol=0, atol=POINT_TOLERANCE * tessellation.extent)
+        tried += 1
+    assert tried, "no mesh hit at the apex whose Newton stops there and whose search converges far"

@@ -123,6 +123,56 @@ def test_trims_of_a_remeshed_face_are_sampled_to_the_faces_own_extent(tmp_path_f
     assert worst <= tolerance, (worst, tolerance)
 
 
+def test_remeshed_face_whose_trims_cannot_be_sampled_again_is_warned_about(tmp_path_factory, monkeypatch):
+    """union.step's faces are meshed and their trims sampled again to the faces' own extent (`occt.REMESH_RATIO`).
+    Where that second sampling fails on a face (forced here: Open CASCADE raising on face 2's second call), the face
+    keeps its first trims, sampled to the loose box's tolerance (2.06× coarser than the reader promises), and that
+    was silent. Now the summary says so in the CLI's warning form, naming the file and the face: on stderr, and
+    `render --strict` exits 1; the face's trims are its first, the other faces' sampled again as before."""
+    from click.testing import CliRunner
+
+    from rtreflect.cli import cli
+    from rtreflect.exchange import occt
+    from rtreflect.exchange.cad import WARNING, model_summary
+
+    path, clean = _part(tmp_path_factory, "union.step")
+    assert not clean.warnings
+    n = len(clean.surfaces)
+    first, calls = [], [0]
+    real = occt.trim_of_face
+
+    def flaky(face, surface, *args, **kwargs):
+        """Each read samples faces 0..n−1, then again (re-meshed): the second sampling of face 2 fails."""
+        call = calls[0] % (2 * n)
+        calls[0] += 1
+        if call == n + 2:
+            raise RuntimeError("Standard_Failure: forced")
+        trim = real(face, surface, *args, **kwargs)
+        if calls[0] <= n:
+            first.append(trim)
+        return trim
+
+    monkeypatch.setattr(occt, "trim_of_face", flaky)
+    model = read_cad(path)
+    assert calls[0] == 2 * n  # every face sampled twice: the faces are re-meshed
+    assert [index for index, _ in model.warnings] == [2]
+    assert "instead of" in model.warnings[0][1] and "forced" in model.warnings[0][1]
+    assert model.surfaces[2].trim is first[2]  # the first trims kept
+    for k, surface in enumerate(model.surfaces):
+        if k != 2:
+            assert surface.trim is not first[k]  # sampled again
+            np.testing.assert_array_equal(surface.trim.outer, clean.surfaces[k].trim.outer)
+    lines = [line for line in model_summary(path, model) if line.startswith(WARNING)]
+    assert len(lines) == 1 and lines[0].startswith(f"rtreflect: warning: {path}: face 2: its trims are kept"), lines
+    options = ["-o", str(tmp_path_factory.mktemp("out")), "--width", "32", "--height", "18", "--samples", "1"]
+    result = CliRunner().invoke(cli, ["render", str(path), *options])
+    assert result.exit_code == 0, result.output
+    assert f"rtreflect: warning: {path}: face 2: " in result.stderr
+    assert f"rtreflect: warning: {path}: face 2: " not in result.stdout
+    strict = CliRunner().invoke(cli, ["render", str(path), *options, "--strict"])
+    assert strict.exit_code == 1, strict.output
+
+
 def test_grazing_ray_on_a_non_uniform_face_is_decided(tmp_path_factory):
     """revolved_seam.step at 480×270 in its automatic scene: the one Newton fallback. A ray grazing the surface (from the
     camera's eye) met its mesh 12 times within the error band (`tracing.BAND_CHORDS` chord errors, ×10 at grazing

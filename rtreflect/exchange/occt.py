@@ -37,7 +37,7 @@ import numpy as np
 from ..errors import SceneError
 from ..geometry.knots import MIN_KNOT_SPAN, knot_vector_problem
 from ..geometry.patches import patch_problem
-from ..geometry.surfaces import NurbsSurface
+from ..geometry.surfaces import SIDE_SNAP, NurbsSurface
 
 #: What to install for CAD input (pyproject.toml's [cad] extra).
 CAD_EXTRA = "pip install 'rtreflect[cad]'"
@@ -63,10 +63,6 @@ TRIM_TOLERANCE = 1e-5
 TRIM_START_SEGMENTS = 8
 #: Bisection rounds at most: 8 · 2^14 points an edge is far beyond any real edge's need.
 TRIM_MAX_ROUNDS = 14
-#: (u, v) closer than this fraction of the domain to one of its sides is put on that side, and consecutive loop
-#: points closer than it are one point: pcurves meet their vertices and the domain's sides only to OCCT's
-#: tolerances (1e-16 on seams, 1e-9 at cut corners), and a loop touching itself there reads as self-intersecting.
-SIDE_SNAP = 1e-9
 #: A periodic direction's knots that start this fraction of a period before a whole-period shift from the pcurves'
 #: first parameter count as starting there (`_into_pcurves_period`): OCCT's parameters agree to its tolerances (1e-9
 #: of the domain at cut corners, `SIDE_SNAP`), far below it; a cut that is not a whole period away lies far above.
@@ -134,6 +130,9 @@ class CadModel:
     skipped: list[tuple[int, str]] = field(default_factory=list)  # (face index, reason) left out by --skip-bad-faces
     #: Per surface: the face is reversed (its outward normal is -S_u × S_v; its mesh triangles are flipped to match).
     reversed: list[bool] = field(default_factory=list)
+    #: (face index, reason): faces read, but short of what the reader promises (trims kept coarser than
+    #: `TRIM_TOLERANCE` of the faces' extent); the summary prints them as warnings (`exchange.cad.model_summary`).
+    warnings: list[tuple[int, str]] = field(default_factory=list)
 
     @property
     def diagonal(self) -> float:
@@ -387,6 +386,8 @@ def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float, onto_edges: 
     if not pieces:
         raise FaceError("a wire of the face has no edges")
     loop = np.concatenate(pieces)
+    # (u, v) within `SIDE_SNAP` of the domain of a side is put on it, and consecutive points so close are one point:
+    # pcurves meet their vertices and the sides only to OCCT's tolerances; a loop touching itself reads as crossing.
     close = SIDE_SNAP * np.array([hi - lo for lo, hi in surface.domain])
     for axis, (lo, hi) in enumerate(surface.domain):
         loop[np.abs(loop[:, axis] - lo) < close[axis], axis] = lo
@@ -668,7 +669,7 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     stem = name or path.stem
     # Keys unique per read: a scene that reads one file twice must not join the two copies' faces.
     _, key_of = edge_keys(converted, f"{path}|{stem}|{next(_READS)}")
-    surfaces, skipped, reversed_flags, meshed = [], [], [], []
+    surfaces, skipped, reversed_flags, meshed, indices, warnings = [], [], [], [], [], []
     with tqdm(faces, desc=f"reading {path.name}", unit="face", leave=False, file=sys.stderr,
               disable=None if len(faces) > PROGRESS_FACES else True) as bar:
         for index, face in enumerate(bar):
@@ -703,12 +704,13 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
             surfaces.append(surface)
             reversed_flags.append(reversed_face)
             meshed.append(face)
+            indices.append(index)
     if not surfaces:
         raise SceneError(path, "", f"no face of the {len(faces)} could be read (first: face {skipped[0][0]}: {skipped[0][1]})")
     bounds = faces_bounds(surfaces)
     tight = float(np.linalg.norm(bounds[1] - bounds[0]))
     if np.isfinite(tight) and 0 < tight and REMESH_RATIO * tight < diagonal:
-        for surface, face, reversed_face in zip(surfaces, meshed, reversed_flags):
+        for surface, face, reversed_face, index in zip(surfaces, meshed, reversed_flags, indices):
             try:
                 BRepMesh_IncrementalMesh(face, MESH_DEFLECTION * tight, False, MESH_ANGLE, False)
                 finer = mesh_of_face(face, reversed_face)
@@ -720,12 +722,18 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
             # The trims too were sampled to the loose box's tolerance (19× the true one on revolved_seam.step).
             try:
                 trim = trim_of_face(face, surface, TRIM_TOLERANCE * tight, trims_onto_edges, surface.trim.edges)
-            except Exception:  # the face read at the loose tolerance: its first trim stands
-                trim = None
-            if trim is not None:
-                object.__setattr__(surface, "trim", trim)
+            except Exception as exc:
+                # The face read at the loose tolerance: its first trim stands, a valid loop of its edges, but its trim
+                # edges are coarser than the reader promises: the user is told which face, and by how much.
+                reason = str(exc) if isinstance(exc, FaceError) else f"Open CASCADE: {type(exc).__name__}: {exc}"
+                warnings.append((index, f"its trims are kept as first sampled, within {TRIM_TOLERANCE * diagonal:.3g} "
+                                        f"of its edges instead of {TRIM_TOLERANCE * tight:.3g} ({diagonal / tight:.3g}× "
+                                        f"coarser: the control points' box overstates the faces'), since sampling "
+                                        f"them again failed ({reason})"))
+                continue
+            object.__setattr__(surface, "trim", trim)
         bounds = faces_bounds(surfaces)
-    return CadModel(surfaces, unit, unit_note, bounds, len(faces), skipped, reversed_flags)
+    return CadModel(surfaces, unit, unit_note, bounds, len(faces), skipped, reversed_flags, warnings)
 
 
 def faces_bounds(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray]:

@@ -198,11 +198,12 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
                             skip_bad_faces=skip_bad_faces, trims_onto_edges=True)
     if failed:
         model_read.skipped = sorted(failed + _renumber(model_read.skipped, [f for f, _ in failed]))
+        model_read.warnings = _renumber(model_read.warnings, [f for f, _ in failed])
         model_read.faces = index
     return model_read
 
 
 def _renumber(skipped: list[tuple[int, str]], failed: list[int]) -> list[tuple[int, str]]:
-    """Indices among the rebuilt faces → indices among all of the file's faces (the failed ones left out)."""
+    """(index, reason) of skipped or warned faces: indices among the rebuilt faces → indices among all of the file's faces (the failed ones left out)."""
     kept = [i for i in range(len(skipped) + len(failed) + max([s for s, _ in skipped], default=0) + 1) if i not in set(failed)]
     return [(kept[s], reason) for s, reason in skipped]

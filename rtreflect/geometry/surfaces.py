@@ -46,6 +46,11 @@ CLOSED_FRACTION = 1e-12
 #: Levenberg–Marquardt search (`trace.tracing._candidates`), never worse than the stop itself: the fraction only
 #: bounds how often the search runs.
 COLLAPSED_FRACTION = 1e-4
+#: (u, v) closer than this fraction of the domain to one of its sides lies on that side: a CAD reader's pcurves and
+#: mesh nodes meet the domain's sides only to Open CASCADE's tolerances (1e-16 on seams, 1e-9 at cut corners). The
+#: CAD reader snaps trim loops so (`exchange.occt`), the tracer reads a mesh node so near a collapsed side as on the
+#: pole (`trace.tracing._meridian_towards`): one figure for both, here upstream of both.
+SIDE_SNAP = 1e-9
 
 
 class SurfaceDerivatives(NamedTuple):

@@ -756,29 +756,47 @@ def newton_lanes(buf, n, last):
 
 
 @njit(inline="always", **JIT)
+def jump_reach(chord, cos, jump_limit, grazing_allowance):
+    """How far a refined hit may lie from its mesh hit and still be that mesh hit's (`near_at`), the one formula.
+
+    jump_limit · chord, grown as 1/cos θ (θ the ray's incidence, cos θ = |D·(S_u × S_v)| / |S_u × S_v|; no growth
+    where cos is NaN) up to grazing_allowance times: the mesh-to-surface gap along a ray grows so
+    (`trace.tracing.JUMP_LIMIT`). At cos θ = 1 the plain limit. Largest at cos θ = 0 (a grazing ray): what a filter
+    needs that must keep every point some normal could let pass (`jump_reaches`, `trace.tracing._may_win_restart`).
+    """
+    allowance = 1.0 / cos
+    if math.isnan(allowance):
+        allowance = 1.0
+    allowance = min(max(allowance, 1.0), grazing_allowance)
+    return jump_limit * chord * allowance
+
+
+@njit(**JIT, aot=(f"void({F1}, f8, f8, f8, {F1})",))
+def jump_reaches(chord, cos, jump_limit, grazing_allowance, out):
+    """`jump_reach` of each chord error (one per patch) at one incidence cosine: cos = 0 gives the largest."""
+    for k in range(chord.shape[0]):
+        out[k] = jump_reach(chord[k], cos, jump_limit, grazing_allowance)
+
+
+@njit(inline="always", **JIT)
 def near_at(S, Su, Sv, O, D, i, t_mesh, chord, jump_limit, grazing_allowance):
     """Whether the refined hit of ray i lies ahead and within reach of its mesh hit at t_mesh, and t = (S − O)·D.
 
-    Within reach (not on another sheet): |S − (O + t_mesh D)| <= jump_limit · chord, the limit grown as
-    1/cos θ (θ the incidence, cos θ = |D·(S_u × S_v)| / |S_u × S_v|) up to grazing_allowance times: the
-    mesh-to-surface gap along a ray (`trace.tracing.JUMP_LIMIT`). The normal only for hits beyond the plain limit.
+    Within reach (not on another sheet): |S − (O + t_mesh D)| <= `jump_reach` at the hit's incidence. The normal
+    only for hits beyond the plain limit (cos θ = 1).
     """
     t = dot3(S[i, 0] - O[i, 0], S[i, 1] - O[i, 1], S[i, 2] - O[i, 2], D[i, 0], D[i, 1], D[i, 2])
     j0 = S[i, 0] - (O[i, 0] + t_mesh * D[i, 0])
     j1 = S[i, 1] - (O[i, 1] + t_mesh * D[i, 1])
     j2 = S[i, 2] - (O[i, 2] + t_mesh * D[i, 2])
     jump = math.sqrt(j0 * j0 + j1 * j1 + j2 * j2)
-    near = jump <= jump_limit * chord
+    near = jump <= jump_reach(chord, 1.0, jump_limit, grazing_allowance)
     if not near:
         a0, a1, a2 = Su[i, 0], Su[i, 1], Su[i, 2]
         b0, b1, b2 = Sv[i, 0], Sv[i, 1], Sv[i, 2]
         x0, x1, x2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
         cos = abs(dot3(x0, x1, x2, D[i, 0], D[i, 1], D[i, 2])) / math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
-        allowance = 1.0 / cos
-        if math.isnan(allowance):
-            allowance = 1.0
-        allowance = min(max(allowance, 1.0), grazing_allowance)
-        near = jump <= jump_limit * chord * allowance
+        near = jump <= jump_reach(chord, cos, jump_limit, grazing_allowance)
     return (t > 0) and near, t
 
 

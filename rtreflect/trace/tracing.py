@@ -390,9 +390,11 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
             rows = stuck[undecided]
             passes = _passes_by(surfaces, pk[rows], u2[undecided], v2[undecided], O[rows], D[rows], tol[undecided])
             status[rows[passes]] = MISS
-            at_pole = np.isin(pole, rows[~passes])
-            restarted.append(_across_pole(tessellation, surfaces, pole[at_pole], pole_point[at_pole], O, D, tm, band,
-                                          status, pk, ur, vr, tr, derivs))
+        # A pole stop still unresolved (the search undecided, or converged on the face far from the mesh hit: on
+        # another crossing of the ray) is tried on the face sharing the pole.
+        at_pole = (status[pole] == UNRESOLVED) & ~left[pole]
+        restarted.append(_across_pole(tessellation, surfaces, pole[at_pole], pole_point[at_pole], O, D, tm, band,
+                                      status, pk, ur, vr, tr, derivs))
     seam = np.flatnonzero(left)
     status[seam] = MISS
     # From the edge point Newton stopped at (a domain edge), or the mesh hit (a trim edge, where the
@@ -471,14 +473,17 @@ def _may_win_restart(tessellation: Tessellation, surfaces: SurfaceSet, rows, pn,
     where no point the restart could converge to passes its tests, whatever Newton (or `_over_closed_seam`) does.
 
     A winning point S is converged (within Newton's tol of the ray), ahead (t > 0) and near the mesh hit
-    M = O + t_mesh D: |S − M| ≤ `JUMP_LIMIT` × band[k] × the grazing allowance, at most `GRAZING_ALLOWANCE`
-    (`_near_mesh_hit`), so |t − t_mesh| ≤ |S − M| lies within that reach; no kept hit bounds it. The same bounds
-    as `_rim_neighbours`' rows with that reach: a planar neighbour's crossing (`_may_win_on_plane`), a curved one's
-    control net hull (`_may_win_in_hull`). On the plate at 960×540 it drops 2,182 of 55,509 restarts (all of them
-    losers): that reach, 80 chord errors of the neighbour (2.4–6.4 there), spans a hole's fillet (radius 0.8), so
-    the walls tried from the top plane over a hole (10,209, 949 win) mostly stay in their nets' hulls.
+    M = O + t_mesh D: |S − M| within the kernel's reach at the point's incidence (`_near_mesh_hit`,
+    `kernels.nurbs.jump_reach`), at most its reach at a grazing ray (cos θ = 0: `JUMP_LIMIT` × band[k] ×
+    `GRAZING_ALLOWANCE`), so |t − t_mesh| ≤ |S − M| lies within that largest reach; no kept hit bounds it. The
+    same bounds as `_rim_neighbours`' rows with that reach: a planar neighbour's crossing (`_may_win_on_plane`), a
+    curved one's control net hull (`_may_win_in_hull`). On the plate at 960×540 it drops 2,182 of 55,509 restarts
+    (all of them losers): that reach, 80 chord errors of the neighbour (2.4–6.4 there), spans a hole's fillet
+    (radius 0.8), so the walls tried from the top plane over a hole (10,209, 949 win) mostly stay in their nets' hulls.
     """
-    reach = JUMP_LIMIT * GRAZING_ALLOWANCE * band
+    reach = np.empty(len(band))
+    # The kernel's own reach (one formula with `_near_mesh_hit`'s test) at cos θ = 0, where it is largest.
+    nurbs_kernel.jump_reaches(np.ascontiguousarray(band, dtype=np.float64), 0.0, JUMP_LIMIT, GRAZING_ALLOWANCE, reach)
     kept = np.full(len(tm), np.inf)  # a restart replaces a miss: no nearer hit bounds it
     may = _may_win_on_plane(tessellation, surfaces, pn, O[rows], D[rows], tm[rows], kept[rows], reach, 0.0)
     return may & _may_win_in_hull(tessellation, surfaces, rows, pn, O, D, tm, kept, reach, 0.0)
@@ -492,8 +497,9 @@ POLE_RESCUE_STEPS = 60
 
 def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points, O, D, tm, band, status, pk, ur, vr,
                  tr, derivs) -> np.ndarray:
-    """Candidates ``rows`` whose Newton stopped on a pole (at ``points``) that neither the search nor `_passes_by`
-    decides (UNRESOLVED), tried on the face sharing the pole: its boundary vertex nearest the pole
+    """Candidates ``rows`` whose Newton stopped on a pole (at ``points``) left UNRESOLVED (neither the search nor
+    `_passes_by` decides, or the search converged on the face far from the mesh hit: on another crossing of the ray,
+    a cone's apex shared by two faces), tried on the face sharing the pole: its boundary vertex nearest the pole
     (`Tessellation.across_seam`, within two of the face's mesh edges), moved onto the meridian towards the mesh hit and
     off the pole (`_meridian_towards`), from which the search (`_rescue`, not Newton:
     at a pole |S_u| = 0 and Newton's step along u is wild there too) looks for the ray on that face. In place where it
@@ -523,9 +529,6 @@ def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points,
 
 #: Parameters along a pole's collapsed side that `_meridian_towards` compares (a meridian every 1/64 of the range).
 POLE_MERIDIANS = 64
-#: A reader's mesh node within this fraction of the domain of a collapsed side lies on the pole: the nodes meet the
-#: domain's sides only to OCCT's tolerances (`exchange.occt.SIDE_SNAP`, the same figure).
-POLE_SNAP = 1e-9
 
 
 def _meridian_towards(surfaces: SurfaceSet, patch, u, v, X) -> tuple[np.ndarray, np.ndarray]:
@@ -540,7 +543,9 @@ def _meridian_towards(surfaces: SurfaceSet, patch, u, v, X) -> tuple[np.ndarray,
     u, v = np.array(u, dtype=np.float64), np.array(v, dtype=np.float64)
     u0, u1, v0, v1 = surfaces.domains(patch)
     side = surfaces.collapsed[np.asarray(patch, dtype=np.int64)]
-    eu, ev = POLE_SNAP * (u1 - u0), POLE_SNAP * (v1 - v0)
+    # A reader's mesh node this close to a collapsed side lies on the pole (`geometry.surfaces.SIDE_SNAP`).
+    snap = surface_module.SIDE_SNAP
+    eu, ev = snap * (u1 - u0), snap * (v1 - v0)
     on_v = (side[:, 2] & (np.abs(v - v0) <= ev)) | (side[:, 3] & (np.abs(v - v1) <= ev))
     on_u = ~on_v & ((side[:, 0] & (np.abs(u - u0) <= eu)) | (side[:, 1] & (np.abs(u - u1) <= eu)))
     v = np.where(on_v, np.where(np.abs(v - v0) <= ev, v0, v1), v)  # onto the side itself
