@@ -77,9 +77,11 @@ def _rgba(hit, weight, shade, shaded, surface, colours, line_color, background, 
     return out
 
 
-#: numpy's switch for its MADV_HUGEPAGE advice on arrays of 4 MiB and more (a private call: None where this numpy
-#: has none), and a lock so that two threads setting and restoring it cannot leave it off.
-_SET_MADVISE_HUGEPAGE = getattr(getattr(getattr(np, "_core", None), "multiarray", None), "_set_madvise_hugepage", None)
+#: numpy's switch for its MADV_HUGEPAGE advice on arrays of 4 MiB and more (a private call, in numpy._core from 2.0,
+#: numpy.core before: None where this numpy has none), and a lock so that two threads setting and restoring it cannot
+#: leave it off.
+_SET_MADVISE_HUGEPAGE = getattr(getattr(getattr(np, "_core", None) or getattr(np, "core", None), "multiarray", None),
+                                "_set_madvise_hugepage", None)
 _MADVISE_LOCK = threading.Lock()
 
 
