@@ -173,8 +173,14 @@ def default_threads() -> int:
 
 
 def pixel_spans(image: ImageSpec, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
-    """The image cut into row-major pixel spans [start, stop) of at most ``rays_per_tile`` rays (at least one pixel)."""
+    """The image cut into row-major pixel spans [start, stop) of at most ``rays_per_tile`` rays (at least one pixel).
+
+    With ``samples = "analytic"`` a span that holds a row holds whole rows: its own pixels inside the pixel window
+    are then one run of the window's rays (`Renderer._render_analytic` takes them as views, not gathered copies).
+    """
     per_tile = max(1, rays_per_tile // rays_per_pixel(image.samples))
+    if image.samples == ANALYTIC and per_tile >= image.width:
+        per_tile -= per_tile % image.width
     total = image.width * image.height
     return [(p, min(p + per_tile, total)) for p in range(0, total, per_tile)]
 
@@ -477,9 +483,11 @@ class Renderer:
         rows = np.repeat(np.arange(r0, r1 + 1), shape[1])
         cols = np.tile(np.arange(c0, c1), shape[0])
         own_at = (pixels // width - r0) * shape[1] + pixels % width - c0  # own pixels' places in the window's rays
-        # One run in both (the window spans the image's width, or one row): slices, so views, not copies.
-        whole = own_at[-1] - own_at[0] + 1 == len(own_at) and pixels[-1] - pixels[0] + 1 == len(pixels)
-        own = slice(int(own_at[0]), int(own_at[-1]) + 1) if whole else own_at
+        # One run of the window's rays (whole rows of it: `pixel_spans`): the own rows' shading as views, not copies;
+        # one run of the film's pixels too (the window spans the image's width, or one row): written in place.
+        run = own_at[-1] - own_at[0] + 1 == len(own_at)
+        whole = run and pixels[-1] - pixels[0] + 1 == len(pixels)
+        own = slice(int(own_at[0]), int(own_at[-1]) + 1) if run else own_at
         block = out[pixels[0] - start:pixels[-1] + 1 - start] if whole else \
             np.empty((len(pixels), len(CHANNELS)), dtype=np.float32)
         with self.clock.stage("camera rays"):
