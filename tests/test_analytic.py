@@ -22,7 +22,7 @@ import shapely
 from rtreflect import NurbsSurface, Scene, load_scene, render
 from rtreflect.exchange.scene import ANALYTIC, ImageSpec
 from rtreflect.integrator.analytic import hard_coverage, stripe_coverage, trapezoid_cdf
-from rtreflect.integrator.renderer import Renderer
+from rtreflect.integrator.renderer import Renderer, pixel_spans
 from rtreflect.modes.profile import stripe_weight
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -149,6 +149,24 @@ def test_bytes_do_not_depend_on_tiling_or_threads(scene_name):
     for threads, rays_per_tile in [(2, 397), (1, 1000), (2, 96 * 3)]:  # spans starting mid-row, and whole rows
         tiled = renderer.render(threads=threads, rays_per_tile=rays_per_tile).film.pixels
         assert tiled.tobytes() == whole.tobytes(), (threads, rays_per_tile)
+    # The renderer cuts analytic spans at rows (`pixel_spans`); `render_span` itself takes any cut: spans starting
+    # mid-row, and spans shorter than a row.
+    n = 96 * 54
+    for size in (397, 50):
+        cut = np.concatenate([renderer.render_span(a, min(a + size, n)).pixels for a in range(0, n, size)])
+        assert cut.tobytes() == whole.reshape(n, -1).tobytes(), size
+
+
+def test_analytic_spans_hold_whole_rows():
+    """Where a row fits in a tile, an analytic span holds whole rows (its own pixels are then one run of the pixel
+    window's rays, taken as views: `Renderer._render_analytic`); a row longer than a tile is still cut."""
+    for width, height, rays in [(96, 54, 397), (960, 540, 1 << 16), (50, 7, 50)]:
+        spans = pixel_spans(ImageSpec(width, height), rays)
+        assert spans[0][0] == 0 and spans[-1][1] == width * height
+        assert all(b == c for (_, b), (c, _) in zip(spans, spans[1:]))
+        assert all(a % width == 0 and (b - a) % width == 0 and b - a <= rays for a, b in spans), (width, rays)
+    assert pixel_spans(ImageSpec(96, 54), 40)[:2] == [(0, 40), (40, 80)]  # a row longer than the tile
+    assert pixel_spans(ImageSpec(96, 54, samples=1), 397)[0] == (0, 397)  # integer samples keep their cut
 
 
 def test_analytic_is_the_default_and_integers_keep_their_grid():

@@ -554,7 +554,12 @@ class Renderer:
             fell_back[part] |= samples.hits.fallback.reshape(len(part), -1).any(axis=1)
         aovs = self.aovs(mine)
         aov_planes(aovs, block[:, 4:])
-        if not whole:
+        if not whole and start % width == 0 and (stop - start) % width == 0:
+            # Whole rows (`pixel_spans`): the block's pixels are the columns [c0, c1) of consecutive rows, one strided
+            # copy into the tile's (rows, columns) view instead of a scatter by index.
+            at = (low[0] - start) // width
+            out.reshape(-1, width, len(CHANNELS))[at:at + len(low), c0:c1] = block.reshape(len(low), c1 - c0, -1)
+        elif not whole:
             out[pixels - start] = block
         return Tile(start, stop, out, rays, fallbacks, int(fell_back.sum()), len(edges))
 
