@@ -157,6 +157,28 @@ def test_bytes_do_not_depend_on_tiling_or_threads(scene_name):
         assert cut.tobytes() == whole.reshape(n, -1).tobytes(), size
 
 
+@pytest.mark.parametrize("scene_name", ["peer", "teapot"])
+def test_pixels_between_levels_are_dropped_only_where_no_stripe_is_near(scene_name, monkeypatch):
+    """`Renderer._across_levels` bounds the pixels between two levels' stripes away from their stripe with the
+    neighbours' σ taken to the pixel's level: the film is the one that evaluates the gradient at all of them, bit for
+    bit (the teapot's lines crowd to a level per pixel column, test_crowded_stripes_are_supersampled_not_dropped),
+    and on the peer scene it spares a fifth of the gradients."""
+    path = ROOT / "bench" / "peer.toml" if scene_name == "peer" else ROOT / "scenes" / "teapot.toml"
+    renderer = Renderer(load_scene(path).with_image(240, 135, ANALYTIC))
+    wanted = []
+    centre_stripes = renderer.centre_stripes
+    monkeypatch.setattr(renderer, "centre_stripes", lambda shading, rows, cols, sigma, want: (
+        wanted.append(int(want.sum())), centre_stripes(shading, rows, cols, sigma, want))[1])
+    pruned = renderer.render(threads=1).film.pixels
+    kept = sum(wanted)
+    wanted.clear()
+    monkeypatch.setattr(renderer, "_across_levels", lambda *args: None)
+    every = renderer.render(threads=1).film.pixels
+    assert pruned.tobytes() == every.tobytes()
+    if scene_name == "peer":
+        assert kept < 0.85 * sum(wanted), (kept, sum(wanted))
+
+
 def test_analytic_spans_hold_whole_rows():
     """Where a row fits in a tile, an analytic span holds whole rows (its own pixels are then one run of the pixel
     window's rays, taken as views: `Renderer._render_analytic`); a row longer than a tile is still cut."""
