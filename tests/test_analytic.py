@@ -22,7 +22,7 @@ import shapely
 from rtreflect import NurbsSurface, Scene, load_scene, render
 from rtreflect.exchange.scene import ANALYTIC, ImageSpec
 from rtreflect.integrator.analytic import hard_coverage, stripe_coverage, trapezoid_cdf
-from rtreflect.integrator.renderer import Renderer
+from rtreflect.integrator.renderer import Renderer, pixel_spans
 from rtreflect.modes.profile import stripe_weight
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -149,6 +149,46 @@ def test_bytes_do_not_depend_on_tiling_or_threads(scene_name):
     for threads, rays_per_tile in [(2, 397), (1, 1000), (2, 96 * 3)]:  # spans starting mid-row, and whole rows
         tiled = renderer.render(threads=threads, rays_per_tile=rays_per_tile).film.pixels
         assert tiled.tobytes() == whole.tobytes(), (threads, rays_per_tile)
+    # The renderer cuts analytic spans at rows (`pixel_spans`); `render_span` itself takes any cut: spans starting
+    # mid-row, and spans shorter than a row.
+    n = 96 * 54
+    for size in (397, 50):
+        cut = np.concatenate([renderer.render_span(a, min(a + size, n)).pixels for a in range(0, n, size)])
+        assert cut.tobytes() == whole.reshape(n, -1).tobytes(), size
+
+
+@pytest.mark.parametrize("scene_name", ["peer", "teapot"])
+def test_pixels_between_levels_are_dropped_only_where_no_stripe_is_near(scene_name, monkeypatch):
+    """`Renderer._across_levels` bounds the pixels between two levels' stripes away from their stripe with the
+    neighbours' σ taken to the pixel's level: the film is the one that evaluates the gradient at all of them, bit for
+    bit (the teapot's lines crowd to a level per pixel column, test_crowded_stripes_are_supersampled_not_dropped),
+    and on the peer scene it spares a fifth of the gradients."""
+    path = ROOT / "bench" / "peer.toml" if scene_name == "peer" else ROOT / "scenes" / "teapot.toml"
+    renderer = Renderer(load_scene(path).with_image(240, 135, ANALYTIC))
+    wanted = []
+    centre_stripes = renderer.centre_stripes
+    monkeypatch.setattr(renderer, "centre_stripes", lambda shading, rows, cols, sigma, want: (
+        wanted.append(int(want.sum())), centre_stripes(shading, rows, cols, sigma, want))[1])
+    pruned = renderer.render(threads=1).film.pixels
+    kept = sum(wanted)
+    wanted.clear()
+    monkeypatch.setattr(renderer, "_across_levels", lambda *args: None)
+    every = renderer.render(threads=1).film.pixels
+    assert pruned.tobytes() == every.tobytes()
+    if scene_name == "peer":
+        assert kept < 0.85 * sum(wanted), (kept, sum(wanted))
+
+
+def test_analytic_spans_hold_whole_rows():
+    """Where a row fits in a tile, an analytic span holds whole rows (its own pixels are then one run of the pixel
+    window's rays, taken as views: `Renderer._render_analytic`); a row longer than a tile is still cut."""
+    for width, height, rays in [(96, 54, 397), (960, 540, 1 << 16), (50, 7, 50)]:
+        spans = pixel_spans(ImageSpec(width, height), rays)
+        assert spans[0][0] == 0 and spans[-1][1] == width * height
+        assert all(b == c for (_, b), (c, _) in zip(spans, spans[1:]))
+        assert all(a % width == 0 and (b - a) % width == 0 and b - a <= rays for a, b in spans), (width, rays)
+    assert pixel_spans(ImageSpec(96, 54), 40)[:2] == [(0, 40), (40, 80)]  # a row longer than the tile
+    assert pixel_spans(ImageSpec(96, 54, samples=1), 397)[0] == (0, 397)  # integer samples keep their cut
 
 
 def test_analytic_is_the_default_and_integers_keep_their_grid():

@@ -18,7 +18,8 @@ from rtreflect.exchange.scene import load_scene
 from rtreflect.integrator import film
 from rtreflect.integrator.analytic import hard_coverage, neighbours, trapezoid_cdf
 from rtreflect.integrator.cull import BOX_MARGIN, ORIGIN_MARGIN, TINY, RayBox
-from rtreflect.kernels.pixels import bent_flags, edge_flags, footprint_ends, scatter_picked, stripe_candidates
+from rtreflect.kernels.pixels import (bent_flags, edge_flags, footprint_ends, level_crossings, scatter_picked,
+                                      stripe_candidates)
 from rtreflect.trace.camera import Camera, sample_offsets
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -155,6 +156,24 @@ def test_stripe_candidates_are_the_shifted_grid_form():
         got = np.zeros((shape[0] + 2, shape[1] + 4), dtype=bool)  # written into a strided view, as in the renderer
         stripe_candidates(level, sigma, 0.06, got[1:-1, 2:-2])
         assert np.array_equal(got[1:-1, 2:-2], want) and not got[0].any() and not got[:, :2].any()
+
+
+def test_level_crossings_are_the_shifted_grid_form():
+    rng = np.random.default_rng(29)
+    for shape in ((1, 1), (1, 9), (7, 1), (23, 31)):
+        level, _ = random_grids(rng, shape)
+        want = rng.uniform(size=shape) < 0.7
+        mixed = np.zeros(shape, dtype=bool)
+        for k in neighbours(level):
+            mixed |= k != level
+        places = np.arange(level.size).reshape(shape)
+        expect = [[p, *(n.ravel()[p] for n in neighbours(places))] for p in np.flatnonzero(want & mixed)]
+        padded = np.zeros((shape[0] + 2, shape[1] + 4), dtype=bool)  # a strided view, as in the renderer
+        padded[1:-1, 2:-2] = want
+        out = np.full((int(want.sum()), 9), -1, dtype=np.int64)
+        count = level_crossings(level, padded[1:-1, 2:-2], out)
+        assert count == len(expect) and out[:count].tolist() == expect
+        assert (out[count:] == -1).all()
 
 
 def test_bent_and_edge_flags_are_the_shifted_grid_form():

@@ -27,7 +27,8 @@ import numpy as np
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
-from .analytic import BENDING, EDGE_SAMPLES, TRUSTED_SPAN, edge_pixels, neighbours, stripe_coverage, uv_footprint
+from .analytic import (BENDING, EDGE_SAMPLES, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbours, stripe_coverage,
+                       uv_footprint)
 from .cull import RayBox
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect, reflect_rays
@@ -41,7 +42,7 @@ from ..exchange.scene import ANALYTIC, ImageSpec, Scene
 from ..geometry.curvature import curvatures_at
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
-from ..kernels.pixels import bent_flags, footprint_ends, scatter_picked, stripe_candidates
+from ..kernels.pixels import bent_flags, footprint_ends, level_crossings, scatter_picked, stripe_candidates
 from ..trace.secondlook import SecondLook
 from ..trace.tracing import Hits, occluded, trace
 
@@ -173,8 +174,14 @@ def default_threads() -> int:
 
 
 def pixel_spans(image: ImageSpec, rays_per_tile: int = RAYS_PER_TILE) -> list[tuple[int, int]]:
-    """The image cut into row-major pixel spans [start, stop) of at most ``rays_per_tile`` rays (at least one pixel)."""
+    """The image cut into row-major pixel spans [start, stop) of at most ``rays_per_tile`` rays (at least one pixel).
+
+    With ``samples = "analytic"`` a span that holds a row holds whole rows: its own pixels inside the pixel window
+    are then one run of the window's rays (`Renderer._render_analytic` takes them as views, not gathered copies).
+    """
     per_tile = max(1, rays_per_tile // rays_per_pixel(image.samples))
+    if image.samples == ANALYTIC and per_tile >= image.width:
+        per_tile -= per_tile % image.width
     total = image.width * image.height
     return [(p, min(p + per_tile, total)) for p in range(0, total, per_tile)]
 
@@ -477,9 +484,11 @@ class Renderer:
         rows = np.repeat(np.arange(r0, r1 + 1), shape[1])
         cols = np.tile(np.arange(c0, c1), shape[0])
         own_at = (pixels // width - r0) * shape[1] + pixels % width - c0  # own pixels' places in the window's rays
-        # One run in both (the window spans the image's width, or one row): slices, so views, not copies.
-        whole = own_at[-1] - own_at[0] + 1 == len(own_at) and pixels[-1] - pixels[0] + 1 == len(pixels)
-        own = slice(int(own_at[0]), int(own_at[-1]) + 1) if whole else own_at
+        # One run of the window's rays (whole rows of it: `pixel_spans`): the own rows' shading as views, not copies;
+        # one run of the film's pixels too (the window spans the image's width, or one row): written in place.
+        run = own_at[-1] - own_at[0] + 1 == len(own_at)
+        whole = run and pixels[-1] - pixels[0] + 1 == len(pixels)
+        own = slice(int(own_at[0]), int(own_at[-1]) + 1) if run else own_at
         block = out[pixels[0] - start:pixels[-1] + 1 - start] if whole else \
             np.empty((len(pixels), len(CHANNELS)), dtype=np.float32)
         with self.clock.stage("camera rays"):
@@ -508,6 +517,7 @@ class Renderer:
             want = np.zeros(shape, dtype=bool)
             if crop[1]:  # one compiled pass over the crop (`kernels.pixels.stripe_candidates`)
                 stripe_candidates(grid_level, grid_sigma, float(self.stripe_reach), want[rs, cs])
+                self._across_levels(shading, sigma, (rs, cs), want)
             want[:max(0, first - 1 - r0)] = False
             want[last + 2 - r0:] = False
         centre = self.centre_stripes(shading, rows, cols, sigma, want.ravel())
@@ -546,9 +556,52 @@ class Renderer:
             fell_back[part] |= samples.hits.fallback.reshape(len(part), -1).any(axis=1)
         aovs = self.aovs(mine)
         aov_planes(aovs, block[:, 4:])
-        if not whole:
+        if not whole and start % width == 0 and (stop - start) % width == 0:
+            # Whole rows (`pixel_spans`): the block's pixels are the columns [c0, c1) of consecutive rows, one strided
+            # copy into the tile's (rows, columns) view instead of a scatter by index.
+            at = (low[0] - start) // width
+            out.reshape(-1, width, len(CHANNELS))[at:at + len(low), c0:c1] = block.reshape(len(low), c1 - c0, -1)
+        elif not whole:
             out[pixels - start] = block
         return Tile(start, stop, out, rays, fallbacks, int(fell_back.sum()), len(edges))
+
+    def _across_levels(self, shading: Shading, sigma: np.ndarray, crop: tuple[slice, slice], want: np.ndarray) -> None:
+        """``want`` (a (rows, columns) grid of the window's pixels) cleared in place where a pixel that
+        `stripe_candidates` kept for a neighbour on another level is bounded away from its own stripe after all.
+
+        The bound is `stripe_candidates`' own, |σ| − m > reach with m the largest |σ_n − σ| over the 8 neighbours
+        (NaN ones passed over), each neighbour's σ_n taken to the pixel's level k (`modes.base.level_offset` at the
+        neighbour's hit): σ is smooth across the switch of the nearest level, so it moves to a neighbour on another
+        level as to any other. Between two stripes, where the nearest level switches, a third of the peer scene's
+        candidates were such pixels, each costing the gradient's four surface evaluations (`centre_stripes`); where
+        the stripes crowd σ_k moves by about a spacing to the next pixel and the pixel stays. A neighbour without a
+        hit (no σ_k there) keeps the pixel, as before.
+        """
+        rs, cs = crop
+        crop_want = want[rs, cs]
+        found = np.empty((int(np.count_nonzero(crop_want)), 1 + len(NEIGHBOURS)), dtype=np.int64)
+        count = level_crossings(shading.level.reshape(want.shape)[rs, cs], crop_want, found)  # compiled
+        if count == 0:
+            return
+        # Crop places (the pixel, then its 8 neighbours: `kernels.pixels.level_crossings`) as the window's rays.
+        row, col = np.divmod(found[:count], cs.stop - cs.start)
+        rays = (row + rs.start) * want.shape[1] + col + cs.start
+        at, nb = rays[:, 0], np.ascontiguousarray(rays[:, 1:].T)  # (pixels), (8, pixels)
+        k, s0 = shading.level[at], sigma[at]
+        sn = sigma[nb]
+        cross = shading.level[nb] != k
+        hits = shading.hits
+        unknown = (cross & ~hits.hit[nb]).any(axis=0)
+        where = np.nonzero(cross & hits.hit[nb])
+        other = nb[where]
+        if len(other):  # σ to the pixel's level at the neighbours on another level, in one pass
+            points = SurfacePoints(*(np.take(x, other, axis=0) for x in (hits.P, hits.N, shading.s)), hits.patch[other],
+                                   hits.u[other], hits.v[other])
+            sn[where] = level_offset(self.mode, points, k[where[1]])
+        with np.errstate(invalid="ignore"):
+            move = np.fmax.reduce(np.abs(sn - s0), axis=0, initial=0.0)  # NaN passed over, as numpy.fmax
+            far = ~unknown & (np.abs(s0) - move > self.stripe_reach)
+        want.ravel()[at[far]] = False
 
     def stripe_offsets(self, shading: Shading) -> np.ndarray:
         """Per ray the signed offset σ from its nearest level's centre (`modes.base.level_offset`), NaN where none is:

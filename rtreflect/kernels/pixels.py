@@ -208,6 +208,41 @@ def stripe_candidates(level, sigma, reach, want):
 
 
 @njit(**JIT, aot=(
+    "i8(i8[:, :], b1[:, :], i8[:, ::1])",
+    "i8(i8[:, ::1], b1[:, :], i8[:, ::1])",
+))
+def level_crossings(level, want, out):
+    """The ``want`` pixels with a neighbour on another level, and their 8 neighbours (`stripe_candidates`' grid):
+    row m of ``out`` = (i·columns + j, then the 8 neighbours' indices in `analytic.NEIGHBOURS` order, each beyond
+    the grid the pixel's own row or column); returns how many rows are written.
+
+    Types: level int64[:, :]; want bool[:, :] (same shape); out int64[:, ::1] (at least the wanted count, 9).
+    """
+    rows, cols = level.shape
+    m = 0
+    for i in range(rows):
+        for j in range(cols):
+            if not want[i, j]:
+                continue
+            mixed = False
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    mixed = mixed or level[_clamp(i + dr, rows), _clamp(j + dc, cols)] != level[i, j]
+            if not mixed:
+                continue
+            out[m, 0] = i * cols + j
+            c = 1
+            for dr in range(-1, 2):
+                for dc in range(-1, 2):
+                    if dr == 0 and dc == 0:
+                        continue
+                    out[m, c] = _clamp(i + dr, rows) * cols + _clamp(j + dc, cols)
+                    c += 1
+            m += 1
+    return m
+
+
+@njit(**JIT, aot=(
     "void(i8[:, :], f8[:, :], f8[:, :], f8[:, :], b1[:, :], f8, b1[:, :])",
     "void(i8[:, ::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], b1[:, ::1], f8, b1[:, ::1])",
 ))
