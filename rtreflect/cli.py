@@ -29,7 +29,7 @@ try:  # the collector back on even where an import fails (a caller importing cli
     tqdm.monitor_interval = 0
 
     from . import __version__  # noqa: E402
-    from .errors import RtreflectError, error_lines, one_line  # noqa: E402
+    from .errors import WARNING, RtreflectError, error_lines, one_line  # noqa: E402
     from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, removed_note, write_json  # noqa: E402,E501
     from .interrupts import Interrupted, signals_as_exceptions  # noqa: E402
     from .analysis.overlay import contours_file_name  # noqa: E402
@@ -122,17 +122,17 @@ def cli() -> None:
 
 def warn(scene_path, message: str) -> None:
     """``rtreflect: warning: SCENE: message`` on stderr: the render succeeded but shows little (issue 13)."""
-    click.echo(f"rtreflect: warning: {scene_path}: {one_line(message)}", err=True)
+    click.echo(f"{WARNING}{scene_path}: {one_line(message)}", err=True)
 
 
-STRICT_HELP = "Exit 1 when a render prints a warning (empty image, no lines reflected, lines missing most of the part)."
+STRICT_HELP = ("Exit 1 when a render prints a warning (empty image, no lines reflected, lines missing most of the part, "
+               "a CAD face read short of the reader's promise).")
 
 
 def _print_notes(scenes) -> bool:
     """What each scene's CAD files gave (faces, unit, bounding box, skipped faces), before rendering; a note that is a
-    warning (a face read short of the reader's promise, `exchange.cad.WARNING`) on stderr. Returns whether one was."""
-    from .exchange.cad import WARNING
-
+    warning (a face read short of the reader's promise, starting with `errors.WARNING`) on stderr. Returns whether one
+    was."""
     warned = False
     for scene in scenes:
         for line in getattr(scene, "notes", ()):
@@ -210,7 +210,8 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     \b
     Warnings (stderr, exit 0; --strict: exit 1): no pixel sees the surface, no reflected
     ray reaches the light plane, fewer than two lines visible, most of the surface
-    reflecting past the tube bank.
+    reflecting past the tube bank, a CAD face read short of the reader's promise
+    (its trims coarser than asked).
 
     \b
     Example:
@@ -706,7 +707,7 @@ def _print_scene(report) -> None:
         line += "".join(f"; {choice}" for choice in getattr(report, "rig", None) or ())
     tqdm.write(line, file=sys.stdout)
     for message in getattr(report, "warnings", None) or ():
-        tqdm.write(f"rtreflect: warning: {report.scene}: {one_line(message)}", file=sys.stderr)
+        tqdm.write(f"{WARNING}{report.scene}: {one_line(message)}", file=sys.stderr)
 
 
 def _check_batch(reports, loaded, outdir, run_validate, golden_dir, continuity_require=None) -> None:

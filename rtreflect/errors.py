@@ -2,6 +2,9 @@
 
 from pathlib import Path
 
+#: How a warning line starts (``rtreflect: warning: FILE: reason``, on stderr; `--strict` counts them): the render
+#: succeeded, or a CAD face was read short of the reader's promise.
+WARNING = "rtreflect: warning: "
 #: Longest quoted value (a token, a name) shown in a message: enough to recognise it, short enough to read.
 QUOTE_LIMIT = 60
 

@@ -96,13 +96,23 @@ def test_traces_with_and_without_the_cones_are_bit_identical(monkeypatch):
     """The teapot (spout and handle meet the body: sheets closer than the band) at 96×64 = 6144 rays, its cones
     built whatever their cost (`clearance.REACH_PER_RADIUS`: the teapot's reach is 2 median radii)."""
     monkeypatch.setattr(clearance, "REACH_PER_RADIUS", np.inf)
+    monkeypatch.setattr(clearance, "PAYBACK_RAYS_PER_TRIANGLE", 0)
     renderer = Renderer(resolve(load_scene(ROOT / "scenes" / "teapot.toml").with_image(96, 64, 1)))
     rows, cols = np.divmod(np.arange(96 * 64), 96)
     origins, directions = renderer.camera.rays(rows, cols)
     assert len(origins) >= clearance.MIN_RAYS
     args = renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions
+    cleared = []
+    drop = clearance.Cones.drop
+
+    def counted(self, origins, directions, prim, start, limit, go):
+        before = int(go.sum())
+        drop(self, origins, directions, prim, start, limit, go)
+        cleared.append(before - int(go.sum()))
+
+    monkeypatch.setattr(clearance.Cones, "drop", counted)
     with_cones, without = trace(*args), trace(*args, clear=False)
-    assert np.isfinite(renderer.accelerator._cones.slope).mean() > 0.5  # the cones were there to skip queries
+    assert sum(cleared) > 100  # queries were skipped (849 of 1,670 segments when written)
     for name in ("hit", "patch", "u", "v", "t", "P", "N", "fallback", "aside", "Su", "Sv", "curvature"):
         a, b = getattr(with_cones, name), getattr(without, name)
         assert a.tobytes() == b.tobytes(), name
@@ -114,3 +124,18 @@ def test_a_scene_whose_reach_spans_many_triangles_builds_no_cones():
     assert clearance.build(Accelerator(scene), scene, float32_rounding(scene), clearance.REACH_PER_RADIUS) is None
     scene = folded_scene(0.002)
     assert clearance.build(Accelerator(scene), scene, float32_rounding(scene), clearance.REACH_PER_RADIUS) is not None
+
+
+def test_cones_are_built_once_the_bvh_has_traced_their_payback(monkeypatch):
+    """Ski rental (`clearance.PAYBACK_RAYS_PER_TRIANGLE`): no cones while the BVH's traced rays stay below the payback
+    a triangle (traces under `MIN_RAYS` do not count), then built once and kept."""
+    scene = folded_scene(0.002)
+    accelerator = Accelerator(scene)
+    triangles = len(accelerator._faces)
+    monkeypatch.setattr(clearance, "PAYBACK_RAYS_PER_TRIANGLE", 3 * clearance.MIN_RAYS / triangles)
+    rounding = float32_rounding(scene)
+    assert clearance.cones(accelerator, scene, rounding, clearance.MIN_RAYS) is None
+    assert clearance.cones(accelerator, scene, rounding, clearance.MIN_RAYS) is None
+    built = clearance.cones(accelerator, scene, rounding, clearance.MIN_RAYS)
+    assert built is not None and np.isfinite(built.slope).any()
+    assert clearance.cones(accelerator, scene, rounding, clearance.MIN_RAYS) is built

@@ -133,7 +133,8 @@ def test_remeshed_face_whose_trims_cannot_be_sampled_again_is_warned_about(tmp_p
 
     from rtreflect.cli import cli
     from rtreflect.exchange import occt
-    from rtreflect.exchange.cad import WARNING, model_summary
+    from rtreflect.errors import WARNING
+    from rtreflect.exchange.cad import model_summary
 
     path, clean = _part(tmp_path_factory, "union.step")
     assert not clean.warnings

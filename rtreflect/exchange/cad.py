@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import SceneError
+from ..errors import WARNING, SceneError, one_line
 from .occt import CadModel
 
 #: Extension (lower case) → format name.
@@ -18,9 +18,6 @@ SNIFF_BYTES = 4096
 #: IGES: every line is 80 columns, column 73 the section letter; the first section is Start (S),
 #: or C for the compressed form.
 IGES_LINE = 80
-#: How a summary line that is a warning starts: the CLI's warning form, ``rtreflect: warning: FILE: reason``
-#: (printed on stderr, and counted by --strict, as a render's warnings are).
-WARNING = "rtreflect: warning: "
 #: Names users know the formats by, for messages.
 FORMAT_NAMES = {"STEP": "STEP", "IGES": "IGES", "3DM": "Rhino .3dm"}
 #: Each format with its article, for "a STEP file was expected".
@@ -93,7 +90,7 @@ def read_part(path: Path, name: str = "", skip_bad_faces: bool = False) -> tuple
 
 def model_summary(path: Path, model: CadModel) -> list[str]:
     """Lines telling what was read: faces, unit, bounding box, skipped faces (printed before a render), and a
-    warning line per face read short of the reader's promise (`CadModel.warnings`, starting with `WARNING`)."""
+    warning line per face read short of the reader's promise (`CadModel.warnings`, starting with `errors.WARNING`)."""
     lo, hi = model.bounds
     fmt = lambda v: "[" + ", ".join(f"{x:.4g}" for x in v) + "]"  # noqa: E731
     unit = model.unit + (f" ({model.unit_note})" if model.unit_note else "")
@@ -101,5 +98,5 @@ def model_summary(path: Path, model: CadModel) -> list[str]:
     if model.skipped:
         lines.append(f"{path}: skipped {len(model.skipped)} of {model.faces} faces (--skip-bad-faces): "
                      + "; ".join(f"face {index}: {reason}" for index, reason in model.skipped))
-    lines.extend(f"{WARNING}{path}: face {index}: {reason}" for index, reason in model.warnings)
+    lines.extend(f"{WARNING}{path}: face {index}: {one_line(reason)}" for index, reason in model.warnings)
     return lines

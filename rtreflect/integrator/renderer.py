@@ -499,10 +499,10 @@ class Renderer:
         with self.clock.stage("analytic AA"):
             sigma = self.stripe_offsets(shading)
             # Where the footprint may reach a stripe: σ moves by at most about |g_x| + |g_y| to a neighbour's centre
-            # (a diagonal one), twice what it moves within the pixel. The bound holds only where all 8 neighbours
-            # are on the pixel's level: a pixel with a neighbour on another level (between two stripes, or where
-            # the stripes crowd) is kept. Only the span's rows and one on either side need to know (the edge
-            # test's neighbours).
+            # (a diagonal one), twice what it moves within the pixel. The bound holds where all 8 neighbours are on
+            # the pixel's level; a pixel with a neighbour on another level (between two stripes, or where the
+            # stripes crowd) gets the same bound with its neighbours' σ taken to its own level (`_across_levels`).
+            # Only the span's rows and one on either side need to know (the edge test's neighbours).
             # Only the rows and columns around the surface can hold a stripe or an edge: the neighbour tests run
             # there alone. (The crop's border rows and columns see no surface, nor do the pixels beyond them, so the
             # edge-repeating pad of `neighbours` stands for those outer neighbours exactly.)

@@ -24,8 +24,10 @@ placed so: ∞); τ_T is the largest over the pairs (`kernels.clearance.pair_slo
 bent by β gives ρ = tan β–like values: rays steeper than the mesh's local bend are cleared, grazing ones asked.
 
 The pairs come from k-d trees over the centroids, one per class of triangle size (radii within a factor 2), so a
-few large triangles beside many small ones do not widen every search. Built once per BVH (thread-safe) and only
-for traces of at least `MIN_RAYS` rays (the second look's finer mesh, traced for a few suspects, never pays).
+few large triangles beside many small ones do not widen every search. Built once per BVH (thread-safe), used only
+in traces of at least `MIN_RAYS` rays (the second look's finer mesh, traced for a few suspects, never pays), and
+only once the BVH has traced as many rays without them as the build would have saved by then
+(`PAYBACK_RAYS_PER_TRIANGLE`: a single render at one sample per pixel does not build them; a long or repeated one does).
 """
 
 from __future__ import annotations
@@ -50,16 +52,28 @@ REACH_ROUNDINGS = 4.0
 #: units in the last place of the scene's extent + largest coordinate): the query's origin is rounded to float32
 #: (½ ulp a coordinate), its direction too (2⁻²⁴ over the segment, shorter than the extent), and Woop et al.'s
 #: watertight test ("Watertight ray/triangle intersection", JCGT 2013) rounds each corner's offset from it (½ ulp)
-#: before its exact edge tests: ~2 ulps in all. A quarter (~4 ulps) leaves twice that.
+#: before its exact edge tests: ~2 ulps in all. A quarter (~4 ulps) leaves twice that. (`float32_rounding` is 8.4–16.8
+#: ulps across a binade.) The Accelerator does not ask Embree for its robust mode, so the margin is also checked
+#: against Embree itself: over ~215,000 cleared segments of 11 shipped and sweep inputs (half the rays within 3° of
+#: the plane of the triangle they aim at), none wrong at a quarter of this margin, a few (hood, g1_join) at none.
 EMBREE_FRACTION = 0.25
 #: The cones are built only where the reach is at most this many median triangle radii: the ball then holds about a
 #: triangle's ring of neighbours (the bench scenes: 0.46 and 0.63); past it the pairs grow as the reach's cube and
 #: the cones clear little (parts/plate.step at 2.6: 16.6M pairs, 1.5 s CPU, every slope ∞ where its faces' meshes
 #: overlap along their seams; the teapot at 2.0: 55 % finite).
 REACH_PER_RADIUS = 1.0
-#: Traces of fewer rays do not build the cones (their BVH, such as the second look's finer mesh, may never see
-#: enough rays to repay ~1 µs a triangle).
+#: Traces of fewer rays do not use (or count towards) the cones: their BVH, such as the second look's finer mesh,
+#: may never see enough rays to repay them.
 MIN_RAYS = 4096
+#: The cones are built once a BVH has traced this many rays per triangle without them, as many as their build
+#: would have saved by then (ski rental: whatever the renders to come, at most twice the cheaper of never and at
+#: once). Measured on `bench/render_bench.py`'s scene (25,088 triangles, one thread, CPU): the build costs 0.21 s,
+#: ~8.5 µs a triangle; prebuilt, they save 0.08 s of a full-HD render's 1.52 s, ~39 ns a ray: 218 rays a triangle.
+#: A single full-HD render at one sample (83 a triangle) never pays for them; a render at `samples = 4` or a
+#: series of renders of one scene does (`bench/render_bench.py` prints the build's cost).
+PAYBACK_RAYS_PER_TRIANGLE = 218
+#: Triangles whose corner angle at their first corner has a smaller sine get no cone (the normal's rounding).
+SLIVER_SINE = 1e-9
 #: Relative pad on the radii and distances the pairs are chosen by (float64 rounding: a superset is safe).
 PAD = 1e-9
 
@@ -89,14 +103,20 @@ class Cones:
                           f64(limit), self.rounding, self.reach, go)
 
 
-def cones(accelerator: Accelerator, tessellation: Tessellation, rounding: float) -> Cones | None:
-    """The BVH's clearance cones, built on first use (``rounding``: `tracing.float32_rounding` of the tessellation);
-    None where they would cost more than they clear (`REACH_PER_RADIUS`)."""
-    if "_cones" not in accelerator.__dict__:
+def cones(accelerator: Accelerator, tessellation: Tessellation, rounding: float, rays: int) -> Cones | None:
+    """The BVH's clearance cones for a trace of ``rays`` rays (``rounding``: `tracing.float32_rounding` of the
+    tessellation): None until the BVH has traced `PAYBACK_RAYS_PER_TRIANGLE` rays a triangle, then built once, or
+    None for good where they would cost more than they clear (`REACH_PER_RADIUS`)."""
+    state = accelerator.__dict__
+    if "_cones" not in state:
         with _lock:
-            if "_cones" not in accelerator.__dict__:
-                accelerator.__dict__["_cones"] = build(accelerator, tessellation, rounding, REACH_PER_RADIUS)
-    return accelerator.__dict__["_cones"]
+            if "_cones" not in state:
+                traced = state.get("_traced_without_cones", 0) + rays
+                state["_traced_without_cones"] = traced
+                if traced < PAYBACK_RAYS_PER_TRIANGLE * len(accelerator._faces):
+                    return None
+                state["_cones"] = build(accelerator, tessellation, rounding, REACH_PER_RADIUS)
+    return state["_cones"]
 
 
 def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
@@ -116,7 +136,8 @@ def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
         return None
     normal = np.cross(b - a, c - a)
     size = np.linalg.norm(normal, axis=1)
-    good = size > 0.0
+    # A sliver's float64 normal is off by ~1e-16/sin θ, so its own corners would not lie at height 0: no cone.
+    good = size > SLIVER_SINE * np.linalg.norm(b - a, axis=1) * np.linalg.norm(c - a, axis=1)
     normal = np.divide(normal, size[:, None], out=np.zeros_like(normal), where=good[:, None])
     good &= np.isfinite(normal).all(axis=1)
     normal = np.ascontiguousarray(normal)

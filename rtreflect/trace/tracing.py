@@ -1103,8 +1103,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     """Exact first hits of rays (origins, unit directions), both (N, 3) float64 (module doc).
 
     With ``max_distance`` (N,), only hits with t below it count. ``clear``: the any-hit test past a mesh hit is
-    skipped where the BVH's clearance cones prove it finds nothing (`clearance`; built for traces of at least
-    `clearance.MIN_RAYS` rays): the same hits, fewer queries.
+    skipped where the BVH's clearance cones prove it finds nothing (`clearance`; used in traces of at least
+    `clearance.MIN_RAYS` rays, once the BVH has traced enough to repay them): the same hits, fewer queries.
     """
     n = len(origins)
     far = np.full(n, np.inf) if max_distance is None else np.asarray(max_distance, dtype=np.float64)
@@ -1117,8 +1117,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     skip = float32_rounding(tessellation)
     slack = FLOAT32_SLACK * tessellation.extent
     crossing = np.zeros(n, dtype=bool)  # the kept hit is a `_crossing_on_face` one
-    with clock.stage("clearance cones"):  # built on a BVH's first large trace, then looked up
-        cones = clearance.cones(accelerator, tessellation, skip) if clear and n >= clearance.MIN_RAYS else None
+    with clock.stage("clearance cones"):  # built once the BVH has traced enough rays to repay them
+        cones = clearance.cones(accelerator, tessellation, skip, n) if clear and n >= clearance.MIN_RAYS else None
     for query in range(MAX_CANDIDATES):
         if len(rays) == 0:
             break
