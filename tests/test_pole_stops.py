@@ -30,6 +30,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 import make_sweep_parts as sweep  # noqa: E402
 
 
+def halves_renderer(solid, path: Path) -> Renderer:
+    """A renderer (160×90, automatic scene) of ``solid`` with its closed faces cut in two along meridians (OCCT's
+    `ShapeUpgrade_ShapeDivideClosed`), written to ``path``: the halves share the poles."""
+    from OCP.ShapeUpgrade import ShapeUpgrade_ShapeDivideClosed
+
+    divide = ShapeUpgrade_ShapeDivideClosed(solid)
+    divide.SetNbSplitPoints(1)
+    divide.Perform()
+    sweep.write_step_in(divide.Result(), path, "MM")
+    return Renderer(resolve(load_scene(path).with_image(160, 90, 1)))
+
+
 def test_shell_restart_that_stops_on_a_pole_is_searched(tmp_path):
     """sphere_pole_view.step (a sphere whose pole faces the default camera), the ray of pixel (37, 77) at 160×90, which
     meets the sphere near its pole: a second-look start from the shell triangle at the pole an eighth of a turn round
@@ -70,18 +82,13 @@ def test_pole_stop_left_undecided_goes_on_to_the_face_sharing_the_pole(tmp_path,
     stayed unresolved (a fallback) though the neighbour across the pole holds the hit. Now it is tried there
     (`tracing._across_pole`) and found: OCCT's nearest hit, on the second face."""
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeSphere
-    from OCP.ShapeUpgrade import ShapeUpgrade_ShapeDivideClosed
     from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
 
     from rtreflect.trace import tracing
 
     sphere = BRepPrimAPI_MakeSphere(gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(*sweep.ISO_FROM)), 20.0).Shape()
-    divide = ShapeUpgrade_ShapeDivideClosed(sphere)
-    divide.SetNbSplitPoints(1)
-    divide.Perform()
     path = tmp_path / "sphere_halves.step"
-    sweep.write_step_in(divide.Result(), path, "MM")
-    renderer = Renderer(resolve(load_scene(path).with_image(160, 90, 1)))
+    renderer = halves_renderer(sphere, path)
     surfaces, tessellation = renderer.surfaces, renderer.tessellation
     assert len(surfaces) == 2
     rows, cols = np.meshgrid(np.arange(90), np.arange(160), indexing="ij")
@@ -122,19 +129,14 @@ def test_pole_stop_whose_search_converges_far_goes_on_to_the_face_sharing_the_ap
     the cone's far side): the face sharing the pole was tried only where the search stayed undecided. Now any pole stop
     left unresolved is tried there (`tracing._across_pole`), and found: OCCT's nearest hit, on the second face."""
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeCone
-    from OCP.ShapeUpgrade import ShapeUpgrade_ShapeDivideClosed
     from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
 
     from rtreflect.trace import tracing
 
     axis = np.array(sweep.ISO_FROM) / np.linalg.norm(sweep.ISO_FROM)
     cone = BRepPrimAPI_MakeCone(gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(*axis)), 15.0, 0.0, 25.0).Shape()
-    divide = ShapeUpgrade_ShapeDivideClosed(cone)
-    divide.SetNbSplitPoints(1)
-    divide.Perform()
     path = tmp_path / "cone_halves.step"
-    sweep.write_step_in(divide.Result(), path, "MM")
-    renderer = Renderer(resolve(load_scene(path).with_image(160, 90, 1)))
+    renderer = halves_renderer(cone, path)
     surfaces, tessellation = renderer.surfaces, renderer.tessellation
     (u0,), (u1,), (v0,), (v1,) = surfaces.domains(np.array([0]))
     assert surfaces.collapsed[0, 2] and surfaces.collapsed[1, 2]  # both faces end at the apex, v = v0
