@@ -179,7 +179,12 @@ class _ClusterBatch:
                 run, index = owner
                 run.futures.discard(future)
                 if future.status == "finished":
-                    pixels, rays, _ = future.result()
+                    try:
+                        pixels, rays, _ = future.result()
+                    except self.distributed.comm.CommClosedError as exc:
+                        # The scheduler died between the tile's end and the fetch of its result: the client may
+                        # still say "running" for a moment, so this is the cluster lost, not a scene's failure.
+                        raise _ClusterLost(exc) from exc
                     # Dask may hand back an array inside its message buffer, not aligned for float32, which
                     # OpenImageIO refuses ("buffer is wrong size"): copied then, else used as is.
                     run.waiting[index] = (np.require(pixels, np.float32, ["C", "A"]), rays)
