@@ -92,9 +92,10 @@ def plain_pages(shape: tuple[int, ...], dtype) -> np.ndarray:
     defrag ``madvise``, the kernel's default) that advice makes the first touch of each 2 MiB page compact memory
     when none is free: a full-HD film's 182 MB then costs 0.02–0.47 s of system time per render (0.02 when huge
     pages happen to be free, measured back to back on the loaded 2-core machine), against a steady 0.07–0.11 s for
-    its 44 500 faults of 4 KiB pages: the plain pages are the steady choice. Where THP is ``always`` the kernel still gives huge pages where free, without compacting for
-    them; where it is ``never`` nothing changes. The advice is turned off around this allocation alone (numpy's
-    switch is process-wide), else the memory is an anonymous private mapping, which nobody advises; else np.empty.
+    its 44 500 faults of 4 KiB pages: the plain pages are the steady choice. Where THP is ``always`` the kernel
+    still gives huge pages where free, without compacting for them; where it is ``never`` nothing changes. The
+    advice is turned off around this allocation alone (numpy's switch is process-wide), else the memory is an
+    anonymous private mapping, which nobody advises; else np.empty.
     """
     dtype = np.dtype(dtype)
     if _SET_MADVISE_HUGEPAGE is not None:
