@@ -383,6 +383,10 @@ def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float, onto_edges: 
     while explorer.More():
         pieces.append(_edge_samples(explorer.Current(), face, surface, tolerance, onto_edges))
         explorer.Next()
+    edges = _wire_edges(wire)
+    if len(pieces) < len(edges):
+        # The explorer stopped at a joint it could not connect: every edge, chained by its pcurve's ends instead.
+        pieces = _chained([_edge_samples(edge, face, surface, tolerance, onto_edges) for edge in edges], surface)
     if not pieces:
         raise FaceError("a wire of the face has no edges")
     loop = np.concatenate(pieces)
@@ -399,6 +403,35 @@ def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float, onto_edges: 
     if len(loop) < 3:
         raise FaceError("a trim loop has fewer than 3 distinct (u, v) points")
     return loop
+
+
+def _wire_edges(wire) -> list:
+    """The wire's edges in its stored order (``TopoDS_Iterator``), each with its orientation in the wire."""
+    from OCP.TopoDS import TopoDS, TopoDS_Iterator
+
+    out, iterator = [], TopoDS_Iterator(wire)
+    while iterator.More():
+        out.append(TopoDS.Edge(iterator.Value()))
+        iterator.Next()
+    return out
+
+
+def _chained(pieces: list, surface: NurbsSurface) -> list:
+    """The edges' (u, v) samples (each in its wire direction) put in loop order: from the first, each next piece is the
+    one whose start lies nearest the current end (distances in fractions of the domain's sides).
+
+    ``BRepTools_WireExplorer`` connects a wire's edges through their vertices and stops where it cannot: on a face of
+    a mirrored assembly instance (a location of determinant −1) converted by ``BRepBuilderAPI_NurbsConvert``, the
+    sphere corner of the filleted block met its pole edge 5e-4 rad off in u and the loop kept 2 of its 4 edges
+    (sweep part mirrored_assembly.step: a third of the corner outside its own trim, rays there missed it).
+    """
+    scale = np.array([max(hi - lo, 1e-300) for lo, hi in surface.domain])
+    left, ordered = list(pieces[1:]), [pieces[0]]
+    while left:
+        end = ordered[-1][-1]
+        k = int(np.argmin([np.max(np.abs(piece[0] - end) / scale) for piece in left]))
+        ordered.append(left.pop(k))
+    return ordered
 
 
 def trim_of_face(face, surface: NurbsSurface, tolerance: float, onto_edges: bool = False, edges: tuple = ()):
