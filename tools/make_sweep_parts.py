@@ -48,7 +48,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 
-from make_parts import _edges, filleted_block, write_iges, write_step  # noqa: E402
+from make_parts import _edges, filleted_block, write_assembly, write_iges, write_step  # noqa: E402
 
 
 def _faces(shape):
@@ -751,27 +751,11 @@ def periodic_bspline():
 def write_mirrored_assembly(path: Path) -> None:
     """The filleted block as a STEP assembly (XCAF) of two instances, the second LOCATED by a mirror (a transform of
     determinant -1, not a transformed copy): its faces come back turned inside out unless the reader flips them."""
-    from OCP.STEPCAFControl import STEPCAFControl_Writer
-    from OCP.STEPControl import STEPControl_AsIs
-    from OCP.TCollection import TCollection_ExtendedString
-    from OCP.TDocStd import TDocStd_Document
-    from OCP.TopLoc import TopLoc_Location
-    from OCP.XCAFDoc import XCAFDoc_DocumentTool
     from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt, gp_Trsf
 
-    document = TDocStd_Document(TCollection_ExtendedString("XmlOcaf"))
-    tool = XCAFDoc_DocumentTool.ShapeTool_s(document.Main())
-    part = tool.AddShape(filleted_block(), False)
-    assembly = tool.NewShape()
     mirror = gp_Trsf()
     mirror.SetMirror(gp_Ax2(gp_Pnt(0, -25, 0), gp_Dir(0, 1, 0)))
-    for trsf in (gp_Trsf(), mirror):
-        tool.AddComponent(assembly, part, TopLoc_Location(trsf))
-    tool.UpdateAssemblies()
-    writer = STEPCAFControl_Writer()
-    writer.Transfer(document, STEPControl_AsIs)
-    writer.Write(str(path))
-
+    write_assembly(filleted_block(), path, (gp_Trsf(), mirror))
 
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
