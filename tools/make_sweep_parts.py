@@ -36,6 +36,16 @@ Each part stresses one thing real exports contain (Open CASCADE through OCP; rhi
   extrusion_holes.3dm  rhino3dm: a polyline outline extruded with two round holes (caps: trimmed planes with holes)
   rhino_mix.3dm        rhino3dm's builders: a bare rational surface, a capped cone, a revolved profile (seam and
                        poles), a pipe extrusion with a hole, a trimmed plane
+Third sweep:
+  loft_skin_edge_on.step  a thin wavy lofted skin (one face) seen edge-on by the 3/4 view (3° off)
+  pipe_spline.step     a circle swept along a 3D spline (BRepOffsetAPI_MakePipe)
+  hollow_sphere_cut.step  a sphere shell 0.1 thick with a quarter cut away: rays between the sheets
+  variable_fillet.step a box whose top edges are filleted with radius 1 → 6
+  torus_hole_view.step a torus whose axis points at the camera: seen through its hole
+  many_holes.step, many_holes.igs  a plate with 28 holes 0.15 from its outer edges (IGES: faces mode)
+  tiny_on_huge.step    a 2000 mm slab with a 0.05 cube and a 0.02-radius pin on it
+  periodic_bspline.step  a face on a B-spline surface periodic in u (OCCT keeps it periodic)
+  mirrored_assembly.step  the filleted block and an instance LOCATED by a mirror (determinant -1) in an XCAF assembly
 """
 
 from __future__ import annotations
