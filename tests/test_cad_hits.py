@@ -73,6 +73,16 @@ def occt_nearest(shape, origins: np.ndarray, directions: np.ndarray):
     return points
 
 
+def assert_first_hits_are_occt(path: Path, renderer, origins: np.ndarray, directions: np.ndarray):
+    """The rays' traced first hits lie at OCCT's nearest intersection (`occt_nearest`) with the shape read from
+    ``path``, to `POINT_TOLERANCE` of the scene; returns the hits."""
+    hits = renderer.trace(origins, directions)
+    shape = occt_faces(path)[0]
+    expected = np.einsum("ij,ij->i", occt_nearest(shape, origins, directions) - origins, directions)
+    np.testing.assert_allclose(hits.t, expected, rtol=0, atol=POINT_TOLERANCE * renderer.tessellation.extent)
+    return hits
+
+
 def on_face_checks(face, p: np.ndarray, n: np.ndarray, tolerance: float) -> float:
     """Asserts p lies on the face (projection, classifier) and n is its normal; returns |cos| of n with the face normal's axis."""
     from OCP.BRep import BRep_Tool

@@ -23,12 +23,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 import make_sweep_parts as sweep  # noqa: E402
 
 
+def _written_and_read(tmp_path_factory, name: str):
+    """The sweep part ``name`` written to a fresh folder, and its read (rtreflect's `read_cad`)."""
+    path = tmp_path_factory.mktemp("sweep") / name
+    sweep.PARTS[name](path)
+    return path, read_cad(path)
+
+
 @pytest.fixture(scope="module")
 def union_big(tmp_path_factory):
-    """union_big.step and its read (rtreflect's `read_cad`), written once for the tests below."""
-    path = tmp_path_factory.mktemp("sweep") / "union_big.step"
-    sweep.PARTS[path.name](path)
-    return path, read_cad(path)
+    """union_big.step and its read, written once for the tests below."""
+    return _written_and_read(tmp_path_factory, "union_big.step")
 
 
 def test_periodic_face_cut_one_period_on_keeps_its_pcurves_parameters(union_big):
@@ -341,3 +346,77 @@ def test_revolved_seam_contours_are_seen_from_the_eye(tmp_path):
     first = np.einsum("ij,ij->i", occt_nearest(shape, np.tile(eye, (len(S), 1)), directions) - eye, directions)
     behind = np.linalg.norm(S - eye, axis=1) - first
     assert np.all(behind <= POINT_TOLERANCE * renderer.tessellation.extent), (np.count_nonzero(behind > 1e-3), behind.max())
+
+
+@pytest.fixture(scope="module")
+def mirrored_assembly(tmp_path_factory):
+    """mirrored_assembly.step (the filleted block, and an instance located by a mirror) and its read."""
+    return _written_and_read(tmp_path_factory, "mirrored_assembly.step")
+
+
+def test_mirrored_instance_trim_loops_follow_every_wire_edge(mirrored_assembly):
+    """On the mirrored instance (location of determinant -1), `BRepTools_WireExplorer` stopped after 2 of the 4 edges
+    of a converted sphere corner's outer wire (face 32: its pole edge 5e-4 rad off its neighbour's end in u): the trim
+    closed straight across the corner and left a third of it out (`occt._chained`). Every edge of every face's outer
+    wire, OCCT's pcurve on the converted face at its quarter points, lies on our outer loop."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve2d
+    from OCP.BRepTools import BRepTools
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    path, model = mirrored_assembly
+    _, _, _, faces = occt_faces(path)
+    assert len(faces) == len(model.surfaces)
+    for k, (surface, face) in enumerate(zip(model.surfaces, faces)):
+        loop = np.vstack([surface.trim.outer, surface.trim.outer[:1]])
+        a, b = loop[:-1], loop[1:]
+        scale = np.array([hi - lo for lo, hi in surface.domain])
+        explorer = TopExp_Explorer(BRepTools.OuterWire_s(face), TopAbs_EDGE)
+        while explorer.More():
+            curve = BRepAdaptor_Curve2d(TopoDS.Edge(explorer.Current()), face)
+            explorer.Next()
+            t0, t1 = curve.FirstParameter(), curve.LastParameter()
+            for t in (0.25, 0.5, 0.75):
+                p = curve.Value(t0 + t * (t1 - t0))
+                q = np.array([p.X(), p.Y()])
+                s = np.clip(np.einsum("ij,ij->i", q - a, b - a) / np.maximum(np.einsum("ij,ij->i", b - a, b - a), 1e-300),
+                            0, 1)
+                gap = np.min(np.max(np.abs(a + s[:, None] * (b - a) - q) / scale, axis=1))
+                assert gap <= 1e-3, (k, q, gap)  # the loop's chords: within its 3D tolerance of the pcurve
+
+
+def test_mirrored_instance_sphere_corner_is_hit(mirrored_assembly):
+    """mirrored_assembly.step at 160×90, pixel (11, 58): the pixel-centre ray meets the mirrored instance's sphere
+    corner (face 32, |N·D| = 0.19) where OCCT's `PerformNearest` hits it at t = 125.238; Newton converged there, but
+    the truncated trim (above) put the point outside the face and the ray missed."""
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = mirrored_assembly[0]
+    renderer = Renderer(resolve(load_scene(path).with_image(160, 90, 1)))
+    assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(np.array([11]), np.array([58])))
+
+
+def test_seam_strip_of_drilled_sphere_is_on_its_face(tmp_path):
+    """sphere_hole.step: OCCT's NURBS conversion re-approximates the sphere's seam pcurves, which drift off the seam
+    near the poles (u = 1.518 against the side u = π/2 at v = 1.41); the trim then cut a strip off the face along the
+    seam and rays there went on to the sphere's far side (its mirrored assembly at 160×90: 10 pixels 9-15 behind
+    OCCT's hit). Seam pcurves are put on the domain's sides (`occt._on_seam_side`). Points of the surface 0.02 inside
+    each seam side are in our trim exactly where they lie on OCCT's original face."""
+    from test_cad_sweep import distance_to_face
+
+    path = tmp_path / "sphere_hole.step"
+    sweep.PARTS[path.name](path)
+    model = read_cad(path)
+    _, originals, _, _ = occt_faces(path)
+    (k,) = [k for k, s in enumerate(model.surfaces) if len(s.trim.holes) == 2]  # the sphere (the other: the bore)
+    surface = model.surfaces[k]
+    (u0, u1), _ = surface.domain
+    v = np.linspace(-1.55, 1.55, 32)
+    for u in (u0 + 0.02, u1 - 0.02):
+        points = surface.evaluate(np.full_like(v, u), v).S
+        on_face = np.array([distance_to_face(originals[k], p) <= 1e-9 * model.diagonal for p in points])
+        np.testing.assert_array_equal(surface.trim.contains(np.full_like(v, u), v), on_face)

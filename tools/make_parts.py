@@ -150,8 +150,9 @@ def write_step(shape, path: Path) -> None:
         raise SystemExit(f"could not write {path}")
 
 
-def write_assembly(shape, path: Path) -> None:
-    """Two located instances of one part, through an XCAF document (a real STEP assembly, not a copy)."""
+def write_assembly(shape, path: Path, transforms=None) -> None:
+    """Located instances of one part, through an XCAF document (a real STEP assembly, not a copy): by default two,
+    the second turned 30° and moved; else one per ``transforms`` (gp_Trsf)."""
     from OCP.STEPCAFControl import STEPCAFControl_Writer
     from OCP.STEPControl import STEPControl_AsIs
     from OCP.TCollection import TCollection_ExtendedString
@@ -164,11 +165,12 @@ def write_assembly(shape, path: Path) -> None:
     tool = XCAFDoc_DocumentTool.ShapeTool_s(document.Main())
     part = tool.AddShape(shape, False)
     assembly = tool.NewShape()
-    first = gp_Trsf()
-    second = gp_Trsf()
-    second.SetRotation(gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1)), math.radians(30))
-    second.SetTranslationPart(gp_Vec(60, 10, 0))
-    for trsf in (first, second):
+    if transforms is None:
+        second = gp_Trsf()
+        second.SetRotation(gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1)), math.radians(30))
+        second.SetTranslationPart(gp_Vec(60, 10, 0))
+        transforms = (gp_Trsf(), second)
+    for trsf in transforms:
         tool.AddComponent(assembly, part, TopLoc_Location(trsf))
     tool.UpdateAssemblies()
     writer = STEPCAFControl_Writer()

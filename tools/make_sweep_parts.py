@@ -36,6 +36,16 @@ Each part stresses one thing real exports contain (Open CASCADE through OCP; rhi
   extrusion_holes.3dm  rhino3dm: a polyline outline extruded with two round holes (caps: trimmed planes with holes)
   rhino_mix.3dm        rhino3dm's builders: a bare rational surface, a capped cone, a revolved profile (seam and
                        poles), a pipe extrusion with a hole, a trimmed plane
+Third sweep:
+  loft_skin_edge_on.step  a thin wavy lofted skin (one face) seen edge-on by the 3/4 view (3° off)
+  pipe_spline.step     a circle swept along a 3D spline (BRepOffsetAPI_MakePipe)
+  hollow_sphere_cut.step  a sphere shell 0.1 thick with a quarter cut away: rays between the sheets
+  variable_fillet.step a box whose top edges are filleted with radius 1 → 6
+  torus_hole_view.step a torus whose axis points at the camera: seen through its hole
+  many_holes.step, many_holes.igs  a plate with 28 holes 0.15 from its outer edges (IGES: faces mode)
+  tiny_on_huge.step    a 2000 mm slab with a 0.05 cube and a 0.02-radius pin on it
+  periodic_bspline.step  a face on a B-spline surface periodic in u (OCCT keeps it periodic)
+  mirrored_assembly.step  the filleted block and an instance LOCATED by a mirror (determinant -1) in an XCAF assembly
 """
 
 from __future__ import annotations
@@ -48,7 +58,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 
-from make_parts import _edges, filleted_block, write_iges, write_step  # noqa: E402
+from make_parts import _edges, filleted_block, write_assembly, write_iges, write_step  # noqa: E402
 
 
 def _faces(shape):
@@ -587,6 +597,176 @@ def write_rhino_mix_3dm(path: Path) -> None:
     save_3dm(model, path)
 
 
+# --- Third sweep (issue 12): kinds the sweeps above did not cover. ---------------------------------------------------
+
+def _wavy_curve(points_xyz):
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeWire
+    from OCP.GeomAPI import GeomAPI_PointsToBSpline
+    from OCP.collections import Array1_gp_Pnt
+    from OCP.gp import gp_Pnt
+
+    points = Array1_gp_Pnt(1, len(points_xyz))
+    for k, p in enumerate(points_xyz):
+        points.SetValue(k + 1, gp_Pnt(*map(float, p)))
+    return BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(GeomAPI_PointsToBSpline(points).Curve()).Edge()).Wire()
+
+
+def _turned_to(shape, direction):
+    """``shape`` rotated so that its z axis points along ``direction``."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.gp import gp_Ax3, gp_Dir, gp_Pnt, gp_Trsf
+
+    trsf = gp_Trsf()
+    trsf.SetTransformation(gp_Ax3(gp_Pnt(0, 0, 0), gp_Dir(*direction)), gp_Ax3())
+    return BRepBuilderAPI_Transform(shape, trsf.Inverted(), True).Shape()
+
+
+def loft_skin_edge_on():
+    """A thin, nearly flat lofted skin (one face, ripples 0.3 on 60 × 50) turned so that the 3/4 view sees it edge-on
+    (its mean plane contains the view direction, tilted 3° off it)."""
+    from OCP.BRepOffsetAPI import BRepOffsetAPI_ThruSections
+
+    loft = BRepOffsetAPI_ThruSections(False, False)
+    for k, y in enumerate((0.0, 12.0, 25.0, 37.0, 50.0)):
+        loft.AddWire(_wavy_curve([(10.0 * i, y, 0.3 * math.sin(1.3 * i + 0.9 * k)) for i in range(7)]))
+    loft.Build()
+    # the skin's normal (z) perpendicular to the view, 3 degrees off: along view × (up-ish), tilted
+    view = [c / math.sqrt(sum(x * x for x in ISO_FROM)) for c in ISO_FROM]
+    side = (view[1], -view[0], 0.0)
+    n = math.hypot(*side)
+    tilt = math.radians(3.0)
+    normal = tuple(math.cos(tilt) * s / n + math.sin(tilt) * v for s, v in zip(side, view))
+    return _turned_to(loft.Shape(), normal)
+
+
+def pipe_spline():
+    """A circle (r 2) swept along an interpolated 3D spline (BRepOffsetAPI_MakePipe): a pipe that winds in x, y, z."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeWire
+    from OCP.BRepOffsetAPI import BRepOffsetAPI_MakePipe
+    from OCP.GC import GC_MakeCircle
+    from OCP.GeomAPI import GeomAPI_PointsToBSpline
+    from OCP.collections import Array1_gp_Pnt
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    pts = [(0, 0, 0), (10, 5, 3), (20, -4, 8), (30, 3, 2), (38, 12, -4), (45, 20, 5)]
+    points = Array1_gp_Pnt(1, len(pts))
+    for k, p in enumerate(pts):
+        points.SetValue(k + 1, gp_Pnt(*map(float, p)))
+    spine_curve = GeomAPI_PointsToBSpline(points).Curve()
+    spine = BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(spine_curve).Edge()).Wire()
+    start, tangent = gp_Pnt(), __import__("OCP.gp", fromlist=["gp_Vec"]).gp_Vec()
+    spine_curve.D1(spine_curve.FirstParameter(), start, tangent)
+    circle = GC_MakeCircle(gp_Ax2(start, gp_Dir(tangent)), 2.0).Value()
+    profile = BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(circle).Edge()).Wire()
+    return BRepOffsetAPI_MakePipe(spine, profile).Shape()
+
+
+def hollow_sphere_cut():
+    """A sphere shell 0.1 thick (r 20 and 19.9), its front quarter cut away towards the 3/4 view: rays enter between
+    the sheets at the cut and graze along the gap."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox, BRepPrimAPI_MakeSphere
+    from OCP.gp import gp_Pnt
+
+    shell = BRepAlgoAPI_Cut(BRepPrimAPI_MakeSphere(20.0).Shape(), BRepPrimAPI_MakeSphere(19.9).Shape()).Shape()
+    return BRepAlgoAPI_Cut(shell, BRepPrimAPI_MakeBox(gp_Pnt(0, -30, 0), gp_Pnt(30, 0, 30)).Shape()).Shape()
+
+
+def variable_fillet():
+    """A 40 × 30 × 20 box whose four top edges are filleted with radius varying 1 → 6 along each edge."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    box = BRepPrimAPI_MakeBox(40.0, 30.0, 20.0).Shape()
+    fillet = BRepFilletAPI_MakeFillet(box)
+    for edge in _edges(box):
+        first, last = BRep_Tool.Range_s(edge)
+        curve = BRep_Tool.Curve_s(edge, first, last)
+        if curve.Value(first).Z() > 19 and curve.Value(last).Z() > 19:
+            fillet.Add(1.0, 6.0, edge)
+    return fillet.Shape()
+
+
+def torus_hole_view():
+    """A full torus (R 30, r 8) whose axis points at the 3/4 view's camera: the view looks through its hole."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeTorus
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt
+
+    return BRepPrimAPI_MakeTorus(gp_Ax2(gp_Pnt(0, 0, 0), gp_Dir(*ISO_FROM)), 30.0, 8.0).Shape()
+
+
+def many_holes():
+    """A 60 × 40 plate (2 thick) with 28 holes (r 1.2) whose rims pass 0.15 from the plate's outer edges: the top and
+    bottom faces' trims have 28 holes crowding their outer loop."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.TopoDS import TopoDS_Compound
+
+    tools = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(tools)
+    r, gap = 1.2, 0.15
+    for k in range(8):
+        x = 4.0 + 7.4 * k
+        builder.Add(tools, _cylinder(x, r + gap, -1, (0, 0, 1), r, 4))
+        builder.Add(tools, _cylinder(x, 40 - r - gap, -1, (0, 0, 1), r, 4))
+    for k in range(6):
+        y = 5.0 + 6.0 * k
+        builder.Add(tools, _cylinder(r + gap, y, -1, (0, 0, 1), r, 4))
+        builder.Add(tools, _cylinder(60 - r - gap, y, -1, (0, 0, 1), r, 4))
+    return BRepAlgoAPI_Cut(BRepPrimAPI_MakeBox(60.0, 40.0, 2.0).Shape(), tools).Shape()
+
+
+def tiny_on_huge():
+    """A 2000 × 2000 × 20 slab with a 0.05 cube and a 0.02-radius pin standing on its top near the middle, and a
+    0.01 fillet on one slab edge: faces 10⁵ times smaller than their neighbours."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Fuse
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.gp import gp_Pnt
+
+    slab = BRepPrimAPI_MakeBox(gp_Pnt(-1000, -1000, -20), gp_Pnt(1000, 1000, 0)).Shape()
+    cube = BRepPrimAPI_MakeBox(gp_Pnt(3, 3, 0), gp_Pnt(3.05, 3.05, 0.05)).Shape()
+    fused = BRepAlgoAPI_Fuse(slab, cube).Shape()
+    return BRepAlgoAPI_Fuse(fused, _cylinder(-4, 2, 0, (0, 0, 1), 0.02, 0.3)).Shape()
+
+
+def periodic_bspline():
+    """A tube-like face on a B-spline surface periodic in u (Geom_BSplineSurface.SetUPeriodic), wavy radius,
+    bicubic; OCCT keeps it periodic through STEP."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.collections import Array1_double, Array1_int, Array2_gp_Pnt
+    from OCP.gp import gp_Pnt
+
+    nu, nv = 8, 5
+    net = Array2_gp_Pnt(1, nu, 1, nv)
+    for i in range(nu):
+        a = 2 * math.pi * i / nu
+        for j in range(nv):
+            r = 10.0 + 3.0 * math.sin(2 * a + j)
+            net.SetValue(i + 1, j + 1, gp_Pnt(r * math.cos(a), r * math.sin(a), 8.0 * j))
+    uk, um = Array1_double(1, nu + 1), Array1_int(1, nu + 1)
+    for k in range(nu + 1):
+        uk.SetValue(k + 1, float(k))
+        um.SetValue(k + 1, 1)
+    vk, vm = Array1_double(1, 2), Array1_int(1, 2)
+    vk.SetValue(1, 0.0), vk.SetValue(2, 1.0)
+    vm.SetValue(1, nv), vm.SetValue(2, nv)
+    surface = Geom_BSplineSurface(net, uk, vk, um, vm, 3, nv - 1, True, False)
+    return BRepBuilderAPI_MakeFace(surface, 1e-7).Face()
+
+
+def write_mirrored_assembly(path: Path) -> None:
+    """The filleted block as a STEP assembly (XCAF) of two instances, the second LOCATED by a mirror (a transform of
+    determinant -1, not a transformed copy): its faces come back turned inside out unless the reader flips them."""
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Pnt, gp_Trsf
+
+    mirror = gp_Trsf()
+    mirror.SetMirror(gp_Ax2(gp_Pnt(0, -25, 0), gp_Dir(0, 1, 0)))
+    write_assembly(filleted_block(), path, (gp_Trsf(), mirror))
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -620,6 +800,16 @@ PARTS = {
     "faces.igs": lambda p: write_iges(shelled_box(), p, mode=0),
     "sphere.3dm": write_sphere_3dm,
     "rhino_mix.3dm": write_rhino_mix_3dm,
+    "loft_skin_edge_on.step": lambda p: write_step(loft_skin_edge_on(), p),
+    "pipe_spline.step": lambda p: write_step(pipe_spline(), p),
+    "hollow_sphere_cut.step": lambda p: write_step(hollow_sphere_cut(), p),
+    "variable_fillet.step": lambda p: write_step(variable_fillet(), p),
+    "torus_hole_view.step": lambda p: write_step(torus_hole_view(), p),
+    "many_holes.step": lambda p: write_step(many_holes(), p),
+    "many_holes.igs": lambda p: write_iges(many_holes(), p, mode=0),
+    "tiny_on_huge.step": lambda p: write_step(tiny_on_huge(), p),
+    "periodic_bspline.step": lambda p: write_step(periodic_bspline(), p),
+    "mirrored_assembly.step": write_mirrored_assembly,
 }
 
 
