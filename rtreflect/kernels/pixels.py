@@ -555,21 +555,21 @@ def scatter_picked(dst, rows, src, pick):
             dst[rows[k], c] = src[pick[k], c]
 
 
-@njit(**JIT, aot=("void(f8[:, ::1], i8[::1], f8[:, ::1], f8)",))
-def spread_rows(dst, rows, src, fill):
-    """``dst[rows[k]] = src[k]`` for every k and ``fill`` in every other row: a full-size array from the rows of some
-    of its rays (``rows`` ascending), each row written once (``np.full`` then a scatter of the rows wrote the kept rows
+@njit(**JIT, aot=("void(f8[:, ::1], i8[::1], f8[:, ::1], i8[::1], f8)",))
+def spread_rows(dst, rows, src, pick, fill):
+    """``dst[rows[k]] = src[pick[k]]`` for every k and ``fill`` in every other row: a full-size array from the rows of
+    some of its rays (``rows`` ascending), each row written once (``np.full`` then `scatter_picked` wrote the kept rows
     twice). The values are copied, not computed.
 
-    Types: dst float64[:, :] (N, m), written; rows int64[:] (K, ascending, < N); src float64[:, :] (K, m); fill float64.
+    Types: dst float64[:, :] (N, m), written; rows int64[:] (K, ascending, < N); src float64[:, :] (M, m); pick
+    int64[:] (K); fill float64.
     """
     k = 0
     for i in range(dst.shape[0]):
         if k < rows.shape[0] and rows[k] == i:
             for c in range(dst.shape[1]):
-                dst[i, c] = src[k, c]
+                dst[i, c] = src[pick[k], c]
             k += 1
         else:
             for c in range(dst.shape[1]):
                 dst[i, c] = fill
-
