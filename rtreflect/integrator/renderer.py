@@ -238,13 +238,13 @@ class Renderer:
         traced = self._trace(np.take(origins, rays, axis=0), np.take(directions, rays, axis=0))  # `shade`: np.take
         # The traced rows in place, a miss's values (`Hits.blank`) in the others: float rows in one compiled pass each
         # (`kernels.pixels.spread_rows`: the full-size array written once, not filled and then scattered into).
-        n, miss, fields, every = len(origins), Hits.blank(1, np.zeros(1, dtype=bool)), {}, np.arange(len(rays))
+        n, miss, fields, order = len(origins), Hits.blank(1, np.zeros(1, dtype=bool)), {}, np.arange(len(rays))
         for name in Hits.__dataclass_fields__:
             new, blank = getattr(traced, name), getattr(miss, name)
             if blank.dtype == np.float64:
                 fields[name] = np.empty((n,) + blank.shape[1:])
-                spread_rows(fields[name].reshape(n, -1), rays,
-                            np.ascontiguousarray(new, dtype=np.float64).reshape(len(rays), -1), every, float(blank.flat[0]))
+                src = np.ascontiguousarray(new, dtype=np.float64).reshape(len(rays), -1)
+                spread_rows(fields[name].reshape(n, -1), rays, src, order, float(blank.flat[0]))
             else:
                 fields[name] = np.full(n, blank[0])
                 fields[name][rays] = new
