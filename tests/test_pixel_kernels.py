@@ -18,8 +18,8 @@ from rtreflect.exchange.scene import load_scene
 from rtreflect.integrator import film
 from rtreflect.integrator.analytic import hard_coverage, neighbours, trapezoid_cdf
 from rtreflect.integrator.cull import BOX_MARGIN, ORIGIN_MARGIN, TINY, RayBox
-from rtreflect.kernels.pixels import (bent_flags, edge_flags, footprint_ends, level_crossings, scatter_picked,
-                                      stripe_candidates)
+from rtreflect.kernels.pixels import (bent_flags, bvh_rays, edge_flags, footprint_ends, level_crossings,
+                                      scatter_picked, spread_rows, stripe_candidates)
 from rtreflect.trace.camera import Camera, sample_offsets
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -300,6 +300,44 @@ def test_scatter_picked_is_numpy_fancy_assignment_of_the_picked_rows(picked):
     want[rows] = src[pick]
     scatter_picked(dst, rows, src, pick)
     assert np.array_equal(dst, want, equal_nan=True)
+
+
+@pytest.mark.parametrize("picked", [False, True])
+def test_spread_rows_is_numpy_full_then_fancy_assignment(picked):
+    """``np.full(fill)`` then ``dst[rows] = src[pick]`` (rows ascending), into an uninitialised array whose every row
+    it writes: the tracer's first query and the renderer's merge of culled and traced rays (`Renderer.trace`)."""
+    rng = np.random.default_rng(41 if picked else 43)
+    rows = np.sort(rng.choice(1000, size=400, replace=False))
+    rows[:50] = np.arange(50)  # a run from the first row, as a tile's kept rays are
+    rows.sort()
+    rows = np.unique(rows)
+    src = rng.normal(size=(700 if picked else len(rows), 4))
+    src[::9] = np.nan
+    pick = rng.choice(700, size=len(rows), replace=False) if picked else np.arange(len(rows))
+    want = np.full((1000, 4), np.nan)
+    want[rows] = src[pick]
+    dst = np.full((1000, 4), 7.0)  # not NaN: every row must be written
+    spread_rows(dst, rows, src, pick, np.nan)
+    assert np.array_equal(dst, want, equal_nan=True)
+    spread_rows(dst, np.zeros(0, dtype=np.int64), src, np.zeros(0, dtype=np.int64), -1.0)
+    assert (dst == -1.0).all()
+
+
+@pytest.mark.parametrize("strided", [False, True])
+def test_bvh_rays_are_numpy_subtraction_and_casts_to_the_bit(strided):
+    """The rays Embree is given (`Accelerator`): float32 of (origins − centre) in float64, and float32 of the
+    directions, against the numpy form they replaced, NaN, ±inf and values float32 rounds either way included."""
+    rng = np.random.default_rng(47)
+    origins = rng.normal(size=(2000, 3)) * 1e5 + 0.1
+    directions = rng.normal(size=(2000, 3))
+    origins[::13], directions[::17], origins[5, 1], directions[7, 2] = np.nan, np.nan, np.inf, -np.inf
+    if strided:
+        origins, directions = origins[::2], directions[1::2]
+    centre = np.array([12345.678, -0.001, 3e4])
+    local, directions32 = np.empty(origins.shape, dtype=np.float32), np.empty(directions.shape, dtype=np.float32)
+    bvh_rays(origins, directions, centre, local, directions32)
+    assert np.array_equal(local.view(np.uint32), (origins - centre).astype(np.float32).view(np.uint32))
+    assert np.array_equal(directions32.view(np.uint32), directions.astype(np.float32).view(np.uint32))
 
 
 # -- the analytic path's footprint ----------------------------------------------------------------------------------

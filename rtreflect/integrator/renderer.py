@@ -42,7 +42,7 @@ from ..exchange.scene import ANALYTIC, ImageSpec, Scene
 from ..geometry.curvature import curvatures_at
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
-from ..kernels.pixels import bent_flags, footprint_ends, level_crossings, scatter_picked, stripe_candidates
+from ..kernels.pixels import bent_flags, footprint_ends, level_crossings, spread_rows, stripe_candidates
 from ..trace.secondlook import SecondLook
 from ..trace.tracing import Hits, occluded, trace
 
@@ -233,16 +233,22 @@ class Renderer:
             rays = self.ray_box.may_hit(origins, directions)
         if len(rays) == len(origins):
             return self._trace(origins, directions)
-        hits = Hits.blank(len(origins), np.zeros(len(origins), dtype=bool))
-        if len(rays):
-            traced = self._trace(np.take(origins, rays, axis=0), np.take(directions, rays, axis=0))  # `shade`: np.take
-            for name in Hits.__dataclass_fields__:
-                have, new = getattr(hits, name), getattr(traced, name)
-                if have.ndim == 2:  # P, N, S_u, S_v: compiled row copies (`kernels.pixels.scatter_picked`)
-                    scatter_picked(have, rays, np.ascontiguousarray(new), np.arange(len(rays)))
-                else:
-                    have[rays] = new
-        return hits
+        if len(rays) == 0:
+            return Hits.blank(len(origins), np.zeros(len(origins), dtype=bool))
+        traced = self._trace(np.take(origins, rays, axis=0), np.take(directions, rays, axis=0))  # `shade`: np.take
+        # The traced rows in place, a miss's values (`Hits.blank`) in the others: float rows in one compiled pass each
+        # (`kernels.pixels.spread_rows`: the full-size array written once, not filled and then scattered into).
+        n, miss, fields, order = len(origins), Hits.blank(1, np.zeros(1, dtype=bool)), {}, np.arange(len(rays))
+        for name in Hits.__dataclass_fields__:
+            new, blank = getattr(traced, name), getattr(miss, name)
+            if blank.dtype == np.float64:
+                fields[name] = np.empty((n,) + blank.shape[1:])
+                src = np.ascontiguousarray(new, dtype=np.float64).reshape(len(rays), -1)
+                spread_rows(fields[name].reshape(n, -1), rays, src, order, float(blank.flat[0]))
+            else:
+                fields[name] = np.full(n, blank[0])
+                fields[name][rays] = new
+        return Hits(**fields)
 
     def _trace(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
         if self.vertex_normals is not None:

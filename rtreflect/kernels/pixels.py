@@ -539,6 +539,24 @@ def footprint_ends(u, v, steps, u0, u1, v0, v1, ends_u, ends_v, shares):
                 ends_v[m + i] = v[i] + sign * lam * dv
 
 
+# -- rays handed to Embree (`trace.accelerator`) ------------------------------------------------------------------
+
+
+@njit(**JIT, aot=("void(f8[:, :], f8[:, :], f8[::1], f4[:, ::1], f4[:, ::1])",))
+def bvh_rays(origins, directions, centre, local, directions32):
+    """Rays in a BVH's centred float32 coordinates (`Accelerator`): ``local`` = origins − centre, subtracted in float64
+    then rounded to float32, and ``directions32`` the directions rounded to float32, as numpy's subtraction and casts
+    (the same bits) in one pass and no float64 temporary.
+
+    Types: origins, directions float64[:, :] (N, 3), any stride; centre float64[:] (3); local, directions32
+    float32[:, :] (N, 3), written.
+    """
+    for k in range(origins.shape[0]):
+        for c in range(3):
+            local[k, c] = origins[k, c] - centre[c]
+            directions32[k, c] = directions[k, c]
+
+
 # -- rows of (N, 3) arrays ------------------------------------------------------------------------------------------
 
 
@@ -553,3 +571,23 @@ def scatter_picked(dst, rows, src, pick):
     for k in range(rows.shape[0]):
         for c in range(dst.shape[1]):
             dst[rows[k], c] = src[pick[k], c]
+
+
+@njit(**JIT, aot=("void(f8[:, ::1], i8[::1], f8[:, ::1], i8[::1], f8)",))
+def spread_rows(dst, rows, src, pick, fill):
+    """``dst[rows[k]] = src[pick[k]]`` for every k and ``fill`` in every other row: a full-size array from the rows of
+    some of its rays (``rows`` ascending), each row written once (``np.full`` then `scatter_picked` wrote the kept rows
+    twice). The values are copied, not computed.
+
+    Types: dst float64[:, :] (N, m), written; rows int64[:] (K, ascending, < N); src float64[:, :] (M, m); pick
+    int64[:] (K); fill float64.
+    """
+    k = 0
+    for i in range(dst.shape[0]):
+        if k < rows.shape[0] and rows[k] == i:
+            for c in range(dst.shape[1]):
+                dst[i, c] = src[pick[k], c]
+            k += 1
+        else:
+            for c in range(dst.shape[1]):
+                dst[i, c] = fill

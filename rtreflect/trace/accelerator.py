@@ -19,6 +19,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from ..geometry.tessellation import Tessellation
+from ..kernels.pixels import bvh_rays
 
 
 class MeshHits(NamedTuple):
@@ -55,9 +56,13 @@ class Accelerator:
         eps = 2.0 * self._chord_error[patch] + 1e-6 * (self._extent + np.abs(R - self.centre).max(axis=1))
         return R + eps[:, None] * n
 
-    def _local(self, origins: np.ndarray) -> np.ndarray:
-        """Ray origins in the BVH's centred float32 coordinates (moved in float64, then converted)."""
-        return np.ascontiguousarray(np.asarray(origins, dtype=np.float64) - self.centre, dtype=np.float32)
+    def _local(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rays in the BVH's centred float32 coordinates: the origins moved in float64, then converted, and the
+        directions converted (one compiled pass, `kernels.pixels.bvh_rays`)."""
+        origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
+        local, directions32 = np.empty(origins.shape, dtype=np.float32), np.empty(directions.shape, dtype=np.float32)
+        bvh_rays(origins, directions, np.ascontiguousarray(self.centre, dtype=np.float64), local, directions32)
+        return local, directions32
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray, max_distance: np.ndarray | None = None) -> MeshHits:
         """Nearest triangle hit of each ray (within ``max_distance`` along it, when given)."""
@@ -68,8 +73,7 @@ class Accelerator:
             empty = np.zeros(0)
             return MeshHits(np.zeros(0, dtype=np.int64), empty, empty, empty)
         result = self.scene.run(
-            self._local(origins),
-            np.ascontiguousarray(directions, dtype=np.float32),
+            *self._local(origins, directions),
             query="INTERSECT",
             output=1,
             **extra,
@@ -82,8 +86,7 @@ class Accelerator:
         if len(origins) == 0:
             return np.zeros(0, dtype=bool)
         result = self.scene.run(
-            self._local(origins),
-            np.ascontiguousarray(directions, dtype=np.float32),
+            *self._local(origins, directions),
             dists=np.ascontiguousarray(np.minimum(max_distance, np.finfo(np.float32).max), dtype=np.float32),
             query="OCCLUDED",
         )

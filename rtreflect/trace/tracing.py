@@ -57,7 +57,7 @@ from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
 from ..kernels import nurbs as nurbs_kernel
 from ..kernels import rims as rims_kernel
-from ..kernels.pixels import scatter_picked
+from ..kernels.pixels import scatter_picked, spread_rows
 
 #: Newton stops once the point is this close to the ray, relative to the ray distance (or the part's size),
 #: and at least to the hit's distance from the origin: S's coordinates cannot be computed more finely than
@@ -174,12 +174,19 @@ class Hits:
     #: prefilter, the same kernel at the same point and normal), else NaN: the AOV stage computes only the NaN rows.
     curvature: np.ndarray
 
+    #: The (N, 3) and (N, 4) fields, in the order the tracer stores them (`trace`).
+    ROW_FIELDS = ("P", "Su", "Sv", "N", "curvature")
+
     @classmethod
-    def blank(cls, n: int, hit: np.ndarray) -> "Hits":
-        """Rows for n rays flagged ``hit``, every value still that of a miss: to be filled in where hit."""
+    def blank(cls, n: int, hit: np.ndarray, rows: bool = True) -> "Hits":
+        """Rows for n rays flagged ``hit``, every value still that of a miss: to be filled in where hit.
+
+        ``rows=False``: P, N, S_u, S_v and the curvatures (`ROW_FIELDS`) left uninitialised, for a caller that writes
+        each of their rows (`trace`'s first query: `kernels.pixels.spread_rows`)."""
+        new = (lambda shape: np.full(shape, np.nan)) if rows else np.empty  # noqa: E731
         return cls(hit, np.full(n, -1), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan),
-                   np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
-                   np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 4), np.nan))
+                   new((n, 3)), new((n, 3)), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
+                   new((n, 3)), new((n, 3)), new((n, 4)))
 
 
 def facing(normals: np.ndarray, directions: np.ndarray, cosine: np.ndarray | None = None) -> np.ndarray:
@@ -1097,6 +1104,19 @@ def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values:
                            np.arange(len(rows)) if isinstance(pick, slice) else pick)
 
 
+def _spread_rows(hits: Hits, rows: np.ndarray | slice, values: tuple[np.ndarray, ...], pick: np.ndarray | slice) -> None:
+    """``hits``' unwritten `Hits.ROW_FIELDS` (`Hits.blank` with ``rows=False``) as ``value[pick]`` in ``rows`` and NaN
+    (a miss's) in the others: one compiled pass each (`kernels.pixels.spread_rows`), or a copy where ``rows`` is every
+    row (a slice)."""
+    for name, value in zip(Hits.ROW_FIELDS, values):
+        target = getattr(hits, name)
+        if isinstance(rows, slice):
+            target[rows] = value[pick]
+        else:
+            spread_rows(target, rows, np.ascontiguousarray(value),
+                        np.arange(len(rows)) if isinstance(pick, slice) else pick, np.nan)
+
+
 def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet,
           origins: np.ndarray, directions: np.ndarray, clock: StageClock = NULL_CLOCK,
           max_distance: np.ndarray | None = None, clear: bool = True) -> Hits:
@@ -1108,7 +1128,7 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     """
     n = len(origins)
     far = np.full(n, np.inf) if max_distance is None else np.asarray(max_distance, dtype=np.float64)
-    hits = Hits.blank(n, np.zeros(n, dtype=bool))
+    hits = Hits.blank(n, np.zeros(n, dtype=bool), rows=False)  # its rows written whole by the first query (below)
     best = np.full(n, np.inf)  # t of the kept valid hit
     cos = np.full(n, np.nan)  # |n·D| there
     doubt = np.full(n, np.inf)  # mesh t of the nearest unresolved candidate
@@ -1170,8 +1190,11 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 normal[bad] = surfaces.normals(c.patch[bad], c.u[bad], c.v[bad], kept)
                 cosine[bad] = np.einsum("ij,ij->i", normal[bad], D[bad])
             facing(normal, D, cosine)
-            _put_rows((hits.P, hits.Su, hits.Sv, hits.N, hits.curvature), rows,
-                      (c.derivs.S, c.derivs.Su, c.derivs.Sv, normal, c.curvature), pick)
+            values = (c.derivs.S, c.derivs.Su, c.derivs.Sv, normal, c.curvature)
+            if start is None:  # the first query: the kept rows, a miss's NaN in the others, each row written once
+                _spread_rows(hits, rows, values, pick)
+            else:
+                _put_rows(tuple(getattr(hits, name) for name in Hits.ROW_FIELDS), rows, values, pick)
             cos[rows] = np.abs(cosine[pick])
         # Go on where a mesh hit behind this one could still carry a nearer exact hit.
         # An unresolved candidate does not stop the search: the exact hit may lie behind it.
@@ -1183,6 +1206,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             # test would find nothing: not asked. (Not after the last query: a ray still open there is a fallback.)
             cones.drop(O, D, mesh.prim, nxt, limit, go)
         rays, start, limit = rays[go], nxt[go], limit[go]
+    if start is None:  # no mesh hit at all (the first query broke off): the rows are still unwritten
+        _spread_rows(hits, np.zeros(0, dtype=np.int64), (np.zeros((0, 3)),) * 4 + (np.zeros((0, 4)),), slice(None))
     open_rays = rays  # still had candidates to examine after MAX_CANDIDATES
     hits.hit[:] = np.isfinite(best)
     # Unresolved candidates that may hide a nearer exact hit than the kept one (module doc).
