@@ -18,7 +18,7 @@ from rtreflect.exchange.scene import load_scene
 from rtreflect.integrator import film
 from rtreflect.integrator.analytic import hard_coverage, neighbours, trapezoid_cdf
 from rtreflect.integrator.cull import BOX_MARGIN, ORIGIN_MARGIN, TINY, RayBox
-from rtreflect.kernels.pixels import (bent_flags, bvh_rays, edge_flags, footprint_ends, level_crossings,
+from rtreflect.kernels.pixels import (bent_flags, bvh_rays, clear_far, edge_flags, footprint_ends, level_crossings,
                                       scatter_picked, spread_rows, stripe_candidates)
 from rtreflect.trace.camera import Camera, sample_offsets
 
@@ -174,6 +174,29 @@ def test_level_crossings_are_the_shifted_grid_form():
         count = level_crossings(level, padded[1:-1, 2:-2], out)
         assert count == len(expect) and out[:count].tolist() == expect
         assert (out[count:] == -1).all()
+
+
+def test_clear_far_is_the_numpy_bound_over_the_neighbours():
+    """`Renderer._across_levels`' bound as numpy had it: fmax.reduce of |σ_n − σ| (NaN passed over), then
+    |σ| − m > reach clears the pixel unless it is unknown (a NaN σ keeps it)."""
+    rng = np.random.default_rng(31)
+    for count in (0, 1, 57):
+        sigma = rng.uniform(-0.3, 0.3, size=count)
+        sigma_n = sigma + rng.uniform(-0.1, 0.1, size=(8, count))
+        sigma_n[rng.uniform(size=sigma_n.shape) < 0.2] = np.nan
+        sigma[rng.uniform(size=count) < 0.1] = np.nan
+        unknown = rng.uniform(size=count) < 0.2
+        at = rng.permutation(2 * count + 1)[:count]
+        with np.errstate(invalid="ignore"):
+            move = np.fmax.reduce(np.abs(sigma_n - sigma), axis=0, initial=0.0)
+            far = ~unknown & (np.abs(sigma) - move > 0.06)
+        want = np.ones(2 * count + 1, dtype=bool)
+        want[at[far]] = False
+        got = np.ones(2 * count + 1, dtype=bool)
+        places = np.stack([at, at], axis=1)[:, 0]  # a strided column, as the renderer passes its pixels
+        clear_far(sigma_n, sigma, unknown, 0.06, places, got)
+        assert np.array_equal(got, want)
+        assert count < 57 or 0 < far.sum() < count  # both outcomes exercised
 
 
 def test_bent_and_edge_flags_are_the_shifted_grid_form():

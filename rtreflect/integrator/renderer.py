@@ -42,7 +42,8 @@ from ..exchange.scene import ANALYTIC, ImageSpec, Scene
 from ..geometry.curvature import curvatures_at
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import tessellate
-from ..kernels.pixels import bent_flags, footprint_ends, level_crossings, spread_rows, stripe_candidates
+from ..kernels.pixels import (bent_flags, clear_far, footprint_ends, level_crossings, spread_rows,
+                              stripe_candidates)
 from ..trace.secondlook import SecondLook
 from ..trace.tracing import Hits, occluded, trace
 
@@ -575,13 +576,13 @@ class Renderer:
         """``want`` (a (rows, columns) grid of the window's pixels) cleared in place where a pixel that
         `stripe_candidates` kept for a neighbour on another level is bounded away from its own stripe after all.
 
-        The bound is `stripe_candidates`' own, |σ| − m > reach with m the largest |σ_n − σ| over the 8 neighbours
-        (NaN ones passed over), each neighbour's σ_n taken to the pixel's level k (`modes.base.level_offset` at the
-        neighbour's hit): σ is smooth across the switch of the nearest level, so it moves to a neighbour on another
-        level as to any other. Between two stripes, where the nearest level switches, a third of the peer scene's
-        candidates were such pixels, each costing the gradient's four surface evaluations (`centre_stripes`); where
-        the stripes crowd σ_k moves by about a spacing to the next pixel and the pixel stays. A neighbour without a
-        hit (no σ_k there) keeps the pixel, as before.
+        The bound is `stripe_candidates`' own (both kernels call `kernels.pixels._may_reach`; here `clear_far`), |σ| − m
+        > reach with m the largest |σ_n − σ| over the 8 neighbours (NaN ones passed over), each neighbour's σ_n taken to
+        the pixel's level k (`modes.base.level_offset` at the neighbour's hit): σ is smooth across the switch of the
+        nearest level, so it moves to a neighbour on another level as to any other. Between two stripes, where the
+        nearest level switches, a third of the peer scene's candidates were such pixels, each costing the gradient's
+        four surface evaluations (`centre_stripes`); where the stripes crowd σ_k moves by about a spacing to the next
+        pixel and the pixel stays. A neighbour without a hit (no σ_k there) keeps the pixel, as before.
         """
         rs, cs = crop
         crop_want = want[rs, cs]
@@ -604,10 +605,7 @@ class Renderer:
             points = SurfacePoints(*(np.take(x, other, axis=0) for x in (hits.P, hits.N, shading.s)), hits.patch[other],
                                    hits.u[other], hits.v[other])
             sn[where] = level_offset(self.mode, points, k[where[1]])
-        with np.errstate(invalid="ignore"):
-            move = np.fmax.reduce(np.abs(sn - s0), axis=0, initial=0.0)  # NaN passed over, as numpy.fmax
-            far = ~unknown & (np.abs(s0) - move > self.stripe_reach)
-        want.ravel()[at[far]] = False
+        clear_far(sn, s0, unknown, float(self.stripe_reach), at, want.reshape(-1))  # the bound, compiled once
 
     def stripe_offsets(self, shading: Shading) -> np.ndarray:
         """Per ray the signed offset σ from its nearest level's centre (`modes.base.level_offset`), NaN where none is:

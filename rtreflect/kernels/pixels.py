@@ -180,6 +180,19 @@ def _clamp(i, n):
     return 0 if i < 0 else (n - 1 if i >= n else i)
 
 
+@njit(inline="always", **JIT)
+def _moved(move, s_n, s0):
+    """The largest |σ_n − σ| so far, ``move``, with neighbour σ_n's (numpy.fmax: a NaN σ_n passed over)."""
+    return _fmax(move, abs(s_n - s0))
+
+
+@njit(inline="always", **JIT)
+def _may_reach(s0, move, reach):
+    """The pixel's footprint may reach its stripe: |σ| − m ≤ ``reach``, m = ``move`` the most σ moves to a neighbour's
+    centre (about |g_x| + |g_y|, twice what it moves within the pixel: `Renderer._render_analytic`). False for σ NaN."""
+    return abs(s0) - move <= reach
+
+
 @njit(**JIT, aot=(
     "void(i8[:, :], f8[:, :], f8, b1[:, :])",
     "void(i8[:, ::1], f8[:, ::1], f8, b1[:, ::1])",
@@ -203,8 +216,30 @@ def stripe_candidates(level, sigma, reach, want):
                         continue
                     a, b = _clamp(i + dr, rows), _clamp(j + dc, cols)
                     mixed = mixed or level[a, b] != k0
-                    move = _fmax(move, abs(sigma[a, b] - s0))
-            want[i, j] = k0 >= 0 and (mixed or abs(s0) - move <= reach)
+                    move = _moved(move, sigma[a, b], s0)
+            want[i, j] = k0 >= 0 and (mixed or _may_reach(s0, move, reach))
+
+
+@njit(**JIT, aot=(
+    "void(f8[:, ::1], f8[::1], b1[::1], f8, i8[:], b1[::1])",
+))
+def clear_far(sigma_n, sigma, unknown, reach, at, want):
+    """``want[at[p]]`` cleared where pixel p is bounded away from its stripe: `stripe_candidates`' bound, not
+    |σ| − m ≤ ``reach`` with m the largest |σ_n − σ| over its 8 neighbours (column p of ``sigma_n``; NaN ones passed
+    over), unless ``unknown[p]`` or its σ is NaN (`Renderer._across_levels`).
+
+    Types: sigma_n float64[:, ::1] (8, P); sigma float64[::1] (P); unknown bool[::1] (P); reach float64;
+    at int64[:] (P); want bool[::1], written (the window's pixels).
+    """
+    for p in range(sigma.shape[0]):
+        s0 = sigma[p]
+        if unknown[p] or s0 != s0:
+            continue
+        move = 0.0
+        for n in range(sigma_n.shape[0]):
+            move = _moved(move, sigma_n[n, p], s0)
+        if not _may_reach(s0, move, reach):
+            want[at[p]] = False
 
 
 @njit(**JIT, aot=(
