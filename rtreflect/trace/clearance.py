@@ -76,6 +76,12 @@ PAYBACK_RAYS_PER_TRIANGLE = 218
 SLIVER_SINE = 1e-9
 #: Relative pad on the radii and distances the pairs are chosen by (float64 rounding: a superset is safe).
 PAD = 1e-9
+#: The grid's cube numbers are found with this relative pad on the scene's scale (`_slopes`): a superset is safe.
+GRID_PAD = 4e-9
+#: A grid's cube side, in a search's half-width (`_slopes`): finer cubes visit fewer far triangles, more cubes.
+GRID_CELL = 0.5
+#: A grid's cubes per triangle at most (`_slopes`).
+GRID_CUBES_PER_TRIANGLE = 4.0
 
 _lock = threading.Lock()
 
@@ -145,35 +151,39 @@ def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
     _, first_copy = np.unique(vertices32, axis=0, return_inverse=True)
     canon = np.ascontiguousarray(first_copy.reshape(-1)[faces], dtype=np.int64)
     slope = np.where(good, 0.0, np.inf)
-    for first, second in _pairs(centre, radius, reach):
-        kernel.pair_slopes(vertices, faces, canon, normal, first, second, slope)
+    _slopes(vertices, faces, canon, normal, np.ascontiguousarray(centre), radius, reach, slope)
     corners = np.ascontiguousarray(vertices[faces].reshape(-1, 9))
     return Cones(corners, normal, np.ascontiguousarray(centre), radius, slope,
                  np.asarray(accelerator.centre, dtype=np.float64), EMBREE_FRACTION * rounding, reach)
 
 
-def _pairs(centre: np.ndarray, radius: np.ndarray, reach: float):
-    """Blocks of (T, T') index arrays, both orders, covering every pair with |c_T − c_T'| ≤ r_T + reach + r_T'
-    (and some farther ones), from k-d trees per size class (radii within a factor 2)."""
-    from scipy.spatial import cKDTree  # noqa: PLC0415 (as `Tessellation`'s trees: only where needed)
-
-    if len(centre) == 0:
+def _slopes(vertices: np.ndarray, faces: np.ndarray, canon: np.ndarray, normal: np.ndarray, centre: np.ndarray,
+            radius: np.ndarray, reach: float, slope: np.ndarray) -> None:
+    """τ_T into ``slope`` over every pair with |c_T − c_T'| ≤ (r_T + reach + r_T')(1 + `PAD`): per class of triangle
+    size (radii within a factor 2, so a few large triangles beside many small ones do not widen every search) a
+    uniform grid of cubes about a search's width files the class's triangles by centre, and every T meets those of
+    the cubes within r_T + reach + the class's largest radius (`kernels.clearance.ball_slopes`)."""
+    count = len(centre)
+    if count == 0:
         return
     floor = max(float(radius.min()), 1e-300)
     size_class = np.floor(np.log2(radius / floor)).astype(np.int64)
-    groups = [np.flatnonzero(size_class == k) for k in np.unique(size_class)]
-    trees = [cKDTree(centre[g]) for g in groups]
-    for i, (ga, ta) in enumerate(zip(groups, trees)):
-        for gb, tb in zip(groups[i:], trees[i:]):
-            bound = (float(radius[ga].max()) + reach + float(radius[gb].max())) * (1.0 + PAD)
-            if ga is gb:  # within a class: each pair once (query_pairs: i < j), no distances kept
-                near = ta.query_pairs(bound, output_type="ndarray")
-                first, second = ga[near[:, 0]], ga[near[:, 1]]
-            else:
-                near = ta.sparse_distance_matrix(tb, bound, output_type="ndarray")
-                first, second = ga[near["i"]], gb[near["j"]]
-            gap = np.linalg.norm(centre[first] - centre[second], axis=1)
-            keep = gap <= (radius[first] + reach + radius[second]) * (1.0 + PAD)
-            first, second = first[keep], second[keep]
-            yield first, second
-            yield second, first
+    # The cube numbers' float64 rounding, as a distance: a superset of the cubes is safe.
+    margin = GRID_PAD * (float(np.abs(centre).max()) + float(radius.max()) + reach)
+    typical = float(np.median(radius))
+    for k in np.unique(size_class):
+        group = np.flatnonzero(size_class == k)
+        widest = float(radius[group].max())
+        low = centre[group].min(axis=0) - margin
+        span = centre[group].max(axis=0) + margin - low
+        cell = max(GRID_CELL * (typical + reach + widest), margin)
+        # Not many more cubes than triangles: a class's few triangles scattered far apart need no fine grid.
+        cell = max(cell, float(np.prod(span + cell)) ** (1.0 / 3.0) / (GRID_CUBES_PER_TRIANGLE * len(group)) ** (1.0 / 3.0))
+        cells = np.floor(span / cell).astype(np.int64) + 1
+        where = np.clip(np.floor((centre[group] - low) / cell).astype(np.int64), 0, cells - 1)
+        number = (where[:, 0] * cells[1] + where[:, 1]) * cells[2] + where[:, 2]
+        order = np.argsort(number, kind="stable")
+        start = np.zeros(int(np.prod(cells)) + 1, dtype=np.int64)
+        np.cumsum(np.bincount(number, minlength=len(start) - 1), out=start[1:])
+        kernel.ball_slopes(vertices, faces, canon, normal, centre, radius, size_class, reach, PAD, low, cell, cells,
+                           start, np.ascontiguousarray(group[order]), widest, margin, 0, count, slope)
