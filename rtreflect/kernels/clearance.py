@@ -225,23 +225,30 @@ def _to_triangle(corner, n0, n1, n2, p0, p1, p2):
     """Distance from the point p in the plane of the triangle ``corner`` (9 coordinates) with unit normal n to it:
     0 inside (p on the inner side of every edge), else the least distance to an edge segment (an upper bound where
     an edge's side test and its segment disagree by rounding: the segment's distance is always at least the true one)."""
+    # The side tests first: the point just past a ray's mesh hit on the triangle is nearly always inside it.
     inside = True
-    best = math.inf
     for e in range(3):
         a0, a1, a2 = corner[3 * e], corner[3 * e + 1], corner[3 * e + 2]
         q = (e + 1) % 3
-        b0, b1, b2 = corner[3 * q], corner[3 * q + 1], corner[3 * q + 2]
         r = (e + 2) % 3
-        e0, e1, e2 = b0 - a0, b1 - a1, b2 - a2
+        e0, e1, e2 = corner[3 * q] - a0, corner[3 * q + 1] - a1, corner[3 * q + 2] - a2
         # Inner side: the same side of the edge as the third corner.
         o0, o1, o2 = e1 * n2 - e2 * n1, e2 * n0 - e0 * n2, e0 * n1 - e1 * n0
         third = o0 * (corner[3 * r] - a0) + o1 * (corner[3 * r + 1] - a1) + o2 * (corner[3 * r + 2] - a2)
         side = o0 * (p0 - a0) + o1 * (p1 - a1) + o2 * (p2 - a2)
         if not side * third >= 0.0:
             inside = False
+            break
+    if inside:
+        return 0.0
+    best = math.inf
+    for e in range(3):
+        a0, a1, a2 = corner[3 * e], corner[3 * e + 1], corner[3 * e + 2]
+        q = (e + 1) % 3
+        e0, e1, e2 = corner[3 * q] - a0, corner[3 * q + 1] - a1, corner[3 * q + 2] - a2
         ee = e0 * e0 + e1 * e1 + e2 * e2
         s = ((p0 - a0) * e0 + (p1 - a1) * e1 + (p2 - a2) * e2) / ee if ee > 0.0 else 0.0
         s = min(max(s, 0.0), 1.0)
         g0, g1, g2 = p0 - a0 - s * e0, p1 - a1 - s * e1, p2 - a2 - s * e2
         best = min(best, math.sqrt(g0 * g0 + g1 * g1 + g2 * g2))
-    return 0.0 if inside else best
+    return best

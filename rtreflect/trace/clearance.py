@@ -32,7 +32,9 @@ only once the BVH has traced as many rays without them as the build would have s
 
 from __future__ import annotations
 
+import os
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,6 +82,9 @@ PAD = 1e-9
 GRID_PAD = 4e-9
 #: A grid's cube side, in a search's half-width (`_slopes`): finer cubes visit fewer far triangles, more cubes.
 GRID_CELL = 0.5
+#: Threads of the slopes' kernel: the build runs while a render's other tile threads wait for it (`cones`'s lock),
+#: so on their cores (the renderer's `default_threads`).
+BUILD_THREADS = min(2, os.cpu_count() or 1)
 #: A grid's cubes per triangle at most (`_slopes`).
 GRID_CUBES_PER_TRIANGLE = 4.0
 
@@ -185,5 +190,14 @@ def _slopes(vertices: np.ndarray, faces: np.ndarray, canon: np.ndarray, normal: 
         order = np.argsort(number, kind="stable")
         start = np.zeros(int(np.prod(cells)) + 1, dtype=np.int64)
         np.cumsum(np.bincount(number, minlength=len(start) - 1), out=start[1:])
-        kernel.ball_slopes(vertices, faces, canon, normal, centre, radius, size_class, reach, PAD, low, cell, cells,
-                           start, np.ascontiguousarray(group[order]), widest, margin, 0, count, slope)
+        members = np.ascontiguousarray(group[order])
+        grid = (low, cell, cells, start, members, widest, margin)
+        # Each T's slope is its own: the threads take disjoint runs of T (the kernel releases the GIL).
+        bounds = np.linspace(0, count, BUILD_THREADS + 1).astype(np.int64)
+        run = lambda lo, hi: kernel.ball_slopes(vertices, faces, canon, normal, centre, radius, size_class,  # noqa: E731
+                                                reach, PAD, *grid, int(lo), int(hi), slope)
+        if BUILD_THREADS == 1:
+            run(0, count)
+        else:
+            with ThreadPoolExecutor(BUILD_THREADS) as pool:
+                list(pool.map(run, bounds[:-1], bounds[1:]))
