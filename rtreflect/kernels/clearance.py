@@ -33,7 +33,7 @@ def ball_slopes(vertices, faces, canon, normal, centre, radius, size_class, reac
     those of the cubes its box c_T ± ((r_T + reach + widest)(1 + pad) + ``margin``) spans: a superset of its pairs
     (their L∞ distance is at most their distance; ``margin``: the float64 rounding of the cube numbers). A pair's
     distance test is the same float64 expression for either order, taken from its member of the lower
-    (``size_class``, index), as `trace.clearance`'s k-d trees took it.
+    (``size_class``, index), as the k-d trees that found them before took it (the same slopes, bit for bit).
 
     With h = n·(X − a₀)
     (n T's unit normal) and, for a line in T's plane through its anchor p with outward unit normal o (T on the
@@ -109,7 +109,7 @@ def ball_slopes(vertices, faces, canon, normal, centre, radius, size_class, reac
                         j = members[slot]
                         if j == i:
                             continue
-                        # The pair's test as the k-d trees' pairs took it: from its lower (size class, index).
+                        # The pair's test in one order whichever T is: from its lower (size class, index).
                         lower = size_class[i] < size_class[j] or (size_class[i] == size_class[j] and i < j)
                         f, s = (i, j) if lower else (j, i)
                         y0 = centre[f, 0] - centre[s, 0]

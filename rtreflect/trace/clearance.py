@@ -20,11 +20,11 @@ within ε of the segment: T itself neither (its points have h = 0 < g − ε). �
 of its angle) has T on its inner side, so its signed distance δ(X) = o·(X − p) ≤ λ(X); h and δ are affine on T',
 so |h| ≤ ρ δ on all of T' with ρ the largest |h_k|/δ_k over its corners, wherever every δ_k ≥ 0 (a corner T'
 shares with T has h = 0: the same float32 point, `canon`). The least ρ over T's six lines bounds the pair (none
-placed so: ∞); τ_T is the largest over the pairs (`kernels.clearance.pair_slopes`). A neighbour across an edge
+placed so: ∞); τ_T is the largest over the pairs (`kernels.clearance.ball_slopes`). A neighbour across an edge
 bent by β gives ρ = tan β–like values: rays steeper than the mesh's local bend are cleared, grazing ones asked.
 
-The pairs come from k-d trees over the centroids, one per class of triangle size (radii within a factor 2), so a
-few large triangles beside many small ones do not widen every search. Built once per BVH (thread-safe), used only
+The pairs come from a uniform grid of cubes per class of triangle size (radii within a factor 2, so a few large
+triangles beside many small ones do not widen every search), searched and measured in the same compiled pass. Built once per BVH (thread-safe), used only
 in traces of at least `MIN_RAYS` rays (the second look's finer mesh, traced for a few suspects, never pays), and
 only once the BVH has traced as many rays without them as the build would have saved by then
 (`PAYBACK_RAYS_PER_TRIANGLE`: a single render at one sample per pixel does not build them; a long or repeated one does).
