@@ -109,14 +109,15 @@ def ball_slopes(vertices, faces, canon, normal, centre, radius, size_class, reac
                         j = members[slot]
                         if j == i:
                             continue
-                        # The pair's test in one order whichever T is: from its lower (size class, index).
+                        # The pair's test as one expression whichever T is: the distance's squares do not depend
+                        # on the order, the radii's sum is taken from the lower (size class, index).
+                        y0 = centre[i, 0] - centre[j, 0]
+                        y1 = centre[i, 1] - centre[j, 1]
+                        y2 = centre[i, 2] - centre[j, 2]
                         lower = size_class[i] < size_class[j] or (size_class[i] == size_class[j] and i < j)
-                        f, s = (i, j) if lower else (j, i)
-                        y0 = centre[f, 0] - centre[s, 0]
-                        y1 = centre[f, 1] - centre[s, 1]
-                        y2 = centre[f, 2] - centre[s, 2]
-                        if not (math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-                                <= (radius[f] + reach + radius[s]) * (1.0 + pad)):
+                        rf = radius[i] if lower else radius[j]
+                        rs = radius[j] if lower else radius[i]
+                        if not math.sqrt(y0 * y0 + y1 * y1 + y2 * y2) <= (rf + reach + rs) * (1.0 + pad):
                             continue
                         _pair_slope(vertices, faces, canon, i, j, n0, n1, n2, lines, anchor, valid, h, shared,
                                     other, slope)
