@@ -24,10 +24,11 @@ placed so: ∞); τ_T is the largest over the pairs (`kernels.clearance.ball_slo
 bent by β gives ρ = tan β–like values: rays steeper than the mesh's local bend are cleared, grazing ones asked.
 
 The pairs come from a uniform grid of cubes per class of triangle size (radii within a factor 2, so a few large
-triangles beside many small ones do not widen every search), searched and measured in the same compiled pass. Built once per BVH (thread-safe), used only
-in traces of at least `MIN_RAYS` rays (the second look's finer mesh, traced for a few suspects, never pays), and
-only once the BVH has traced as many rays without them as the build would have saved by then
-(`PAYBACK_RAYS_PER_TRIANGLE`: a single render at one sample per pixel does not build them; a long or repeated one does).
+triangles beside many small ones do not widen every search), searched and measured in one compiled pass on
+`BUILD_THREADS` threads. Built once per BVH (thread-safe), used only in traces of at least `MIN_RAYS` rays (the
+second look's finer mesh, traced for a few suspects, never pays), and only once the BVH has traced as many rays
+without them as the build would have saved by then (`PAYBACK_RAYS_PER_TRIANGLE`), or at once where the render
+under way will trace that many (`expect`).
 """
 
 from __future__ import annotations
@@ -69,11 +70,13 @@ REACH_PER_RADIUS = 1.0
 MIN_RAYS = 4096
 #: The cones are built once a BVH has traced this many rays per triangle without them, as many as their build
 #: would have saved by then (ski rental: whatever the renders to come, at most twice the cheaper of never and at
-#: once). Measured on `bench/render_bench.py`'s scene (25,088 triangles, one thread, CPU): the build costs 0.21 s,
-#: ~8.5 µs a triangle; prebuilt, they save 0.08 s of a full-HD render's 1.52 s, ~39 ns a ray: 218 rays a triangle.
-#: A single full-HD render at one sample (83 a triangle) never pays for them; a render at `samples = 4` or a
-#: series of renders of one scene does (`bench/render_bench.py` prints the build's cost).
-PAYBACK_RAYS_PER_TRIANGLE = 218
+#: once), or at a render's first trace where that render alone traces this many (`expect`: the rays to come are
+#: known). Measured on `bench/render_bench.py`'s scene (25,088 triangles, one thread, CPU, a loaded machine,
+#: A/B in one process): the build costs 0.145 s (0.142-0.149), ~5.8 µs a triangle; prebuilt, they save
+#: 0.153 s (0.107-0.211) of a full-HD render's ~2.5 s, ~74 ns a ray (52-102): 78 rays a triangle, rounded to 80.
+#: A full-HD render at one sample (83 a triangle) builds them first thing and about breaks even; the renders of
+#: that scene after it save the whole 0.15 s.
+PAYBACK_RAYS_PER_TRIANGLE = 80
 #: Triangles whose corner angle at their first corner has a smaller sine get no cone (the normal's rounding).
 SLIVER_SINE = 1e-9
 #: Relative pad on the radii and distances the pairs are chosen by (float64 rounding: a superset is safe).
@@ -116,18 +119,27 @@ class Cones:
 
 def cones(accelerator: Accelerator, tessellation: Tessellation, rounding: float, rays: int) -> Cones | None:
     """The BVH's clearance cones for a trace of ``rays`` rays (``rounding``: `tracing.float32_rounding` of the
-    tessellation): None until the BVH has traced `PAYBACK_RAYS_PER_TRIANGLE` rays a triangle, then built once, or
-    None for good where they would cost more than they clear (`REACH_PER_RADIUS`)."""
+    tessellation): None until the BVH has traced, or a render under way will have traced (`expect`),
+    `PAYBACK_RAYS_PER_TRIANGLE` rays a triangle, then built once, or None for good where they would cost more than
+    they clear (`REACH_PER_RADIUS`)."""
     state = accelerator.__dict__
     if "_cones" not in state:
         with _lock:
             if "_cones" not in state:
                 traced = state.get("_traced_without_cones", 0) + rays
                 state["_traced_without_cones"] = traced
-                if traced < PAYBACK_RAYS_PER_TRIANGLE * len(accelerator._faces):
+                if max(traced, state.get("_expected_by", 0)) < PAYBACK_RAYS_PER_TRIANGLE * len(accelerator._faces):
                     return None
                 state["_cones"] = build(accelerator, tessellation, rounding, REACH_PER_RADIUS)
     return state["_cones"]
+
+
+def expect(accelerator: Accelerator, rays: int) -> None:
+    """A render about to trace at least ``rays`` rays on the BVH: where they reach the payback, the cones are built
+    at its first trace rather than once that many are traced (the rays to come are known, not rented)."""
+    state = accelerator.__dict__
+    with _lock:
+        state["_expected_by"] = state.get("_traced_without_cones", 0) + rays
 
 
 def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
