@@ -35,9 +35,9 @@ def ball_slopes(vertices, faces, canon, normal, centre, radius, size_class, reac
     distance test is the same float64 expression for either order, taken from its member of the lower
     (``size_class``, index), as the k-d trees that found them before took it (the same slopes, bit for bit).
 
-    With h = n·(X − a₀)
-    (n T's unit normal) and, for a line in T's plane through its anchor p with outward unit normal o (T on the
-    side o·(X − p) ≤ 0: an edge's outward normal, or at a vertex minus the bisector of its angle), δ = o·(X − p):
+    With h = n·(X − a₀) (n T's unit normal) and, for a line in T's plane through its anchor p with outward unit
+    normal o (T on the side o·(X − p) ≤ 0: an edge's outward normal, or at a vertex minus the bisector of its
+    angle), δ = o·(X − p):
     on T' (convex; h and δ affine) |h| ≤ ρ δ with ρ = max |h_k|/δ_k over its vertices wherever every δ_k ≥ 0 and
     δ_k > 0 where h_k ≠ 0. A vertex T' shares with T (``canon``: the same float32 point) has h = 0 exactly, and
     δ = 0 exactly when it lies on the line (the anchor, or the edge's other end). Lines for which T' is not so
