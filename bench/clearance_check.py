@@ -45,12 +45,15 @@ def check(path: Path, width: int, height: int) -> tuple[int, int, int, int]:
             counts[2] += int(found.sum())
 
     clearance.Cones.drop = drop
+    payback = clearance.PAYBACK_RAYS_PER_TRIANGLE
+    clearance.PAYBACK_RAYS_PER_TRIANGLE = 0  # built for the first trace: every input's cones are checked
     try:
         for first in range(0, len(origins), 1 << 16):  # the renderer's tiles
             span = slice(first, first + (1 << 16))
             trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins[span], directions[span])
     finally:
         clearance.Cones.drop = original
+        clearance.PAYBACK_RAYS_PER_TRIANGLE = payback
     return (len(origins), *counts)
 
 

@@ -139,3 +139,16 @@ def test_cones_are_built_once_the_bvh_has_traced_their_payback(monkeypatch):
     built = clearance.cones(accelerator, scene, rounding, clearance.MIN_RAYS)
     assert built is not None and np.isfinite(built.slope).any()
     assert clearance.cones(accelerator, scene, rounding, clearance.MIN_RAYS) is built
+
+
+def test_a_render_that_will_trace_their_payback_builds_them_at_its_first_trace(monkeypatch):
+    """`clearance.expect`: the rays a render is about to trace count ahead, so its first trace builds the cones; a
+    render that will trace fewer leaves them to the ski rental."""
+    scene = folded_scene(0.002)
+    small, large = Accelerator(scene), Accelerator(scene)
+    monkeypatch.setattr(clearance, "PAYBACK_RAYS_PER_TRIANGLE", 3 * clearance.MIN_RAYS / len(small._faces))
+    rounding = float32_rounding(scene)
+    clearance.expect(small, 2 * clearance.MIN_RAYS)
+    assert clearance.cones(small, scene, rounding, clearance.MIN_RAYS) is None
+    clearance.expect(large, 3 * clearance.MIN_RAYS)
+    assert clearance.cones(large, scene, rounding, clearance.MIN_RAYS) is not None

@@ -24,6 +24,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
+from ..trace import clearance
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
@@ -704,6 +705,8 @@ class Renderer:
         and fallbacks as tiles are yielded. ``film``: each tile is rendered straight into its span of it
         (`Film.span`; the tile's pixels are that view), else into an array of its own.
         """
+        image = self.scene.image
+        clearance.expect(self.accelerator, image.width * image.height * rays_per_pixel(image.samples))
         for tile in self._tiles_in_order(threads or default_threads(), self.spans(rays_per_tile), film):
             if stats is not None:
                 stats.rays += tile.rays

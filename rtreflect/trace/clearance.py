@@ -20,19 +20,22 @@ within ε of the segment: T itself neither (its points have h = 0 < g − ε). �
 of its angle) has T on its inner side, so its signed distance δ(X) = o·(X − p) ≤ λ(X); h and δ are affine on T',
 so |h| ≤ ρ δ on all of T' with ρ the largest |h_k|/δ_k over its corners, wherever every δ_k ≥ 0 (a corner T'
 shares with T has h = 0: the same float32 point, `canon`). The least ρ over T's six lines bounds the pair (none
-placed so: ∞); τ_T is the largest over the pairs (`kernels.clearance.pair_slopes`). A neighbour across an edge
+placed so: ∞); τ_T is the largest over the pairs (`kernels.clearance.ball_slopes`). A neighbour across an edge
 bent by β gives ρ = tan β–like values: rays steeper than the mesh's local bend are cleared, grazing ones asked.
 
-The pairs come from k-d trees over the centroids, one per class of triangle size (radii within a factor 2), so a
-few large triangles beside many small ones do not widen every search. Built once per BVH (thread-safe), used only
-in traces of at least `MIN_RAYS` rays (the second look's finer mesh, traced for a few suspects, never pays), and
-only once the BVH has traced as many rays without them as the build would have saved by then
-(`PAYBACK_RAYS_PER_TRIANGLE`: a single render at one sample per pixel does not build them; a long or repeated one does).
+The pairs come from a uniform grid of cubes per class of triangle size (radii within a factor 2, so a few large
+triangles beside many small ones do not widen every search), searched and measured in one compiled pass on
+`BUILD_THREADS` threads. Built once per BVH (thread-safe), used only in traces of at least `MIN_RAYS` rays (the
+second look's finer mesh, traced for a few suspects, never pays), and only once the BVH has traced as many rays
+without them as the build would have saved by then (`PAYBACK_RAYS_PER_TRIANGLE`), or at once where the render
+under way will trace that many (`expect`).
 """
 
 from __future__ import annotations
 
+import os
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,15 +70,28 @@ REACH_PER_RADIUS = 1.0
 MIN_RAYS = 4096
 #: The cones are built once a BVH has traced this many rays per triangle without them, as many as their build
 #: would have saved by then (ski rental: whatever the renders to come, at most twice the cheaper of never and at
-#: once). Measured on `bench/render_bench.py`'s scene (25,088 triangles, one thread, CPU): the build costs 0.21 s,
-#: ~8.5 µs a triangle; prebuilt, they save 0.08 s of a full-HD render's 1.52 s, ~39 ns a ray: 218 rays a triangle.
-#: A single full-HD render at one sample (83 a triangle) never pays for them; a render at `samples = 4` or a
-#: series of renders of one scene does (`bench/render_bench.py` prints the build's cost).
-PAYBACK_RAYS_PER_TRIANGLE = 218
+#: once), or at a render's first trace where that render alone traces this many (`expect`: the rays to come are
+#: known). Measured on `bench/render_bench.py`'s scene (25,088 triangles, one thread, CPU, a loaded machine,
+#: A/B in one process): the build costs 0.145 s (0.142-0.149), ~5.8 µs a triangle; prebuilt, they save
+#: 0.153 s (0.107-0.211) of a full-HD render's ~2.5 s, ~74 ns a ray (52-102): 78 rays a triangle, rounded to 80.
+#: A full-HD render at one sample (83 a triangle) builds them first thing and about breaks even; the renders of
+#: that scene after it save the whole 0.15 s. The saving is per ray that hits the mesh (72 % of these): the peer
+#: scene (bench/peer.toml, 4,608 triangles, 17 % hit) builds them at 112 rays a triangle for 0.024 s and saves
+#: 0.008-0.019 s a render, so its first render costs that much more (counting hits instead of rays would not).
+PAYBACK_RAYS_PER_TRIANGLE = 80
 #: Triangles whose corner angle at their first corner has a smaller sine get no cone (the normal's rounding).
 SLIVER_SINE = 1e-9
 #: Relative pad on the radii and distances the pairs are chosen by (float64 rounding: a superset is safe).
 PAD = 1e-9
+#: The grid's cube numbers are found with this relative pad on the scene's scale (`_slopes`): a superset is safe.
+GRID_PAD = 4e-9
+#: A grid's cube side, in a search's half-width (`_slopes`): finer cubes visit fewer far triangles, more cubes.
+GRID_CELL = 0.5
+#: Threads of the slopes' kernel: the build runs while a render's other tile threads wait for it (`cones`'s lock),
+#: so on their cores (the renderer's `default_threads`).
+BUILD_THREADS = min(2, os.cpu_count() or 1)
+#: A grid's cubes per triangle at most (`_slopes`).
+GRID_CUBES_PER_TRIANGLE = 4.0
 
 _lock = threading.Lock()
 
@@ -105,18 +121,27 @@ class Cones:
 
 def cones(accelerator: Accelerator, tessellation: Tessellation, rounding: float, rays: int) -> Cones | None:
     """The BVH's clearance cones for a trace of ``rays`` rays (``rounding``: `tracing.float32_rounding` of the
-    tessellation): None until the BVH has traced `PAYBACK_RAYS_PER_TRIANGLE` rays a triangle, then built once, or
-    None for good where they would cost more than they clear (`REACH_PER_RADIUS`)."""
+    tessellation): None until the BVH has traced, or a render under way will have traced (`expect`),
+    `PAYBACK_RAYS_PER_TRIANGLE` rays a triangle, then built once, or None for good where they would cost more than
+    they clear (`REACH_PER_RADIUS`)."""
     state = accelerator.__dict__
     if "_cones" not in state:
         with _lock:
             if "_cones" not in state:
                 traced = state.get("_traced_without_cones", 0) + rays
                 state["_traced_without_cones"] = traced
-                if traced < PAYBACK_RAYS_PER_TRIANGLE * len(accelerator._faces):
+                if max(traced, state.get("_expected_by", 0)) < PAYBACK_RAYS_PER_TRIANGLE * len(accelerator._faces):
                     return None
                 state["_cones"] = build(accelerator, tessellation, rounding, REACH_PER_RADIUS)
     return state["_cones"]
+
+
+def expect(accelerator: Accelerator, rays: int) -> None:
+    """A render about to trace at least ``rays`` rays on the BVH: where they reach the payback, the cones are built
+    at its first trace rather than once that many are traced (the rays to come are known, not rented)."""
+    state = accelerator.__dict__
+    with _lock:
+        state["_expected_by"] = state.get("_traced_without_cones", 0) + rays
 
 
 def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
@@ -145,35 +170,48 @@ def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
     _, first_copy = np.unique(vertices32, axis=0, return_inverse=True)
     canon = np.ascontiguousarray(first_copy.reshape(-1)[faces], dtype=np.int64)
     slope = np.where(good, 0.0, np.inf)
-    for first, second in _pairs(centre, radius, reach):
-        kernel.pair_slopes(vertices, faces, canon, normal, first, second, slope)
+    _slopes(vertices, faces, canon, normal, np.ascontiguousarray(centre), radius, reach, slope)
     corners = np.ascontiguousarray(vertices[faces].reshape(-1, 9))
     return Cones(corners, normal, np.ascontiguousarray(centre), radius, slope,
                  np.asarray(accelerator.centre, dtype=np.float64), EMBREE_FRACTION * rounding, reach)
 
 
-def _pairs(centre: np.ndarray, radius: np.ndarray, reach: float):
-    """Blocks of (T, T') index arrays, both orders, covering every pair with |c_T − c_T'| ≤ r_T + reach + r_T'
-    (and some farther ones), from k-d trees per size class (radii within a factor 2)."""
-    from scipy.spatial import cKDTree  # noqa: PLC0415 (as `Tessellation`'s trees: only where needed)
-
-    if len(centre) == 0:
+def _slopes(vertices: np.ndarray, faces: np.ndarray, canon: np.ndarray, normal: np.ndarray, centre: np.ndarray,
+            radius: np.ndarray, reach: float, slope: np.ndarray) -> None:
+    """τ_T into ``slope`` over every pair with |c_T − c_T'| ≤ (r_T + reach + r_T')(1 + `PAD`): per class of triangle
+    size (radii within a factor 2, so a few large triangles beside many small ones do not widen every search) a
+    uniform grid of cubes about a search's width files the class's triangles by centre, and every T meets those of
+    the cubes within r_T + reach + the class's largest radius (`kernels.clearance.ball_slopes`)."""
+    count = len(centre)
+    if count == 0:
         return
     floor = max(float(radius.min()), 1e-300)
     size_class = np.floor(np.log2(radius / floor)).astype(np.int64)
-    groups = [np.flatnonzero(size_class == k) for k in np.unique(size_class)]
-    trees = [cKDTree(centre[g]) for g in groups]
-    for i, (ga, ta) in enumerate(zip(groups, trees)):
-        for gb, tb in zip(groups[i:], trees[i:]):
-            bound = (float(radius[ga].max()) + reach + float(radius[gb].max())) * (1.0 + PAD)
-            if ga is gb:  # within a class: each pair once (query_pairs: i < j), no distances kept
-                near = ta.query_pairs(bound, output_type="ndarray")
-                first, second = ga[near[:, 0]], ga[near[:, 1]]
-            else:
-                near = ta.sparse_distance_matrix(tb, bound, output_type="ndarray")
-                first, second = ga[near["i"]], gb[near["j"]]
-            gap = np.linalg.norm(centre[first] - centre[second], axis=1)
-            keep = gap <= (radius[first] + reach + radius[second]) * (1.0 + PAD)
-            first, second = first[keep], second[keep]
-            yield first, second
-            yield second, first
+    # The cube numbers' float64 rounding, as a distance: a superset of the cubes is safe.
+    margin = GRID_PAD * (float(np.abs(centre).max()) + float(radius.max()) + reach)
+    typical = float(np.median(radius))
+    for k in np.unique(size_class):
+        group = np.flatnonzero(size_class == k)
+        widest = float(radius[group].max())
+        low = centre[group].min(axis=0) - margin
+        span = centre[group].max(axis=0) + margin - low
+        cell = max(GRID_CELL * (typical + reach + widest), margin)
+        # Not many more cubes than triangles: a class's few triangles scattered far apart need no fine grid.
+        cell = max(cell, float(np.prod(span + cell)) ** (1.0 / 3.0) / (GRID_CUBES_PER_TRIANGLE * len(group)) ** (1.0 / 3.0))
+        cells = np.floor(span / cell).astype(np.int64) + 1
+        where = np.clip(np.floor((centre[group] - low) / cell).astype(np.int64), 0, cells - 1)
+        number = (where[:, 0] * cells[1] + where[:, 1]) * cells[2] + where[:, 2]
+        order = np.argsort(number, kind="stable")
+        start = np.zeros(int(np.prod(cells)) + 1, dtype=np.int64)
+        np.cumsum(np.bincount(number, minlength=len(start) - 1), out=start[1:])
+        members = np.ascontiguousarray(group[order])
+        grid = (low, cell, cells, start, members, widest, margin)
+        # Each T's slope is its own: the threads take disjoint runs of T (the kernel releases the GIL).
+        bounds = np.linspace(0, count, BUILD_THREADS + 1).astype(np.int64)
+        run = lambda lo, hi: kernel.ball_slopes(vertices, faces, canon, normal, centre, radius, size_class,  # noqa: E731
+                                                reach, PAD, *grid, int(lo), int(hi), slope)
+        if BUILD_THREADS == 1:
+            run(0, count)
+        else:
+            with ThreadPoolExecutor(BUILD_THREADS) as pool:
+                list(pool.map(run, bounds[:-1], bounds[1:]))
