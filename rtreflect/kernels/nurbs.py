@@ -895,15 +895,50 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
 def stationary_at(g1, g2, jacobian_square, rn, stationary_cosine):
     """Whether |r|² is stationary: r normal to the tangent plane, the cosine of the gradient Jᵀr = (g1, g2) against
     |J| |r| (|J|² = jacobian_square, the Frobenius norm's square) not above stationary_cosine (NaN counts as
-    stationary: Jᵀr = 0 with J = 0). The one test of `rescue` and of `trace.tracing._passes_by` (`stationary_points`)."""
+    stationary: Jᵀr = 0 with J = 0). The one test of `rescue` and of `passes_by` (`trace.tracing._passes_by`)."""
     return not (math.hypot(g1, g2) / (math.sqrt(jacobian_square) * rn) > stationary_cosine)
 
 
-@njit(**JIT, aot=(f"void({F1}, {F1}, {F1}, {F1}, f8, {B1})",))
-def stationary_points(g1, g2, jacobian_square, rn, stationary_cosine, out):
-    """`stationary_at` for every row."""
-    for i in range(g1.shape[0]):
-        out[i] = stationary_at(g1[i], g2[i], jacobian_square[i], rn[i], stationary_cosine)
+@njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, i8, f8, {B1})",))
+def passes_by(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
+              patch, u, v, O, D, tol, steps, stationary_cosine, passes):
+    """Newton on f = ½|r|², r = (S − O) − ((S − O)·D) D, from (u, v), ``steps`` steps, then the positive-minimum test
+    at the last point (`trace.tracing._passes_by`, whose docstring gives the gradient and the full Hessian): per ray,
+    passes where the Hessian is positive definite, |r| > tol and the point is stationary (`stationary_at`). A step
+    with a non-finite component is no step along it; each step is clamped to the domain (`clamp_to_domain`)."""
+    scratch = new_scratch(max_degree)
+    d = np.empty((6, 3))
+    for i in range(patch.shape[0]):
+        k = patch[i]
+        ui, vi = u[i], v[i]
+        O0, O1, O2, D0, D1, D2 = O[i, 0], O[i, 1], O[i, 2], D[i, 0], D[i, 1], D[i, 2]
+        step = 0
+        while True:
+            point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, ui, vi, 2, d,
+                     scratch)
+            q0, q1, q2 = d[0, 0] - O0, d[0, 1] - O1, d[0, 2] - O2
+            qD = dot3(q0, q1, q2, D0, D1, D2)
+            r0, r1, r2 = q0 - qD * D0, q1 - qD * D1, q2 - qD * D2
+            uD = dot3(d[1, 0], d[1, 1], d[1, 2], D0, D1, D2)
+            vD = dot3(d[2, 0], d[2, 1], d[2, 2], D0, D1, D2)
+            pu0, pu1, pu2 = d[1, 0] - uD * D0, d[1, 1] - uD * D1, d[1, 2] - uD * D2  # S_u⊥
+            pv0, pv1, pv2 = d[2, 0] - vD * D0, d[2, 1] - vD * D1, d[2, 2] - vD * D2  # S_v⊥
+            gu = dot3(r0, r1, r2, d[1, 0], d[1, 1], d[1, 2])
+            gv = dot3(r0, r1, r2, d[2, 0], d[2, 1], d[2, 2])
+            uu, uv, vv = dot3(pu0, pu1, pu2, pu0, pu1, pu2), dot3(pu0, pu1, pu2, pv0, pv1, pv2), dot3(pv0, pv1, pv2,
+                                                                                                      pv0, pv1, pv2)
+            a = uu + dot3(r0, r1, r2, d[3, 0], d[3, 1], d[3, 2])
+            b = uv + dot3(r0, r1, r2, d[4, 0], d[4, 1], d[4, 2])
+            c = vv + dot3(r0, r1, r2, d[5, 0], d[5, 1], d[5, 2])
+            det = a * c - b * b
+            if step == steps:
+                rn = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+                passes[i] = a > 0 and det > 0 and rn > tol[i] and stationary_at(gu, gv, uu + vv, rn, stationary_cosine)
+                break
+            step += 1
+            du, dv = (c * gu - b * gv) / det, (a * gv - b * gu) / det
+            ui, vi = clamp_to_domain(domain, k, ui - (du if math.isfinite(du) else 0.0),
+                                     vi - (dv if math.isfinite(dv) else 0.0))
 
 
 @njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, i8, f8, f8, i8, f8, {F2}, {F2}, {F2}, {B1}, {B1}, {B1})",))
