@@ -420,3 +420,44 @@ def test_seam_strip_of_drilled_sphere_is_on_its_face(tmp_path):
         points = surface.evaluate(np.full_like(v, u), v).S
         on_face = np.array([distance_to_face(originals[k], p) <= 1e-9 * model.diagonal for p in points])
         np.testing.assert_array_equal(surface.trim.contains(np.full_like(v, u), v), on_face)
+
+
+@pytest.mark.parametrize("make", ["torus", "polar_cap"])
+def test_seam_axis_is_the_parameter_the_two_pcurves_differ_in(make):
+    """`occt._seam_axis` names the parameter constant along each seam edge of a converted closed face, from the two
+    pcurves of the edge (a domain's width apart): a whole torus has one seam in u and one in v; a polar cap of a sphere
+    (v from 1.52 to π/2) has a seam 0.05 long, shorter than the drift a converted pole's pcurve may have in u, where
+    the samples' spread alone would name v. Its samples put on that side keep the other parameter as sampled."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeSphere, BRepPrimAPI_MakeTorus
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    from rtreflect.exchange import occt
+
+    solid = BRepPrimAPI_MakeTorus(2.0, 0.5).Shape() if make == "torus" else \
+        BRepPrimAPI_MakeSphere(1.0, 1.52, np.pi / 2, 2 * np.pi).Shape()
+    converted = BRepBuilderAPI_NurbsConvert(solid, True).Shape()
+    faces = TopExp_Explorer(converted, TopAbs_FACE)
+    face = TopoDS.Face(faces.Current())
+    if make == "polar_cap":  # the cap's curved face, not its flat base
+        while BRep_Tool.Surface_s(face).IsUClosed() is False:
+            faces.Next()
+            face = TopoDS.Face(faces.Current())
+    surface = occt.bspline_of_face(face)
+    axes = []
+    edges = TopExp_Explorer(face, TopAbs_EDGE)
+    while edges.More():
+        edge = TopoDS.Edge(edges.Current())
+        if BRep_Tool.IsClosed_s(edge, face) and not BRep_Tool.Degenerated_s(edge):
+            axis = occt._seam_axis(edge, face, surface)
+            uv = occt._edge_samples(edge, face, surface, 1e-4)
+            assert np.ptp(uv[:, axis]) == 0.0 and uv[0, axis] in surface.domain[axis]
+            axes.append(axis)
+        edges.Next()
+    assert sorted(set(axes)) == ([0, 1] if make == "torus" else [0])
+    drifting = np.array([[0.0, 1.52], [0.05, 1.53]])  # a short piece whose u drifts more than it runs in v
+    (u0, _), _ = surface.domain
+    assert np.array_equal(occt._on_seam_side(drifting + [u0, 0.0], surface, 0)[:, 1], drifting[:, 1])

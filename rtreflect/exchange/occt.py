@@ -334,7 +334,7 @@ def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge
     # A pole edge has no 3D curve to follow; a seam's pcurves are the domain's sides (and projecting onto a seam
     # could land on either side): put there (`_on_seam_side`).
     if BRep_Tool.IsClosed_s(edge, face) and not BRep_Tool.Degenerated_s(edge):
-        uv = _on_seam_side(uv, surface)
+        uv = _on_seam_side(uv, surface, _seam_axis(edge, face, surface))
     elif onto_edge and not BRep_Tool.Degenerated_s(edge):
         curve3d = BRepAdaptor_Curve(edge)
         target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(t)) for t in ts)])
@@ -350,21 +350,34 @@ def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge
 SEAM_SNAP = 0.02
 
 
-def _on_seam_side(uv: np.ndarray, surface: NurbsSurface) -> np.ndarray:
-    """A seam edge's pcurve samples put on the domain side they run along (u = u₀ or u₁, or v alike).
+def _seam_axis(edge, face, surface: NurbsSurface) -> int:
+    """The parameter (0: u, 1: v) constant along a seam edge: the one its face's two pcurves of it differ in by the
+    domain's width (a closed face's two sides), whatever the pieces' own extent or drift."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve2d
+    from OCP.TopoDS import TopoDS
+
+    here, there = (BRepAdaptor_Curve2d(TopoDS.Edge(e), face) for e in (edge, edge.Reversed()))
+    t = 0.5 * (here.FirstParameter() + here.LastParameter())
+    a, b = here.Value(t), there.Value(t)
+    (u0, u1), (v0, v1) = surface.domain
+    return int(abs(a.Y() - b.Y()) / (v1 - v0) > abs(a.X() - b.X()) / (u1 - u0))
+
+
+def _on_seam_side(uv: np.ndarray, surface: NurbsSurface, axis: int) -> np.ndarray:
+    """A seam edge's pcurve samples put on the domain side they run along (``axis``, `_seam_axis`: u = u₀ or u₁,
+    or v alike).
 
     A closed face's seam is a side of its converted surface's domain: both pcurves lie on the two sides. OCCT's
     conversion (``BRepBuilderAPI_NurbsConvert``) re-approximates the pcurves and, near a pole, they drift: sphere_hole
     .step's seam at u = π/2 runs to u = 1.518 at v = 1.41, 0.05 outside the domain, and its other pcurve as far inside
     it, so the trim cut a strip off the face along the seam (sweep part sphere_hole.step and its mirrored assembly at
-    160×90: 10 pixels stored the sphere's far side, 9-15 behind OCCT's hit). The sides are exact.
+    160×90: 10 pixels stored the sphere's far side, 9-15 behind OCCT's hit). The sides are exact. The axis comes from
+    the two pcurves, not from the samples' spread: a short piece near a pole may drift farther in u than it runs in v.
     """
-    (u0, u1), (v0, v1) = surface.domain
-    span = np.array([u1 - u0, v1 - v0])
-    axis = int(np.argmin(np.ptp(uv, axis=0) / span))  # the parameter constant along the seam
     lo, hi = surface.domain[axis]
+    span = hi - lo
     side = lo if abs(uv[:, axis].mean() - lo) <= abs(uv[:, axis].mean() - hi) else hi
-    if np.max(np.abs(uv[:, axis] - side)) > SEAM_SNAP * span[axis]:
+    if np.max(np.abs(uv[:, axis] - side)) > SEAM_SNAP * span:
         return uv
     out = uv.copy()
     out[:, axis] = side

@@ -706,8 +706,9 @@ class Renderer:
         (`Film.span`; the tile's pixels are that view), else into an array of its own.
         """
         image = self.scene.image
-        clearance.expect(self.accelerator, image.width * image.height * rays_per_pixel(image.samples))
-        for tile in self._tiles_in_order(threads or default_threads(), self.spans(rays_per_tile), film):
+        threads = threads or default_threads()
+        clearance.expect(self.accelerator, image.width * image.height * rays_per_pixel(image.samples), threads)
+        for tile in self._tiles_in_order(threads, self.spans(rays_per_tile), film):
             if stats is not None:
                 stats.rays += tile.rays
                 stats.fallbacks += tile.fallbacks

@@ -25,7 +25,7 @@ bent by β gives ρ = tan β–like values: rays steeper than the mesh's local b
 
 The pairs come from a uniform grid of cubes per class of triangle size (radii within a factor 2, so a few large
 triangles beside many small ones do not widen every search), searched and measured in one compiled pass on
-`BUILD_THREADS` threads. Built once per BVH (thread-safe), used only in traces of at least `MIN_RAYS` rays (the
+the render's threads (`expect`; else `BUILD_THREADS`). Built once per BVH (thread-safe), used only in traces of at least `MIN_RAYS` rays (the
 second look's finer mesh, traced for a few suspects, never pays), and only once the BVH has traced as many rays
 without them as the build would have saved by then (`PAYBACK_RAYS_PER_TRIANGLE`), or at once where the render
 under way will trace that many (`expect`).
@@ -88,7 +88,7 @@ GRID_PAD = 4e-9
 #: A grid's cube side, in a search's half-width (`_slopes`): finer cubes visit fewer far triangles, more cubes.
 GRID_CELL = 0.5
 #: Threads of the slopes' kernel: the build runs while a render's other tile threads wait for it (`cones`'s lock),
-#: so on their cores (the renderer's `default_threads`).
+#: so on their cores: the render's thread count where it announced itself (`expect`), else this.
 BUILD_THREADS = min(2, os.cpu_count() or 1)
 #: A grid's cubes per triangle at most (`_slopes`).
 GRID_CUBES_PER_TRIANGLE = 4.0
@@ -132,20 +132,23 @@ def cones(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
                 state["_traced_without_cones"] = traced
                 if max(traced, state.get("_expected_by", 0)) < PAYBACK_RAYS_PER_TRIANGLE * len(accelerator._faces):
                     return None
-                state["_cones"] = build(accelerator, tessellation, rounding, REACH_PER_RADIUS)
+                state["_cones"] = build(accelerator, tessellation, rounding, REACH_PER_RADIUS,
+                                        state.get("_build_threads", BUILD_THREADS))
     return state["_cones"]
 
 
-def expect(accelerator: Accelerator, rays: int) -> None:
-    """A render about to trace at least ``rays`` rays on the BVH: where they reach the payback, the cones are built
-    at its first trace rather than once that many are traced (the rays to come are known, not rented)."""
+def expect(accelerator: Accelerator, rays: int, threads: int = BUILD_THREADS) -> None:
+    """A render about to trace at least ``rays`` rays on the BVH with ``threads`` threads: where they reach the
+    payback, the cones are built at its first trace, on as many threads, rather than once that many are traced (the
+    rays to come are known, not rented)."""
     state = accelerator.__dict__
     with _lock:
         state["_expected_by"] = state.get("_traced_without_cones", 0) + rays
+        state["_build_threads"] = max(1, int(threads))
 
 
 def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
-          reach_per_radius: float = np.inf) -> Cones | None:
+          reach_per_radius: float = np.inf, threads: int = BUILD_THREADS) -> Cones | None:
     """The cones of the BVH's triangles (module doc): slopes over every pair that may meet a triangle's ball (None
     where the reach exceeds ``reach_per_radius`` median triangle radii)."""
     vertices32 = accelerator._vertices  # the BVH's own float32 corners: the triangles Embree tests
@@ -170,14 +173,14 @@ def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
     _, first_copy = np.unique(vertices32, axis=0, return_inverse=True)
     canon = np.ascontiguousarray(first_copy.reshape(-1)[faces], dtype=np.int64)
     slope = np.where(good, 0.0, np.inf)
-    _slopes(vertices, faces, canon, normal, np.ascontiguousarray(centre), radius, reach, slope)
+    _slopes(vertices, faces, canon, normal, np.ascontiguousarray(centre), radius, reach, slope, threads)
     corners = np.ascontiguousarray(vertices[faces].reshape(-1, 9))
     return Cones(corners, normal, np.ascontiguousarray(centre), radius, slope,
                  np.asarray(accelerator.centre, dtype=np.float64), EMBREE_FRACTION * rounding, reach)
 
 
 def _slopes(vertices: np.ndarray, faces: np.ndarray, canon: np.ndarray, normal: np.ndarray, centre: np.ndarray,
-            radius: np.ndarray, reach: float, slope: np.ndarray) -> None:
+            radius: np.ndarray, reach: float, slope: np.ndarray, threads: int = BUILD_THREADS) -> None:
     """τ_T into ``slope`` over every pair with |c_T − c_T'| ≤ (r_T + reach + r_T')(1 + `PAD`): per class of triangle
     size (radii within a factor 2, so a few large triangles beside many small ones do not widen every search) a
     uniform grid of cubes about a search's width files the class's triangles by centre, and every T meets those of
@@ -207,11 +210,11 @@ def _slopes(vertices: np.ndarray, faces: np.ndarray, canon: np.ndarray, normal: 
         members = np.ascontiguousarray(group[order])
         grid = (low, cell, cells, start, members, widest, margin)
         # Each T's slope is its own: the threads take disjoint runs of T (the kernel releases the GIL).
-        bounds = np.linspace(0, count, BUILD_THREADS + 1).astype(np.int64)
+        bounds = np.linspace(0, count, threads + 1).astype(np.int64)
         run = lambda lo, hi: kernel.ball_slopes(vertices, faces, canon, normal, centre, radius, size_class,  # noqa: E731
                                                 reach, PAD, *grid, int(lo), int(hi), slope)
-        if BUILD_THREADS == 1:
+        if threads == 1:
             run(0, count)
         else:
-            with ThreadPoolExecutor(BUILD_THREADS) as pool:
+            with ThreadPoolExecutor(threads) as pool:
                 list(pool.map(run, bounds[:-1], bounds[1:]))

@@ -177,6 +177,10 @@ class Hits:
     #: The (N, 3) and (N, 4) fields, in the order the tracer stores them (`trace`).
     ROW_FIELDS = ("P", "Su", "Sv", "N", "curvature")
 
+    def rows(self) -> tuple[np.ndarray, ...]:
+        """The `ROW_FIELDS` arrays, in that order."""
+        return tuple(getattr(self, name) for name in self.ROW_FIELDS)
+
     @classmethod
     def blank(cls, n: int, hit: np.ndarray, rows: bool = True) -> "Hits":
         """Rows for n rays flagged ``hit``, every value still that of a miss: to be filled in where hit.
@@ -1078,29 +1082,20 @@ def _band(tessellation: Tessellation, cos: np.ndarray) -> np.ndarray:
 
 
 def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values: tuple[np.ndarray, ...],
-              pick: np.ndarray | slice) -> None:
-    """``target[rows] = value[pick]`` for (N, 3) arrays: slices copy as numpy does, index rows by the compiled row
-    copy (`kernels.pixels.scatter_picked`, ~4× numpy's fancy indexing of (N, 3) rows, and no gathered copy); the
-    values are copied, not computed."""
+              pick: np.ndarray | slice, fill: float | None = None) -> None:
+    """``target[rows] = value[pick]`` for (N, 3) and (N, 4) arrays: slices copy as numpy does, index rows by a compiled
+    row copy (`kernels.pixels.scatter_picked`, ~4× numpy's fancy indexing of (N, 3) rows, and no gathered copy). With
+    ``fill`` the targets are unwritten (`Hits.blank` with ``rows=False``) and their other rows get ``fill``, each row
+    written once (`kernels.pixels.spread_rows`; a slice is then every row). The values are copied, not computed."""
     for target, value in zip(targets, values):
         if isinstance(rows, slice):
             target[rows] = value[pick]
+            continue
+        picked = np.arange(len(rows)) if isinstance(pick, slice) else pick
+        if fill is None:
+            scatter_picked(target, rows, np.ascontiguousarray(value), picked)
         else:
-            scatter_picked(target, rows, np.ascontiguousarray(value),
-                           np.arange(len(rows)) if isinstance(pick, slice) else pick)
-
-
-def _spread_rows(hits: Hits, rows: np.ndarray | slice, values: tuple[np.ndarray, ...], pick: np.ndarray | slice) -> None:
-    """``hits``' unwritten `Hits.ROW_FIELDS` (`Hits.blank` with ``rows=False``) as ``value[pick]`` in ``rows`` and NaN
-    (a miss's) in the others: one compiled pass each (`kernels.pixels.spread_rows`), or a copy where ``rows`` is every
-    row (a slice)."""
-    for name, value in zip(Hits.ROW_FIELDS, values):
-        target = getattr(hits, name)
-        if isinstance(rows, slice):
-            target[rows] = value[pick]
-        else:
-            spread_rows(target, rows, np.ascontiguousarray(value),
-                        np.arange(len(rows)) if isinstance(pick, slice) else pick, np.nan)
+            spread_rows(target, rows, np.ascontiguousarray(value), picked, fill)
 
 
 def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet,
@@ -1177,10 +1172,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 cosine[bad] = np.einsum("ij,ij->i", normal[bad], D[bad])
             facing(normal, D, cosine)
             values = (c.derivs.S, c.derivs.Su, c.derivs.Sv, normal, c.curvature)
-            if start is None:  # the first query: the kept rows, a miss's NaN in the others, each row written once
-                _spread_rows(hits, rows, values, pick)
-            else:
-                _put_rows(tuple(getattr(hits, name) for name in Hits.ROW_FIELDS), rows, values, pick)
+            # The first query: the kept rows, a miss's NaN in the others, each row written once.
+            _put_rows(hits.rows(), rows, values, pick, np.nan if start is None else None)
             cos[rows] = np.abs(cosine[pick])
         # Go on where a mesh hit behind this one could still carry a nearer exact hit.
         # An unresolved candidate does not stop the search: the exact hit may lie behind it.
@@ -1193,7 +1186,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             cones.drop(O, D, mesh.prim, nxt, limit, go)
         rays, start, limit = rays[go], nxt[go], limit[go]
     if start is None:  # no mesh hit at all (the first query broke off): the rows are still unwritten
-        _spread_rows(hits, np.zeros(0, dtype=np.int64), (np.zeros((0, 3)),) * 4 + (np.zeros((0, 4)),), slice(None))
+        _put_rows(hits.rows(), np.zeros(0, dtype=np.int64), (np.zeros((0, 3)),) * 4 + (np.zeros((0, 4)),), slice(None),
+                  np.nan)
     open_rays = rays  # still had candidates to examine after MAX_CANDIDATES
     hits.hit[:] = np.isfinite(best)
     # Unresolved candidates that may hide a nearer exact hit than the kept one (module doc).
