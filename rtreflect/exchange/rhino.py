@@ -9,10 +9,20 @@ wires before any pcurve exists), inner wires added, and ``ShapeFix_Face`` comput
 rebuilt faces then go through `occt.read_faces` like a STEP file's, their trim samples moved onto the exact 3D
 edges (ShapeFix's pcurves only approximate them: 7.6e-3 mm off a 10 mm circle). Rhino's face orientation
 (``OrientationIsReversed``) becomes the OCCT face's. Lengths stay in the model's unit.
+
+What is rendered is what Rhino shows (`placed_breps`): the visible objects of the model (not hidden, on a layer
+that is on together with its parents), and every **block instance** (``InstanceReference``) as its definition's
+objects transformed by the instance's 4×4 ``Xform`` (nested blocks composed, outermost first); the definitions'
+own objects (``ObjectMode.InstanceDefinitionObject``, also listed in ``File3dm.Objects``) are not rendered where
+they are stored. An instance of determinant < 0 (mirrored) has its faces flipped, as a STEP assembly's mirrored
+location (``BRepTools_TrsfModification``): rhino3dm's ``Brep.Transform`` maps the surfaces, whose S_u × S_v then
+points inwards. What is left out (meshes, SubD, curves, hidden objects) is counted in the model's `CadModel.notes`.
 """
 
 from __future__ import annotations
 
+from collections import Counter
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +35,9 @@ UNIT_NAMES = {"Millimeters": "mm", "Centimeters": "cm", "Meters": "m", "Inches":
               "Microns": "µm", "Kilometers": "km", "None": "unitless"}
 #: Gap closing tolerance when the file does not state one (Rhino's default absolute tolerance, model units).
 DEFAULT_TOLERANCE = 1e-3
+#: Blocks nested deeper than this are taken for a cycle (a definition placing itself, directly or not): Rhino refuses
+#: to make one, a damaged or hand-written file may hold one. Real assemblies nest a few levels.
+MAX_BLOCK_DEPTH = 32
 
 
 def _import_rhino3dm(path: Path):
@@ -162,17 +175,9 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
     compound = TopoDS_Compound()
     builder = BRep_Builder()
     builder.MakeCompound(compound)
-    others, index, failed = {}, 0, []
-    for obj in model.Objects:
-        geometry = obj.Geometry
-        if isinstance(geometry, rhino3dm.Extrusion):
-            geometry = geometry.ToBrep(False)
-        elif isinstance(geometry, rhino3dm.Surface):
-            geometry = rhino3dm.Brep.CreateFromSurface(geometry)
-        if not isinstance(geometry, rhino3dm.Brep):
-            kind = type(obj.Geometry).__name__
-            others[kind] = others.get(kind, 0) + 1
-            continue
+    placed = placed_breps(model, rhino3dm)
+    index, failed = 0, []
+    for geometry in placed.breps:
         edges: dict = {}
         context = ShapeBuild_ReShape()
         brep_faces = TopoDS_Compound()
@@ -188,7 +193,10 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
         # The edges a later face's fix replaced, replaced in the faces fixed before it too: shared again.
         builder.Add(compound, context.Apply(brep_faces))
     if index == 0:
-        held = ", ".join(f"{n} {k}" for k, n in sorted(others.items())) or "no objects"
+        held = _tally(placed.others)
+        if placed.hidden:
+            held = (held + " and " if held else "") + f"{_hidden(placed.hidden)}: show them in Rhino to render them"
+        held = held or "no objects"
         raise SceneError(path, "", f"no surfaces to render: the .3dm file holds {held}")
     if failed and not skip_bad_faces:
         face, reason = failed[0]
@@ -200,7 +208,119 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
         model_read.skipped = sorted(failed + _renumber(model_read.skipped, [f for f, _ in failed]))
         model_read.warnings = _renumber(model_read.warnings, [f for f, _ in failed])
         model_read.faces = index
+    model_read.notes = placed.notes()
     return model_read
+
+
+@dataclass
+class Placed:
+    """What `placed_breps` found in a model: the Breps to render, and what it left out (for the summary)."""
+
+    breps: list = field(default_factory=list)  # rhino3dm Breps, in the file's object order, instances expanded
+    others: Counter = field(default_factory=Counter)  # objects left out by kind: "Mesh", "SubD", "LineCurve", ...
+    hidden: int = 0  # objects left out because Rhino does not show them (hidden, or on a layer that is off)
+    instances: int = 0  # block instances placed (nested ones included)
+    mirrored: int = 0  # of which of determinant < 0
+
+    def notes(self) -> list[str]:
+        """Summary lines (without the file name): the blocks placed, the objects left out by kind, the hidden ones."""
+        lines = []
+        if self.instances:
+            lines.append(f"placed {self.instances} block instance{'s' * (self.instances != 1)}"
+                         + (f" ({self.mirrored} mirrored)" if self.mirrored else ""))
+        if self.others:
+            lines.append(f"left out {_tally(self.others)}: not surfaces")
+        if self.hidden:
+            lines.append(f"left out {_hidden(self.hidden)}")
+        return lines
+
+
+def _tally(counts: Counter) -> str:
+    return ", ".join(f"{n} {kind}" for kind, n in sorted(counts.items()))
+
+
+def _hidden(count: int) -> str:
+    return f"{count} hidden object{'s' * (count != 1)} (hidden, or on a layer that is off)"
+
+
+def placed_breps(model, rhino3dm) -> Placed:
+    """The Breps Rhino shows in ``model`` (a ``File3dm``), in world coordinates, in the file's object order.
+
+    Breps, Extrusions (``ToBrep``) and bare Surfaces (``Brep.CreateFromSurface``) are taken; each block instance
+    (``InstanceReference``) is its definition's objects (``InstanceDefinition.GetObjectIds``, in that order)
+    placed by its ``Xform``, a nested instance's transform composed after its parent's (world = T_outer · T_inner ·
+    p); a placed Brep of determinant < 0 is flipped (``Brep.Flip``) so that its faces still face out. Objects a
+    designer does not see are left out and counted: hidden ones (``ObjectMode.Hidden``) and those on a layer that
+    is off or under one that is (inside a block too, as Rhino draws it); objects of the definitions themselves
+    (``ObjectMode.InstanceDefinitionObject``) render only through their instances.
+    """
+    placed = Placed()
+    objects = {obj.Attributes.Id: obj for obj in model.Objects}
+    definitions = {definition.Id: definition for definition in model.InstanceDefinitions}
+    shown = _layers_shown(model)
+    definition_mode = rhino3dm.ObjectMode.InstanceDefinitionObject
+
+    def visit(obj, xform, depth: int) -> None:
+        attributes = obj.Attributes
+        if attributes.Mode == rhino3dm.ObjectMode.Hidden or not attributes.Visible \
+                or not shown.get(attributes.LayerIndex, True):
+            placed.hidden += 1
+            return
+        geometry = obj.Geometry
+        if isinstance(geometry, rhino3dm.InstanceReference):
+            definition = definitions.get(geometry.ParentIdefId)
+            if definition is None or depth >= MAX_BLOCK_DEPTH:
+                placed.others["InstanceReference without its definition" if definition is None
+                              else f"InstanceReference nested over {MAX_BLOCK_DEPTH} deep (a cycle)"] += 1
+                return
+            members = [objects.get(member) for member in definition.GetObjectIds()]
+            if not members or None in members:  # a linked block whose file was not embedded
+                placed.others[f"InstanceReference of block {definition.Name!r} whose objects are not in the file"] += 1
+                return
+            inner = geometry.Xform if xform is None else rhino3dm.Transform.Multiply(xform, geometry.Xform)
+            placed.instances += 1
+            placed.mirrored += inner.Determinant() < 0
+            for member in members:
+                visit(member, inner, depth + 1)
+            return
+        if isinstance(geometry, rhino3dm.Extrusion):
+            brep = geometry.ToBrep(False)
+        elif isinstance(geometry, rhino3dm.Surface):
+            brep = rhino3dm.Brep.CreateFromSurface(geometry)
+        elif isinstance(geometry, rhino3dm.Brep):
+            brep = geometry if xform is None else geometry.Duplicate()  # a definition's Brep is placed many times
+        else:
+            placed.others[type(geometry).__name__] += 1
+            return
+        if xform is not None:
+            if not brep.Transform(xform):
+                placed.others[f"{type(geometry).__name__} in a block whose transform cannot be applied"] += 1
+                return
+            if xform.Determinant() < 0:
+                brep.Flip()
+        placed.breps.append(brep)
+
+    for obj in model.Objects:
+        if obj.Attributes.Mode != definition_mode:
+            visit(obj, None, 0)
+    return placed
+
+
+def _layers_shown(model) -> dict[int, bool]:
+    """Layer index → whether Rhino shows its objects: the layer and every parent layer on."""
+    layers = list(model.Layers)
+    by_id = {layer.Id: layer for layer in layers}
+
+    def shown(layer) -> bool:
+        seen = set()
+        while layer is not None and layer.Id not in seen:  # a parent cycle (a damaged file) ends the walk
+            if not layer.Visible:
+                return False
+            seen.add(layer.Id)
+            layer = by_id.get(layer.ParentLayerId)
+        return True
+
+    return {layer.Index: shown(layer) for layer in layers}
 
 
 def _renumber(skipped: list[tuple[int, str]], failed: list[int]) -> list[tuple[int, str]]:
