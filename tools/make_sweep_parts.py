@@ -835,18 +835,23 @@ def _loose_box():
     return r.Brep.CreateFromBoundingBox(r.BoundingBox(*(r.Point3d(*corner) for corner in LOOSE_BOX)))
 
 
-def write_blocks_3dm(path: Path, exploded: bool = False) -> None:
-    """blocks.3dm: `BLOCK_INSTANCES` of the definitions "part" and "pair" (nested), a loose box, and what a renderer
+def write_blocks_3dm(path: Path, exploded: bool = False, instances=BLOCK_INSTANCES) -> None:
+    """blocks.3dm: ``instances`` of the definitions "part" and "pair" (nested), a loose box, and what a renderer
     leaves out: a hidden box, a box on a layer that is off, a mesh and a line. ``exploded``: the same model with each
     instance's objects transformed by rhino3dm (``Brep.Transform``, nested transforms applied inner first; flipped
-    where mirrored, as Rhino's Explode leaves a solid facing out) and written as Breps, in the order of the instances."""
+    where mirrored, as Rhino's Explode leaves a solid facing out) and written as Breps, in the order of the instances.
+    rhino3dm's ``Brep.Transform`` keeps a sphere a surface of revolution under a non-uniform scale (1.24 off the
+    ellipsoid): exploded, only similarities are written (rotations, mirrors, uniform scales)."""
     import rhino3dm as r
 
     model = new_3dm()
     members = {"part": [(np.eye(4), g) for g in _block_part()]}
     members["pair"] = [(inner @ m, g) for inner in BLOCK_PAIR for m, g in members["part"]]
     if exploded:
-        for name, matrix in BLOCK_INSTANCES:
+        for name, matrix in instances:
+            gram = matrix[:3, :3].T @ matrix[:3, :3]
+            if not np.allclose(gram, gram[0, 0] * np.eye(3), rtol=0, atol=1e-12 * gram[0, 0]):
+                raise ValueError(f"rhino3dm cannot explode a block placed by a non-similarity transform:\n{matrix}")
             for inner, geometry in members[name]:
                 brep = geometry.ToBrep(False) if isinstance(geometry, r.Extrusion) else geometry.Duplicate()
                 for step in ((inner, matrix) if name == "pair" else (matrix,)):
@@ -864,7 +869,7 @@ def write_blocks_3dm(path: Path, exploded: bool = False) -> None:
         pair = tuple(r.InstanceReference(ids["part"], _rhino_transform(m)) for m in BLOCK_PAIR)
         ids["pair"] = model.InstanceDefinitions.FindIndex(
             model.InstanceDefinitions.Add("pair", "", "", "", r.Point3d(0, 0, 0), pair, (attributes,) * 2)).Id
-        for name, matrix in BLOCK_INSTANCES:
+        for name, matrix in instances:
             model.Objects.AddInstanceObject(r.InstanceReference(ids[name], _rhino_transform(matrix)), attributes)
         hidden = r.ObjectAttributes()
         hidden.LayerIndex, hidden.Mode = attributes.LayerIndex, r.ObjectMode.Hidden

@@ -12,11 +12,12 @@ edges (ShapeFix's pcurves only approximate them: 7.6e-3 mm off a 10 mm circle). 
 
 What is rendered is what Rhino shows (`placed_breps`): the visible objects of the model (not hidden, on a layer
 that is on together with its parents), and every **block instance** (``InstanceReference``) as its definition's
-objects transformed by the instance's 4×4 ``Xform`` (nested blocks composed, outermost first); the definitions'
-own objects (``ObjectMode.InstanceDefinitionObject``, also listed in ``File3dm.Objects``) are not rendered where
-they are stored. An instance of determinant < 0 (mirrored) has its faces flipped, as a STEP assembly's mirrored
-location (``BRepTools_TrsfModification``): rhino3dm's ``Brep.Transform`` maps the surfaces, whose S_u × S_v then
-points inwards. What is left out (meshes, SubD, curves, hidden objects) is counted in the model's `CadModel.notes`.
+objects transformed by the instance's 4×4 ``Xform`` (nested blocks composed, outermost first; each face's NURBS
+surface and edge curves transformed, `rebuild_face`); the definitions' own objects
+(``ObjectMode.InstanceDefinitionObject``, also listed in ``File3dm.Objects``) are not rendered where they are stored.
+A transform of determinant < 0 (a mirrored instance) maps S_u × S_v inwards: its faces are reversed, as Open
+CASCADE does for a mirrored STEP location (``BRepTools_TrsfModification``), so that they still face out. What is
+left out (meshes, SubD, curves, hidden objects, blocks that cannot be placed) is counted in `CadModel.notes`.
 """
 
 from __future__ import annotations
@@ -101,17 +102,19 @@ def occt_curve(curve):
     return Geom_BSplineCurve(poles, weights, knots, mults, curve.Order - 1, False)
 
 
-def rebuild_face(brep, face, edges: dict, tolerance: float, context=None):
+def rebuild_face(brep, face, edges: dict, tolerance: float, context=None, xform=None):
     """One Rhino Brep face as an OCCT face: its surface, its loops' 3D edges as wires, pcurves by ShapeFix_Face.
 
     ``context`` (a ``ShapeBuild_ReShape`` shared by the Brep's faces) records the edges ShapeFix replaces, so that
-    applied to all the Brep's rebuilt faces it keeps one edge per Rhino edge (the Brep's topology)."""
+    applied to all the Brep's rebuilt faces it keeps one edge per Rhino edge (the Brep's topology). ``xform`` (a block
+    instance's ``Transform``) places the face: its NURBS surface and edge curves are transformed (their homogeneous
+    control points: exact for any affine map), and a transform of determinant < 0 reverses the face."""
     from OCP.BRep import BRep_Builder
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace
     from OCP.ShapeFix import ShapeFix_Face
     from OCP.TopoDS import TopoDS, TopoDS_Wire
 
-    surface = occt_surface(face.ToNurbsSurface())
+    surface = occt_surface(_placed(face.ToNurbsSurface(), xform))
     builder = BRep_Builder()
     wires = []
     for loop in face.Loops:
@@ -122,7 +125,7 @@ def rebuild_face(brep, face, edges: dict, tolerance: float, context=None):
             if trim.EdgeIndex < 0:  # a pole (singular trim): no 3D edge; ShapeFix adds the degenerate edge
                 continue
             if trim.EdgeIndex not in edges:  # one TopoDS edge per Rhino edge: a seam is the same edge twice
-                curve = occt_curve(brep.Edges[trim.EdgeIndex].ToNurbsCurve())
+                curve = occt_curve(_placed(brep.Edges[trim.EdgeIndex].ToNurbsCurve(), xform))
                 made = BRepBuilderAPI_MakeEdge(curve)
                 if not made.IsDone():
                     raise FaceError(f"Open CASCADE cannot make an edge of Rhino edge {trim.EdgeIndex}")
@@ -148,9 +151,20 @@ def rebuild_face(brep, face, edges: dict, tolerance: float, context=None):
     fix.SetMaxTolerance(10 * tolerance)
     fix.Perform()
     rebuilt = fix.Face()
-    if face.OrientationIsReversed:
+    if face.OrientationIsReversed != (xform is not None and xform.Determinant() < 0):
         rebuilt = TopoDS.Face(rebuilt.Reversed())
     return rebuilt
+
+
+def _placed(nurbs, xform):
+    """A NurbsSurface or NurbsCurve (a fresh copy) transformed by ``xform`` in place, unless it is None.
+
+    Not ``Brep.Transform``: that transforms a sphere's or cylinder's RevSurface as a surface of revolution, wrong under
+    a non-uniform scale (measured on blocks.3dm's sphere scaled (1, 0.6, 2): 1.24 off the ellipsoid, Open CASCADE's
+    first hits 2.9 behind ours); the NURBS form's control points carry any affine map exactly (2e-15 here)."""
+    if xform is not None:
+        nurbs.Transform(xform)
+    return nurbs
 
 
 def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadModel:
@@ -177,14 +191,14 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
     builder.MakeCompound(compound)
     placed = placed_breps(model, rhino3dm)
     index, failed = 0, []
-    for geometry in placed.breps:
+    for geometry, xform in placed.breps:
         edges: dict = {}
         context = ShapeBuild_ReShape()
         brep_faces = TopoDS_Compound()
         builder.MakeCompound(brep_faces)
         for face in geometry.Faces:
             try:
-                builder.Add(brep_faces, rebuild_face(geometry, face, edges, tolerance, context))
+                builder.Add(brep_faces, rebuild_face(geometry, face, edges, tolerance, context, xform))
             except FaceError as exc:
                 failed.append((index, str(exc)))
             except Exception as exc:  # an OCCT exception while rebuilding: name the face
@@ -193,7 +207,7 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
         # The edges a later face's fix replaced, replaced in the faces fixed before it too: shared again.
         builder.Add(compound, context.Apply(brep_faces))
     if index == 0:
-        held = _tally(placed.others)
+        held = ", ".join(filter(None, [_tally(placed.others), placed.unplaced and _unplaced(placed.unplaced)]))
         if placed.hidden:
             held = (held + " and " if held else "") + f"{_hidden(placed.hidden)}: show them in Rhino to render them"
         held = held or "no objects"
@@ -216,9 +230,11 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
 class Placed:
     """What `placed_breps` found in a model: the Breps to render, and what it left out (for the summary)."""
 
-    breps: list = field(default_factory=list)  # rhino3dm Breps, in the file's object order, instances expanded
+    #: (rhino3dm Brep, its block instance's composed Transform or None), in the file's object order, instances expanded
+    breps: list = field(default_factory=list)
     others: Counter = field(default_factory=Counter)  # objects left out by kind: "Mesh", "SubD", "LineCurve", ...
     hidden: int = 0  # objects left out because Rhino does not show them (hidden, or on a layer that is off)
+    unplaced: Counter = field(default_factory=Counter)  # block instances that cannot be placed, by reason
     instances: int = 0  # block instances placed (nested ones included)
     mirrored: int = 0  # of which of determinant < 0
 
@@ -228,6 +244,8 @@ class Placed:
         if self.instances:
             lines.append(f"placed {self.instances} block instance{'s' * (self.instances != 1)}"
                          + (f" ({self.mirrored} mirrored)" if self.mirrored else ""))
+        if self.unplaced:
+            lines.append(f"left out {_unplaced(self.unplaced)}")
         if self.others:
             lines.append(f"left out {_tally(self.others)}: not surfaces")
         if self.hidden:
@@ -237,6 +255,10 @@ class Placed:
 
 def _tally(counts: Counter) -> str:
     return ", ".join(f"{n} {kind}" for kind, n in sorted(counts.items()))
+
+
+def _unplaced(reasons: Counter) -> str:
+    return "block instances: " + _tally(reasons)
 
 
 def _hidden(count: int) -> str:
@@ -249,7 +271,7 @@ def placed_breps(model, rhino3dm) -> Placed:
     Breps, Extrusions (``ToBrep``) and bare Surfaces (``Brep.CreateFromSurface``) are taken; each block instance
     (``InstanceReference``) is its definition's objects (``InstanceDefinition.GetObjectIds``, in that order)
     placed by its ``Xform``, a nested instance's transform composed after its parent's (world = T_outer · T_inner ·
-    p); a placed Brep of determinant < 0 is flipped (``Brep.Flip``) so that its faces still face out. Objects a
+    p), given with the Brep for `rebuild_face` to apply. Objects a
     designer does not see are left out and counted: hidden ones (``ObjectMode.Hidden``) and those on a layer that
     is off or under one that is (inside a block too, as Rhino draws it); objects of the definitions themselves
     (``ObjectMode.InstanceDefinitionObject``) render only through their instances.
@@ -269,15 +291,12 @@ def placed_breps(model, rhino3dm) -> Placed:
         geometry = obj.Geometry
         if isinstance(geometry, rhino3dm.InstanceReference):
             definition = definitions.get(geometry.ParentIdefId)
-            if definition is None or depth >= MAX_BLOCK_DEPTH:
-                placed.others["InstanceReference without its definition" if definition is None
-                              else f"InstanceReference nested over {MAX_BLOCK_DEPTH} deep (a cycle)"] += 1
-                return
-            members = [objects.get(member) for member in definition.GetObjectIds()]
-            if not members or None in members:  # a linked block whose file was not embedded
-                placed.others[f"InstanceReference of block {definition.Name!r} whose objects are not in the file"] += 1
-                return
+            members = [objects.get(member) for member in definition.GetObjectIds()] if definition else []
             inner = geometry.Xform if xform is None else rhino3dm.Transform.Multiply(xform, geometry.Xform)
+            why = _unplaceable(definition, members, inner, depth)
+            if why:
+                placed.unplaced[why] += 1
+                return
             placed.instances += 1
             placed.mirrored += inner.Determinant() < 0
             for member in members:
@@ -288,22 +307,30 @@ def placed_breps(model, rhino3dm) -> Placed:
         elif isinstance(geometry, rhino3dm.Surface):
             brep = rhino3dm.Brep.CreateFromSurface(geometry)
         elif isinstance(geometry, rhino3dm.Brep):
-            brep = geometry if xform is None else geometry.Duplicate()  # a definition's Brep is placed many times
+            brep = geometry
         else:
             placed.others[type(geometry).__name__] += 1
             return
-        if xform is not None:
-            if not brep.Transform(xform):
-                placed.others[f"{type(geometry).__name__} in a block whose transform cannot be applied"] += 1
-                return
-            if xform.Determinant() < 0:
-                brep.Flip()
-        placed.breps.append(brep)
+        placed.breps.append((brep, xform))
 
     for obj in model.Objects:
         if obj.Attributes.Mode != definition_mode:
             visit(obj, None, 0)
     return placed
+
+
+def _unplaceable(definition, members: list, xform, depth: int) -> str:
+    """Why a block instance of ``definition`` (its objects ``members``, placed by ``xform`` at nesting ``depth``)
+    cannot be placed, or ""."""
+    if definition is None:
+        return "whose block definition is not in the file"
+    if depth >= MAX_BLOCK_DEPTH:
+        return f"nested over {MAX_BLOCK_DEPTH} deep (a block that holds itself?)"
+    if not members or None in members:  # a linked block whose file was not embedded
+        return f"of block {definition.Name!r}, whose objects are not in the file (linked?)"
+    if xform.Determinant() == 0:
+        return "flattened (a transform of determinant 0)"
+    return ""
 
 
 def _layers_shown(model) -> dict[int, bool]:
