@@ -67,7 +67,8 @@ def test_blocks_render_as_their_exploded_copy(tmp_path):
 
     Both are seen by the block file's automatic camera and lights: the exploded copy's sphere is meshed with a few
     nodes more (its surface differs from the reader's placed one by 7e-15), which moves the automatic framing."""
-    similar = tuple((name, m) for name, m in sweep.BLOCK_INSTANCES if np.ptp(np.linalg.svd(m[:3, :3], compute_uv=False)) < 1e-12)
+    similar = tuple((name, m) for name, m in sweep.BLOCK_INSTANCES
+                    if np.ptp(np.linalg.svd(m[:3, :3], compute_uv=False)) < 1e-12)  # equal stretch every way
     assert len(similar) == len(sweep.BLOCK_INSTANCES) - 1
     paths = tmp_path / "blocks.3dm", tmp_path / "exploded.3dm"
     for path, exploded in zip(paths, (False, True)):
@@ -135,7 +136,8 @@ def test_summary_says_what_the_file_held_and_was_left_out(blocks):
 def _model_with_layers(tmp_path: Path, shown: bool) -> Path:
     """A box on a child layer of a layer that is off, a hidden box, and (``shown``) a box on a layer that is on."""
     model = rhino3dm.File3dm()
-    box = rhino3dm.Brep.CreateFromBoundingBox(rhino3dm.BoundingBox(rhino3dm.Point3d(0, 0, 0), rhino3dm.Point3d(1, 2, 3)))
+    corners = rhino3dm.Point3d(0, 0, 0), rhino3dm.Point3d(1, 2, 3)
+    box = rhino3dm.Brep.CreateFromBoundingBox(rhino3dm.BoundingBox(*corners))
     on, off, child = rhino3dm.Layer(), rhino3dm.Layer(), rhino3dm.Layer()
     on.Name, off.Name, off.Visible, child.Name = "on", "off", False, "child"
     indices = [model.Layers.Add(layer) for layer in (on, off)]

@@ -899,7 +899,8 @@ def blocks_occt():
     from OCP.TopoDS import TopoDS_Compound
 
     (lo, hi), (centre, radius), (base, cylinder_radius, height) = BLOCK_BOX, BLOCK_SPHERE, BLOCK_CYLINDER
-    part = [BRepPrimAPI_MakeBox(gp_Pnt(*lo), gp_Pnt(*hi)).Shape(), BRepPrimAPI_MakeSphere(gp_Pnt(*centre), radius).Shape(),
+    part = [BRepPrimAPI_MakeBox(gp_Pnt(*lo), gp_Pnt(*hi)).Shape(),
+            BRepPrimAPI_MakeSphere(gp_Pnt(*centre), radius).Shape(),
             _cylinder(*base, (0, 0, 1), cylinder_radius, height)]
     placements = {"part": [np.eye(4)], "pair": list(BLOCK_PAIR)}
     compound = TopoDS_Compound()
