@@ -46,6 +46,11 @@ Third sweep:
   tiny_on_huge.step    a 2000 mm slab with a 0.05 cube and a 0.02-radius pin on it
   periodic_bspline.step  a face on a B-spline surface periodic in u (OCCT keeps it periodic)
   mirrored_assembly.step  the filleted block and an instance LOCATED by a mirror (determinant -1) in an XCAF assembly
+Fourth sweep (what real .3dm files contain):
+  blocks.3dm           block instances (InstanceReference) of a box, a sphere and a capped cylinder extrusion: rotated,
+                       mirrored, scaled uniformly and not, and a nested block placed by a mirror; a loose box, a hidden
+                       box, a box on a layer that is off, a mesh and a curve (`write_blocks_3dm`; `blocks_occt` builds
+                       the same placed solids in Open CASCADE)
 """
 
 from __future__ import annotations
@@ -54,6 +59,8 @@ import argparse
 import math
 import sys
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
@@ -767,6 +774,148 @@ def write_mirrored_assembly(path: Path) -> None:
     mirror.SetMirror(gp_Ax2(gp_Pnt(0, -25, 0), gp_Dir(0, 1, 0)))
     write_assembly(filleted_block(), path, (gp_Trsf(), mirror))
 
+
+# --- Fourth sweep (issue 12): block instances, hidden objects and what is not a surface in a .3dm. -----------------
+
+def _turn(degrees: float, axis: int) -> np.ndarray:
+    """4×4 rotation by ``degrees`` about the coordinate axis ``axis`` (0: x, 1: y, 2: z) through the origin."""
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    i, j = [k for k in range(3) if k != axis]
+    m = np.eye(4)
+    m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
+    return m
+
+
+def _affine(linear=np.eye(3), move=(0.0, 0.0, 0.0)) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = linear, move
+    return m
+
+
+#: blocks.3dm's definition "part": a 10 × 5 × 3 box at the origin, a sphere (radius 3 about (16, 2.5, 1.5)) and a
+#: capped cylinder extrusion (radius 2 about (-6, 2.5), height 6).
+BLOCK_BOX, BLOCK_SPHERE, BLOCK_CYLINDER = ((0, 0, 0), (10, 5, 3)), ((16, 2.5, 1.5), 3.0), ((-6, 2.5, 0), 2.0, 6.0)
+#: Definition "pair": "part" twice, the second turned 90° about x and lifted by 12.
+BLOCK_PAIR = (np.eye(4), _affine(move=(0, 0, 12)) @ _turn(90, 0))
+#: The model's instances (definition, 4×4 transform), in file order: "part" turned 30° about z and moved; mirrored in
+#: the plane y = -8 (determinant -1); scaled 1.5 about the origin and moved; scaled (1, 0.6, 2) and moved (the
+#: sphere becomes an ellipsoid); "pair" mirrored in the plane x = -15 (its two parts mirrored through the nesting).
+BLOCK_INSTANCES = (("part", _affine(move=(32, 0, 0)) @ _turn(30, 2)),
+                   ("part", _affine(np.diag([1.0, -1.0, 1.0]), (0, -16, 0))),
+                   ("part", _affine(1.5 * np.eye(3), (0, 14, 0))),
+                   ("part", _affine(np.diag([1.0, 0.6, 2.0]), (32, 14, 0))),
+                   ("pair", _affine(np.diag([-1.0, 1.0, 1.0]), (-30, 0, 0))))
+#: A box outside the blocks, and where the hidden ones are.
+LOOSE_BOX = ((20, -30, 0), (28, -24, 4))
+
+
+def _rhino_transform(matrix: np.ndarray):
+    import rhino3dm as r
+
+    xform = r.Transform(1.0)
+    for i in range(4):
+        for j in range(4):
+            setattr(xform, f"M{i}{j}", float(matrix[i, j]))
+    return xform
+
+
+def _block_part():
+    """The definition "part"'s objects in rhino3dm: a Brep box, a Brep sphere, an Extrusion cylinder."""
+    import rhino3dm as r
+
+    (lo, hi), (centre, radius), (base, cylinder_radius, height) = BLOCK_BOX, BLOCK_SPHERE, BLOCK_CYLINDER
+    return (r.Brep.CreateFromBoundingBox(r.BoundingBox(r.Point3d(*lo), r.Point3d(*hi))),
+            r.Brep.CreateFromSphere(r.Sphere(r.Point3d(*centre), radius)),
+            r.Extrusion.Create(r.Circle(r.Point3d(*base), cylinder_radius).ToNurbsCurve(), height, True))
+
+
+def _loose_box():
+    import rhino3dm as r
+
+    return r.Brep.CreateFromBoundingBox(r.BoundingBox(*(r.Point3d(*corner) for corner in LOOSE_BOX)))
+
+
+def write_blocks_3dm(path: Path, exploded: bool = False, instances=BLOCK_INSTANCES) -> None:
+    """blocks.3dm: ``instances`` of the definitions "part" and "pair" (nested), a loose box, and what a renderer
+    leaves out: a hidden box, a box on a layer that is off, a mesh and a line. ``exploded``: the same model with each
+    instance's objects transformed by rhino3dm (``Brep.Transform``, nested transforms applied inner first; flipped
+    where mirrored, as Rhino's Explode leaves a solid facing out) and written as Breps, in the order of the instances.
+    rhino3dm's ``Brep.Transform`` keeps a sphere a surface of revolution under a non-uniform scale (1.24 off the
+    ellipsoid): exploded, only similarities are written (rotations, mirrors, uniform scales)."""
+    import rhino3dm as r
+
+    model = new_3dm()
+    members = {"part": [(np.eye(4), g) for g in _block_part()]}
+    members["pair"] = [(inner @ m, g) for inner in BLOCK_PAIR for m, g in members["part"]]
+    if exploded:
+        for name, matrix in instances:
+            gram = matrix[:3, :3].T @ matrix[:3, :3]
+            if not np.allclose(gram, gram[0, 0] * np.eye(3), rtol=0, atol=1e-12 * gram[0, 0]):
+                raise ValueError(f"rhino3dm cannot explode a block placed by a non-similarity transform:\n{matrix}")
+            for inner, geometry in members[name]:
+                brep = geometry.ToBrep(False) if isinstance(geometry, r.Extrusion) else geometry.Duplicate()
+                for step in ((inner, matrix) if name == "pair" else (matrix,)):
+                    brep.Transform(_rhino_transform(step))
+                if np.linalg.det(matrix[:3, :3] @ inner[:3, :3]) < 0:
+                    brep.Flip()
+                model.Objects.AddBrep(brep)
+    else:
+        default = r.Layer()
+        default.Name = "Default"
+        attributes = r.ObjectAttributes()
+        attributes.LayerIndex = model.Layers.Add(default)
+        part = model.InstanceDefinitions.Add("part", "", "", "", r.Point3d(0, 0, 0), _block_part(), (attributes,) * 3)
+        ids = {"part": model.InstanceDefinitions.FindIndex(part).Id}
+        pair = tuple(r.InstanceReference(ids["part"], _rhino_transform(m)) for m in BLOCK_PAIR)
+        ids["pair"] = model.InstanceDefinitions.FindIndex(
+            model.InstanceDefinitions.Add("pair", "", "", "", r.Point3d(0, 0, 0), pair, (attributes,) * 2)).Id
+        for name, matrix in instances:
+            model.Objects.AddInstanceObject(r.InstanceReference(ids[name], _rhino_transform(matrix)), attributes)
+        hidden = r.ObjectAttributes()
+        hidden.LayerIndex, hidden.Mode = attributes.LayerIndex, r.ObjectMode.Hidden
+        model.Objects.AddBrep(_loose_box(), hidden)
+        off = r.Layer()
+        off.Name, off.Visible = "off", False
+        on_off = r.ObjectAttributes()
+        on_off.LayerIndex = model.Layers.Add(off)
+        model.Objects.AddBrep(_loose_box(), on_off)
+        mesh = r.Mesh()
+        for x, y in ((0, -30), (8, -30), (0, -24)):
+            mesh.Vertices.Add(x, y, 0)
+        mesh.Faces.AddFace(0, 1, 2)
+        model.Objects.AddMesh(mesh)
+        model.Objects.AddCurve(r.LineCurve(r.Point3d(0, -30, 0), r.Point3d(8, -24, 4)))
+    model.Objects.AddBrep(_loose_box())
+    save_3dm(model, path)
+
+
+def blocks_occt():
+    """blocks.3dm's visible solids built in Open CASCADE from the same numbers (primitives, each placed by its composed
+    4×4 transform through ``BRepBuilderAPI_GTransform``): the reference for its first hits."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_GTransform
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox, BRepPrimAPI_MakeSphere
+    from OCP.gp import gp_GTrsf, gp_Mat, gp_Pnt, gp_XYZ
+    from OCP.TopoDS import TopoDS_Compound
+
+    (lo, hi), (centre, radius), (base, cylinder_radius, height) = BLOCK_BOX, BLOCK_SPHERE, BLOCK_CYLINDER
+    part = [BRepPrimAPI_MakeBox(gp_Pnt(*lo), gp_Pnt(*hi)).Shape(),
+            BRepPrimAPI_MakeSphere(gp_Pnt(*centre), radius).Shape(),
+            _cylinder(*base, (0, 0, 1), cylinder_radius, height)]
+    placements = {"part": [np.eye(4)], "pair": list(BLOCK_PAIR)}
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    for name, matrix in BLOCK_INSTANCES:
+        for inner in placements[name]:
+            m = matrix @ inner
+            trsf = gp_GTrsf(gp_Mat(*m[:3, :3].ravel()), gp_XYZ(*m[:3, 3]))
+            for shape in part:
+                builder.Add(compound, BRepBuilderAPI_GTransform(shape, trsf, True).Shape())
+    builder.Add(compound, BRepPrimAPI_MakeBox(*(gp_Pnt(*corner) for corner in LOOSE_BOX)).Shape())
+    return compound
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -810,6 +959,7 @@ PARTS = {
     "tiny_on_huge.step": lambda p: write_step(tiny_on_huge(), p),
     "periodic_bspline.step": lambda p: write_step(periodic_bspline(), p),
     "mirrored_assembly.step": write_mirrored_assembly,
+    "blocks.3dm": write_blocks_3dm,
 }
 
 

@@ -89,7 +89,8 @@ def read_part(path: Path, name: str = "", skip_bad_faces: bool = False) -> tuple
 
 
 def model_summary(path: Path, model: CadModel) -> list[str]:
-    """Lines telling what was read: faces, unit, bounding box, skipped faces (printed before a render), and a
+    """Lines telling what was read: faces, unit, bounding box, skipped faces, the reader's notes (`CadModel.notes`:
+    a .3dm file's blocks placed and objects left out; printed before a render), and a
     warning line per face read short of the reader's promise (`CadModel.warnings`, starting with `errors.WARNING`)."""
     lo, hi = model.bounds
     fmt = lambda v: "[" + ", ".join(f"{x:.4g}" for x in v) + "]"  # noqa: E731
@@ -98,5 +99,6 @@ def model_summary(path: Path, model: CadModel) -> list[str]:
     if model.skipped:
         lines.append(f"{path}: skipped {len(model.skipped)} of {model.faces} faces (--skip-bad-faces): "
                      + "; ".join(f"face {index}: {reason}" for index, reason in model.skipped))
+    lines.extend(f"{path}: {note}" for note in model.notes)
     lines.extend(f"{WARNING}{path}: face {index}: {one_line(reason)}" for index, reason in model.warnings)
     return lines

@@ -133,6 +133,9 @@ class CadModel:
     #: (face index, reason): faces read, but short of what the reader promises (trims kept coarser than
     #: `TRIM_TOLERANCE` of the faces' extent); the summary prints them as warnings (`exchange.cad.model_summary`).
     warnings: list[tuple[int, str]] = field(default_factory=list)
+    #: What the reader left out of the file or placed, one summary line each without the file name (the .3dm reader:
+    #: block instances placed, objects that are not surfaces by kind, hidden objects).
+    notes: list[str] = field(default_factory=list)
 
     @property
     def diagonal(self) -> float:

@@ -9,10 +9,21 @@ wires before any pcurve exists), inner wires added, and ``ShapeFix_Face`` comput
 rebuilt faces then go through `occt.read_faces` like a STEP file's, their trim samples moved onto the exact 3D
 edges (ShapeFix's pcurves only approximate them: 7.6e-3 mm off a 10 mm circle). Rhino's face orientation
 (``OrientationIsReversed``) becomes the OCCT face's. Lengths stay in the model's unit.
+
+What is rendered is what Rhino shows (`placed_breps`): the visible objects of the model (not hidden, on a layer
+that is on together with its parents), and every **block instance** (``InstanceReference``) as its definition's
+objects transformed by the instance's 4×4 ``Xform`` (nested blocks composed, outermost first; each face's NURBS
+surface and edge curves transformed, `rebuild_face`); the definitions' own objects
+(``ObjectMode.InstanceDefinitionObject``, also listed in ``File3dm.Objects``) are not rendered where they are stored.
+A transform of determinant < 0 (a mirrored instance) maps S_u × S_v inwards: its faces are reversed, as Open
+CASCADE does for a mirrored STEP location (``BRepTools_TrsfModification``), so that they still face out. What is
+left out (meshes, SubD, curves, hidden objects, blocks that cannot be placed) is counted in `CadModel.notes`.
 """
 
 from __future__ import annotations
 
+from collections import Counter
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +36,9 @@ UNIT_NAMES = {"Millimeters": "mm", "Centimeters": "cm", "Meters": "m", "Inches":
               "Microns": "µm", "Kilometers": "km", "None": "unitless"}
 #: Gap closing tolerance when the file does not state one (Rhino's default absolute tolerance, model units).
 DEFAULT_TOLERANCE = 1e-3
+#: Blocks nested deeper than this are taken for a cycle (a definition placing itself, directly or not): Rhino refuses
+#: to make one, a damaged or hand-written file may hold one. Real assemblies nest a few levels.
+MAX_BLOCK_DEPTH = 32
 
 
 def _import_rhino3dm(path: Path):
@@ -88,17 +102,19 @@ def occt_curve(curve):
     return Geom_BSplineCurve(poles, weights, knots, mults, curve.Order - 1, False)
 
 
-def rebuild_face(brep, face, edges: dict, tolerance: float, context=None):
+def rebuild_face(brep, face, edges: dict, tolerance: float, context=None, xform=None):
     """One Rhino Brep face as an OCCT face: its surface, its loops' 3D edges as wires, pcurves by ShapeFix_Face.
 
     ``context`` (a ``ShapeBuild_ReShape`` shared by the Brep's faces) records the edges ShapeFix replaces, so that
-    applied to all the Brep's rebuilt faces it keeps one edge per Rhino edge (the Brep's topology)."""
+    applied to all the Brep's rebuilt faces it keeps one edge per Rhino edge (the Brep's topology). ``xform`` (a block
+    instance's ``Transform``) places the face: its NURBS surface and edge curves are transformed (their homogeneous
+    control points: exact for any affine map), and a transform of determinant < 0 reverses the face."""
     from OCP.BRep import BRep_Builder
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace
     from OCP.ShapeFix import ShapeFix_Face
     from OCP.TopoDS import TopoDS, TopoDS_Wire
 
-    surface = occt_surface(face.ToNurbsSurface())
+    surface = occt_surface(_placed(face.ToNurbsSurface(), xform))
     builder = BRep_Builder()
     wires = []
     for loop in face.Loops:
@@ -109,7 +125,7 @@ def rebuild_face(brep, face, edges: dict, tolerance: float, context=None):
             if trim.EdgeIndex < 0:  # a pole (singular trim): no 3D edge; ShapeFix adds the degenerate edge
                 continue
             if trim.EdgeIndex not in edges:  # one TopoDS edge per Rhino edge: a seam is the same edge twice
-                curve = occt_curve(brep.Edges[trim.EdgeIndex].ToNurbsCurve())
+                curve = occt_curve(_placed(brep.Edges[trim.EdgeIndex].ToNurbsCurve(), xform))
                 made = BRepBuilderAPI_MakeEdge(curve)
                 if not made.IsDone():
                     raise FaceError(f"Open CASCADE cannot make an edge of Rhino edge {trim.EdgeIndex}")
@@ -135,9 +151,20 @@ def rebuild_face(brep, face, edges: dict, tolerance: float, context=None):
     fix.SetMaxTolerance(10 * tolerance)
     fix.Perform()
     rebuilt = fix.Face()
-    if face.OrientationIsReversed:
+    if face.OrientationIsReversed != (xform is not None and xform.Determinant() < 0):
         rebuilt = TopoDS.Face(rebuilt.Reversed())
     return rebuilt
+
+
+def _placed(nurbs, xform):
+    """A NurbsSurface or NurbsCurve (a fresh copy) transformed by ``xform`` in place, unless it is None.
+
+    Not ``Brep.Transform``: that transforms a sphere's or cylinder's RevSurface as a surface of revolution, wrong under
+    a non-uniform scale (measured on blocks.3dm's sphere scaled (1, 0.6, 2): 1.24 off the ellipsoid, Open CASCADE's
+    first hits 2.9 behind ours); the NURBS form's control points carry any affine map exactly (2e-15 here)."""
+    if xform is not None:
+        nurbs.Transform(xform)
+    return nurbs
 
 
 def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadModel:
@@ -162,24 +189,16 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
     compound = TopoDS_Compound()
     builder = BRep_Builder()
     builder.MakeCompound(compound)
-    others, index, failed = {}, 0, []
-    for obj in model.Objects:
-        geometry = obj.Geometry
-        if isinstance(geometry, rhino3dm.Extrusion):
-            geometry = geometry.ToBrep(False)
-        elif isinstance(geometry, rhino3dm.Surface):
-            geometry = rhino3dm.Brep.CreateFromSurface(geometry)
-        if not isinstance(geometry, rhino3dm.Brep):
-            kind = type(obj.Geometry).__name__
-            others[kind] = others.get(kind, 0) + 1
-            continue
+    placed = placed_breps(model, rhino3dm)
+    index, failed = 0, []
+    for geometry, xform in placed.breps:
         edges: dict = {}
         context = ShapeBuild_ReShape()
         brep_faces = TopoDS_Compound()
         builder.MakeCompound(brep_faces)
         for face in geometry.Faces:
             try:
-                builder.Add(brep_faces, rebuild_face(geometry, face, edges, tolerance, context))
+                builder.Add(brep_faces, rebuild_face(geometry, face, edges, tolerance, context, xform))
             except FaceError as exc:
                 failed.append((index, str(exc)))
             except Exception as exc:  # an OCCT exception while rebuilding: name the face
@@ -188,7 +207,10 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
         # The edges a later face's fix replaced, replaced in the faces fixed before it too: shared again.
         builder.Add(compound, context.Apply(brep_faces))
     if index == 0:
-        held = ", ".join(f"{n} {k}" for k, n in sorted(others.items())) or "no objects"
+        held = ", ".join(filter(None, [_tally(placed.others), placed.unplaced and _unplaced(placed.unplaced)]))
+        if placed.hidden:
+            held = (held + " and " if held else "") + f"{_hidden(placed.hidden)}: show them in Rhino to render them"
+        held = held or "no objects"
         raise SceneError(path, "", f"no surfaces to render: the .3dm file holds {held}")
     if failed and not skip_bad_faces:
         face, reason = failed[0]
@@ -200,7 +222,132 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
         model_read.skipped = sorted(failed + _renumber(model_read.skipped, [f for f, _ in failed]))
         model_read.warnings = _renumber(model_read.warnings, [f for f, _ in failed])
         model_read.faces = index
+    model_read.notes = placed.notes()
     return model_read
+
+
+@dataclass
+class Placed:
+    """What `placed_breps` found in a model: the Breps to render, and what it left out (for the summary)."""
+
+    #: (rhino3dm Brep, its block instance's composed Transform or None), in the file's object order, instances expanded
+    breps: list = field(default_factory=list)
+    others: Counter = field(default_factory=Counter)  # objects left out by kind: "Mesh", "SubD", "LineCurve", ...
+    hidden: int = 0  # objects left out because Rhino does not show them (hidden, or on a layer that is off)
+    unplaced: Counter = field(default_factory=Counter)  # block instances that cannot be placed, by reason
+    instances: int = 0  # block instances placed (nested ones included)
+    mirrored: int = 0  # of which of determinant < 0
+
+    def notes(self) -> list[str]:
+        """Summary lines (without the file name): the blocks placed, the objects left out by kind, the hidden ones."""
+        lines = []
+        if self.instances:
+            lines.append(f"placed {self.instances} block instance{'s' * (self.instances != 1)}"
+                         + (f" ({self.mirrored} mirrored)" if self.mirrored else ""))
+        if self.unplaced:
+            lines.append(f"left out {_unplaced(self.unplaced)}")
+        if self.others:
+            lines.append(f"left out {_tally(self.others)}: not surfaces")
+        if self.hidden:
+            lines.append(f"left out {_hidden(self.hidden)}")
+        return lines
+
+
+def _tally(counts: Counter) -> str:
+    return ", ".join(f"{n} {kind}" for kind, n in sorted(counts.items()))
+
+
+def _unplaced(reasons: Counter) -> str:
+    return "block instances: " + _tally(reasons)
+
+
+def _hidden(count: int) -> str:
+    return f"{count} hidden object{'s' * (count != 1)} (hidden, or on a layer that is off)"
+
+
+def placed_breps(model, rhino3dm) -> Placed:
+    """The Breps Rhino shows in ``model`` (a ``File3dm``), in world coordinates, in the file's object order.
+
+    Breps, Extrusions (``ToBrep``) and bare Surfaces (``Brep.CreateFromSurface``) are taken; each block instance
+    (``InstanceReference``) is its definition's objects (``InstanceDefinition.GetObjectIds``, in that order)
+    placed by its ``Xform``, a nested instance's transform composed after its parent's (world = T_outer · T_inner ·
+    p), given with the Brep for `rebuild_face` to apply. Objects a
+    designer does not see are left out and counted: hidden ones (``ObjectMode.Hidden``) and those on a layer that
+    is off or under one that is (inside a block too, as Rhino draws it); objects of the definitions themselves
+    (``ObjectMode.InstanceDefinitionObject``) render only through their instances.
+    """
+    placed = Placed()
+    objects = {obj.Attributes.Id: obj for obj in model.Objects}
+    definitions = {definition.Id: definition for definition in model.InstanceDefinitions}
+    shown = _layers_shown(model)
+    definition_mode = rhino3dm.ObjectMode.InstanceDefinitionObject
+
+    def visit(obj, xform, depth: int) -> None:
+        attributes = obj.Attributes
+        if attributes.Mode == rhino3dm.ObjectMode.Hidden or not attributes.Visible \
+                or not shown.get(attributes.LayerIndex, True):
+            placed.hidden += 1
+            return
+        geometry = obj.Geometry
+        if isinstance(geometry, rhino3dm.InstanceReference):
+            definition = definitions.get(geometry.ParentIdefId)
+            members = [objects.get(member) for member in definition.GetObjectIds()] if definition else []
+            inner = geometry.Xform if xform is None else rhino3dm.Transform.Multiply(xform, geometry.Xform)
+            why = _unplaceable(definition, members, inner, depth)
+            if why:
+                placed.unplaced[why] += 1
+                return
+            placed.instances += 1
+            placed.mirrored += inner.Determinant() < 0
+            for member in members:
+                visit(member, inner, depth + 1)
+            return
+        if isinstance(geometry, rhino3dm.Extrusion):
+            brep = geometry.ToBrep(False)
+        elif isinstance(geometry, rhino3dm.Surface):
+            brep = rhino3dm.Brep.CreateFromSurface(geometry)
+        elif isinstance(geometry, rhino3dm.Brep):
+            brep = geometry
+        else:
+            placed.others[type(geometry).__name__] += 1
+            return
+        placed.breps.append((brep, xform))
+
+    for obj in model.Objects:
+        if obj.Attributes.Mode != definition_mode:
+            visit(obj, None, 0)
+    return placed
+
+
+def _unplaceable(definition, members: list, xform, depth: int) -> str:
+    """Why a block instance of ``definition`` (its objects ``members``, placed by ``xform`` at nesting ``depth``)
+    cannot be placed, or ""."""
+    if definition is None:
+        return "whose block definition is not in the file"
+    if depth >= MAX_BLOCK_DEPTH:
+        return f"nested over {MAX_BLOCK_DEPTH} deep (a block that holds itself?)"
+    if not members or None in members:  # a linked block whose file was not embedded
+        return f"of block {definition.Name!r}, whose objects are not in the file (linked?)"
+    if xform.Determinant() == 0:
+        return "flattened (a transform of determinant 0)"
+    return ""
+
+
+def _layers_shown(model) -> dict[int, bool]:
+    """Layer index → whether Rhino shows its objects: the layer and every parent layer on."""
+    layers = list(model.Layers)
+    by_id = {layer.Id: layer for layer in layers}
+
+    def shown(layer) -> bool:
+        seen = set()
+        while layer is not None and layer.Id not in seen:  # a parent cycle (a damaged file) ends the walk
+            if not layer.Visible:
+                return False
+            seen.add(layer.Id)
+            layer = by_id.get(layer.ParentLayerId)
+        return True
+
+    return {layer.Index: shown(layer) for layer in layers}
 
 
 def _renumber(skipped: list[tuple[int, str]], failed: list[int]) -> list[tuple[int, str]]:
