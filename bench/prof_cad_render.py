@@ -3,8 +3,8 @@ seconds: where the time per covered pixel goes, and what batching the tracer's r
 
 Renders once to warm up (kernels loaded, the second look's fine mesh built), then:
 
-1. a cProfile of a second render with the process's CPU clock as timer: its `RenderStats` stages and the functions
-   with the most time of their own;
+1. a cProfile of a second render with the process's CPU clock as timer (`prof_render.profiled`): its `RenderStats`
+   stages and the functions with the most time of their own;
 2. the candidate rounds (`tracing._candidates`, one per query round of every `trace`: the coarse trace, the second
    look's fine trace, the trimmed occlusion test): calls, rays and CPU seconds of each kind, and of the calls of at
    most ``--small`` rays, whose cost is mostly fixed (numpy set-up, kernel dispatch, the rare paths' steps);
@@ -18,8 +18,6 @@ Renders once to warm up (kernels loaded, the second look's fine mesh built), the
 from __future__ import annotations
 
 import argparse
-import cProfile
-import pstats
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -31,6 +29,8 @@ from rtreflect.integrator.autorig import resolve
 from rtreflect.integrator import renderer as renderer_module
 from rtreflect.integrator.renderer import RAYS_PER_TILE, Renderer
 from rtreflect.trace import secondlook, tracing
+
+from prof_render import profiled
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -94,15 +94,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="best of N renders per span size")
     args = ap.parse_args()
     renderer = Renderer(resolve(load_scene(args.part).with_image(args.width, args.height, 1)))
-    renderer.render(threads=1)
-    profile = cProfile.Profile(time.process_time)
-    profile.enable()
-    result = renderer.render(threads=1)
-    profile.disable()
-    print("stages (seconds, one thread, under the profiler):")
-    for stage, seconds in sorted(result.stats.stages.items(), key=lambda kv: -kv[1]):
-        print(f"  {stage:<22} {seconds:.3f}")
-    pstats.Stats(profile).sort_stats("tottime").print_stats(args.top)
+    profiled(renderer, args.top)
     rounds(renderer, args.small)
     spans(renderer, args.width, args.height, args.repeat)
 
