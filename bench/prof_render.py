@@ -23,6 +23,22 @@ from rtreflect.exchange.scene import load_scene
 from rtreflect.integrator.renderer import Renderer
 
 
+def profiled(renderer: Renderer, top: int) -> pstats.Stats:
+    """One render to warm up, then a second under cProfile with the process's CPU clock as timer: prints its stage
+    times and the ``top`` functions by their own time, and returns the profile (also bench/prof_cad_render.py's)."""
+    renderer.render(threads=1)
+    profile = cProfile.Profile(time.process_time)
+    profile.enable()
+    result = renderer.render(threads=1)
+    profile.disable()
+    print("stages (wall seconds, one thread):")
+    for stage, seconds in sorted(result.stats.stages.items(), key=lambda kv: -kv[1]):
+        print(f"  {stage:<22} {seconds:.3f}")
+    stats = pstats.Stats(profile).sort_stats("tottime")
+    stats.print_stats(top)
+    return stats
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--width", type=int, default=1920)
@@ -33,17 +49,7 @@ def main() -> None:
         path = Path(tmp) / "bench.toml"
         path.write_text(bench_scene_text(args.width, args.height))
         scene = load_scene(path)
-    renderer = Renderer(scene)
-    renderer.render(threads=1)
-    profile = cProfile.Profile(time.process_time)
-    profile.enable()
-    result = renderer.render(threads=1)
-    profile.disable()
-    print("stages (wall seconds, one thread):")
-    for stage, seconds in sorted(result.stats.stages.items(), key=lambda kv: -kv[1]):
-        print(f"  {stage:<22} {seconds:.3f}")
-    stats = pstats.Stats(profile).sort_stats("tottime")
-    stats.print_stats(args.top)
+    stats = profiled(Renderer(scene), args.top)
     stats.print_callers(r"accelerator.py.*\((intersect|occluded)\)")
 
 
