@@ -78,6 +78,40 @@ def test_finite_tubes_against_least_squares():
     assert 50 < seen < 300, "the sample must mix rays with and without a tube ahead"
 
 
+@pytest.mark.parametrize("radius", [0.4, 2.5])
+def test_endless_bank_nearest_tube_is_the_full_tables(radius):
+    """Endless tubes at ascending c_k: `reach` looks at a few tubes about the nearest (`kernels.tubes._nearest`);
+    its answer is the full (N, K) table's, to the bit: the first of equal nearest tubes ahead (ties made on purpose:
+    points midway between two tubes, reflected straight at the light plane), its d and t, the candidate flag and the
+    least t within the radius; rays with the tubes ahead a prefix, a suffix, all or none of them."""
+    rng = np.random.default_rng(5)
+    c, m = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    lights = TubeLights(np.array([0.0, 0.0, 4.0]), m, c, np.cross(c, m), np.array([-3.0, -1.5, -0.25, 0.5, 0.75, 2.0, 3.5]),
+                        radius, float("inf"))
+    R = np.column_stack([rng.uniform(-4, 4, 3000), rng.uniform(-1, 1, 3000), rng.uniform(-0.5, 0.5, 3000)])
+    s = rng.normal(size=(3000, 3))
+    s[:1000, 0] *= 0.05  # nearly across the tubes: their closest approaches spread ahead of and behind the point
+    s /= np.linalg.norm(s, axis=1, keepdims=True)
+    R[:200, 0] = 0.5 * (lights.c_k[:-1] + lights.c_k[1:])[rng.integers(0, 6, 200)]  # midway: equal distances
+    s[:200] = m
+    reach, table = lights.reach(R, s), lights.distances(R, s)
+    d = np.where(table.ahead, table.d, np.inf)
+    some = np.isfinite(d).any(axis=1)
+    best = np.where(some, np.argmin(d, axis=1), -1)  # argmin: the first of equals, as the scan
+    rows = np.flatnonzero(some)
+    np.testing.assert_array_equal(reach.line_id, best)
+    np.testing.assert_array_equal(reach.line_dist[rows], d[rows, best[rows]])
+    np.testing.assert_array_equal(reach.line_t[rows], table.t[rows, best[rows]])
+    assert np.isnan(reach.line_dist[~some]).all()
+    within = table.ahead & (table.d <= radius)
+    np.testing.assert_array_equal(reach.candidate, within.any(axis=1))
+    np.testing.assert_array_equal(reach.t_candidate, np.where(within, table.t, np.inf).min(axis=1))
+    ahead = table.ahead.sum(axis=1)
+    assert (ahead == 0).any() and (ahead == 7).any() and ((ahead > 0) & (ahead < 7)).sum() > 100
+    assert (table.d[np.arange(200), best[:200]] == table.d[np.arange(200), best[:200] + 1]).sum() > 100  # the ties
+    assert 100 < reach.candidate.sum() < 3000
+
+
 @pytest.mark.parametrize("length", [float("inf"), 6.0])
 def test_rays_along_the_tubes(length):
     """s ∥ c: the point-to-line distance |b × c|; an endless tube is ahead, a finite one is never reached."""

@@ -140,6 +140,106 @@ def distances(Q, c, e, c_k, half_length, R, s, d, t, ahead):
             d[i, k], t[i, k], ahead[i, k] = _pair(Q, c, e, R, i, c_k[k], half_length, pre)
 
 
+@njit(inline="always", **JIT)
+def _scan(Q, c, e, c_k, radius, half_length, R, i, pre):
+    """(best, best_d, best_t, hit, t_hit) of point i over every tube: the nearest tube ahead (first of equals; −1,
+    ∞, NaN where none is), and whether a tube ahead lies within the radius and the least t of those (∞ where none)."""
+    best, best_d, best_t, hit, t_hit = -1, np.inf, np.nan, False, np.inf
+    for k in range(c_k.shape[0]):
+        dk, tk, ahead = _pair(Q, c, e, R, i, c_k[k], half_length, pre)
+        if not ahead:
+            continue
+        if dk < best_d:
+            best, best_d, best_t = k, dk, tk
+        if dk <= radius:
+            hit = True
+            if tk < t_hit:
+                t_hit = tk
+    return best, best_d, best_t, hit, t_hit
+
+
+@njit(inline="always", **JIT)
+def _guess(x, c0, per_unit, last):
+    """An index in [0, last + 1] near where the ascending c_k cross x (linear between the first and last; 0 for NaN):
+    where `_nearest`'s exact walks start, so any value is correct, a near one quick."""
+    at = (x - c0) * per_unit
+    if not at > 0:
+        return 0
+    if at >= last + 1:
+        return last + 1
+    return int(at + 0.5)
+
+
+@njit(inline="always", **JIT)
+def _nearest(c_k, radius, pre, per_unit):
+    """`_scan`'s answer for infinite tubes at ascending c_k and a ray not parallel to them (finite scalars), from a
+    few tubes about the nearest.
+
+    t_k = α + c_k β and y_k = g − c_k h (d_k = |y_k|/|s × c|) are each one rounded product and one rounded sum of
+    c_k, as `_pair` computes them: monotone in c_k (β's and −h's sign), so in k. The tubes ahead (t > 0) are then a
+    suffix (β ≥ 0) or a prefix of k; over them d_k falls and then rises (weakly: equal runs), least at one of the two
+    tubes about y's change of sign; the least d's equal run and the tubes within the radius are runs about it; t over
+    a run is least at one of its ends. Walks from an interpolated guess find each end by the comparisons the scan
+    makes, on the values it computes: the same tube (first of equals), d, t and flags, to the bit.
+    """
+    g, h, inv, alpha, beta = pre[1], pre[2], pre[3], pre[4], pre[5]
+    last = c_k.shape[0] - 1
+    lo, hi = 0, last
+    if beta >= 0:  # ahead: a suffix
+        if not alpha + c_k[last] * beta > 0:
+            return -1, np.inf, np.nan, False, np.inf
+        if not alpha + c_k[0] * beta > 0:
+            lo = min(max(_guess(-alpha / beta, c_k[0], per_unit, last), 1), last)
+            while lo > 1 and alpha + c_k[lo - 1] * beta > 0:
+                lo -= 1
+            while not alpha + c_k[lo] * beta > 0:
+                lo += 1
+    else:  # a prefix
+        if not alpha + c_k[0] * beta > 0:
+            return -1, np.inf, np.nan, False, np.inf
+        if not alpha + c_k[last] * beta > 0:
+            hi = min(max(_guess(-alpha / beta, c_k[0], per_unit, last) - 1, 0), last - 1)
+            while hi < last - 1 and alpha + c_k[hi + 1] * beta > 0:
+                hi += 1
+            while not alpha + c_k[hi] * beta > 0:
+                hi -= 1
+    # j: the first k in [lo, hi + 1] past y's change of sign (y ≥ 0 where y rises with k, h ≤ 0; else y ≤ 0).
+    j = min(max(_guess(g / h, c_k[0], per_unit, last), lo), hi + 1)
+    if h <= 0:
+        while j > lo and g - c_k[j - 1] * h >= 0:
+            j -= 1
+        while j <= hi and not g - c_k[j] * h >= 0:
+            j += 1
+    else:
+        while j > lo and g - c_k[j - 1] * h <= 0:
+            j -= 1
+        while j <= hi and not g - c_k[j] * h <= 0:
+            j += 1
+    if j > lo:
+        best = j - 1
+        best_d = abs(g - c_k[best] * h) * inv
+        if j <= hi:
+            dj = abs(g - c_k[j] * h) * inv
+            if dj < best_d:
+                best, best_d = j, dj
+    else:
+        best = j
+        best_d = abs(g - c_k[best] * h) * inv
+    while best > lo and abs(g - c_k[best - 1] * h) * inv == best_d:  # the first of an equal run
+        best -= 1
+    if not best_d < np.inf:  # d overflowed: the scan keeps none
+        return -1, np.inf, np.nan, False, np.inf
+    best_t = alpha + c_k[best] * beta
+    if not best_d <= radius:
+        return best, best_d, best_t, False, np.inf
+    a, b = best, best
+    while a > lo and abs(g - c_k[a - 1] * h) * inv <= radius:
+        a -= 1
+    while b < hi and abs(g - c_k[b + 1] * h) * inv <= radius:
+        b += 1
+    return best, best_d, best_t, True, min(alpha + c_k[a] * beta, alpha + c_k[b] * beta)
+
+
 @njit(**JIT, aot=("void(f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8, f8, f8[:, ::1], f8[:, ::1], i8[::1], i8[::1], f8[::1], "
                   "f8[::1], f8[::1], b1[::1], f8[::1], f8[::1], f8[::1])",))
 def reach(Q, m, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, line_sigma, line_t, candidate,
@@ -147,24 +247,24 @@ def reach(Q, m, c, e, c_k, radius, half_length, R, s, tube, line_id, line_dist, 
     """Per point, without the (N, K) tables: the nearest tube ahead (index, d, the signed distance as `signed`
     and its t; first of equals; −1 and NaN where none is), whether a tube ahead lies within the radius and
     the t of the nearest such (∞ where none), where tube.shape[0] > 0 the t of tube[i], and Ulmet's f
-    (`_ulmet_at`)."""
+    (`_ulmet_at`). Infinite tubes at ascending c_k (a bank's): a few tubes about the nearest (`_nearest`), the
+    scan's values (`_scan`, which the others take)."""
     want = tube.shape[0] > 0
+    K = c_k.shape[0]
+    ordered = K > 1 and not half_length < np.inf and np.isfinite(c_k[0]) and np.isfinite(c_k[K - 1])
+    for k in range(1, K):
+        ordered = ordered and c_k[k - 1] < c_k[k]
+    per_unit = (K - 1) / (c_k[K - 1] - c_k[0]) if ordered else 0.0
     for i in range(R.shape[0]):
         f[i] = _ulmet_at(Q, m, e, R, s, i)
         pre = _prepare(Q, c, e, R, s, i)
-        best, best_d, best_t, hit, t_hit = -1, np.inf, np.nan, False, np.inf
-        for k in range(c_k.shape[0]):
-            dk, tk, ahead = _pair(Q, c, e, R, i, c_k[k], half_length, pre)
-            if want and k == tube[i]:
-                t_of[i] = tk
-            if not ahead:
-                continue
-            if dk < best_d:
-                best, best_d, best_t = k, dk, tk
-            if dk <= radius:
-                hit = True
-                if tk < t_hit:
-                    t_hit = tk
+        if ordered and not pre[0] and np.isfinite(pre[1]) and np.isfinite(pre[2]) and np.isfinite(pre[4]) and \
+                np.isfinite(pre[5]):
+            best, best_d, best_t, hit, t_hit = _nearest(c_k, radius, pre, per_unit)
+        else:
+            best, best_d, best_t, hit, t_hit = _scan(Q, c, e, c_k, radius, half_length, R, i, pre)
+        if want and 0 <= tube[i] < K:
+            t_of[i] = _pair(Q, c, e, R, i, c_k[tube[i]], half_length, pre)[1]
         line_id[i] = best
         line_dist[i] = best_d if best >= 0 else np.nan
         # The sign as `signed` gives it (the same expression, so the same bits); s ∥ c: the unsigned d.
