@@ -461,3 +461,27 @@ def test_seam_axis_is_the_parameter_the_two_pcurves_differ_in(make):
     drifting = np.array([[0.0, 1.52], [0.05, 1.53]])  # a short piece whose u drifts more than it runs in v
     (u0, _), _ = surface.domain
     assert np.array_equal(occt._on_seam_side(drifting + [u0, 0.0], surface, 0)[:, 1], drifting[:, 1])
+
+
+def test_tiny_pin_on_huge_slab_first_hits_are_open_cascades(tmp_path):
+    """tiny_on_huge.step: the 0.02-radius pin, meshed at its 2000 mm part's deflection (BRepMesh's smallest segment,
+    a tenth of it, longer than the pin's circumference), was one flat strip along its seam; the second look's shell
+    (that strip moved along the normals, which lie in it) had no thickness, and in a close-up rays past the pin's
+    silhouette went on to the slab (103 of 160×90 pixels, up to 88 mm behind). Such a reader mesh is replaced by the
+    span grid (`tessellation.reader_mesh`): every pixel-centre ray's first hit is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "tiny_on_huge.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(160, 90, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective", eye=np.array([-3.7, 2.25, 0.25]),
+                                 look_at=np.array([-4.0, 2.0, 0.15]), up=np.array([0.0, 0.0, 1.0]), fov=30.0)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = np.divmod(np.arange(160 * 90), 160)
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert np.count_nonzero(hits.patch == 6) > 500  # the pin's side fills a good part of the view

@@ -5,8 +5,8 @@ NURBS evaluator afterwards. Each knot span gets ``tessellation`` segments per
 direction, so the mesh follows the surface's own pieces.
 
 A trimmed CAD face (``NurbsSurface.trim``, DESIGN.md "CAD input") is meshed from its reader's
-triangulation in (u, v) when it has one (``mesh_uv``: vertices S(nodes) by rtreflect's own
-evaluator), else from the span grid keeping the triangles that touch the face (a triangle
+triangulation in (u, v) when it has one that follows the face (``mesh_uv``, `reader_mesh`: vertices S(nodes)
+by rtreflect's own evaluator), else from the span grid keeping the triangles that touch the face (a triangle
 overlapping the trim polygon in (u, v)). Either way the mesh only finds hits: the tracer
 tests each refined hit against the trim (tracing.py).
 """
@@ -95,6 +95,49 @@ def grid_faces(nu: int, nv: int) -> np.ndarray:
     return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int64)
 
 
+#: A reader's triangulation is used only while it follows its face, which the second look's shell (the mesh moved
+#: along the surface's normals) needs to enclose the surface: its triangles cover at least this fraction of the face's
+#: area (the triangles' (u, v) areas times |S_u × S_v| at their centroids), and those whose plane lies along a
+#: corner's normal (`COARSE_COS`) no more than this fraction of its own.
+#: Past either the shell no longer encloses the surface: tiny_on_huge.step's 0.02-radius pin, meshed at its 2000 mm
+#: part's deflection, was one flat strip along its seam (u = 0..2π chords of no length, no area), its shell a sheet
+#: of no thickness, and rays past its silhouette went on to the slab (a 160×90 close-up: 103 pixels up to 88 mm
+#: behind Open CASCADE's first hit); a circle cut in two chords would be a strip through the axis, along its normals.
+#: The span grid meshes such a face instead.
+COARSE_AREA = 0.25
+#: A triangle lies along the surface when a corner's normal makes a cosine below this (60°) with its plane's normal
+#: (BRepMesh at `occt.MESH_ANGLE` = 0.5 rad stays within ~0.25 rad). Weighed by area: slivers (a drilled sphere's
+#: along its hole) and a cone's triangles at its apex (normals turning about a point) fail it on a sliver of area.
+COARSE_COS = 0.5
+
+
+def reader_mesh(surface: NurbsSurface) -> tuple[np.ndarray, np.ndarray] | None:
+    """The face's reader triangulation (``mesh_uv``) as nodes (m, 2) and triangles (k, 3), or None where it has none
+    or where it does not follow the face (`COARSE_AREA`, `COARSE_COS`): the span grid meshes the face then."""
+    if surface.mesh_uv is None:
+        return None
+    nodes, triangles = surface.mesh_uv
+    uv, faces = np.asarray(nodes, dtype=np.float64).reshape(-1, 2), np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if len(faces) == 0:
+        return uv, faces
+    points = surface.evaluate(uv[:, 0], uv[:, 1]).S
+    a, b, c = (points[faces[:, k]] for k in range(3))
+    cross = np.cross(b - a, c - a)
+    area = np.linalg.norm(cross, axis=1)
+    p, q, r = (uv[faces[:, k]] for k in range(3))
+    uv_area = np.abs((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+    centre = (p + q + r) / 3.0
+    d = surface.evaluate(centre[:, 0], centre[:, 1])
+    expected = float(np.sum(uv_area * np.linalg.norm(np.cross(d.Su, d.Sv), axis=1)))
+    total = float(np.sum(area))
+    if total < COARSE_AREA * expected:
+        return None
+    normal = cross / np.maximum(area, np.finfo(float).tiny)[:, None]  # no area: no plane, and no weight below
+    corners = surface.normals(uv[:, 0], uv[:, 1])
+    cosine = np.min(np.abs(np.einsum("fkj,fj->fk", corners[faces], normal)), axis=1)
+    return None if float(np.sum(area[cosine < COARSE_COS])) > COARSE_AREA * total else (uv, faces)
+
+
 def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enclose: bool = False,
                      widen: bool = False) -> PatchMesh:
     """A mesh of one patch (of its trimmed face, see the module doc).
@@ -102,9 +145,9 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enc
     Per vertex ``uv`` (V, 2), ``patch`` (V,) and ``rim`` (V,): the vertices on the face's
     boundary (domain edge, or the trimmed mesh's boundary), where a neighbouring face may join.
     """
-    if surface.mesh_uv is not None:
-        nodes, triangles = surface.mesh_uv
-        uv, faces = np.asarray(nodes, dtype=np.float64).reshape(-1, 2), np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    mesh = reader_mesh(surface)
+    if mesh is not None:
+        uv, faces = mesh
         rim_edges = _boundary_edges(faces)  # on the trim: where a neighbouring face joins
         rim = np.unique(rim_edges)
         uv, faces = _with_skirt(uv, faces, surface)
@@ -121,7 +164,7 @@ def tessellate_patch(surface: NurbsSurface, patch_index: int, per_span: int, enc
     points = surface.evaluate(uv[:, 0], uv[:, 1]).S
     if enclose:
         points = _enclosing(surface, uv, points, faces, rim)
-    if widen and surface.mesh_uv is None and surface.trim is None:
+    if widen and mesh is None and surface.trim is None:
         points = _widened(surface, uv, points, faces, rim)
     # The grid as built, never merged: merging would mix vertices of different (u, v).
     return PatchMesh(np.ascontiguousarray(points, dtype=np.float64), np.asarray(faces, dtype=np.int64), uv,

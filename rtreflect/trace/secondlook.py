@@ -58,7 +58,7 @@ from .tracing import (FLOAT32_SLACK, VALID, Hits, _normals, _other_root, _over_c
                       _stopped_at_pole, facing, float32_rounding, refine_all, trace)
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
-from ..geometry.tessellation import Tessellation, _once, largest_factor, tessellate
+from ..geometry.tessellation import Tessellation, _once, largest_factor, reader_mesh, tessellate
 
 #: Half-thickness of the shell in chord errors: the mesh-to-surface distance is sampled at edge
 #: midpoints and vertices (`_chord_error`), a triangle's interior may stray a little farther.
@@ -266,7 +266,9 @@ class SecondLook:
         with self._lock:
             if self._fine is None:
                 # A reader's triangulation is subdivided in (u, v) (clipping a span grid to the trim costs ~10×).
-                finer = [s if s.mesh_uv is None else replace(s, mesh_uv=subdivided(*s.mesh_uv, FINE_LEVELS))
+                # One too coarse to follow its face (`reader_mesh`) is dropped: the span grid meshes that face.
+                finer = [s if s.mesh_uv is None else replace(s, mesh_uv=None if (m := reader_mesh(s)) is None
+                                                             else subdivided(*m, FINE_LEVELS))
                          for s in self._scene_surfaces]
                 fine = tessellate(finer, fine_factor(finer, self._per_span) * self._per_span, enclose=True, widen=True)
                 self._fine = fine, Accelerator(fine)
