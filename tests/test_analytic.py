@@ -141,7 +141,9 @@ def test_silhouette_pixels_are_supersampled(peer):
 
 
 @pytest.mark.parametrize("scene_name", ["peer", "teapot"])
-def test_bytes_do_not_depend_on_tiling_or_threads(scene_name):
+def test_bytes_do_not_depend_on_tiling_or_threads(scene_name, monkeypatch):
+    from rtreflect.integrator import renderer as renderer_module
+
     path = ROOT / "bench" / "peer.toml" if scene_name == "peer" else ROOT / "scenes" / "teapot.toml"
     scene = load_scene(path).with_image(96, 54, ANALYTIC)
     renderer = Renderer(scene)
@@ -149,6 +151,10 @@ def test_bytes_do_not_depend_on_tiling_or_threads(scene_name):
     for threads, rays_per_tile in [(2, 397), (1, 1000), (2, 96 * 3)]:  # spans starting mid-row, and whole rows
         tiled = renderer.render(threads=threads, rays_per_tile=rays_per_tile).film.pixels
         assert tiled.tobytes() == whole.tobytes(), (threads, rays_per_tile)
+    # Culled rays given the miss values, or traced to miss at Embree's root (`TRACE_ALL`): the same bytes.
+    for trace_all in (0.0, 2.0):  # every batch traced whole; every batch culled
+        monkeypatch.setattr(renderer_module, "TRACE_ALL", trace_all)
+        assert renderer.render(threads=2, rays_per_tile=397).film.pixels.tobytes() == whole.tobytes(), trace_all
     # The renderer cuts analytic spans at rows (`pixel_spans`); `render_span` itself takes any cut: spans starting
     # mid-row, and spans shorter than a row.
     n = 96 * 54

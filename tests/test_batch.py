@@ -366,6 +366,29 @@ def test_tiles_fit_the_budget_and_tube_pairs_stop_growing_at_a_chunk(tmp_path, b
         assert sizes[2000] == sizes[10000] > 1000
 
 
+
+@pytest.mark.parametrize("budget_mb", [40, 96])
+def test_analytic_spans_of_a_narrow_window_fit_the_budget(budget_mb):
+    """samples = "analytic": a span of the pixel window holds more pixels than rays (the columns outside the window
+    are film, not rays); its film rows count in the budget, with the tiles in flight (the peer scene: a window of
+    about half the width)."""
+    from rtreflect.integrator.tiling import WRITER_ROWS, rays_per_tile, tile_bytes
+
+    from dataclasses import replace
+
+    from rtreflect.exchange.scene import ANALYTIC
+
+    scene = load_scene(Path(__file__).resolve().parents[1] / "bench" / "peer.toml")
+    scene = replace(scene, image=replace(scene.image, samples=ANALYTIC))
+    budget = budget_mb << 20
+    rays = rays_per_tile(scene, budget, 2)
+    spans = Renderer(scene).spans(rays, threads=2)
+    pixel_bytes = len(CHANNELS) * 4
+    rows = (2 + WRITER_ROWS) * scene.image.width * pixel_bytes
+    widest = max(stop - start for start, stop in spans)
+    assert widest > rays  # the case: a span of more pixels than rays
+    assert rows + 2 * (tile_bytes(scene, rays) + widest * pixel_bytes) <= budget
+
 # -- issue 11: files, workers and the cluster ---------------------------------------------------
 def test_symlinked_scene_renders_under_its_own_name(tmp_path):
     """`current.toml -> v3.toml`: outputs are named by each file's stem, so both scenes render (not deduplicated)."""

@@ -96,9 +96,11 @@ def grid_faces(nu: int, nv: int) -> np.ndarray:
 
 
 #: A reader's triangulation is used only while it follows its face, which the second look's shell (the mesh moved
-#: along the surface's normals) needs to enclose the surface: its triangles cover at least this fraction of the face's
-#: area (the triangles' (u, v) areas times |S_u × S_v| at their centroids), and those whose plane lies along a
-#: corner's normal (`COARSE_COS`) no more than this fraction of its own.
+#: along the surface's normals) needs to enclose the surface: its triangles' 3D area is at least this fraction of the
+#: surface's area over their own (u, v) footprint (each triangle's (u, v) area times |S_u × S_v| at its centroid: a
+#: mesh that spans its footprint but lies flat across the surface's bend has little area, not a mesh that leaves part
+#: of the face out), and those whose plane lies along a corner's normal (`COARSE_COS`) no more than this fraction of
+#: its own.
 #: Past either the shell no longer encloses the surface: tiny_on_huge.step's 0.02-radius pin, meshed at its 2000 mm
 #: part's deflection, was one flat strip along its seam (u = 0..2π chords of no length, no area), its shell a sheet
 #: of no thickness, and rays past its silhouette went on to the slab (a 160×90 close-up: 103 pixels up to 88 mm

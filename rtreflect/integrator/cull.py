@@ -1,4 +1,4 @@
-"""Ray culling: camera rays that cannot meet any mesh the tracer asks are not traced at all.
+"""Ray culling: camera rays that cannot meet any mesh the tracer asks need not be traced.
 
 Every Embree query costs about as much per ray whether it hits or not (embreex builds each ray in
 turn), and a camera ray is asked of the coarse mesh and of the second look's shell
@@ -7,6 +7,8 @@ the tracing went to rays that hit nothing. A ray misses every triangle when it m
 holding all of them; the slab test (Kay and Kajiya, "Ray tracing complex scenes", SIGGRAPH 1986)
 decides that in one compiled pass (`kernels.pixels.box_keep`), and the renderer gives such rays the miss values of
 `tracing.Hits.blank` (what the tracer itself leaves there: the same bits).
+Where the box keeps most of a batch (`renderer.TRACE_ALL`), the renderer traces the whole batch instead: the
+culled rays then miss at Embree's root, with the same values, and nothing has to be spread back.
 
 The box is the meshes' bounding box grown by `BOX_MARGIN` of its diagonal, plus `ORIGIN_MARGIN` of the
 ray origins' distance to it, so Embree's float32 rounding (of the vertices and of the moved origins,

@@ -254,7 +254,8 @@ class Renderer:
         self._window: tuple[RayBox | None, tuple[slice, slice]] = (None, (slice(0, 0), slice(0, 0)))  # `window`
 
     def trace(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
-        """Exact first hits of camera rays; rays that miss every mesh's box (`cull`) are not traced: miss values."""
+        """Exact first hits of camera rays; rays that miss every mesh's box (`cull`) get the miss values, untraced unless
+        the box keeps `TRACE_ALL` of the batch (then all are traced: they miss at Embree's root, the same bits)."""
         with self.clock.stage("camera rays"):
             rays = self.ray_box.may_hit(origins, directions)
         if len(rays) >= TRACE_ALL * len(origins):  # few to cull: traced too (misses, as culled), nothing to spread

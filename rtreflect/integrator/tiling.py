@@ -18,8 +18,8 @@ from ..trace.camera import rays_per_pixel
 from ..errors import RtreflectError
 from .film import CHANNELS
 from ..modes.lights import TUBE_ENTRIES_PER_CHUNK
-from .renderer import RAYS_PER_TILE
-from ..exchange.scene import Scene
+from .renderer import RAYS_PER_TILE, WINDOW_TILE_PIXELS
+from ..exchange.scene import ANALYTIC, Scene
 
 #: Default budget: this fraction of the machine's physical memory.
 DEFAULT_FRACTION = 0.25
@@ -88,7 +88,9 @@ def rays_per_tile(scene: Scene, max_memory: int, tiles_in_flight: int) -> int:
     # The writer holds a partial row; OpenImageIO's EXR writer holds scanline buffers (`WRITER_ROWS`).
     rows = (2 + WRITER_ROWS) * scene.image.width * pixel_bytes
     usable = (max_memory - rows) // max(1, tiles_in_flight)
-    per_ray = bytes_per_ray(scene) + pixel_bytes // per_pixel + 1
+    # An analytic render's span of the pixel window holds up to WINDOW_TILE_PIXELS pixels per ray (`pixel_spans`).
+    pixels_per_ray = WINDOW_TILE_PIXELS if scene.image.samples == ANALYTIC else 1
+    per_ray = bytes_per_ray(scene) + pixels_per_ray * pixel_bytes // per_pixel + 1
     tubes = max(1, len(scene.lights.positions))
     # tile_bytes is linear in the rays up to a full chunk of tube pairs, then grows by per_ray only.
     below_chunk = min(max(0, usable) // (per_ray + BYTES_PER_TUBE_ENTRY * tubes), TUBE_ENTRIES_PER_CHUNK // tubes)
