@@ -795,8 +795,9 @@ def _affine(linear=np.eye(3), move=(0.0, 0.0, 0.0)) -> np.ndarray:
 #: blocks.3dm's definition "part": a 10 × 5 × 3 box at the origin, a sphere (radius 3 about (16, 2.5, 1.5)) and a
 #: capped cylinder extrusion (radius 2 about (-6, 2.5), height 6).
 BLOCK_BOX, BLOCK_SPHERE, BLOCK_CYLINDER = ((0, 0, 0), (10, 5, 3)), ((16, 2.5, 1.5), 3.0), ((-6, 2.5, 0), 2.0, 6.0)
-#: Definition "pair": "part" twice, the second turned 90° about x and lifted by 12.
-BLOCK_PAIR = (np.eye(4), _affine(move=(0, 0, 12)) @ _turn(90, 0))
+#: Definition "pair": "part" twice, the second turned 90° about x, moved 6 along x and lifted by 12 (the move along x
+#: does not commute with the instance's mirror in x, so composing the two in the wrong order misplaces it).
+BLOCK_PAIR = (np.eye(4), _affine(move=(6, 0, 12)) @ _turn(90, 0))
 #: The model's instances (definition, 4×4 transform), in file order: "part" turned 30° about z and moved; mirrored in
 #: the plane y = -8 (determinant -1); scaled 1.5 about the origin and moved; scaled (1, 0.6, 2) and moved (the
 #: sphere becomes an ellipsoid); "pair" mirrored in the plane x = -15 (its two parts mirrored through the nesting).

@@ -36,8 +36,9 @@ UNIT_NAMES = {"Millimeters": "mm", "Centimeters": "cm", "Meters": "m", "Inches":
               "Microns": "µm", "Kilometers": "km", "None": "unitless"}
 #: Gap closing tolerance when the file does not state one (Rhino's default absolute tolerance, model units).
 DEFAULT_TOLERANCE = 1e-3
-#: Blocks nested deeper than this are taken for a cycle (a definition placing itself, directly or not): Rhino refuses
-#: to make one, a damaged or hand-written file may hold one. Real assemblies nest a few levels.
+#: Blocks nested deeper than this are left out: real assemblies nest a few levels, and a cycle (a definition placing
+#: itself, directly or not, which Rhino refuses to make but a damaged file may hold) is caught before by the path
+#: of definitions it is inside; the limit bounds the work a pathological file can ask for.
 MAX_BLOCK_DEPTH = 32
 
 
@@ -282,7 +283,7 @@ def placed_breps(model, rhino3dm) -> Placed:
     shown = _layers_shown(model)
     definition_mode = rhino3dm.ObjectMode.InstanceDefinitionObject
 
-    def visit(obj, xform, depth: int) -> None:
+    def visit(obj, xform, path: tuple) -> None:
         attributes = obj.Attributes
         if attributes.Mode == rhino3dm.ObjectMode.Hidden or not attributes.Visible \
                 or not shown.get(attributes.LayerIndex, True):
@@ -293,14 +294,14 @@ def placed_breps(model, rhino3dm) -> Placed:
             definition = definitions.get(geometry.ParentIdefId)
             members = [objects.get(member) for member in definition.GetObjectIds()] if definition else []
             inner = geometry.Xform if xform is None else rhino3dm.Transform.Multiply(xform, geometry.Xform)
-            why = _unplaceable(definition, members, inner, depth)
+            why = _unplaceable(definition, members, inner, path)
             if why:
                 placed.unplaced[why] += 1
                 return
             placed.instances += 1
             placed.mirrored += inner.Determinant() < 0
             for member in members:
-                visit(member, inner, depth + 1)
+                visit(member, inner, (*path, definition.Id))
             return
         if isinstance(geometry, rhino3dm.Extrusion):
             brep = geometry.ToBrep(False)
@@ -315,18 +316,22 @@ def placed_breps(model, rhino3dm) -> Placed:
 
     for obj in model.Objects:
         if obj.Attributes.Mode != definition_mode:
-            visit(obj, None, 0)
+            visit(obj, None, ())
     return placed
 
 
-def _unplaceable(definition, members: list, xform, depth: int) -> str:
-    """Why a block instance of ``definition`` (its objects ``members``, placed by ``xform`` at nesting ``depth``)
-    cannot be placed, or ""."""
+def _unplaceable(definition, members: list, xform, path: tuple) -> str:
+    """Why a block instance of ``definition`` (its objects ``members``, placed by ``xform`` inside the definitions
+    ``path``, outermost first) cannot be placed, or ""."""
     if definition is None:
         return "whose block definition is not in the file"
-    if depth >= MAX_BLOCK_DEPTH:
-        return f"nested over {MAX_BLOCK_DEPTH} deep (a block that holds itself?)"
-    if not members or None in members:  # a linked block whose file was not embedded
+    if definition.Id in path:  # a damaged file: followed, it would never end
+        return f"of block {definition.Name!r} inside itself"
+    if len(path) >= MAX_BLOCK_DEPTH:
+        return f"nested over {MAX_BLOCK_DEPTH} deep"
+    if not members:
+        return f"of block {definition.Name!r}, which holds no objects"
+    if None in members:  # a linked block whose file was not embedded
         return f"of block {definition.Name!r}, whose objects are not in the file (linked?)"
     if xform.Determinant() == 0:
         return "flattened (a transform of determinant 0)"

@@ -55,6 +55,7 @@ from ..geometry.curvature import curvatures, curvatures_at
 from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
+from ..geometry.trims import into_period
 from ..kernels import nurbs as nurbs_kernel
 from ..kernels import rims as rims_kernel
 from ..kernels.pixels import scatter_picked, spread_rows
@@ -663,6 +664,25 @@ def _may_cross_twice(c, kappa, cap):
         return (np.abs(c) < OTHER_ROOT_COS) | (c * c <= cap * np.abs(kappa))
 
 
+def _into_domain(surfaces: SurfaceSet, patch, u, v) -> tuple[np.ndarray, np.ndarray]:
+    """Predicted Newton starts (u, v) moved into their patch's domain: across a closed face's seam
+    (S(u₀, ·) ≡ S(u₁, ·), `SurfaceSet.closed`; v alike) wrapped one period round, since the surface goes on there;
+    at an open edge clamped. Starts inside the domain keep their bits.
+
+    Clamped at a seam, a start predicted past it lands on the seam's far side, and Newton goes to the ray's other
+    crossing (blocks.3dm at 480×270: the non-uniformly scaled sphere's entry lies across its seam from the mesh hit;
+    clamped, 2 pixels stored the exit 0.65 behind it)."""
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    closed = surfaces.closed[np.asarray(patch, dtype=np.int64)]
+    out = []
+    for x, lo, hi, wraps in ((u, u0, u1, closed[:, 0]), (v, v0, v1, closed[:, 1])):
+        x = np.asarray(x, dtype=np.float64)
+        outside = (x < lo) | (x > hi)
+        with np.errstate(invalid="ignore"):  # NaN starts stay NaN, as np.clip leaves them
+            out.append(np.where(wraps & outside, into_period(x, lo, hi - lo), np.clip(x, lo, hi)))
+    return out[0], out[1]
+
+
 def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs, normal, cosine,
                 aside, curvature: np.ndarray | None = None) -> None:
     """Grazing valid hits, and those the mesh may have led past a shallow cap: the nearer of the ray's two crossings of
@@ -716,8 +736,7 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     rays, step, du, dv = rays[ahead], step[ahead], du[ahead], dv[ahead]
     if len(rays) == 0:
         return
-    u0, u1, v0, v1 = surfaces.domains(pk[rays])
-    us, vs = np.clip(ur[rays] + step * du, u0, u1), np.clip(vr[rays] + step * dv, v0, v1)
+    us, vs = _into_domain(surfaces, pk[rays], ur[rays] + step * du, vr[rays] + step * dv)
     t_start = tr[rays] + step
     u3, v3, d3, ok3 = refine(surfaces, pk[rays], us, vs, O[rays], D[rays], t_start, tessellation.extent)
     t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
@@ -769,9 +788,7 @@ def _crossing_on_face(tessellation: Tessellation, surfaces: SurfaceSet, rows, pa
     # Both crossings of every row in one refinement: rows 0..m−1 the one at s₋, m..2m−1 the one at s₊.
     s = np.concatenate([(c - root) / kappa, (c + root) / kappa])
     k2, O2, D2, tm2 = (np.concatenate([x, x]) for x in (patch, O, D, tm))
-    u0, u1, v0, v1 = surfaces.domains(k2)
-    starts_u = np.clip(np.tile(u, 2) + s * np.tile(du, 2), u0, u1)
-    starts_v = np.clip(np.tile(v, 2) + s * np.tile(dv, 2), v0, v1)
+    starts_u, starts_v = _into_domain(surfaces, k2, np.tile(u, 2) + s * np.tile(du, 2), np.tile(v, 2) + s * np.tile(dv, 2))
     u3, v3, d3, ok3 = refine(surfaces, k2, starts_u, starts_v, O2, D2, tm2 + s, tessellation.extent)
     near3, t3 = _near_mesh_hit(d3, k2, O2, D2, tm2, band)
     ok3 &= near3 & surfaces.on_face(k2, u3, v3)
