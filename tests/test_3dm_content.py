@@ -216,7 +216,8 @@ class _Object:
 
     def __init__(self, geometry, mode=rhino3dm.ObjectMode.Normal):
         self.Geometry = geometry
-        self.Attributes = type("Attributes", (), {"Id": uuid.uuid4(), "Mode": mode, "Visible": True, "LayerIndex": 0})()
+        self.Attributes = type("Attributes", (), {"Id": uuid.uuid4(), "Mode": mode, "Visible": True, "LayerIndex": 0,
+                                               "ActiveSpace": rhino3dm.ActiveSpace.ModelSpace})()
 
 
 class _Definition:
@@ -244,3 +245,24 @@ def test_block_inside_itself_and_empty_block_are_named():
     placed = rhino.placed_breps(model, rhino3dm)
     assert len(placed.breps) == 1 and placed.instances == 2
     assert placed.unplaced == {"of block 'a' inside itself": 1, "of block 'empty', which holds no objects": 1}
+
+
+def test_objects_on_layout_pages_are_left_out(tmp_path):
+    """A surface on a layout page (page space: at the sheet's coordinates) is not part of the model: left out and
+    counted, as hidden ones are; a file holding only such objects is the one-line error saying so. Before, the
+    page's sphere rendered beside the model's."""
+    page = rhino3dm.ObjectAttributes()
+    page.ActiveSpace = rhino3dm.ActiveSpace.PageSpace
+    model = rhino3dm.File3dm()
+    model.Objects.AddBrep(rhino3dm.Brep.CreateFromSphere(rhino3dm.Sphere(rhino3dm.Point3d(200, 100, 0), 50.0)), page)
+    only_page = tmp_path / "only_page.3dm"
+    assert model.Write(str(only_page), 7)
+    model.Objects.AddBrep(rhino3dm.Brep.CreateFromSphere(rhino3dm.Sphere(rhino3dm.Point3d(0, 0, 0), 2.0)))
+    both = tmp_path / "both.3dm"
+    assert model.Write(str(both), 7)
+    read = read_cad(both)
+    assert len(read.surfaces) == 1
+    assert np.abs(read.surfaces[0].points[..., :3]).max() < 3.0  # the model's sphere, radius 2 about the origin
+    assert read.notes == ["left out 1 object on layout pages (page space, not the model)"]
+    with pytest.raises(SceneError, match=r"no surfaces to render: the \.3dm file holds 1 object on layout pages"):
+        read_cad(only_page)

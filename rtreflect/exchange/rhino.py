@@ -208,7 +208,8 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
         # The edges a later face's fix replaced, replaced in the faces fixed before it too: shared again.
         builder.Add(compound, context.Apply(brep_faces))
     if index == 0:
-        held = ", ".join(filter(None, [_tally(placed.others), placed.unplaced and _unplaced(placed.unplaced)]))
+        held = ", ".join(filter(None, [_tally(placed.others), placed.unplaced and _unplaced(placed.unplaced),
+                                       placed.on_pages and _on_pages(placed.on_pages)]))
         if placed.hidden:
             held = (held + " and " if held else "") + f"{_hidden(placed.hidden)}: show them in Rhino to render them"
         held = held or "no objects"
@@ -238,6 +239,7 @@ class Placed:
     unplaced: Counter = field(default_factory=Counter)  # block instances that cannot be placed, by reason
     instances: int = 0  # block instances placed (nested ones included)
     mirrored: int = 0  # of which of determinant < 0
+    on_pages: int = 0  # objects left out because they lie on a layout page (page space), not in the model
 
     def notes(self) -> list[str]:
         """Summary lines (without the file name): the blocks placed, the objects left out by kind, the hidden ones."""
@@ -251,6 +253,8 @@ class Placed:
             lines.append(f"left out {_tally(self.others)}: not surfaces")
         if self.hidden:
             lines.append(f"left out {_hidden(self.hidden)}")
+        if self.on_pages:
+            lines.append(f"left out {_on_pages(self.on_pages)}")
         return lines
 
 
@@ -260,6 +264,10 @@ def _tally(counts: Counter) -> str:
 
 def _unplaced(reasons: Counter) -> str:
     return "block instances: " + _tally(reasons)
+
+
+def _on_pages(count: int) -> str:
+    return f"{count} object{'s' * (count != 1)} on layout pages (page space, not the model)"
 
 
 def _hidden(count: int) -> str:
@@ -282,9 +290,13 @@ def placed_breps(model, rhino3dm) -> Placed:
     definitions = {definition.Id: definition for definition in model.InstanceDefinitions}
     shown = _layers_shown(model)
     definition_mode = rhino3dm.ObjectMode.InstanceDefinitionObject
+    page_space = rhino3dm.ActiveSpace.PageSpace
 
     def visit(obj, xform, path: tuple) -> None:
         attributes = obj.Attributes
+        if attributes.ActiveSpace == page_space:  # a layout's title block or annotation: drawn on paper, not modelled
+            placed.on_pages += 1
+            return
         if attributes.Mode == rhino3dm.ObjectMode.Hidden or not attributes.Visible \
                 or not shown.get(attributes.LayerIndex, True):
             placed.hidden += 1
