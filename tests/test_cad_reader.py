@@ -288,3 +288,26 @@ def test_period_shift_puts_the_first_knot_in_the_pcurves_range(periods):
     assert lo - PERIOD_SHIFT_SLACK * period <= moved[0] < lo + period
     half = periods % 1.0 == 0.5
     np.testing.assert_allclose(moved[0], lo + (0.5 * period if half else 0.0), rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("value, periods, snapped", [
+    (-1.756e-9, 0, 0.0),  # union_big.step's cylinders: cut beside the knot 0, a 1.76e-9 sliver span before
+    (2 * np.pi - 1.756e-9, 0, 2 * np.pi),
+    (1.5, 0, 1.5),  # between knots: kept
+    (2.0 + 1e-8, 0, 2.0 + 1e-8),  # beyond SIDE_SNAP of the range (1e-8 > 1e-9 · 2π): kept
+    (2.0 - 5e-10, 0, 2.0),
+    (-1e-9, 2, 4 * np.pi),  # two periods on: onto the knot there
+    (1.5, 2, 1.5 + 4 * np.pi),
+])
+def test_cut_points_snap_onto_knots_within_side_snap(value, periods, snapped):
+    """`occt._snap_to_knots`: a cut point within `SIDE_SNAP` of the cut's range from a knot is put on the knot (a
+    periodic direction's knots moved by whole periods to it first), so `Segment` leaves no sliver knot span; farther
+    points are kept."""
+    from rtreflect.exchange.occt import _snap_to_knots
+
+    period = 2 * np.pi
+    knots = np.array([0.0, 2.0, 4.0, period])
+    value += periods * period
+    assert _snap_to_knots(value, knots, period, period) == pytest.approx(snapped, rel=0, abs=1e-12)
+    if periods == 0:  # not periodic: the same knots, the same verdict
+        assert _snap_to_knots(value, knots, period) == snapped

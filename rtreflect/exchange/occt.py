@@ -8,8 +8,8 @@ Steps (DESIGN.md, "CAD input"; measured facts in the project's OCP notes):
 2. Per face, the B-spline surface (location applied by ``BRep_Tool.Surface_s``) is cut to the
    face's (u, v) bounds with ``Geom_BSplineSurface.Segment``: this un-periodises periodic
    surfaces, clamps unclamped knot vectors, and keeps the geometry and the parameters (knot
-   insertion, Piegl & Tiller A5.3). Knots closer than float64 resolves are merged
-   (`clean_knots`). Weights are read with ``WeightsArray()`` whenever either rational flag is set.
+   insertion, Piegl & Tiller A5.3); a cut point within `SIDE_SNAP` of a knot is put on it (`_snap_to_knots`: no
+   sliver span). Knots closer than float64 resolves are merged (`clean_knots`). Weights are read with ``WeightsArray()`` whenever either rational flag is set.
 3. Trims: the outer wire (``BRepTools.OuterWire_s``) and the holes, each edge's pcurve
    (``BRepAdaptor_Curve2d``, seam edges once per orientation, pole edges included) sampled by
    bisection until the polyline's midpoints lie within `TRIM_TOLERANCE` × the part's diagonal (the faces' own
@@ -211,11 +211,22 @@ def clean_knots(knots: np.ndarray, degree: int, poles: np.ndarray, weights: np.n
     return knots, poles, weights
 
 
-def _snap_to_knots(value: float, knots: np.ndarray) -> float:
-    """``value`` moved onto a knot closer than `MIN_KNOT_SPAN`, so cutting there adds no near-duplicate knot."""
-    narrowest = MIN_KNOT_SPAN * max(1.0, float(np.max(np.abs(knots))))
-    near = knots[np.abs(knots - value) < narrowest]
-    return float(near[0]) if len(near) else value
+def _snap_to_knots(value: float, knots: np.ndarray, width: float, period: float = 0.0) -> float:
+    """``value`` moved onto the nearest knot within `SIDE_SNAP` of ``width`` (the cut's range; at least
+    `MIN_KNOT_SPAN`), so cutting there leaves no sliver knot span. A periodic direction's knots (one period's) are
+    first moved by whole periods to ``value``'s period where ``value`` lies outside their range.
+
+    A cut that close to a knot is OCCT's tolerance, not a feature: union_big.step's periodic cylinders were cut at
+    u = -1.756e-9 beside the knot 0, leaving a 1.76e-9-wide span in which S_uu came out 0.65 of its scale off, and
+    variable_fillet.step's fillets 9.4e-9 past a knot, S_vv 5.3e4 off (tests/test_nurbs_vs_occt.py). The trims and
+    mesh nodes that far outside the cut are put on its side anyway (`_wire_loop`; the evaluator clamps to the domain).
+    """
+    reach = max(SIDE_SNAP * width, MIN_KNOT_SPAN * max(1.0, float(np.max(np.abs(knots)))))
+    if period and not knots[0] - reach <= value <= knots[-1] + reach:  # the knots as OCCT gave them where they serve
+        knots = knots + period * math.floor((value - knots[0]) / period)
+    gap = np.abs(knots - value)
+    k = int(np.argmin(gap))
+    return float(knots[k]) if gap[k] < reach else value
 
 
 def _into_pcurves_period(knots: np.ndarray, lo: float, period: float) -> np.ndarray:
@@ -248,7 +259,7 @@ def bspline_of_face(face) -> NurbsSurface:
             hi = min(hi, lo + period)
         else:  # the pcurves' bounds may pass the surface's by their tolerance
             lo, hi = max(lo, first), min(hi, last)
-        return _snap_to_knots(lo, knots), _snap_to_knots(hi, knots)
+        return _snap_to_knots(lo, knots, hi - lo, period), _snap_to_knots(hi, knots, hi - lo, period)
 
     uk = np.fromiter(surface.UKnots(), float)
     vk = np.fromiter(surface.VKnots(), float)
