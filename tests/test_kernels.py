@@ -38,6 +38,11 @@ from rtreflect.trace.tracing import refine
 ROOT = Path(__file__).resolve().parents[1]
 TEAPOT = ROOT / "scenes" / "teapot.bpt"
 
+#: One xdist worker runs this file and test_kernels_aot.py one test after another (`--dist loadgroup`, pyproject's
+#: addopts): their numba JIT compilations share its on-disk cache, so the JIT compiles once instead of in both
+#: workers at once (CI's suite spent 511 + 198 s in two such tests side by side).
+pytestmark = pytest.mark.xdist_group("numba-jit")
+
 
 def tubes(length: float) -> TubeLights:
     c, m = np.array([0.0, 0.6, 0.8]), np.array([0.0, -0.8, 0.6])

@@ -58,6 +58,9 @@ def built() -> bool:
 
 needs_module = pytest.mark.skipif(not built(), reason="AOT kernels not built (python -m rtreflect.kernels.build)")
 
+#: With test_kernels.py on one xdist worker: the JIT compiles once (see there).
+pytestmark = pytest.mark.xdist_group("numba-jit")
+
 
 @needs_module
 def test_render_with_fresh_module_does_not_import_numba_and_matches_the_jit():
