@@ -140,6 +140,26 @@ def test_instances_sphere_corner_entry_is_the_first_hit(tmp_path):
     np.testing.assert_allclose(hits.t, expected, rtol=0, atol=POINT_TOLERANCE * renderer.tessellation.extent)
 
 
+@pytest.mark.parametrize("name, pixel", [("torus_hole_view.step", (180, 364)), ("pipe_spline.step", (84, 106))])
+def test_entry_past_a_passing_minimum_is_the_first_hit(tmp_path, name, pixel):
+    """torus_hole_view.step and pipe_spline.step at 480×270, pixel-centre rays (row, column) (180, 364) and (84, 106):
+    each ray's first mesh hit leads the search to a positive minimum of its distance to the face (0.028 at t = 59.8 on
+    the torus's inner wall, 0.017 at t = 35.0 on the pipe), judged a miss; the surface then dips across the ray a
+    little farther on (OCCT's `PerformNearest`: t = 65.33 and 37.28), where the mesh, within its chord error of it (0.6
+    and 0.25), stays on the ray's far side. The renderer stored the face's far side, 99.36 and 53.41 (validate: "1
+    pixels store an exact hit behind a nearer exact surface point"); the ray is now followed on past the minimum
+    (`tracing._past_minimum`)."""
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / name
+    sweep.PARTS[name](path)
+    renderer = Renderer(resolve(load_scene(path).with_image(480, 270, 1)))
+    assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(np.array([pixel[0]]), np.array([pixel[1]])))
+
+
 def test_revolved_seam_lip_is_the_first_hit(tmp_path):
     """revolved_seam.step: GeomAPI_PointsToBSpline's profile overshoots its last point, z = 36, to 36.3 and folds back
     to the axis within v 0.995..1, a lip 4.7 wide on the top of the part. Pixel-centre rays of the default camera at
