@@ -505,3 +505,50 @@ def test_tiny_pin_on_huge_slab_first_hits_are_open_cascades(tmp_path):
     rows, cols = np.divmod(np.arange(160 * 90), 160)
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
     assert np.count_nonzero(hits.patch == 6) > 500  # the pin's side fills a good part of the view
+
+
+def test_ray_off_an_open_fillet_restarts_on_the_face_it_ran_onto(tmp_path):
+    """panel_fillet.step (a 2000 mm panel, one top edge filleted at 2) at 320×180, pixel (71, 21): the ray's first mesh
+    hit is on the fillet's mesh, 0.13 before the side face y = -1000 (whose mesh chord along the fillet passes below the
+    point there); Newton on the fillet ran off its lower edge, and of the `tracing.SEAM_TRIES` neighbours the first was
+    the fillet's own end 81 away (its u runs 0..2003 across the 2 mm fillet: a vertex over half that span away counted
+    as the far side of a seam) and the side face was never tried: the ray went on through the part to the bottom face
+    74 farther. The far side of its own seam is looked for only on a closed face (`tracing._seam_sides`): OCCT's
+    `PerformNearest` hit, the side face at t = 2244.9965 (|N·D| = 0.37), is the first hit. The ray is fixed here (a
+    small image's renderer traces it)."""
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "panel_fillet.step"
+    sweep.PARTS[path.name](path)
+    renderer = Renderer(resolve(load_scene(path).with_image(96, 54, 1)))
+    origins = np.array([[865.8695425427776, -1973.990555914712, 955.6933066183215]])
+    directions = np.array([[-0.79514500624295, 0.43384946801612145, -0.42369689419327494]])
+    hits = assert_first_hits_are_occt(path, renderer, origins, directions)
+    assert hits.patch[0] == 1
+
+
+def test_cone_through_its_apex_close_up_first_hits_are_open_cascades(tmp_path):
+    """double_cone.step: one conical face running through its apex (both nappes), so the apex, where S_u = 0, is a row
+    inside the face's domain, not a collapsed side (`SurfaceSet.collapsed`, `tracing._stopped_at_pole` know only sides).
+    In a close-up of the apex every pixel-centre ray's first hit is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "double_cone.step"
+    sweep.PARTS[path.name](path)
+    apex = -20.0 * np.cos(np.radians(30.0)) * np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)  # gp_Cone: v = -R / sin α
+    scene = load_scene(path).with_image(96, 54, 1)
+    towards = np.array([0.3, -1.0, 0.6]) / np.linalg.norm([0.3, -1.0, 0.6])
+    camera = dataclasses.replace(scene.camera, projection="perspective", eye=apex + 15.0 * towards, look_at=apex,
+                                 up=np.array([0.0, 0.0, 1.0]), fov=30.0)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = np.divmod(np.arange(96 * 54), 96)
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit.mean() > 0.3

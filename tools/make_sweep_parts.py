@@ -51,6 +51,13 @@ Fourth sweep (what real .3dm files contain):
                        mirrored, scaled uniformly and not, and a nested block placed by a mirror; a loose box, a hidden
                        box, a box on a layer that is off, a mesh and a curve (`write_blocks_3dm`; `blocks_occt` builds
                        the same placed solids in Open CASCADE)
+Fifth sweep (car-body, aircraft and product kinds):
+  three_sided.step     a domed bicubic face with one side collapsed to a point (a degenerate edge), the point in view
+  panel_fillet.step    a 2000 × 2000 gently curved B-spline panel, 30 thick, one top edge filleted at 2
+  double_cone.step     one conical face running through its apex (both nappes): the apex inside the face
+  offset_cylinder.step a Geom_OffsetSurface of a half cylinder (r 20, offset 5) with a round hole through it
+  thin_chamfer.step    a cylinder (r 50) whose top rim is chamfered 0.05: a conical sliver 0.07 × 314
+  touching_hole.step   a domed bicubic face whose round hole touches its straight outer side at one point
 """
 
 from __future__ import annotations
@@ -917,6 +924,104 @@ def blocks_occt():
     return compound
 
 
+
+# --- Fifth sweep (issue 12): what car-body, aircraft and product parts have that the sweeps above lack. -------------
+
+def three_sided():
+    """A bicubic B-spline face whose u = 0 row of poles is one point (a degenerate edge: a three-sided patch, as car
+    bodies close a corner), domed, its collapsed corner towards the 3/4 view's camera."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRep import BRep_Tool
+
+    back = math.atan2(-ISO_FROM[1], -ISO_FROM[0])  # the fan opens away from the camera
+    poles = [[(0.0, 0.0, 0.0)] * 4]
+    for i in (1, 2, 3):
+        row = []
+        for j in range(4):
+            a = back + math.radians(-35.0 + 70.0 * j / 3)
+            r = 15.0 * i
+            row.append((r * math.cos(a), r * math.sin(a), 6.0 * math.sin(i) * (1.2 if j in (1, 2) else 0.4)))
+        poles.append(row)
+    face = _bspline_face(poles, 3, 3, [(0.0, 4), (1.0, 4)])
+    return BRepBuilderAPI_MakeFace(BRep_Tool.Surface_s(face), 1e-7).Face()
+
+
+#: panel_fillet.step: the panel's size, and the radius of the fillet along one of its top edges.
+PANEL_SIZE, PANEL_FILLET = 2000.0, 2.0
+
+
+def panel_fillet():
+    """A 2000 × 2000 B-spline panel sagging 60 (a roof, a wing skin), 30 thick (its top face extruded down), one top
+    edge filleted at 2: a face a thousand times narrower than the part."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism
+    from OCP.gp import gp_Vec
+
+    half = PANEL_SIZE / 2
+    poles = [[(-half + PANEL_SIZE * i / 3, -half + PANEL_SIZE * j / 3, 60.0 * (i in (1, 2)) + 25.0 * (j in (1, 2)))
+              for j in range(4)] for i in range(4)]
+    solid = BRepPrimAPI_MakePrism(_bspline_face(poles, 3, 3, [(0.0, 4), (1.0, 4)]), gp_Vec(0, 0, -30)).Shape()
+    fillet = BRepFilletAPI_MakeFillet(solid)
+    for edge in _edges(solid):  # the top face's edge along y = -half
+        first, last = BRep_Tool.Range_s(edge)
+        curve = BRep_Tool.Curve_s(edge, first, last)
+        a, b = curve.Value(first), curve.Value(last)
+        if abs(a.Y() + half) < 1e-6 and abs(b.Y() + half) < 1e-6 and min(a.Z(), b.Z()) > -1.0:
+            fillet.Add(PANEL_FILLET, edge)
+    return fillet.Shape()
+
+
+def double_cone():
+    """A conical face (semi-angle 30°) running through its apex: v from 20 before it to 15 past it, 270° round, so the
+    apex lies inside the face (both nappes, one face), its axis across the 3/4 view."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_ConicalSurface
+    from OCP.gp import gp_Ax3, gp_Dir, gp_Pnt
+
+    # gp_Cone: radius 10 at v = 0, the apex at v = -10 / sin 30° = -20
+    surface = Geom_ConicalSurface(gp_Ax3(gp_Pnt(0, 0, 0), gp_Dir(1, 1, 0), gp_Dir(0, 0, 1)), math.radians(30.0), 10.0)
+    return BRepBuilderAPI_MakeFace(surface, 0.0, 1.5 * math.pi, -40.0, -5.0, 1e-7).Face()
+
+
+def offset_cylinder():
+    """A half cylinder (r 20, 40 long) offset by 5 as a Geom_OffsetSurface face, with a round hole cut through it."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_CylindricalSurface, Geom_OffsetSurface
+    from OCP.gp import gp_Ax3
+
+    surface = Geom_OffsetSurface(Geom_CylindricalSurface(gp_Ax3(), 20.0), 5.0)
+    face = BRepBuilderAPI_MakeFace(surface, 0.0, math.pi, 0.0, 40.0, 1e-7).Face()
+    return BRepAlgoAPI_Cut(face, _cylinder(0, -50, 20, (0, 1, 0), 6.0, 100)).Shape()
+
+
+def thin_chamfer():
+    """A cylinder (r 50, 30 high) whose top rim is chamfered 0.05: a conical sliver 0.07 wide and 314 long between
+    the large cap and side."""
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeChamfer
+    from OCP.BRep import BRep_Tool
+
+    body = _cylinder(0, 0, 0, (0, 0, 1), 50.0, 30.0)
+    chamfer = BRepFilletAPI_MakeChamfer(body)
+    for edge in _edges(body):
+        first, last = BRep_Tool.Range_s(edge)
+        curve = BRep_Tool.Curve_s(edge, first, last)
+        if curve is not None and abs(curve.Value(first).Z() - 30.0) < 1e-9 and abs(curve.Value(last).Z() - 30.0) < 1e-9:
+            chamfer.Add(0.05, edge)
+    return chamfer.Shape()
+
+
+def touching_hole():
+    """A domed bicubic face with a round hole (r 8) whose rim touches the face's straight side y = 0 at one point
+    (a vertical cylinder tangent to that side's plane): the outer trim touches itself there."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+
+    poles = [[(15.0 * i, 15.0 * j, 10.0 if (i in (1, 2) and j in (1, 2)) else 0.0) for j in range(4)] for i in range(4)]
+    face = _bspline_face(poles, 3, 3, [(0.0, 4), (1.0, 4)])
+    return BRepAlgoAPI_Cut(face, _cylinder(22.5, 8.0, -20, (0, 0, 1), 8.0, 60)).Shape()
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -961,6 +1066,12 @@ PARTS = {
     "periodic_bspline.step": lambda p: write_step(periodic_bspline(), p),
     "mirrored_assembly.step": write_mirrored_assembly,
     "blocks.3dm": write_blocks_3dm,
+    "three_sided.step": lambda p: write_step(three_sided(), p),
+    "panel_fillet.step": lambda p: write_step(panel_fillet(), p),
+    "double_cone.step": lambda p: write_step(double_cone(), p),
+    "offset_cylinder.step": lambda p: write_step(offset_cylinder(), p),
+    "thin_chamfer.step": lambda p: write_step(thin_chamfer(), p),
+    "touching_hole.step": lambda p: write_step(touching_hole(), p),
 }
 
 

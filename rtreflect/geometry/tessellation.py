@@ -219,7 +219,8 @@ class Tessellation:
         several faces meet at a corner, their boundary vertices coincide). With the points' own
         ``uv`` (N, 2), a boundary vertex of the same patch counts too when its (u, v) lies more
         than half the patch's domain away: the other side of a closed face's seam (a revolved
-        face's u = 0 and u = 2π), where the ray goes on on the same face.
+        face's u = 0 and u = 2π), where the ray goes on on the same face; a NaN component never
+        qualifies (the tracer passes NaN in a direction the face is not closed in, `tracing._seam_sides`).
 
         ``reach`` (N,): only vertices within that distance of their point count (across a large face
         the search would otherwise walk the face's whole boundary).

@@ -426,7 +426,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     for attempt in range(SEAM_TRIES):
         if len(seam) == 0:
             break
-        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, np.column_stack([ur[seam], vr[seam]]), reach)
+        pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, _seam_sides(surfaces, pk[seam], ur[seam], vr[seam]),
+                                                   reach)
         close = pn >= 0
         seam, at, tried, reach, pn, un, vn, gap = (x[close] for x in (seam, at, tried, reach, pn, un, vn, gap))
         if attempt == 0:
@@ -618,6 +619,14 @@ def _search_tolerance(t, extent) -> np.ndarray:
     """The distance |r| at which the search (`_rescue`) from a start at ray distance ``t`` counts as on the ray: Newton's
     tolerance at that distance, `NEWTON_TOLERANCE` × max(t, the scene's extent)."""
     return NEWTON_TOLERANCE * np.maximum(t, extent)
+
+
+def _seam_sides(surfaces: SurfaceSet, patch, u, v) -> np.ndarray:
+    """(N, 2) (u, v) for `Tessellation.across_seam`'s far side of a closed face's seam: NaN in a direction the face is
+    not closed in (`SurfaceSet.closed`), where none of its own vertices is across a seam. An open face's vertices half
+    its span away are no seam: panel_fillet.step's fillet (2 wide, u from 0 to 2003 across it) offered its own end, 81
+    away, as the first of the `SEAM_TRIES`, and the side face it ran onto was never tried (the ray went through)."""
+    return np.where(surfaces.closed[np.asarray(patch, dtype=np.int64)], np.column_stack([u, v]), np.nan)
 
 
 def _over_closed_seam(surfaces: SurfaceSet, patch, u, v, derivs: SurfaceDerivatives, converged, edge, O, D, t_mesh,
