@@ -7,8 +7,9 @@ point by point, in registers, with no (N, …) temporaries:
 * the non-zero basis functions and their derivatives (Piegl & Tiller A2.3, eq. 2.9–2.10);
 * the homogeneous derivatives A^(k,l), w^(k,l) as Σ_i Σ_j N_i^(k)(u) N_j^(l)(v) P^w_ij; up to
   degree `POWER_FORM_MAX_DEGREE` from each span's power (Taylor) form instead, Σ_kl C_kl τ_u^k τ_v^l
-  with τ the local parameter in [0, 1]: no divisions, about 3× fewer operations than A2.3; for
-  bicubic patches written out in registers (`bicubic_contract`: the same sums, the same bits);
+  with τ the local parameter in [0, 1]: no divisions, about 3× fewer operations than A2.3; up to
+  bicubic written out in registers (`bicubic_contract`: the same sums, the same bits), a lower degree's
+  form padded with zero coefficients to bicubic (planes, and the cylinders, cones and tori of CAD parts);
 * the rational derivatives by Piegl & Tiller eq. 4.20 (algorithm A4.4), for k + l <= 2;
 * the unit normal (S_u × S_v)/|S_u × S_v| and its degenerate test, and Newton's iteration onto
   the exact ray–surface hit (`newton_lanes`);
@@ -101,12 +102,16 @@ def power_form(patch) -> np.ndarray | None:
 
     S_w(u, v) = Σ_kl C_kl τ_u^k τ_v^l on span (a, b), with C_kl = Σ_ij M^u_ki M^v_lj P^w_ij and
     M_kr = h^k/k! N_r^(k)(span start) (h the span's length). Rows: span a·(spans in v) + b, then k, l;
-    empty spans (repeated knots), which `find_span_at` never returns, hold zeros. None beyond
+    empty spans (repeated knots), which `find_span_at` never returns, hold zeros. Up to bicubic, k and l
+    run to 3 whatever the degree, C_kl = 0 beyond it (a polynomial of lower degree is a cubic): every such
+    patch is evaluated by the written-out bicubic code (`is_bicubic_power`). None beyond
     `POWER_FORM_MAX_DEGREE` or `POWER_FORM_MAX_BYTES`.
     """
     p, q = patch.degree_u, patch.degree_v
     nu, nv = patch.weights.shape
-    if max(p, q) > POWER_FORM_MAX_DEGREE or (nu - p) * (nv - q) * (p + 1) * (q + 1) * 4 * 8 > POWER_FORM_MAX_BYTES:
+    padded = max(p, q) <= WRITTEN_OUT_DEGREE  # stored as bicubic, the higher coefficients 0 (`is_bicubic_power`)
+    rows = (WRITTEN_OUT_DEGREE + 1) ** 2 if padded else (p + 1) * (q + 1)
+    if max(p, q) > POWER_FORM_MAX_DEGREE or (nu - p) * (nv - q) * rows * 4 * 8 > POWER_FORM_MAX_BYTES:
         return None
 
     def taylor(knots: np.ndarray, degree: int, n_ctrl: int) -> np.ndarray:
@@ -125,6 +130,8 @@ def power_form(patch) -> np.ndarray | None:
     Mu, Mv = taylor(patch.knots_u, p, nu), taylor(patch.knots_v, q, nv)
     windows = np.lib.stride_tricks.sliding_window_view(patch._pw, (p + 1, q + 1), axis=(0, 1))  # (a, b, 4, i, j)
     coef = np.einsum("aki,blj,abcij->abklc", Mu, Mv, windows, optimize=True)
+    if padded:
+        coef = np.pad(coef, ((0, 0), (0, 0), (0, WRITTEN_OUT_DEGREE - p), (0, WRITTEN_OUT_DEGREE - q), (0, 0)))
     return np.ascontiguousarray(coef.reshape(-1, 4))
 
 
@@ -289,7 +296,9 @@ def contract(Nu, Nv, points, base, stride, p, q, order):
 #: The degree whose power-form evaluation is written out as scalars (`bicubic_contract`): bicubic patches are
 #: what the inline scenes, the teapot and the benches are made of. The generic loops over degree-sized scratch
 #: arrays cost ~30 % more per evaluation there (S, S_u, S_v on one thread at the render bench's hits: 0.128 µs
-#: generic, 0.099 µs written out).
+#: generic, 0.099 µs written out). Lower degrees are padded to it (`power_form`): CAD parts are mostly planes
+#: (1, 1) and rational (2, 1) or (2, 2) cylinders, cones and tori, whose points otherwise took the scalar path
+#: one by one (parts/plate.step: Newton's fused pass 1.14 µs a ray against the bicubic patch's 0.20).
 WRITTEN_OUT_DEGREE = 3
 _ZERO4 = (0.0, 0.0, 0.0, 0.0)
 
@@ -412,8 +421,8 @@ def clamp_to_domain(domain, k, u, v):
 
 @njit(inline="always", **JIT)
 def is_bicubic_power(degree, power_offset, k):
-    """Whether patch k is evaluated by `bicubic_contract` (bicubic, with a power form)."""
-    return power_offset[k] >= 0 and degree[k, 0] == WRITTEN_OUT_DEGREE and degree[k, 1] == WRITTEN_OUT_DEGREE
+    """Whether patch k is evaluated by `bicubic_contract` (at most bicubic, with a power form padded to bicubic)."""
+    return power_offset[k] >= 0 and degree[k, 0] <= WRITTEN_OUT_DEGREE and degree[k, 1] <= WRITTEN_OUT_DEGREE
 
 
 @njit(inline="always", **JIT)
@@ -426,16 +435,18 @@ def find_span_near(knots, lo, p, n_ctrl, t, guess):
 
 
 @njit(inline="always", **JIT)
-def bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v, guess_u, guess_v):
-    """Where (u, v) (inside the domain) lies in bicubic patch k's power form: (first row of its span's C_ij in
-    ``power``, the span indices, each span's start and length h); guesses of the spans as `find_span_near`'s."""
+def bicubic_span_at(degree, knots, count, knot_offset, power_offset, k, u, v, guess_u, guess_v):
+    """Where (u, v) (inside the domain) lies in patch k's power form padded to bicubic (`is_bicubic_power`): (first
+    row of its span's 16 C_ij in ``power``, the span indices, each span's start and length h); guesses of the spans
+    as `find_span_near`'s."""
+    p, q = degree[k, 0], degree[k, 1]
     nu, nv = count[k, 0], count[k, 1]
     ku, kv = knot_offset[k, 0], knot_offset[k, 1]
-    su = find_span_near(knots, ku, WRITTEN_OUT_DEGREE, nu, u, guess_u)
-    sv = find_span_near(knots, kv, WRITTEN_OUT_DEGREE, nv, v, guess_v)
+    su = find_span_near(knots, ku, p, nu, u, guess_u)
+    sv = find_span_near(knots, kv, q, nv, v, guess_v)
     start_u, start_v = knots[ku + su], knots[kv + sv]
     len_u, len_v = knots[ku + su + 1] - start_u, knots[kv + sv + 1] - start_v
-    span = (su - WRITTEN_OUT_DEGREE) * (nv - WRITTEN_OUT_DEGREE) + (sv - WRITTEN_OUT_DEGREE)
+    span = (su - p) * (nv - q) + (sv - q)
     return power_offset[k] + span * 16, su, sv, start_u, len_u, start_v, len_v
 
 
@@ -459,8 +470,8 @@ def point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_off
     nu, nv = count[k, 0], count[k, 1]
     u, v = clamp_to_domain(domain, k, u, v)
     if is_bicubic_power(degree, power_offset, k):
-        base, _, _, start_u, len_u, start_v, len_v = bicubic_span_at(knots, count, knot_offset, power_offset, k, u, v,
-                                                                     -1, -1)
+        base, _, _, start_u, len_u, start_v, len_v = bicubic_span_at(degree, knots, count, knot_offset, power_offset,
+                                                                     k, u, v, -1, -1)
         tau_u, inv_u = span_local(u, start_u, len_u)
         tau_v, inv_v = span_local(v, start_v, len_v)
         H = bicubic_contract(power, base, tau_u, inv_u, tau_v, inv_v, order)
@@ -682,7 +693,7 @@ def eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_o
         u, v = clamp_to_domain(domain, k, buf[LANE_U * LANES + j], buf[LANE_V * LANES + j])
         if is_bicubic_power(degree, power_offset, k):
             first, span_u[j], span_v[j], start_u, len_u, start_v, len_v = bicubic_span_at(
-                knots, count, knot_offset, power_offset, k, u, v, span_u[j], span_v[j])
+                degree, knots, count, knot_offset, power_offset, k, u, v, span_u[j], span_v[j])
             base[j] = first
             buf[LANE_SPAN * LANES + j], buf[(LANE_SPAN + 1) * LANES + j] = u, start_u
             buf[(LANE_SPAN + 2) * LANES + j], buf[(LANE_SPAN + 3) * LANES + j] = len_u, v
