@@ -68,13 +68,13 @@ def parameter_steps(Su: np.ndarray, Sv: np.ndarray, w: np.ndarray) -> tuple[np.n
     """(du, dv) per point whose tangent step du S_u + dv S_v is nearest the vector w (N, 3), in least squares.
 
     The normal equations are those of the first fundamental form, [[E, F], [F, G]] (du, dv) = (S_u·w, S_v·w)
-    with E = S_u·S_u, F = S_u·S_v, G = S_v·S_v, solved by Cramer's rule: inf or NaN where EG − F² = 0.
+    with E = S_u·S_u, F = S_u·S_v, G = S_v·S_v, solved by Cramer's rule: inf or NaN where EG − F² = 0
+    (`kernels.nurbs.tangent_step`).
     """
-    E, F, G = (np.einsum("ij,ij->i", x, y) for x, y in ((Su, Su), (Su, Sv), (Sv, Sv)))
-    a, b = np.einsum("ij,ij->i", Su, w), np.einsum("ij,ij->i", Sv, w)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        det = E * G - F * F
-        return (G * a - F * b) / det, (E * b - F * a) / det
+    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)  # noqa: E731
+    du, dv = np.empty(len(f64(Su))), np.empty(len(f64(Su)))
+    kernel.tangent_steps(f64(Su), f64(Sv), f64(w), du, dv)
+    return du, dv
 
 
 def find_span(knots: np.ndarray, degree: int, n_ctrl: int, t: np.ndarray) -> np.ndarray:
@@ -366,6 +366,11 @@ class SurfaceSet:
             for side, row in enumerate((P[0], P[-1], P[:, 0], P[:, -1])):
                 out[k, side] = np.linalg.norm(np.ptp(row, axis=0)) <= COLLAPSED_FRACTION * surface.size
         return out
+
+    @cached_property
+    def closed_table(self) -> np.ndarray:
+        """`closed` as the kernels take it (C-contiguous bool, (P, 2))."""
+        return np.ascontiguousarray(self.closed, dtype=np.bool_).reshape(-1, 2)
 
     @cached_property
     def closed(self) -> np.ndarray:

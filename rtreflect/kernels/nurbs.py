@@ -966,6 +966,109 @@ def passes_by(degree, count, knot_offset, knots, pw_offset, pw, domain, power_of
                                      vi - (dv if math.isfinite(dv) else 0.0))
 
 
+#: `walk_past_minimum`'s verdicts per row: left the band (or its steps) without crossing; crossed between its last
+#: two points; stopped at a foot whose normal is degenerate, for the caller's limit normal (`geometry.surfaces`).
+WALK_DROPPED, WALK_CROSSED, WALK_PAUSED = 0, 1, 2
+
+
+@njit(inline="always", **JIT)
+def tangent_step(a0, a1, a2, b0, b1, b2, w0, w1, w2):
+    """(du, dv) whose tangent step du S_u + dv S_v (S_u = a, S_v = b) is nearest the vector w, in least squares: the
+    normal equations of the first fundamental form, [[E, F], [F, G]] (du, dv) = (S_u·w, S_v·w) with E = S_u·S_u,
+    F = S_u·S_v, G = S_v·S_v, by Cramer's rule (inf or NaN where EG − F² = 0)."""
+    E, F, G = dot3(a0, a1, a2, a0, a1, a2), dot3(a0, a1, a2, b0, b1, b2), dot3(b0, b1, b2, b0, b1, b2)
+    su, sv = dot3(a0, a1, a2, w0, w1, w2), dot3(b0, b1, b2, w0, w1, w2)
+    det = E * G - F * F
+    return (G * su - F * sv) / det, (E * sv - F * su) / det
+
+
+@njit(**JIT, aot=(f"void({F2}, {F2}, {F2}, {F1}, {F1})",))
+def tangent_steps(Su, Sv, w, du, dv):
+    """`tangent_step` per row into du, dv (`geometry.surfaces.parameter_steps`)."""
+    for i in range(Su.shape[0]):
+        du[i], dv[i] = tangent_step(Su[i, 0], Su[i, 1], Su[i, 2], Sv[i, 0], Sv[i, 1], Sv[i, 2], w[i, 0], w[i, 1], w[i, 2])
+
+
+@njit(inline="always", **JIT)
+def into_domain_at(domain, closed, k, u, v):
+    """(u, v) moved into patch k's domain: wrapped one period round in a direction the patch is closed in
+    (``closed[k]``: its two edges coincide, the surface goes on across the seam), clamped in an open one; a point
+    inside keeps its bits, NaN stays NaN (`trace.tracing._into_domain` for arrays)."""
+    u0, u1, v0, v1 = domain[k, 0], domain[k, 1], domain[k, 2], domain[k, 3]
+    if closed[k, 0] and (u < u0 or u > u1):
+        u = u0 + (u - u0) % (u1 - u0)
+    if closed[k, 1] and (v < v0 or v > v1):
+        v = v0 + (v - v0) % (v1 - v0)
+    return clamp_to_domain(domain, k, u, v)
+
+
+@njit(**JIT, aot=(f"void({F2}, b1[:, ::1], {I1}, {F1}, {F1}, {F1}, {F1})",))
+def into_domains(domain, closed, patch, u, v, u_out, v_out):
+    """`into_domain_at` per row into u_out, v_out (`trace.tracing._into_domain`)."""
+    for i in range(patch.shape[0]):
+        u_out[i], v_out[i] = into_domain_at(domain, closed, patch[i], u[i], v[i])
+
+
+@njit(**JIT, aot=(f"void({TABLE}, {F2}, b1[:, ::1], {I1}, {I1}, {F2}, {F2}, {F1}, {F1}, i8, f8, f8, {B1}, {F1}, {F1}, "
+                  f"{F1}, {F1}, {I1}, {F1}, {F1}, {F1}, {I1})",))
+def walk_past_minimum(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
+                      scale, closed, rows, patch, O, D, reach, step, foot_iterations, sine, vanishing, pending,
+                      u, v, t, g, steps_left, u1, v1, g1, state):
+    """The walk of `trace.tracing._past_minimum` past a positive minimum of the ray's distance to its face, per row
+    i in ``rows``, in place.
+
+    From the last point X(t) = O + tD, whose foot on the surface is (u, v) and height g = n·(X − S), the ray point
+    moves on by step[i] (at most steps_left[i] times): its foot from the previous one by ``foot_iterations``
+    Gauss–Newton steps (`tangent_step` towards X − S; a step undefined is not taken; `into_domain_at`), its height
+    g₁ along the unit normal. Where g·g₁ <= 0 the ray crossed the surface between the two points: ``state``
+    `WALK_CROSSED`, (u, v, t, g) the point before, (u1, v1, g1) the one after. Where |g₁| > reach[i] (or NaN) the ray
+    left the band: `WALK_DROPPED`, as when its steps run out. Where the normal at a foot is degenerate (`normal_at`),
+    `WALK_PAUSED` with that foot in (u1, v1): the caller takes the limit normal there, sets g1 and ``pending``, and
+    calls again; the walk goes on from the verdict on that point.
+    """
+    scratch = new_scratch(max_degree)
+    d = np.empty((6, 3))
+    for i in rows:
+        k = patch[i]
+        ui, vi, ti, gi, left = u[i], v[i], t[i], g[i], steps_left[i]
+        a, b, h = u1[i], v1[i], g1[i]
+        have = pending[i]  # (a, b, h) already known: the caller's, at a paused foot
+        fresh = True  # d not yet at (ui, vi)
+        verdict = WALK_DROPPED
+        while True:
+            if not have:
+                if left == 0:
+                    break
+                x0, x1, x2 = O[i, 0] + (ti + step[i]) * D[i, 0], O[i, 1] + (ti + step[i]) * D[i, 1], \
+                    O[i, 2] + (ti + step[i]) * D[i, 2]
+                a, b = ui, vi
+                for e in range(foot_iterations + (1 if fresh else 0)):
+                    if e > 0 or not fresh:  # a Gauss–Newton step from d, which holds S, S_u, S_v at (a, b)
+                        du, dv = tangent_step(d[1, 0], d[1, 1], d[1, 2], d[2, 0], d[2, 1], d[2, 2], x0 - d[0, 0],
+                                              x1 - d[0, 1], x2 - d[0, 2])
+                        if not (math.isfinite(du) and math.isfinite(dv)):
+                            du = dv = 0.0
+                        a, b = into_domain_at(domain, closed, k, a + du, b + dv)
+                    point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, k, a, b, 1,
+                             d, scratch)
+                fresh = False
+                n0, n1, n2, bad = normal_at(domain, scale, k, d[1:2], d[2:3], 0, sine, vanishing)
+                if bad:
+                    verdict = WALK_PAUSED
+                    break
+                h = dot3(n0, n1, n2, x0 - d[0, 0], x1 - d[0, 1], x2 - d[0, 2])
+            if have:
+                have, fresh = False, True  # d is not at the paused foot
+            if gi * h <= 0.0:
+                verdict = WALK_CROSSED
+                break
+            if not abs(h) <= reach[i]:
+                break
+            ui, vi, ti, gi, left = a, b, ti + step[i], h, left - 1
+        u[i], v[i], t[i], g[i], steps_left[i] = ui, vi, ti, gi, left
+        u1[i], v1[i], g1[i], state[i], pending[i] = a, b, h, verdict, False
+
+
 @njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, i8, f8, f8, i8, f8, {F2}, {F2}, {F2}, {B1}, {B1}, {B1})",))
 def rescue(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
            patch, u, v, O, D, tol, steps, stationary_cosine, stalled_damping, crawl_steps, crawl_gain, S, Su, Sv,

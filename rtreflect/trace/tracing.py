@@ -57,7 +57,6 @@ from ..geometry.curvature import curvatures, curvatures_at
 from ..geometry import surfaces as surface_module  # its DEGENERATE_SINE, VANISHING_PARTIAL: read at call time
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet, parameter_steps
 from ..geometry.tessellation import Tessellation
-from ..geometry.trims import into_period
 from ..kernels import nurbs as nurbs_kernel
 from ..kernels import rims as rims_kernel
 from ..kernels.pixels import scatter_picked, spread_rows
@@ -707,15 +706,11 @@ def _into_domain(surfaces: SurfaceSet, patch, u, v) -> tuple[np.ndarray, np.ndar
     Clamped at a seam, a start predicted past it lands on the seam's far side, and Newton goes to the ray's other
     crossing (blocks.3dm at 480×270: the non-uniformly scaled sphere's entry lies across its seam from the mesh hit;
     clamped, 2 pixels stored the exit 0.65 behind it)."""
-    u0, u1, v0, v1 = surfaces.domains(patch)
-    closed = surfaces.closed[np.asarray(patch, dtype=np.int64)]
-    out = []
-    for x, lo, hi, wraps in ((u, u0, u1, closed[:, 0]), (v, v0, v1, closed[:, 1])):
-        x = np.asarray(x, dtype=np.float64)
-        outside = (x < lo) | (x > hi)
-        with np.errstate(invalid="ignore"):  # NaN starts stay NaN, as np.clip leaves them
-            out.append(np.where(wraps & outside, into_period(x, lo, hi - lo), np.clip(x, lo, hi)))
-    return out[0], out[1]
+    patch = np.ascontiguousarray(patch, dtype=np.int64)
+    u, v = (np.ascontiguousarray(np.broadcast_to(x, patch.shape), dtype=np.float64) for x in (u, v))
+    u_out, v_out = np.empty(len(patch)), np.empty(len(patch))
+    nurbs_kernel.into_domains(surfaces.table.domain, surfaces.closed_table, patch, u, v, u_out, v_out)
+    return u_out, v_out
 
 
 def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, pk, ur, vr, tr, derivs, normal, cosine,
@@ -851,13 +846,13 @@ def _past_minimum(tessellation: Tessellation, surfaces: SurfaceSet, rows, O, D, 
     pipe_spline.step, pixel (84, 106): 0.017 away at 35.0, entered at 37.28, stored 53.41). From the minimum the ray
     point X = O + tD moves on in steps of `PAST_MINIMUM_EDGES` of the face's longest mesh edge, at most
     `PAST_MINIMUM_STEPS`, while its height g = n·(X − S) over its nearest surface point S (Gauss–Newton from the
-    previous step's, `_foot`) stays within the error band (`BAND_CHORDS` chord errors of the face, where the mesh
-    cannot tell which side of the surface the ray is on); where g changes sign the ray crossed the surface: Newton
+    previous step's, `kernels.nurbs.walk_past_minimum`) stays within the error band (`BAND_CHORDS` chord errors of
+    the face, where the mesh cannot tell which side of the surface the ray is on); where g changes sign the ray crossed the surface: Newton
     (`refine`) from the nearer of the two feet, at t interpolated between them, finds the crossing, kept where it
     converges within reach of that t (`_near_mesh_hit`) and on the face (its trim). The caller flags it ``aside`` and,
     as a `_crossing_on_face` hit, `trace` keeps it only nearer than the stored hit by more than float32 rounding. All
-    rows advance together, one step at a time; a dip shorter than a step between two steps' points, both above the
-    surface, is not seen.
+    walk is compiled, per row; a dip shorter than a step between two steps' points, both above the surface, is not
+    seen.
     """
     if len(rows) == 0:
         return rows
@@ -865,31 +860,36 @@ def _past_minimum(tessellation: Tessellation, surfaces: SurfaceSet, rows, O, D, 
     reach = BAND_CHORDS * tessellation.chord_error[patch] + FLOAT32_SLACK * tessellation.extent
     step = PAST_MINIMUM_EDGES * tessellation.edge_length[patch]
     # At the minimum X − S is normal to the surface: the search's point is X's foot.
-    u, v = ur[rows], vr[rows]
+    u, v = ur[rows].copy(), vr[rows].copy()
     d = SurfaceDerivatives(*(x[rows] for x in derivs[:3]))
-    t = np.einsum("ij,ij->i", d.S - O[rows], D[rows])
-    g = np.einsum("ij,ij->i", surfaces.normals(patch, u, v, d), O[rows] + t[:, None] * D[rows] - d.S)
+    Or, Dr = O[rows], D[rows]
+    t = np.einsum("ij,ij->i", d.S - Or, Dr)
+    g = np.einsum("ij,ij->i", surfaces.normals(patch, u, v, d), Or + t[:, None] * Dr - d.S)
+    # The walk, compiled (`kernels.nurbs.walk_past_minimum`); a foot with a degenerate normal comes back for the
+    # limit normal (`SurfaceSet.normals`) and the walk goes on from there.
+    n = len(rows)
+    steps_left = np.full(n, PAST_MINIMUM_STEPS, dtype=np.int64)
+    u1, v1, g1 = np.zeros(n), np.zeros(n), np.zeros(n)
+    pending = np.zeros(n, dtype=bool)
+    state = np.full(n, nurbs_kernel.WALK_DROPPED, dtype=np.int64)
     live = np.flatnonzero(np.abs(g) <= reach)  # indices into rows
-    ends = []  # per crossing: (index, t before, u, v and g of the feet before and after)
-    for _ in range(PAST_MINIMUM_STEPS):
-        if len(live) == 0:
-            break
-        r = rows[live]
-        t1 = t[live] + step[live]
-        u1, v1, d1, g1 = _foot(surfaces, patch[live], u[live], v[live], SurfaceDerivatives(*(x[live] for x in d[:3])),
-                               O[r] + t1[:, None] * D[r])
-        across = g[live] * g1 <= 0.0
-        ends.append((live[across], t[live][across], u[live][across], v[live][across], g[live][across],
-                     u1[across], v1[across], g1[across]))
-        t[live], u[live], v[live], g[live] = t1, u1, v1, g1
-        for have, new in zip(d[:3], d1[:3]):
-            have[live] = new
-        live = live[~across & (np.abs(g1) <= reach[live])]  # NaN heights drop out too
-    if not ends:
-        return rows[:0]
-    at, t0, u0, v0, g0, u1, v1, g1 = (np.concatenate(x) for x in zip(*ends))
+    while len(live):
+        nurbs_kernel.walk_past_minimum(*surfaces.table.args, surfaces.table.scale, surfaces.closed_table, live, patch,
+                                       Or, Dr, reach, step, FOOT_ITERATIONS, surface_module.DEGENERATE_SINE,
+                                       surface_module.VANISHING_PARTIAL, pending, u, v, t, g, steps_left, u1, v1, g1,
+                                       state)
+        live = live[state[live] == nurbs_kernel.WALK_PAUSED]
+        if len(live):
+            k = patch[live]
+            foot = surfaces.evaluate(k, u1[live], v1[live])
+            X = Or[live] + (t[live] + step[live])[:, None] * Dr[live]
+            g1[live] = np.einsum("ij,ij->i", surfaces.normals(k, u1[live], v1[live], foot), X - foot.S)
+            pending[live] = True
+    at = np.flatnonzero(state == nurbs_kernel.WALK_CROSSED)
     if len(at) == 0:
         return rows[:0]
+    t0, u0, v0, g0 = t[at], u[at], v[at], g[at]
+    u1, v1, g1 = u1[at], v1[at], g1[at]
     with np.errstate(divide="ignore", invalid="ignore"):
         t_start = t0 + step[at] * np.nan_to_num(g0 / (g0 - g1), nan=0.5)
     first = np.abs(g0) < np.abs(g1)
@@ -902,20 +902,6 @@ def _past_minimum(tessellation: Tessellation, surfaces: SurfaceSet, rows, O, D, 
     _store(won, ok, k, u3, v3, t3, d3, pk, ur, vr, tr, derivs)
     status[won] = VALID
     return won
-
-
-def _foot(surfaces: SurfaceSet, patch, u, v, d: SurfaceDerivatives, X):
-    """The surface point S(u, v) nearest each point X, by `FOOT_ITERATIONS` Gauss–Newton steps from (u, v), where the
-    surface's S, S_u, S_v are ``d`` (the tangent step nearest X − S, `parameter_steps`, kept in the domain,
-    `_into_domain`), and X's height n·(X − S) over it along the unit normal n (`_past_minimum`). Returns (u, v, S and
-    its derivatives there, height); a step undefined (S_u ∥ S_v) is not taken."""
-    for _ in range(FOOT_ITERATIONS):
-        du, dv = parameter_steps(d.Su, d.Sv, X - d.S)
-        still = ~(np.isfinite(du) & np.isfinite(dv))
-        du[still], dv[still] = 0.0, 0.0
-        u, v = _into_domain(surfaces, patch, u + du, v + dv)
-        d = surfaces.evaluate(patch, u, v)
-    return u, v, d, np.einsum("ij,ij->i", surfaces.normals(patch, u, v, d), X - d.S)
 
 
 def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
