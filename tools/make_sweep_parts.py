@@ -68,6 +68,8 @@ Sixth sweep (vertices many faces share, trims across seams, concave loops, high 
   thin_wall.step       a wall 0.01 thick, 80 long and 40 high on a base: two large faces 0.01 apart, seen edge-on
   wavy_cut.step        a cylinder whose top is cut away by a wavy 13 × 13 bicubic sheet (an intersection-curve trim)
   sphere_seam_hole.step  a sphere with a pocket across its seam and a hole beside its pole
+  revolved_pinch.step  an hourglass profile revolved a full turn, touching the axis at an interior point
+  corner_blend.step    a box corner whose three edges are filleted at 3, 5 and 7: the vertex blend where they meet
 """
 
 from __future__ import annotations
@@ -1131,6 +1133,51 @@ def sphere_seam_hole():
     return BRepAlgoAPI_Cut(sphere, _cylinder(0, 9.5, 0, (0, 0, 1), 4.0, 30)).Shape()
 
 
+def revolved_pinch():
+    """An hourglass profile revolved a full turn, touching the axis at an interior point (radius 0 at z = 15; ends discs
+    of radius 12 and 10 left open): two faces of revolution meeting at one point on the axis (each with a pole
+    there), their seam facing the 3/4 view's camera. (Open CASCADE will not revolve one edge through the axis.)"""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeWire, BRepBuilderAPI_Transform
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeRevol
+    from OCP.GeomAPI import GeomAPI_PointsToBSpline
+    from OCP.collections import Array1_gp_Pnt
+    from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt, gp_Trsf
+
+    def profile(xz):
+        points = Array1_gp_Pnt(1, len(xz))
+        for k, (x, z) in enumerate(xz):
+            points.SetValue(k + 1, gp_Pnt(x, 0.0, z))
+        return BRepBuilderAPI_MakeEdge(GeomAPI_PointsToBSpline(points).Curve()).Edge()
+
+    wire = BRepBuilderAPI_MakeWire(profile([(12.0, 0.0), (11.0, 5.0), (6.0, 11.0), (0.0, 15.0)]),
+                                   profile([(0.0, 15.0), (5.0, 19.0), (9.0, 25.0), (10.0, 30.0)])).Wire()
+    axis = gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1))
+    turn = gp_Trsf()
+    turn.SetRotation(axis, math.atan2(ISO_FROM[1], ISO_FROM[0]))
+    wire = BRepBuilderAPI_Transform(wire, turn, True).Shape()
+    return BRepPrimAPI_MakeRevol(wire, axis, 2 * math.pi).Shape()
+
+
+def corner_blend():
+    """A 40 × 30 × 20 box whose three edges at the corner facing the 3/4 view's camera are filleted at 3, 5 and 7:
+    three fillets of unequal radius and the blend Open CASCADE builds where they meet (a vertex blend)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    box = BRepPrimAPI_MakeBox(40.0, 30.0, 20.0).Shape()
+    fillet = BRepFilletAPI_MakeFillet(box)
+    corner = np.array([40.0, 0.0, 20.0])
+    for edge in _edges(box):
+        first, last = BRep_Tool.Range_s(edge)
+        curve = BRep_Tool.Curve_s(edge, first, last)
+        ends = [np.array([p.X(), p.Y(), p.Z()]) for p in (curve.Value(first), curve.Value(last))]
+        if any(np.allclose(e, corner) for e in ends):
+            along = int(np.argmax(np.abs(ends[1] - ends[0])))
+            fillet.Add((3.0, 5.0, 7.0)[along], edge)
+    return fillet.Shape()
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -1189,6 +1236,8 @@ PARTS = {
     "thin_wall.step": lambda p: write_step(thin_wall(), p),
     "wavy_cut.step": lambda p: write_step(wavy_cut(), p),
     "sphere_seam_hole.step": lambda p: write_step(sphere_seam_hole(), p),
+    "revolved_pinch.step": lambda p: write_step(revolved_pinch(), p),
+    "corner_blend.step": lambda p: write_step(corner_blend(), p),
 }
 
 
