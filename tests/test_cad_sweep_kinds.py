@@ -584,3 +584,33 @@ def test_cone_through_its_apex_close_up_first_hits_are_open_cascades(tmp_path):
     rows, cols = np.divmod(np.arange(96 * 54), 96)
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
     assert hits.hit.mean() > 0.3
+
+
+def test_ray_off_a_face_by_a_ten_face_apex_restarts_on_the_face_across_its_side(tmp_path):
+    """star_apex.step (a five-pointed star drawn to an apex: ten planar faces meet there), a close-up of the apex at
+    120×120, pixel (18, 91): the ray meets the mesh of face 9 and Newton converges just across its side into face 0,
+    3.6e-5 from the side, 2.3 from the apex. The nearest boundary vertex of another face is the apex, which the other
+    nine faces share (the planar faces' meshes have no vertex along their straight sides), at one distance to
+    rounding, in the k-d walk's order: the `tracing.SEAM_TRIES` (3) restarts went to faces 7, 8 and 4, meeting face 9
+    only at the apex, never to face 0, and the ray went through the part to its base, 18 behind OCCT's first hit
+    (t = 12.395 on face 0). The tries now go on while the next vertex lies at the previous one's distance
+    (`tracing.SEAM_CORNER_TRIES`): every pixel-centre ray's first hit is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "star_apex.step"
+    sweep.PARTS[path.name](path)
+    apex = 20.0 * np.array(sweep.ISO_FROM) / np.linalg.norm(sweep.ISO_FROM)  # the solid's z axis turned to the camera
+    scene = load_scene(path).with_image(120, 120, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([13.072640345857646, -21.45025517428663, 16.43905798231287]),
+                                 look_at=apex, up=np.array([0.0, 0.0, 1.0]), fov=30.0)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = np.divmod(np.arange(120 * 120), 120)
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.patch[18 * 120 + 91] == 0
+    assert len(np.unique(hits.patch[hits.hit])) >= 10  # the apex's faces fill the view

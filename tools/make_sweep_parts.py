@@ -58,6 +58,18 @@ Fifth sweep (car-body, aircraft and product kinds):
   offset_cylinder.step a Geom_OffsetSurface of a half cylinder (r 20, offset 5) with a round hole through it
   thin_chamfer.step    a cylinder (r 50) whose top rim is chamfered 0.05: a conical sliver 0.07 × 314
   touching_hole.step   a domed bicubic face whose round hole touches its straight outer side at one point
+Sixth sweep (vertices many faces share, trims across seams, concave loops, high degrees, thin walls):
+  star_apex.step       a five-pointed star drawn to an apex (ten planar faces meet there), the apex at the camera;
+                       its base a non-convex ten-sided loop
+  seam_hole.step       a cylinder drilled across its periodic seam: each hole's trim loop straddles the seam
+  slot_plate.step      a plate with a slot 1.2 wide and 35 long cut in from one side: non-convex outer loops
+  twisted_ruled.step   a degree-1 × 1 B-spline face (bilinear: a hyperbolic paraboloid), twisted 30 over 40
+  rational_high.step   a rational B-spline face of degree 6 × 5, weights 0.3 to 4
+  thin_wall.step       a wall 0.01 thick, 80 long and 40 high on a base: two large faces 0.01 apart, seen edge-on
+  wavy_cut.step        a cylinder whose top is cut away by a wavy 13 × 13 bicubic sheet (an intersection-curve trim)
+  sphere_seam_hole.step  a sphere with a pocket across its seam and a hole beside its pole
+  revolved_pinch.step  an hourglass profile revolved a full turn, touching the axis at an interior point
+  corner_blend.step    a box corner whose three edges are filleted at 3, 5 and 7: the vertex blend where they meet
 """
 
 from __future__ import annotations
@@ -475,9 +487,9 @@ def instances():
     return compound
 
 
-def _bspline_face(poles, degree_u: int, degree_v: int, u_knots, weights=None):
+def _bspline_face(poles, degree_u: int, degree_v: int, u_knots, weights=None, v_knots=None):
     """A face on a B-spline surface through ``poles`` (nested lists of xyz): clamped, ``u_knots`` (value,
-    multiplicity) pairs, v without interior knots."""
+    multiplicity) pairs, v without interior knots unless ``v_knots`` (the same form) are given."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
     from OCP.Geom import Geom_BSplineSurface
     from OCP.collections import Array1_double, Array1_int, Array2_double, Array2_gp_Pnt
@@ -497,7 +509,7 @@ def _bspline_face(poles, degree_u: int, degree_v: int, u_knots, weights=None):
         return values, mults
 
     uk, um = knots(u_knots)
-    vk, vm = knots([(0.0, degree_v + 1), (1.0, degree_v + 1)])
+    vk, vm = knots(v_knots or [(0.0, degree_v + 1), (1.0, degree_v + 1)])
     if weights is None:
         surface = Geom_BSplineSurface(net, uk, vk, um, vm, degree_u, degree_v)
     else:
@@ -1022,6 +1034,150 @@ def touching_hole():
     return BRepAlgoAPI_Cut(face, _cylinder(22.5, 8.0, -20, (0, 0, 1), 8.0, 60)).Shape()
 
 
+# --- Sixth sweep (issue 12): vertices where many faces meet, seams crossed by trims, concave loops, high degrees. --
+
+def star_apex():
+    """A five-pointed star (outer radius 25, inner 10) drawn to an apex 20 above it: ten planar faces meet at the
+    apex, which points at the 3/4 view's camera, and the base is a non-convex ten-sided loop."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakePolygon, BRepBuilderAPI_MakeVertex, BRepBuilderAPI_Transform
+    from OCP.BRepOffsetAPI import BRepOffsetAPI_ThruSections
+    from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt, gp_Trsf
+
+    polygon = BRepBuilderAPI_MakePolygon()
+    for k in range(10):
+        a, r = math.pi / 2 + math.pi * k / 5, 25.0 if k % 2 == 0 else 10.0
+        polygon.Add(gp_Pnt(r * math.cos(a), r * math.sin(a), 0.0))
+    polygon.Close()
+    loft = BRepOffsetAPI_ThruSections(True, True)
+    loft.AddWire(polygon.Wire())
+    loft.AddVertex(BRepBuilderAPI_MakeVertex(gp_Pnt(0, 0, 20.0)).Vertex())
+    loft.Build()
+    tilt = gp_Trsf()  # the apex's axis z turned towards the camera
+    towards = np.array(ISO_FROM) / np.linalg.norm(ISO_FROM)
+    tilt.SetRotation(gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(*np.cross((0.0, 0.0, 1.0), towards))), math.acos(towards[2]))
+    return BRepBuilderAPI_Transform(loft.Shape(), tilt, True).Shape()
+
+
+def seam_hole():
+    """A cylinder (r 20, 50 high; its seam at angle 0, x > 0) drilled through along x at mid-height by an r 6 hole:
+    each hole's trim loop straddles the lateral face's periodic seam (and the seam edge is split by it)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+
+    return BRepAlgoAPI_Cut(_cylinder(0, 0, 0, (0, 0, 1), 20.0, 50.0), _cylinder(-40, 0, 25, (1, 0, 0), 6.0, 80)).Shape()
+
+
+def slot_plate():
+    """A 60 × 40 × 4 plate with a slot 1.2 wide and 35 long cut in from one side, its end round: the top and bottom
+    faces' outer loops are non-convex, with a narrow re-entrant bay."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut, BRepAlgoAPI_Fuse
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.gp import gp_Pnt
+
+    plate = BRepPrimAPI_MakeBox(gp_Pnt(0, 0, 0), gp_Pnt(60, 40, 4)).Shape()
+    slot = BRepPrimAPI_MakeBox(gp_Pnt(-1, 19.4, -1), gp_Pnt(35, 20.6, 5)).Shape()
+    slot = BRepAlgoAPI_Fuse(slot, _cylinder(35, 20, -1, (0, 0, 1), 0.6, 6)).Shape()
+    return BRepAlgoAPI_Cut(plate, slot).Shape()
+
+
+def twisted_ruled():
+    """A degree-1 × 1 B-spline face (a bilinear patch, a hyperbolic paraboloid): its straight sides 40 long twisted
+    by 30 between the ends."""
+    poles = [[(0.0, 0.0, 0.0), (0.0, 40.0, 30.0)], [(40.0, 0.0, 30.0), (40.0, 40.0, 0.0)]]
+    return _bspline_face(poles, 1, 1, [(0.0, 2), (1.0, 2)])
+
+
+def rational_high():
+    """A rational B-spline face of degree 6 × 5 (one span), its poles a wavy 7 × 6 net, weights from 0.3 to 4."""
+    poles = [[(8.0 * i, 8.0 * j, 6.0 * math.sin(1.1 * i) * math.cos(0.9 * j) + 0.5 * i * j) for j in range(6)]
+             for i in range(7)]
+    weights = [[0.3 + 3.7 * ((3 * i + 5 * j) % 7) / 6 for j in range(6)] for i in range(7)]
+    return _bspline_face(poles, 6, 5, [(0.0, 7), (1.0, 7)], weights)
+
+
+def thin_wall():
+    """A wall 0.01 thick, 80 long and 40 high on a 100 × 60 × 5 base: two large faces 0.01 apart, its top a strip
+    0.01 wide, standing across the 3/4 view."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Fuse
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.gp import gp_Pnt
+
+    base = BRepPrimAPI_MakeBox(gp_Pnt(0, 0, 0), gp_Pnt(100, 60, 5)).Shape()
+    wall = BRepPrimAPI_MakeBox(gp_Pnt(10, 30, 5), gp_Pnt(90, 30.01, 45)).Shape()
+    return BRepAlgoAPI_Fuse(base, wall).Shape()
+
+
+def wavy_cut():
+    """A cylinder (r 15, 40 high) whose top is cut away by a wavy bicubic B-spline sheet (six waves across it): the
+    cut face is a trimmed B-spline with an intersection-curve loop, the side face's top trim many short edges."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism
+    from OCP.gp import gp_Vec
+
+    n = 13
+    poles = [[(-20.0 + 40.0 * i / (n - 1), -20.0 + 40.0 * j / (n - 1),
+               30.0 + 3.0 * math.sin(1.7 * i) + 2.0 * math.cos(1.3 * j)) for j in range(n)] for i in range(n)]
+    knots = [(0.0, 4)] + [(k / (n - 3), 1) for k in range(1, n - 3)] + [(1.0, 4)]
+    sheet = _bspline_face(poles, 3, 3, knots, v_knots=knots)
+    cutter = BRepPrimAPI_MakePrism(sheet, gp_Vec(0, 0, 30)).Shape()
+    return BRepAlgoAPI_Cut(_cylinder(0, 0, 0, (0, 0, 1), 15.0, 40.0), cutter).Shape()
+
+
+def sphere_seam_hole():
+    """A sphere (r 20) with two holes: an r 5 hole drilled through along x across its seam (the seam at angle 0,
+    x > 0), and an r 4 hole along z offset 5 from the axis, beside the pole (the pole's point left on the face)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeSphere
+
+    sphere = BRepPrimAPI_MakeSphere(20.0).Shape()
+    sphere = BRepAlgoAPI_Cut(sphere, _cylinder(0, 0, 0, (1, 0, 0), 5.0, 30)).Shape()
+    return BRepAlgoAPI_Cut(sphere, _cylinder(0, 9.5, 0, (0, 0, 1), 4.0, 30)).Shape()
+
+
+def revolved_pinch():
+    """An hourglass profile revolved a full turn, touching the axis at an interior point (radius 0 at z = 15; ends discs
+    of radius 12 and 10 left open): two faces of revolution meeting at one point on the axis (each with a pole
+    there), their seam facing the 3/4 view's camera. (Open CASCADE will not revolve one edge through the axis.)"""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeWire, BRepBuilderAPI_Transform
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeRevol
+    from OCP.GeomAPI import GeomAPI_PointsToBSpline
+    from OCP.collections import Array1_gp_Pnt
+    from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt, gp_Trsf
+
+    def profile(xz):
+        points = Array1_gp_Pnt(1, len(xz))
+        for k, (x, z) in enumerate(xz):
+            points.SetValue(k + 1, gp_Pnt(x, 0.0, z))
+        return BRepBuilderAPI_MakeEdge(GeomAPI_PointsToBSpline(points).Curve()).Edge()
+
+    wire = BRepBuilderAPI_MakeWire(profile([(12.0, 0.0), (11.0, 5.0), (6.0, 11.0), (0.0, 15.0)]),
+                                   profile([(0.0, 15.0), (5.0, 19.0), (9.0, 25.0), (10.0, 30.0)])).Wire()
+    axis = gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1))
+    turn = gp_Trsf()
+    turn.SetRotation(axis, math.atan2(ISO_FROM[1], ISO_FROM[0]))
+    wire = BRepBuilderAPI_Transform(wire, turn, True).Shape()
+    return BRepPrimAPI_MakeRevol(wire, axis, 2 * math.pi).Shape()
+
+
+def corner_blend():
+    """A 40 × 30 × 20 box whose three edges at the corner facing the 3/4 view's camera are filleted at 3, 5 and 7:
+    three fillets of unequal radius and the blend Open CASCADE builds where they meet (a vertex blend)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    box = BRepPrimAPI_MakeBox(40.0, 30.0, 20.0).Shape()
+    fillet = BRepFilletAPI_MakeFillet(box)
+    corner = np.array([40.0, 0.0, 20.0])
+    for edge in _edges(box):
+        first, last = BRep_Tool.Range_s(edge)
+        curve = BRep_Tool.Curve_s(edge, first, last)
+        ends = [np.array([p.X(), p.Y(), p.Z()]) for p in (curve.Value(first), curve.Value(last))]
+        if any(np.allclose(e, corner) for e in ends):
+            along = int(np.argmax(np.abs(ends[1] - ends[0])))
+            fillet.Add((3.0, 5.0, 7.0)[along], edge)
+    return fillet.Shape()
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -1072,6 +1228,16 @@ PARTS = {
     "offset_cylinder.step": lambda p: write_step(offset_cylinder(), p),
     "thin_chamfer.step": lambda p: write_step(thin_chamfer(), p),
     "touching_hole.step": lambda p: write_step(touching_hole(), p),
+    "star_apex.step": lambda p: write_step(star_apex(), p),
+    "seam_hole.step": lambda p: write_step(seam_hole(), p),
+    "slot_plate.step": lambda p: write_step(slot_plate(), p),
+    "twisted_ruled.step": lambda p: write_step(twisted_ruled(), p),
+    "rational_high.step": lambda p: write_step(rational_high(), p),
+    "thin_wall.step": lambda p: write_step(thin_wall(), p),
+    "wavy_cut.step": lambda p: write_step(wavy_cut(), p),
+    "sphere_seam_hole.step": lambda p: write_step(sphere_seam_hole(), p),
+    "revolved_pinch.step": lambda p: write_step(revolved_pinch(), p),
+    "corner_blend.step": lambda p: write_step(corner_blend(), p),
 }
 
 

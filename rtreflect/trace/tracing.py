@@ -113,6 +113,15 @@ SEAM_TRIES = 3
 #: the third try on parts/plate.step's top face (longest edge 100) searched 3.5–4 units away, for 11,600 rays at
 #: 960×540 and no win (430 rays now).
 SEAM_CORNER_EDGES = 1.0
+#: Where more faces than `SEAM_TRIES` meet at a B-rep vertex (a pyramid's apex; a five-pointed star's has ten), the
+#: nearest boundary vertices of the other faces are all that corner's, at one distance from the point to rounding, and
+#: which come first is arbitrary (the k-d walk's order): star_apex.step's ray off one face's side 2.3 from the apex
+#: tried three faces meeting only at the apex, never the one across that side, and went through the part to its base
+#: 18 behind. Past `SEAM_TRIES` the tries go on while the next neighbour's vertex lies at the previous one's distance
+#: to within `CORNER_TIE` of the part's extent (the reader's trim tolerance, `occt.TRIM_TOLERANCE`: the faces' meshes
+#: put a shared vertex there within it), up to `SEAM_CORNER_TRIES` in all.
+CORNER_TIE = 1e-5
+SEAM_CORNER_TRIES = 16
 
 #: `_rim_neighbours` looks across the rim where the mesh hit lies within this many times the two faces' summed
 #: chord errors of a rim edge: each mesh lies within its chord error of the shared edge, ×2 as `BAND_CHORDS`
@@ -422,12 +431,16 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     reach = 2.0 * tessellation.edge_length[pk[seam]]
     # Every row that left its face, and that face: its sheet's other crossing may lie on it (`_crossing_on_face`).
     gone, gone_patch = seam, pk[seam]
-    for attempt in range(SEAM_TRIES):
+    last = np.full(len(seam), np.nan)  # the distance of the previous try's vertex
+    tie = CORNER_TIE * tessellation.extent
+    for attempt in range(SEAM_CORNER_TRIES):
         if len(seam) == 0:
             break
         pn, un, vn, gap = tessellation.across_seam(at, pk[seam], tried, _seam_sides(surfaces, pk[seam], ur[seam], vr[seam]),
                                                    reach)
         close = pn >= 0
+        if attempt >= SEAM_TRIES:  # only at a corner more faces share (`SEAM_CORNER_TRIES`)
+            close &= np.abs(gap - last) <= tie
         seam, at, tried, reach, pn, un, vn, gap = (x[close] for x in (seam, at, tried, reach, pn, un, vn, gap))
         if attempt == 0:
             # The faces meeting at a corner have their boundary vertices there within a mesh edge of each other: a
@@ -450,6 +463,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         status[won] = VALID
         restarted.append(won)
         seam, at, reach, tried = seam[~ok3], at[~ok3], reach[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
+        last = gap[~ok3]
     crossed = _crossing_on_face(tessellation, surfaces, gone, gone_patch, O, D, tm, us, vs, band, status, pk, ur, vr, tr,
                                 derivs)
     restarted.append(crossed)
