@@ -156,7 +156,7 @@ def inside_faces(row, u, v, vlo, vhi, inv_height, band_first, band_count, band_p
             inside[i] = True
             continue
         pu, pv = u[i], v[i]
-        if not (vlo[f] <= pv <= vhi[f]):  # also NaN: outside every loop, on none
+        if not (vlo[f] <= pv <= vhi[f]) or pu != pu:  # also NaN: outside every loop, on none
             inside[i] = False
             continue
         b = band_first[f] + _band(pv, vlo[f], inv_height[f], band_count[f])
