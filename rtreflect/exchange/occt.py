@@ -14,7 +14,10 @@ Steps (DESIGN.md, "CAD input"; measured facts in the project's OCP notes):
    (``BRepAdaptor_Curve2d``, seam edges once per orientation, pole edges included) sampled by
    bisection until the polyline's midpoints lie within `TRIM_TOLERANCE` × the part's diagonal (the faces' own
    box's where the control points' box overstates it, `REMESH_RATIO`)
-   of the pcurve's **in model space** (measured on the surface with rtreflect's evaluator).
+   of the pcurve's **in model space** (measured on the surface with rtreflect's evaluator). Each segment also
+   carries its cubic Hermite end tangents (Δt·γ'(t) at its ends, ``BRepAdaptor_Curve2d.D1``; on .3dm faces the
+   3D edge's tangent in (u, v)) where that piece matches the pcurve's midpoint (`_hermite_tangents`): the
+   point-in-face test decides points between chord and edge against it (`kernels.trims`).
 4. ``mesh_uv``: ``BRepMesh_IncrementalMesh`` on each converted face, the nodes' (u, v) and the
    triangles (flipped on reversed faces so they wind like the face's normal).
 
