@@ -614,3 +614,31 @@ def test_ray_off_a_face_by_a_ten_face_apex_restarts_on_the_face_across_its_side(
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
     assert hits.patch[18 * 120 + 91] == 0
     assert len(np.unique(hits.patch[hits.hit])) >= 10  # the apex's faces fill the view
+
+
+@pytest.mark.parametrize("towards", [(1.0, 0.0, 0.3), (1.0, -0.4, 1.0)], ids=["side", "above"])
+def test_thin_chamfer_close_up_first_hits_are_open_cascades(tmp_path, towards):
+    """thin_chamfer.step (a 0.05 chamfer round an r 50 rim): its caps' trims are polylines within `TRIM_TOLERANCE`
+    (1e-3 here) of the circles, inside them, and the chamfer is 0.07 wide; in a close-up 0.6 from the rim, rays
+    hitting a cap between its chord and the circle were taken as off the cap and went on through the part, 30-99
+    behind (160×90: 66 pixels seen from the side, 21 from above). Each loop segment is decided against the cubic
+    Hermite piece of its edge's pcurve there (`kernels.trims`): every pixel-centre ray's first hit is OCCT's
+    `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "thin_chamfer.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(160, 90, 1)
+    rim = np.array([49.975, 0.0, 29.975])  # the chamfer's middle
+    towards = np.array(towards) / np.linalg.norm(towards)
+    camera = dataclasses.replace(scene.camera, projection="perspective", eye=rim + 0.6 * towards, look_at=rim,
+                                 up=np.array([0.0, 0.0, 1.0]), fov=30.0)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = np.divmod(np.arange(160 * 90), 160)
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert np.count_nonzero(hits.patch == 1) > 500  # the chamfer fills a good part of the view

@@ -1,12 +1,15 @@
-"""The compiled point-in-face test (`TrimTable`, issue 12 "Speed and memory") answers as GEOS does, point for point.
+"""The compiled point-in-face test (`TrimTable`, issue 12 "Speed and memory"): against GEOS, point for point.
 
-The reference is each face's own `Trim.contains` (GEOS's prepared intersects: boundary counts as inside), on
-random points over each face's domain, on the loops' vertices and edge midpoints (on the boundary) and a few
-rounding units beside them, and on the (u, v) the tracer actually asks about when rendering a shipped part.
+On chords, the reference is each face's own `Trim.contains` (GEOS's prepared intersects: boundary counts as
+inside), on random points over each face's domain, on the loops' vertices and edge midpoints (on the boundary)
+and a few rounding units beside them, and on the (u, v) the tracer actually asks about when rendering a shipped
+part. Where a segment carries its cubic Hermite piece (`Trim.tangents`), the reference is GEOS on the pieces
+sampled densely, away from the curves by more than that sampling's error; and on a circle, the circle itself.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +19,8 @@ pytest.importorskip("shapely")
 
 from rtreflect.exchange.load import load_scene  # noqa: E402
 from rtreflect.geometry.surfaces import SurfaceSet  # noqa: E402
-from rtreflect.geometry.trims import Trim, TrimTable  # noqa: E402
+from rtreflect.geometry.trims import Trim, TrimTable, segment_table  # noqa: E402
+from rtreflect.kernels import trims as kernel  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 PARTS = sorted(p for p in (ROOT / "parts").iterdir() if p.suffix.lower() in (".step", ".stp", ".igs", ".iges", ".3dm"))
@@ -47,15 +51,140 @@ def probes(trims, domains, rng, n=1500):
     return np.concatenate(P), np.concatenate(U), np.concatenate(V)
 
 
+#: Points per Hermite piece of the dense reference loops (`densified`): their chords lie within 1/(8·64²) of the
+#: piece's bend from it, far inside the margin `assert_as_the_curves` leaves.
+DENSE = 64
+
+
+def densified(trim: Trim | None) -> tuple[Trim | None, float]:
+    """The trim with each Hermite piece (as `TrimTable` uses it: `segment_table`) replaced by `DENSE` chords, and
+    the largest distance those chords may lie from the pieces (the margin within which GEOS on them is no reference)."""
+    if trim is None:
+        return None, 0.0
+    s = np.arange(DENSE) / DENSE
+    loops, margin = [], 0.0
+    for i, ring in enumerate((trim.outer, *trim.holes)):
+        ring = np.asarray(ring, dtype=np.float64)
+        tangents = trim.tangents[i] if i < len(trim.tangents) else np.full((len(ring), 4), np.nan)
+        table = segment_table(ring, np.roll(ring, -1, axis=0), tangents)
+        pieces = []
+        for row in table:
+            if np.isnan(row[kernel.CURVE]):
+                pieces.append(row[None, 0:2])
+                continue
+            c = row[kernel.CURVE:kernel.BOX].reshape(2, 3)
+            pieces.append(np.column_stack([row[k] + s * (c[k, 0] + s * (c[k, 1] + s * c[k, 2])) for k in (0, 1)]))
+            bend = np.hypot(*(2.0 * np.abs(c[:, 1]) + 6.0 * np.abs(c[:, 2])))  # |H''| ≤ this on [0, 1]
+            margin = max(margin, bend / (8.0 * DENSE**2))
+        loops.append(np.concatenate(pieces))
+    return Trim(loops[0], tuple(loops[1:]), trim.u_period, trim.v_period, trim.u0, trim.v0), margin
+
+
+def assert_as_the_curves(trims, patch, u, v) -> np.ndarray:
+    """`TrimTable` with the trims' Hermite pieces answers as GEOS on their dense sampling (`densified`), at every
+    point farther from the loops than that sampling's error (and a rounding margin); returns its answers."""
+    import shapely
+
+    got = TrimTable(trims).contains(patch, u, v)
+    dense = [densified(t) for t in trims]
+    want = reference([t for t, _ in dense], patch, u, v)
+    checked = np.ones(len(patch), dtype=bool)
+    for k in np.unique(patch):
+        if k < 0 or trims[k] is None:
+            continue
+        at = np.flatnonzero(patch == k)
+        trim, margin = dense[k]
+        uu, vv = trim.wrap(u[at], v[at])
+        extent = float(np.ptp(np.concatenate([trim.outer, *trim.holes]), axis=0).max())
+        boundary = shapely.MultiLineString([np.vstack([r, r[:1]]) for r in (trim.outer, *trim.holes)])
+        near = shapely.distance(boundary, shapely.points(uu, vv)) <= 2.0 * margin + 1e-12 * extent
+        checked[at[near]] = False
+    assert checked.mean() > 0.5
+    np.testing.assert_array_equal(got[checked], want[checked])
+    return got
+
+
 @pytest.mark.parametrize("part", PARTS, ids=lambda p: p.name)
 def test_every_shipped_face_answers_as_geos(part):
+    """On chords alone (the trims without their tangents) GEOS's answers, bit for bit; with them, the curves'."""
     surfaces = load_scene(part).surfaces
     trims = [s.trim for s in surfaces]
     patch, u, v = probes(trims, [s.domain for s in surfaces], np.random.default_rng(12))
-    want = reference(trims, patch, u, v)
+    chords = [dataclasses.replace(t, tangents=()) if t is not None else None for t in trims]
+    want = reference(chords, patch, u, v)
     assert want.any() and not want.all()
-    np.testing.assert_array_equal(TrimTable(trims).contains(patch, u, v), want)
-    np.testing.assert_array_equal(SurfaceSet(surfaces).on_face(patch, u, v), want)
+    np.testing.assert_array_equal(TrimTable(chords).contains(patch, u, v), want)
+    got = assert_as_the_curves(trims, patch, u, v)
+    np.testing.assert_array_equal(SurfaceSet(surfaces).on_face(patch, u, v), got)
+    for k, trim in enumerate(trims):  # the samples themselves lie on the loops: on the face
+        if trim is not None:
+            ring = np.concatenate([trim.outer, *trim.holes])
+            assert TrimTable(trims).contains(np.full(len(ring), k), ring[:, 0], ring[:, 1]).all()
+
+
+def circle_loop(centre, radius, n, phase=0.0, reverse=False):
+    """A circle sampled at n angles with its exact Hermite tangents per segment (Δθ·γ'(θ) at both ends)."""
+    theta = phase + 2.0 * np.pi * np.arange(n) / n
+    if reverse:
+        theta = theta[::-1]
+    step = 2.0 * np.pi / n * (-1.0 if reverse else 1.0)
+    ring = np.column_stack([centre[0] + radius * np.cos(theta), centre[1] + radius * np.sin(theta)])
+    d = step * radius * np.column_stack([-np.sin(theta), np.cos(theta)])
+    return ring, np.column_stack([d, np.roll(d, -1, axis=0)])
+
+
+@pytest.mark.parametrize("phase", [0.0, 0.5, 0.123])
+def test_points_between_chord_and_circle_are_classified_as_the_circle(phase):
+    """A disc of radius 2 with a hole of radius 0.7, each sampled at only 16 and 12 angles (chords 0.04 and 0.024
+    inside the circles): between chord and circle the polygon is wrong (GEOS), the Hermite pieces (their radial
+    error ≤ 2e-4 of the radius here) right. ``phase`` (of a step) puts the circles' v-extrema on a sample or inside a piece, where
+    it crosses a line of constant v twice; points on the lines v = a sample's v test the half-open rule."""
+    rng = np.random.default_rng(7)
+    (c, r, n), (hc, hr, hn) = ((0.3, -0.7), 2.0, 16), ((0.5, -0.4), 0.7, 12)
+    outer, t_outer = circle_loop(c, r, n, phase * 2.0 * np.pi / n)
+    hole, t_hole = circle_loop(hc, hr, hn, phase * 2.0 * np.pi / hn, reverse=True)
+    trim = Trim(outer, (hole,), tangents=(t_outer, t_hole))
+    polygon = dataclasses.replace(trim, tangents=())
+    m = 40_000
+    angle = rng.uniform(0.0, 2.0 * np.pi, m)
+    for centre, radius, steps, sign in ((c, r, n, 1.0), (hc, hr, hn, -1.0)):
+        chord = radius * np.cos(np.pi / steps)  # the chords' nearest approach to the centre
+        depth = rng.uniform(chord, radius * (1.0 + (1.0 - chord / radius)), m)  # across the chord band
+        sure = np.abs(depth - radius) > 5e-4 * radius
+        u, v = centre[0] + depth * np.cos(angle), centre[1] + depth * np.sin(angle)
+        # points at the samples' v (half-open crossings at a shared sample), across the band
+        at = rng.integers(0, steps, m // 4)
+        v[: m // 4] = centre[1] + radius * np.sin(2.0 * np.pi * at / steps + phase * 2.0 * np.pi / steps)
+        reach = np.sqrt(np.maximum(depth[: m // 4] ** 2 - (v[: m // 4] - centre[1]) ** 2, 0.0))
+        u[: m // 4] = centre[0] + np.where(angle[: m // 4] < np.pi, 1.0, -1.0) * reach
+        depth = np.hypot(u - centre[0], v - centre[1])
+        sure = np.abs(depth - radius) > 5e-4 * radius
+        other = (np.hypot(u - hc[0], v - hc[1]) > hr) if sign > 0 else (np.hypot(u - c[0], v - c[1]) <= r)
+        want = (depth <= radius if sign > 0 else depth >= radius) & other
+        patch = np.zeros(m, dtype=np.int64)
+        got = TrimTable([trim]).contains(patch, u, v)
+        np.testing.assert_array_equal(got[sure], want[sure])
+        assert np.count_nonzero(polygon.contains(u, v)[sure] != want[sure]) > m // 10  # the chords' band: wrong
+    ring = np.concatenate([outer, hole])
+    assert TrimTable([trim]).contains(np.zeros(len(ring), dtype=np.int64), ring[:, 0], ring[:, 1]).all()
+
+
+def test_a_piece_crossing_a_line_three_times():
+    """A loop whose lower side is one Hermite piece v(s) = 3s(1 − s)(1 − 2s) from (0, 0) to (1, 0) (it crosses each
+    line |v| < 0.29 three times): every point farther than its dense sampling's error answers as GEOS on that."""
+    loop = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    tangents = np.full((4, 4), np.nan)
+    tangents[0] = [1.0, 3.0, 1.0, 3.0]
+    trim = Trim(loop, tangents=(tangents,))
+    rng = np.random.default_rng(5)
+    m = 50_000
+    u, v = rng.uniform(-0.1, 1.1, m), rng.uniform(-0.4, 0.4, m)
+    v[:1000] = np.repeat(np.linspace(-0.28, 0.28, 10), 100)  # lines crossing three times
+    got = assert_as_the_curves([trim], np.zeros(m, dtype=np.int64), u, v)
+    assert not got[(v < -0.3) | (u < 0.0) | (u > 1.0)].any()
+    s = rng.uniform(0.0, 1.0, 2000)  # on the curve: the boundary, inside
+    on = TrimTable([trim]).contains(np.zeros(2000, dtype=np.int64), s, 3.0 * s * (1.0 - s) * (1.0 - 2.0 * s))
+    assert on.mean() > 0.95  # (the rest within rounding of it, either side)
 
 
 def test_periodic_repaired_untrimmed_and_odd_inputs():
@@ -81,7 +210,8 @@ def test_periodic_repaired_untrimmed_and_odd_inputs():
 
 
 def test_points_the_tracer_asks_about(monkeypatch):
-    """Every (u, v) the plate's render tests (the tracer's candidates, seam restarts, rim neighbours, second look)."""
+    """Every (u, v) the plate's render tests (the tracer's candidates, seam restarts, rim neighbours, second look),
+    against the curves (`assert_as_the_curves`)."""
     from rtreflect.integrator.autorig import resolve
     from rtreflect.integrator.renderer import Renderer
 
@@ -98,4 +228,5 @@ def test_points_the_tracer_asks_about(monkeypatch):
     patch, u, v = (np.concatenate(x) for x in zip(*asked))
     trims = [s.trim for s in renderer.surfaces.patches]
     assert len(patch) > 10_000
-    np.testing.assert_array_equal(on_face(renderer.surfaces, patch, u, v), reference(trims, patch, u, v))
+    got = assert_as_the_curves(trims, patch, u, v)
+    np.testing.assert_array_equal(on_face(renderer.surfaces, patch, u, v), got)

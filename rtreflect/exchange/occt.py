@@ -14,7 +14,10 @@ Steps (DESIGN.md, "CAD input"; measured facts in the project's OCP notes):
    (``BRepAdaptor_Curve2d``, seam edges once per orientation, pole edges included) sampled by
    bisection until the polyline's midpoints lie within `TRIM_TOLERANCE` × the part's diagonal (the faces' own
    box's where the control points' box overstates it, `REMESH_RATIO`)
-   of the pcurve's **in model space** (measured on the surface with rtreflect's evaluator).
+   of the pcurve's **in model space** (measured on the surface with rtreflect's evaluator). Each segment also
+   carries its cubic Hermite end tangents (Δt·γ'(t) at its ends, ``BRepAdaptor_Curve2d.D1``; on .3dm faces the
+   3D edge's tangent in (u, v)) where that piece matches the pcurve's midpoint (`_hermite_tangents`): the
+   point-in-face test decides points between chord and edge against it (`kernels.trims`).
 4. ``mesh_uv``: ``BRepMesh_IncrementalMesh`` on each converted face, the nodes' (u, v) and the
    triangles (flipped on reversed faces so they wind like the face's normal).
 
@@ -307,15 +310,20 @@ def bspline_of_face(face) -> NurbsSurface:
     return surface
 
 
-def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge: bool = False) -> np.ndarray:
+def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge: bool = False,
+                  with_tangents: bool = False):
     """One edge's pcurve as (u, v) points in the wire's direction, bisected until within ``tolerance`` in 3D.
 
     ``onto_edge``: each sample is then moved to the foot of the 3D edge's point at the same parameter
     on the surface (`project_onto_surface`): for pcurves that only approximate the edge (fitted by
     ShapeFix for .3dm faces, 7.6e-3 mm off a 10 mm circle) the loop follows the exact 3D edge.
+
+    ``with_tangents``: also each segment's cubic Hermite end tangents (m − 1, 4), `_hermite_tangents` (NaN rows: the
+    chord), returned as ``(uv, tangents)``.
     """
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d
+    from OCP.gp import gp_Pnt, gp_Pnt2d, gp_Vec, gp_Vec2d
     from OCP.TopAbs import TopAbs_REVERSED
 
     curve = BRepAdaptor_Curve2d(edge, face)
@@ -345,17 +353,78 @@ def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge
         order = np.argsort(np.r_[ts, mids_t[bad]], kind="stable")
         ts = np.r_[ts, mids_t[bad]][order]
         uv = np.r_[uv, mids[bad]][order]
+        mids = None
+    tangents = None
     # A pole edge has no 3D curve to follow; a seam's pcurves are the domain's sides (and projecting onto a seam
-    # could land on either side): put there (`_on_seam_side`).
+    # could land on either side): put there (`_on_seam_side`). A seam is a straight side: its chords are exact.
     if BRep_Tool.IsClosed_s(edge, face) and not BRep_Tool.Degenerated_s(edge):
         uv = _on_seam_side(uv, surface, _seam_axis(edge, face, surface))
+        tangents = np.full((len(uv) - 1, 4), np.nan)
     elif onto_edge and not BRep_Tool.Degenerated_s(edge):
         curve3d = BRepAdaptor_Curve(edge)
-        target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(t)) for t in ts)])
-        uv = project_onto_surface(surface, target, uv)
+        mids_t = 0.5 * (ts[:-1] + ts[1:]) if with_tangents else ts[:0]  # the midpoints too: `_hermite_tangents`
+        target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(t)) for t in np.r_[ts, mids_t])])
+        start = np.r_[uv, (mids if mids is not None else at(mids_t)) if with_tangents else uv[:0]]
+        feet = project_onto_surface(surface, target, start)
+        uv, mids = feet[:len(ts)], feet[len(ts):]
+        if with_tangents:  # the projected curve's tangent: C'(t) in the surface's (u, v), least squares on S_u, S_v
+            d3 = np.empty((len(ts), 3))
+            point, vector = gp_Pnt(), gp_Vec()
+            for k, t in enumerate(ts):
+                curve3d.D1(float(t), point, vector)
+                d3[k] = vector.X(), vector.Y(), vector.Z()
+            tangents = _hermite_tangents(ts, uv, _surface_tangent(surface, uv, d3), mids)
+    if with_tangents and tangents is None:
+        if mids is None:  # the last round split segments: the final ones' midpoints
+            mids = at(0.5 * (ts[:-1] + ts[1:]))
+        duv = np.empty((len(ts), 2))
+        point, vector = gp_Pnt2d(), gp_Vec2d()
+        for k, t in enumerate(ts):  # OCP per-point call, as `at`
+            curve.D1(float(t), point, vector)
+            duv[k] = vector.X(), vector.Y()
+        tangents = _hermite_tangents(ts, uv, duv, mids)
     if edge.Orientation() == TopAbs_REVERSED:
         uv = uv[::-1]
-    return uv
+        if tangents is not None:  # each segment run backwards: its end tangents swapped and negated
+            tangents = -tangents[::-1][:, [2, 3, 0, 1]]
+    return (uv, tangents) if with_tangents else uv
+
+
+#: A segment's cubic Hermite piece is used only where its midpoint lies at most this fraction of the chord's midpoint
+#: error from the pcurve's midpoint (`_hermite_tangents`): a knot of lower continuity inside the segment (a kink the
+#: end tangents do not see) keeps the chord.
+HERMITE_MIDPOINT = 0.1
+
+
+def _hermite_tangents(ts: np.ndarray, uv: np.ndarray, duv: np.ndarray, mids: np.ndarray) -> np.ndarray:
+    """Per segment i of the samples ``uv`` (at edge parameters ``ts``, pcurve derivative ``duv``): the end tangents
+    (Δt·γ'(t_i), Δt·γ'(t_{i+1})) of its cubic Hermite piece, (m − 1, 4); NaN (the chord) where the piece's midpoint
+    H(½) = (a + b)/2 + (T₀ − T₁)/8 does not lie within `HERMITE_MIDPOINT` of the chord's midpoint error from the
+    pcurve's midpoint ``mids`` (both in (u, v)), or the tangents are not finite.
+
+    The Hermite piece matches a smooth pcurve to O(h⁴) where the chord does to O(h²) (de Boor, *A Practical Guide to
+    Splines*, ch. IV): the point-in-face test decides points between a chord and its edge against it
+    (`kernels.trims`)."""
+    dt = np.diff(ts)[:, None]
+    tangents = np.column_stack([dt * duv[:-1], dt * duv[1:]])
+    chord_mid = 0.5 * (uv[:-1] + uv[1:])
+    hermite_mid = chord_mid + (tangents[:, :2] - tangents[:, 2:]) / 8.0
+    chord_error = np.linalg.norm(chord_mid - mids, axis=1)
+    hermite_error = np.linalg.norm(hermite_mid - mids, axis=1)
+    good = np.isfinite(tangents).all(axis=1) & (hermite_error <= HERMITE_MIDPOINT * chord_error)
+    tangents[~good] = np.nan
+    return tangents
+
+
+def _surface_tangent(surface: NurbsSurface, uv: np.ndarray, d3: np.ndarray) -> np.ndarray:
+    """(du, dv) whose image S_u du + S_v dv is nearest the 3D tangents ``d3`` at ``uv`` (normal equations; NaN where
+    S_u, S_v are singular: a pole)."""
+    ev = surface.evaluate(uv[:, 0], uv[:, 1])
+    a, b, c = (np.einsum("ij,ij->i", x, y) for x, y in ((ev.Su, ev.Su), (ev.Su, ev.Sv), (ev.Sv, ev.Sv)))
+    gu, gv = np.einsum("ij,ij->i", d3, ev.Su), np.einsum("ij,ij->i", d3, ev.Sv)
+    det = a * c - b * b
+    safe = np.where(det > 1e-12 * (a * c + 1e-300), det, np.nan)
+    return np.column_stack([(c * gu - b * gv) / safe, (a * gv - b * gu) / safe])
 
 
 #: A seam edge's pcurve within this fraction of the domain's range of one of its sides is put on that side.
@@ -430,22 +499,27 @@ def project_onto_surface(surface: NurbsSurface, target: np.ndarray, uv: np.ndarr
     return np.where((after <= before)[:, None], uv, start)
 
 
-def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float, onto_edges: bool = False) -> np.ndarray:
-    """A wire's edges' samples joined into one closed (u, v) polyline (last point not repeated)."""
+def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float, onto_edges: bool = False):
+    """A wire's edges' samples joined into one closed (u, v) polyline (last point not repeated), and per segment
+    i → i + 1 (the last closing the loop) its cubic Hermite end tangents (n, 4) (`_hermite_tangents`; NaN: the chord,
+    as at the joints between edges)."""
     from OCP.BRepTools import BRepTools_WireExplorer
 
     pieces = []
     explorer = BRepTools_WireExplorer(wire, face)
     while explorer.More():
-        pieces.append(_edge_samples(explorer.Current(), face, surface, tolerance, onto_edges))
+        pieces.append(_edge_samples(explorer.Current(), face, surface, tolerance, onto_edges, with_tangents=True))
         explorer.Next()
     edges = _wire_edges(wire)
     if len(pieces) < len(edges):
         # The explorer stopped at a joint it could not connect: every edge, chained by its pcurve's ends instead.
-        pieces = _chained([_edge_samples(edge, face, surface, tolerance, onto_edges) for edge in edges], surface)
+        pieces = _chained([_edge_samples(edge, face, surface, tolerance, onto_edges, with_tangents=True)
+                           for edge in edges], surface)
     if not pieces:
         raise FaceError("a wire of the face has no edges")
-    loop = np.concatenate(pieces)
+    loop = np.concatenate([uv for uv, _ in pieces])
+    # Per point, its outgoing segment's tangents: an edge's own segments, then NaN for the joint to the next edge.
+    tangents = np.concatenate([np.r_[tan, np.full((1, 4), np.nan)] for _, tan in pieces])
     # (u, v) within `SIDE_SNAP` of the domain of a side is put on it, and consecutive points so close are one point:
     # pcurves meet their vertices and the sides only to OCCT's tolerances; a loop touching itself reads as crossing.
     close = SIDE_SNAP * np.array([hi - lo for lo, hi in surface.domain])
@@ -453,12 +527,17 @@ def _wire_loop(wire, face, surface: NurbsSurface, tolerance: float, onto_edges: 
         loop[np.abs(loop[:, axis] - lo) < close[axis], axis] = lo
         loop[np.abs(loop[:, axis] - hi) < close[axis], axis] = hi
     keep = np.r_[True, np.any(np.abs(np.diff(loop, axis=0)) > close, axis=1)]
+    # A point dropped merges its (vanishing) incoming segment into its outgoing one: the kept point before a run of
+    # dropped ones takes the last one's outgoing tangents.
+    kept = np.flatnonzero(keep)
+    tangents = tangents[np.r_[kept[1:] - 1, len(loop) - 1]]
     loop = loop[keep]
     if len(loop) > 1 and np.all(np.abs(loop[0] - loop[-1]) <= close):
-        loop = loop[:-1]
+        # The last point is the first: the segment before it closes the loop (the vanishing one after it goes).
+        loop, tangents = loop[:-1], tangents[:-1]
     if len(loop) < 3:
         raise FaceError("a trim loop has fewer than 3 distinct (u, v) points")
-    return loop
+    return loop, tangents
 
 
 def _wire_edges(wire) -> list:
@@ -473,7 +552,7 @@ def _wire_edges(wire) -> list:
 
 
 def _chained(pieces: list, surface: NurbsSurface) -> list:
-    """The edges' (u, v) samples (each in its wire direction) put in loop order: from the first, each next piece is the
+    """The edges' (u, v) samples (each in its wire direction; ``pieces``: (samples, tangents) pairs) put in loop order: from the first, each next piece is the
     one whose start lies nearest the current end (distances in fractions of the domain's sides).
 
     ``BRepTools_WireExplorer`` connects a wire's edges through their vertices and stops where it cannot: on a face of
@@ -484,14 +563,15 @@ def _chained(pieces: list, surface: NurbsSurface) -> list:
     scale = np.array([max(hi - lo, 1e-300) for lo, hi in surface.domain])
     left, ordered = list(pieces[1:]), [pieces[0]]
     while left:
-        end = ordered[-1][-1]
-        k = int(np.argmin([np.max(np.abs(piece[0] - end) / scale) for piece in left]))
+        end = ordered[-1][0][-1]
+        k = int(np.argmin([np.max(np.abs(piece[0][0] - end) / scale) for piece in left]))
         ordered.append(left.pop(k))
     return ordered
 
 
 def trim_of_face(face, surface: NurbsSurface, tolerance: float, onto_edges: bool = False, edges: tuple = ()):
-    """The face's `Trim`: outer wire and holes as (u, v) polylines of ``surface`` (already un-periodised).
+    """The face's `Trim`: outer wire and holes as (u, v) polylines of ``surface`` (already un-periodised), with each
+    segment's cubic Hermite tangents (`_hermite_tangents`) for the point-in-face test.
 
     ``onto_edges``: samples follow the 3D edges rather than the pcurves (see `_edge_samples`).
     ``edges``: the face's B-rep edges (`face_edges`), carried on the trim to the seam finder.
@@ -506,15 +586,17 @@ def trim_of_face(face, surface: NurbsSurface, tolerance: float, onto_edges: bool
     outer_wire = BRepTools.OuterWire_s(face)
     if outer_wire.IsNull():
         raise FaceError("the face has no outer wire")
-    outer = _wire_loop(outer_wire, face, surface, tolerance, onto_edges)
-    holes = []
+    outer, outer_tangents = _wire_loop(outer_wire, face, surface, tolerance, onto_edges)
+    holes, tangents = [], [outer_tangents]
     explorer = TopExp_Explorer(face, TopAbs_WIRE)
     while explorer.More():
         wire = TopoDS.Wire(explorer.Current())
         explorer.Next()
         if not wire.IsSame(outer_wire):
-            holes.append(_wire_loop(wire, face, surface, tolerance, onto_edges))
-    trim = Trim(outer, tuple(holes), edges=edges)
+            hole, hole_tangents = _wire_loop(wire, face, surface, tolerance, onto_edges)
+            holes.append(hole)
+            tangents.append(hole_tangents)
+    trim = Trim(outer, tuple(holes), edges=edges, tangents=tuple(tangents))
     if trim._polygon.is_empty or trim._polygon.area <= 0:
         raise FaceError("its trim loops enclose no area")
     return trim

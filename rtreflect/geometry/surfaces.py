@@ -338,7 +338,8 @@ class SurfaceSet:
 
     def on_face(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """True where (u, v) lies on the face of ``patch``: inside its trim, anywhere on an untrimmed patch
-        (every face's `Trim.contains` in one compiled pass, `trims.TrimTable`)."""
+        (every face's trim in one compiled pass, `trims.TrimTable`: its loops' Hermite pieces where known, else
+        `Trim.contains`'s polylines)."""
         patch = np.asarray(patch).ravel()
         if not self.trimmed:
             return np.ones(len(patch), dtype=bool)
