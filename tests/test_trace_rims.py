@@ -174,4 +174,6 @@ def test_seam_restarts_dropped_clear_of_the_neighbour_could_not_win(monkeypatch)
     restarts, every_restarts = len(restarted), len(every_restarted)
     for name in ("hit", "patch", "u", "v", "t", "P", "N", "fallback", "aside", "Su", "Sv"):
         np.testing.assert_array_equal(getattr(hits, name), getattr(every, name), err_msg=name)
-    assert every_restarts > 10000 and restarts < every_restarts - 300
+    # Since the skirts are a quarter edge wide (`tessellation.SKIRT_EDGES`): 3,420 of 3,551 run (at one edge wide,
+    # over 10,000 of them).
+    assert every_restarts > 2000 and restarts < every_restarts - 100
