@@ -73,6 +73,19 @@ def test_render_with_fresh_module_does_not_import_numba_and_matches_the_jit():
 
 
 @needs_module
+def test_cad_part_render_calls_only_the_aot_kernels():
+    """A CAD part's render takes the tracer's rare paths (seam restarts, crossings beside the mesh hit, the walk past a
+    passing minimum), whose kernels must be called with the argument types the AOT module declares: a read-only
+    broadcast of `tracing._into_domain` went to the JIT on every plate render (numba imported, its compile paid)."""
+    script = RENDER.replace('"scenes/cylinder.toml"), width=48, height=27', '"parts/plate.step"), width=160, height=90')
+    env = {**os.environ, "PYTHONPATH": str(ROOT), compiled.MODE_VARIABLE: "auto"}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, env=env)
+    assert out.returncode == 0, out.stderr
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    assert result["aot"] and not result["numba"] and result["fallbacks"] == [], result
+
+
+@needs_module
 def test_stale_module_falls_back_to_the_jit():
     stale = render("stale")
     assert not stale["aot"] and stale["numba"] and "stale" in stale["why"], stale

@@ -71,9 +71,9 @@ def parameter_steps(Su: np.ndarray, Sv: np.ndarray, w: np.ndarray) -> tuple[np.n
     with E = S_u·S_u, F = S_u·S_v, G = S_v·S_v, solved by Cramer's rule: inf or NaN where EG − F² = 0
     (`kernels.nurbs.tangent_step`).
     """
-    f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)  # noqa: E731
-    du, dv = np.empty(len(f64(Su))), np.empty(len(f64(Su)))
-    kernel.tangent_steps(f64(Su), f64(Sv), f64(w), du, dv)
+    Su, Sv, w = (np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3) for x in (Su, Sv, w))
+    du, dv = np.empty(len(Su)), np.empty(len(Su))
+    kernel.tangent_steps(Su, Sv, w, du, dv)
     return du, dv
 
 
@@ -369,13 +369,8 @@ class SurfaceSet:
         return out
 
     @cached_property
-    def closed_table(self) -> np.ndarray:
-        """`closed` as the kernels take it (C-contiguous bool, (P, 2))."""
-        return np.ascontiguousarray(self.closed, dtype=np.bool_).reshape(-1, 2)
-
-    @cached_property
     def closed(self) -> np.ndarray:
-        """Per patch (P, 2): whether it is closed in u, in v: S(u₀, v) = S(u₁, v) for every v (S(u, v₀) = S(u, v₁)),
+        """Per patch (P, 2), C-contiguous bool as the kernels take it: whether it is closed in u, in v: S(u₀, v) = S(u₁, v) for every v (S(u, v₀) = S(u, v₁)),
         to `CLOSED_FRACTION` of its reach, tested at the other direction's span breaks and span midpoints (the two
         edges are B-spline curves over those spans), all patches' in one evaluation. There a point of the seam has
         two parameter pairs, one on each side.

@@ -720,10 +720,11 @@ def _into_domain(surfaces: SurfaceSet, patch, u, v) -> tuple[np.ndarray, np.ndar
     Clamped at a seam, a start predicted past it lands on the seam's far side, and Newton goes to the ray's other
     crossing (blocks.3dm at 480×270: the non-uniformly scaled sphere's entry lies across its seam from the mesh hit;
     clamped, 2 pixels stored the exit 0.65 behind it)."""
-    patch = np.ascontiguousarray(patch, dtype=np.int64)
-    u, v = (np.ascontiguousarray(np.broadcast_to(x, patch.shape), dtype=np.float64) for x in (u, v))
+    # Writeable C arrays, as the compiled kernel's signature takes them (a read-only broadcast would go to the JIT).
+    patch = np.require(patch, np.int64, ("C", "W"))
+    u, v = (np.require(np.broadcast_to(x, patch.shape), np.float64, ("C", "W")) for x in (u, v))
     u_out, v_out = np.empty(len(patch)), np.empty(len(patch))
-    nurbs_kernel.into_domains(surfaces.table.domain, surfaces.closed_table, patch, u, v, u_out, v_out)
+    nurbs_kernel.into_domains(surfaces.table.domain, surfaces.closed, patch, u, v, u_out, v_out)
     return u_out, v_out
 
 
@@ -888,7 +889,7 @@ def _past_minimum(tessellation: Tessellation, surfaces: SurfaceSet, rows, O, D, 
     state = np.full(n, nurbs_kernel.WALK_DROPPED, dtype=np.int64)
     live = np.flatnonzero(np.abs(g) <= reach)  # indices into rows
     while len(live):
-        nurbs_kernel.walk_past_minimum(*surfaces.table.args, surfaces.table.scale, surfaces.closed_table, live, patch,
+        nurbs_kernel.walk_past_minimum(*surfaces.table.args, surfaces.table.scale, surfaces.closed, live, patch,
                                        Or, Dr, reach, step, FOOT_ITERATIONS, surface_module.DEGENERATE_SINE,
                                        surface_module.VANISHING_PARTIAL, pending, u, v, t, g, steps_left, u1, v1, g1,
                                        state)
