@@ -615,6 +615,37 @@ def test_ray_off_a_face_by_a_ten_face_apex_restarts_on_the_face_across_its_side(
     assert len(np.unique(hits.patch[hits.hit])) >= 10  # the apex's faces fill the view
 
 
+def test_ray_dipping_under_a_crest_before_its_hit_is_kept_at_the_dip(tmp_path):
+    """rational_high.step (a wavy rational 6 × 5 face), a grazing close-up at 120×120, pixel (71, 117): the ray meets
+    the face at t = 71.23 (|N·D| = 0.22), runs up to 0.55 over it before that, and 0.0065 under a crest at
+    52.81–54.57 (OCCT's first hit, |N·D| = 0.018), where the mesh, 2.5 off the face, has no hit. The predicted other
+    crossing (`tracing._other_root`, to second order at 61.5) led Newton back to 71.23; the search for the ray's
+    distance from there runs down into the dip, and the dip's near side is looked for in turn. The pixels round it
+    are OCCT's `PerformNearest` too."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from rtreflect.trace.tracing import trace
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "rational_high.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(120, 120, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective", eye=np.array([-30.0, 20.0, 8.0]),
+                                 look_at=np.array([24.0, 20.0, 4.0]), up=np.array([0.0, 0.0, 1.0]), fov=25.0)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = (x.ravel() for x in np.mgrid[64:79, 110:120])
+    origins, directions = renderer.camera.rays(rows, cols)
+    hits = assert_first_hits_are_occt(path, renderer, origins, directions)
+    dip = np.flatnonzero((rows == 71) & (cols == 117))[0]
+    assert hits.t[dip] == pytest.approx(52.808, abs=1e-3)
+    # The coarse trace's own answer, before the second look: the search meets the dip's far side (54.57) first.
+    coarse = trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins[[dip]], directions[[dip]])
+    assert coarse.t[0] == pytest.approx(52.808, abs=1e-3)
+
+
 @pytest.mark.parametrize("towards", [(1.0, 0.0, 0.3), (1.0, -0.4, 1.0)], ids=["side", "above"])
 def test_thin_chamfer_close_up_first_hits_are_open_cascades(tmp_path, towards):
     """thin_chamfer.step (a 0.05 chamfer round an r 50 rim): its caps' trims are polylines within `TRIM_TOLERANCE`

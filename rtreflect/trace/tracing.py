@@ -140,6 +140,14 @@ OTHER_ROOT_COS = 0.2
 #: 0.35: entries at |N·D| 0.22 and 0.32, caps 0.10 and 0.21 deep, were stored at their exits). ×2 as the second
 #: look's shell (`secondlook.SHELL_CHORDS`): the chord error is sampled, a triangle's interior may stray farther.
 OTHER_ROOT_CHORDS = 2.0
+#: Where Newton from the predicted other crossing goes back to the kept hit, the search for the ray's distance
+#: (`_rescue`) from the same start, at most this many steps: the sheet is not a parabola along the ray (a wave), and
+#: the descent from the predicted start runs down into the dip that prediction stood for (rational_high.step, a
+#: grazing close-up: 5 steps needed, 8 enough; its cost on parts/plate.step at 960×540, 1,098 such rays, 12 ms).
+OTHER_ROOT_RESCUE_STEPS = 30
+#: Rounds of `_other_root`: a crossing it finds has a nearer one of its own where it is a dip's far side (the second
+#: round finds it; a third for margin, run only on the rays the second replaced).
+OTHER_ROOT_ROUNDS = 3
 
 #: `_past_minimum` follows the ray on from a positive minimum of its distance to the face in steps of this fraction of
 #: the face's longest mesh edge: the two hidden entries it was made for lay 0.62 and 0.41 edges past their minimum
@@ -741,7 +749,13 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     leaves the ray as g(s) = ½ κ s² − (n·D) s along the normal n, κ = n·S''(δ, δ) with δ the
     parameter step per unit length of D's tangential part: the other crossing lies at s = 2(n·D)/κ.
     Where that is before the hit, Newton starts there on the same face; a valid point nearer than
-    t₁ by more than float32 rounding replaces it. ``normal`` and ``cosine`` (n·D) as the kernel gives them.
+    t₁ by more than float32 rounding replaces it. Where Newton goes back to t₁ instead (the sheet is no parabola
+    along the ray: it waves, and the ray dips under a crest before t₁), the search for the ray's distance
+    (`_rescue`, `OTHER_ROOT_RESCUE_STEPS`) from the same start runs down into that dip (rational_high.step, a
+    grazing close-up: the ray runs 0.55 over the sheet 5 before its hit at t = 71.23 and 0.0065 under it at 52.81–54.57,
+    where the mesh, 2.5 off, has no hit). A crossing found is looked before in turn (`OTHER_ROOT_ROUNDS`): the
+    search meets a dip's far side first. ``normal`` and ``cosine`` (n·D) as the kernel gives them, updated in place
+    for the rows replaced.
     Looked for below `OTHER_ROOT_COS`, and at any incidence where the ray's depth inside the cap between the
     crossings, max |g| = (n·D)²/2|κ|, is within `OTHER_ROOT_CHORDS` chord errors of the face: a deeper cap
     the mesh reaches into, so the ray meets it there and Newton starts near the nearer crossing.
@@ -749,8 +763,23 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     to face the ray as `trace` stores it (`facing`: n·D ≤ 0), so they are the AOV stage's (`Hits.curvature`); the
     caller resets the rows whose hit it replaces.
     """
-    cap = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error  # per face: a shallow cap's |κ| ≥ (n·D)²/cap
     rays = np.flatnonzero(status == VALID)
+    degenerate = np.zeros(len(status), dtype=bool)
+    for _ in range(OTHER_ROOT_ROUNDS):
+        rays = _nearer_crossing(tessellation, surfaces, O, D, rays, pk, ur, vr, tr, derivs, normal, cosine, aside,
+                                curvature)
+        # The next round looks before the crossings just found, with their own normals (the caller resets the
+        # curvature rows of every replaced hit).
+        _normals(surfaces, pk, derivs, D, rays, normal, cosine, degenerate)
+        curvature = None
+        if len(rays) == 0:
+            return
+
+
+def _nearer_crossing(tessellation: Tessellation, surfaces: SurfaceSet, O, D, rays, pk, ur, vr, tr, derivs, normal,
+                     cosine, aside, curvature: np.ndarray | None) -> np.ndarray:
+    """One round of `_other_root` over the valid hits ``rays``: the rays whose hit it replaced, in place."""
+    cap = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error  # per face: a shallow cap's |κ| ≥ (n·D)²/cap
     keep = np.abs(cosine[rays]) < OTHER_ROOT_COS
     # A shallow cap needs |κ| ≥ (n·D)²/2Cδ, and |κ| ≤ max(|κ1|, |κ2|)(1 − (n·D)²) (the principal curvatures bound
     # the normal curvature, the ray's tangential part is that long): rays that cannot pass are dropped before
@@ -771,7 +800,7 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
         keep[~keep] = ~far
         rays = rays[keep]
     if len(rays) == 0:
-        return
+        return rays
     d2 = surfaces.evaluate(pk[rays], ur[rays], vr[rays], order=2)
     nr, cr, Dr = normal[rays], cosine[rays], D[rays]
     kappa, du, dv = _curvature_along_ray(d2, nr, Dr, cr)
@@ -780,16 +809,30 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
     ahead = np.isfinite(step) & (step < 0.0) & (tr[rays] + step > 0.0) & _may_cross_twice(cr, kappa, cap[pk[rays]])
     rays, step, du, dv = rays[ahead], step[ahead], du[ahead], dv[ahead]
     if len(rays) == 0:
-        return
+        return rays
     us, vs = _into_domain(surfaces, pk[rays], ur[rays] + step * du, vr[rays] + step * dv)
     t_start = tr[rays] + step
     u3, v3, d3, ok3 = refine(surfaces, pk[rays], us, vs, O[rays], D[rays], t_start, tessellation.extent)
     t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
-    ok3 &= (t3 > 0) & (t3 < tr[rays] - FLOAT32_SLACK * tessellation.extent) & surfaces.on_face(pk[rays], u3, v3)
+    slack = FLOAT32_SLACK * tessellation.extent
+    ok3 &= (t3 > 0) & (t3 < tr[rays] - slack) & surfaces.on_face(pk[rays], u3, v3)
+    back = np.flatnonzero(~ok3)
+    if len(back):
+        rb = rays[back]
+        tol = _search_tolerance(t_start[back], tessellation.extent)
+        u4, v4, d4, ok4 = _rescue(surfaces, pk[rb], us[back], vs[back], O[rb], D[rb], tol, OTHER_ROOT_RESCUE_STEPS)[:4]
+        t4 = np.einsum("ij,ij->i", d4.S - O[rb], D[rb])
+        ok4 &= (t4 > 0) & (t4 < tr[rb] - slack)
+        ok4[ok4] = surfaces.on_face(pk[rb[ok4]], u4[ok4], v4[ok4])
+        got = back[ok4]
+        u3[got], v3[got], t3[got], ok3[got] = u4[ok4], v4[ok4], t4[ok4], True
+        for have, new in zip(d3[:3], d4[:3]):
+            have[got] = new[ok4]
     won = rays[ok3]
     ur[won], vr[won], tr[won], aside[won] = u3[ok3], v3[ok3], t3[ok3], True
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[ok3]
+    return won
 
 
 def _crossing_on_face(tessellation: Tessellation, surfaces: SurfaceSet, rows, patch, O, D, tm, us, vs, band, status, pk,
