@@ -217,13 +217,22 @@ def test_bent_and_edge_flags_are_the_shifted_grid_form():
 
         hit = rng.uniform(size=shape) < 0.8
         patch, blocked = rng.integers(0, 2, size=shape), rng.uniform(size=shape) < 0.3
+        # Hits on the plane z = 0 (normal +z), some lifted off it (an occlusion edge's nearer face), some shaded apart.
+        rows, cols = np.indices(shape, dtype=np.float64)
+        P = np.stack([cols, rows, np.where(rng.uniform(size=shape) < 0.2, 3.0, 0.0)], axis=-1)
+        N = np.broadcast_to([0.0, 0.0, 1.0], shape + (3,)).copy()
+        shade = np.where(rng.uniform(size=shape) < 0.2, 0.9, 0.5)
         edge = got.copy()
-        for h, p, k, c, o in zip(*(neighbours(x) for x in (hit, patch, level, near, blocked))):
-            edge |= (h != hit) | (hit & (p != patch))
+        for h, p, k, c, o, q, m, w in zip(*(neighbours(x) for x in (hit, patch, level, near, blocked, P, N, shade))):
+            step = q - P
+            length = np.linalg.norm(step, axis=-1)
+            joined = ((np.abs(np.einsum("ijk,ijk->ij", N, step)) <= 0.1 * length)
+                      & (np.abs(np.einsum("ijk,ijk->ij", m, step)) <= 0.1 * length) & (np.abs(w - shade) <= 0.2))
+            edge |= (h != hit) | (hit & (p != patch) & (near | c | ~joined))
             edge |= (near | c) & (k != level)
             edge |= near & c & (o != blocked)
         out = np.empty(shape, dtype=bool)
-        edge_flags(hit, patch, level, near, blocked, got, out)
+        edge_flags(hit, patch, level, near, blocked, got, P, N, shade, 0.1, 0.2, out)
         assert np.array_equal(out, edge)
 
 

@@ -18,9 +18,10 @@ renderer's own pipeline (exact surface point and normal, eye ray, reflection, th
 (u, v) ± ½ (du, dv)/dx and /dy: a central difference over the pixel, no second copy of any formula.
 
 Pixels that this linear model does not describe are not stripe edges and are supersampled
-(`edge_pixels`): where one of the 8 neighbours disagrees on hit or miss, on the patch, on the level
-(near a stripe) or on the occlusion of the reflected ray (near a stripe), and where the footprint spans
-about a level spacing or more, or σ bends within it (a neighbour's σ strays from the pixel's plane).
+(`edge_pixels`): where one of the 8 neighbours disagrees on hit or miss, on the level (near a stripe), on the
+occlusion of the reflected ray (near a stripe) or on the face, where a stripe is near or the two hits do not
+continue one sheet (an occlusion or trim edge, a crease the shading shows: `JOIN_SINE`); and where the footprint
+spans about a level spacing or more, or σ bends within it (a neighbour's σ strays from the pixel's plane).
 """
 
 from __future__ import annotations
@@ -44,6 +45,14 @@ TRUSTED_SPAN = 0.5
 #: widths, for the pixel's linear model to be trusted: within the pixel itself the bend is a quarter of it (σ's
 #: second-order term), so a stripe edge moves by at most w/8 there.
 BENDING = 0.5
+#: Two neighbouring pixels' hits on different faces continue one sheet where each lies within this sine (~6°) of
+#: the other's tangent plane, seen from it: a smooth sheet bends away from its tangent plane by ½κ|ΔP|², so pixels
+#: less than 0.2 of a radius of curvature apart pass; across an occlusion edge the farther hit lies off the
+#: nearer's plane by the depth step times |N·D|. Where faces join with no stripe near, such pixels are not edges.
+JOIN_SINE = 0.1
+#: ... and where their surface colours (the shade k times ``surface_color``) differ by at most this (linear RGB, the
+#: brightest channel): a crease shows as a step in the shading where no stripe is near, and is supersampled.
+JOIN_COLOUR_STEP = 0.01
 #: Sub-pixel samples per axis (s×s) of the pixels that are supersampled (edges): as the old default.
 EDGE_SAMPLES = 4
 #: The 8 neighbours of a pixel as (row, column) steps.
@@ -128,13 +137,17 @@ def neighbours(grid: np.ndarray):
 
 
 def edge_pixels(hit: np.ndarray, patch: np.ndarray, level: np.ndarray, near: np.ndarray, blocked: np.ndarray,
-                untrusted: np.ndarray) -> np.ndarray:
+                untrusted: np.ndarray, P: np.ndarray, N: np.ndarray, shade: np.ndarray, shade_step: float) -> np.ndarray:
     """Pixels the linear stripe model does not describe (module doc): True where any of the 8 neighbours differs.
 
     (rows, columns) grids of the centre rays: ``near``, the footprint reaches a stripe; ``blocked``, the
     reflected ray is occluded before the stripe (False where not tested); ``untrusted``, near a stripe but
-    the footprint is too wide or the gradient unknown.
+    the footprint is too wide or the gradient unknown; ``P``, ``N`` (rows, columns, 3), the hit points and unit
+    normals, and ``shade``, the surface colour's factor k (1 where flat). A neighbour on another face counts only
+    near a stripe, or where the two hits do not continue one sheet (`JOIN_SINE`) or their shades differ by more than
+    ``shade_step``: where faces join with no stripe near, the pixel is the surface's colour on both.
     """
     edge = np.empty(hit.shape, dtype=bool)
-    edge_flags(hit, patch, level, near, blocked, untrusted, edge)  # one compiled pass, the neighbours as `neighbours`
+    # one compiled pass, the neighbours as `neighbours`
+    edge_flags(hit, patch, level, near, blocked, untrusted, P, N, shade, JOIN_SINE, float(shade_step), edge)
     return edge

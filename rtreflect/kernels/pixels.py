@@ -302,15 +302,32 @@ def bent_flags(level, sigma, gx, gy, near, limit, untrusted):
                         untrusted[i, j] = True
 
 
-@njit(**JIT, aot=(
-    "void(b1[:, :], i8[:, :], i8[:, :], b1[:, :], b1[:, :], b1[:, :], b1[:, ::1])",
-    "void(b1[:, ::1], i8[:, ::1], i8[:, ::1], b1[:, ::1], b1[:, ::1], b1[:, ::1], b1[:, ::1])",
-))
-def edge_flags(hit, patch, level, near, blocked, untrusted, edge):
-    """``edge``: ``untrusted``, or a neighbour differs on hit or miss, on the patch (both hit), on the level (either
-    near a stripe) or on the occlusion (both near): `analytic.edge_pixels`.
+@njit(inline="always", **JIT)
+def _joined(P, N, shade, i, j, a, b, join_sine, shade_step):
+    """Whether the hits of pixels (i, j) and (a, b), on two faces, continue one sheet at the pixel's scale: each lies
+    within ``join_sine``·|ΔP| of the other's tangent plane (across an occlusion edge the farther hit lies off the
+    nearer's plane by about the depth step·|N·D|), and their shades k differ by at most ``shade_step``."""
+    d0, d1, d2 = P[a, b, 0] - P[i, j, 0], P[a, b, 1] - P[i, j, 1], P[a, b, 2] - P[i, j, 2]
+    limit = join_sine * join_sine * (d0 * d0 + d1 * d1 + d2 * d2)
+    here = N[i, j, 0] * d0 + N[i, j, 1] * d1 + N[i, j, 2] * d2
+    there = N[a, b, 0] * d0 + N[a, b, 1] * d1 + N[a, b, 2] * d2
+    return here * here <= limit and there * there <= limit and abs(shade[a, b] - shade[i, j]) <= shade_step
 
-    Types: hit bool[:, :]; patch, level int64[:, :]; near, blocked, untrusted bool[:, :]; edge bool[:, :], written.
+
+@njit(**JIT, aot=(
+    "void(b1[:, :], i8[:, :], i8[:, :], b1[:, :], b1[:, :], b1[:, :], f8[:, :, :], f8[:, :, :], f8[:, :], f8, f8, "
+    "b1[:, ::1])",
+    "void(b1[:, ::1], i8[:, ::1], i8[:, ::1], b1[:, ::1], b1[:, ::1], b1[:, ::1], f8[:, :, :], f8[:, :, :], f8[:, :], "
+    "f8, f8, b1[:, ::1])",
+))
+def edge_flags(hit, patch, level, near, blocked, untrusted, P, N, shade, join_sine, shade_step, edge):
+    """``edge``: ``untrusted``, or a neighbour differs on hit or miss, on the patch (both hit; either near a stripe,
+    or the two hits not one sheet continued, `_joined`), on the level (either near a stripe) or on the occlusion
+    (both near): `analytic.edge_pixels`.
+
+    Types: hit bool[:, :]; patch, level int64[:, :]; near, blocked, untrusted bool[:, :]; P, N float64[:, :, :]
+    (rows, columns, 3): the hit points and unit normals; shade float64[:, :]; join_sine, shade_step float64; edge
+    bool[:, :], written.
     """
     rows, cols = hit.shape
     for i in range(rows):
@@ -324,7 +341,9 @@ def edge_flags(hit, patch, level, near, blocked, untrusted, edge):
                     if dr == 0 and dc == 0:
                         continue
                     a, b = _clamp(i + dr, rows), _clamp(j + dc, cols)
-                    e = (hit[a, b] != h0 or (h0 and patch[a, b] != patch[i, j])
+                    e = (hit[a, b] != h0
+                         or (h0 and patch[a, b] != patch[i, j]
+                             and (n0 or near[a, b] or not _joined(P, N, shade, i, j, a, b, join_sine, shade_step)))
                          or ((n0 or near[a, b]) and level[a, b] != level[i, j])
                          or (n0 and near[a, b] and blocked[a, b] != blocked[i, j]))
             edge[i, j] = e
