@@ -84,6 +84,9 @@ Seventh sweep (far coordinates, exact axis views, thin and sloppy faces, sheets)
   open_sheets.step     open sheets: a curved face with a hole seen from its back, and three sheets sharing one edge
   perforated.step      one planar face 100 × 60 with 331 round holes (trim with 331 inner loops)
   sloppy_sewn.step     four bicubic faces moved 0.02 apart and sewn at tolerance 0.05 (edges 0.04 off their faces)
+  skewed_param.step    a domed bicubic face whose u speed |S_u| varies a thousandfold across it
+  polygon_outline.step a planar sheet outlined by a 280-segment polygon with an 80-segment polygonal hole
+  oversized_surface.step  a 40 × 30 trimmed piece (with a hole) of a bicubic surface 10,000 across, beside a box
 """
 
 from __future__ import annotations
@@ -1442,6 +1445,65 @@ def sloppy_sewn():
     return sewing.SewedShape()
 
 
+def skewed_param():
+    """A domed bicubic face whose u parametrization is squeezed a thousandfold at one side: its control points' u
+    spacing grows geometrically (×2.2 a row, 0.004 to 16), so |S_u| varies ~10³ across the domain."""
+    n = 10
+    xs = np.cumsum([0.0] + [0.004 * 2.2 ** k for k in range(n - 1)])
+    xs = 40.0 * xs / xs[-1]
+    poles = [[(float(x), 5.0 * j, 4.0 * math.sin(x / 8.0) * math.cos(0.4 * j)) for j in range(6)] for x in xs]
+    knots = [(0.0, 4)] + [(k / (n - 3), 1) for k in range(1, n - 3)] + [(1.0, 4)]
+    return _bspline_face(poles, 3, 3, knots, v_knots=[(0.0, 4), (1 / 3, 1), (2 / 3, 1), (1.0, 4)])
+
+
+def polygon_outline():
+    """A planar sheet whose outline is a 280-segment polygon (a wavy closed curve sampled as a scanned or tessellated
+    export's boundary) with an 80-segment polygonal hole: one face trimmed by 360 straight edges."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakePolygon
+    from OCP.gp import gp_Pnt
+
+    def polygon(count, radius, wave, centre=(0.0, 0.0)):
+        poly = BRepBuilderAPI_MakePolygon()
+        for k in range(count):
+            a = 2 * math.pi * k / count
+            r = radius * (1.0 + wave * math.sin(7 * a))
+            poly.Add(gp_Pnt(centre[0] + r * math.cos(a), centre[1] + r * math.sin(a), 0.0))
+        poly.Close()
+        return poly.Wire()
+
+    maker = BRepBuilderAPI_MakeFace(polygon(280, 40.0, 0.08), True)
+    hole = polygon(80, 8.0, 0.15, (10.0, 5.0))
+    hole.Reverse()
+    maker.Add(hole)
+    return maker.Face()
+
+
+def oversized_surface():
+    """A small trimmed piece (40 × 30, with a round hole) of a bicubic surface 10,000 × 10,000 across (a surface
+    extended far past its trim before it was cut, as some exports keep it), beside a 40 × 30 × 20 box: the surface's
+    control points span 250 times the part."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Common, BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Pnt
+
+    n = 6
+    poles = [[(-5000.0 + 2000.0 * i, -5000.0 + 2000.0 * j,
+               300.0 * math.sin(0.9 * i + 0.3) * math.cos(0.7 * j + 0.2) + 48.4)
+              for j in range(n)] for i in range(n)]
+    knots = [(0.0, 4), (1 / 3, 1), (2 / 3, 1), (1.0, 4)]
+    sheet = _bspline_face(poles, 3, 3, knots, v_knots=knots)
+    piece = BRepAlgoAPI_Common(sheet, BRepPrimAPI_MakeBox(gp_Pnt(0, 0, -200), gp_Pnt(40, 30, 200)).Shape()).Shape()
+    piece = BRepAlgoAPI_Cut(piece, _cylinder(20, 15, -200, (0, 0, 1), 5.0, 400.0)).Shape()
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, piece)
+    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(50, 0, -10), gp_Pnt(90, 30, 10)).Shape())
+    return compound
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -1513,6 +1575,9 @@ PARTS = {
     "open_sheets.step": lambda p: write_step(open_sheets(), p),
     "perforated.step": lambda p: write_step(perforated(), p),
     "sloppy_sewn.step": lambda p: write_step(sloppy_sewn(), p),
+    "skewed_param.step": lambda p: write_step(skewed_param(), p),
+    "polygon_outline.step": lambda p: write_step(polygon_outline(), p),
+    "oversized_surface.step": lambda p: write_step(oversized_surface(), p),
 }
 
 
