@@ -87,6 +87,8 @@ Seventh sweep (far coordinates, exact axis views, thin and sloppy faces, sheets)
   skewed_param.step    a domed bicubic face whose u speed |S_u| varies a thousandfold across it
   polygon_outline.step a planar sheet outlined by a 280-segment polygon with an 80-segment polygonal hole
   oversized_surface.step  a 40 × 30 trimmed piece (with a hole) of a bicubic surface 10,000 across, beside a box
+  slit.step            two blocks 0.001 apart (not fused): a slit seen along its length, a cylinder behind it
+  dense_net.step       a scanned-looking bicubic face, 48 × 48 control points with bumps, and a hole
 """
 
 from __future__ import annotations
@@ -1504,6 +1506,39 @@ def oversized_surface():
     return compound
 
 
+def slit():
+    """Two 40 × 30 × 20 blocks 0.001 apart (a compound, not fused), their facing faces a slit seen along its length:
+    rays entering it meet one of two planes 0.001 apart at grazing incidence; a filleted cylinder stands behind."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Pnt
+
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(0, 0, 0), gp_Pnt(40, 15, 20)).Shape())
+    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(0, 15.001, 0), gp_Pnt(40, 30, 20)).Shape())
+    builder.Add(compound, _cylinder(60, 15, 0, (0, 0, 1), 6.0, 25.0))
+    return compound
+
+
+def dense_net():
+    """A scanned-looking bicubic face: a 48 × 48 control net (45 × 45 knot spans) over 60 × 60 with bumps of several
+    wavelengths, and a round hole."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+
+    n = 48
+    rng = np.random.default_rng(7)
+    bumps = rng.normal(0.0, 0.25, (n, n))
+    poles = [[(60.0 * i / (n - 1), 60.0 * j / (n - 1),
+               3.0 * math.sin(i / 6.0) * math.cos(j / 9.0) + 0.8 * math.sin(i / 1.7 + j / 2.3) + float(bumps[i, j]))
+              for j in range(n)] for i in range(n)]
+    knots = [(0.0, 4)] + [(k / (n - 3), 1) for k in range(1, n - 3)] + [(1.0, 4)]
+    face = _bspline_face(poles, 3, 3, knots, v_knots=knots)
+    return BRepAlgoAPI_Cut(face, _cylinder(25, 35, -20, (0, 0, 1), 6.0, 40.0)).Shape()
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -1578,6 +1613,8 @@ PARTS = {
     "skewed_param.step": lambda p: write_step(skewed_param(), p),
     "polygon_outline.step": lambda p: write_step(polygon_outline(), p),
     "oversized_surface.step": lambda p: write_step(oversized_surface(), p),
+    "slit.step": lambda p: write_step(slit(), p),
+    "dense_net.step": lambda p: write_step(dense_net(), p),
 }
 
 
