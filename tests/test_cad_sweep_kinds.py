@@ -672,3 +672,66 @@ def test_thin_chamfer_close_up_first_hits_are_open_cascades(tmp_path, towards):
     rows, cols = np.divmod(np.arange(160 * 90), 160)
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
     assert np.count_nonzero(hits.patch == 1) > 500  # the chamfer fills a good part of the view
+
+
+def test_ray_crossing_a_thin_strip_far_from_where_it_met_its_shell_is_hit(tmp_path):
+    """long_strip.step (seventh sweep: one bicubic face 1000 long and 0.1 wide, bent in plan and elevation), seen along
+    its length from 30 before its start (120×120, fov 3°): its reader mesh strays up to 1 (its chord error) from the
+    strip, ten times the strip's width, so pixel-centre rays (59, 51), (61, 93) and (62, 112) crossing it at |N·D| 0.12
+    to 0.13, 366 to 396 along, pass beside the coarse and the finer mesh. They meet the second look's shell first where
+    they pass the strip's start (t 38 to 42), where Newton runs off the face, and their crossing (OCCT's
+    `PerformNearest`) was never refined: the renderer showed background there. Step 3 now walks on along the shell
+    (`secondlook.SHELL_WALK`): their 7th shell hits lead onto the strip."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "long_strip.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(120, 120, 1)
+    strip = scene.surfaces[0]
+    (u0, u1), (v0, v1) = strip.domain
+    start, middle = (strip.evaluate(np.array([u]), np.array([0.5 * (v0 + v1)])).S[0] for u in (u0, u0 + 0.3 * (u1 - u0)))
+    camera = dataclasses.replace(scene.camera, projection="perspective", eye=start - np.array([30.0, 0.0, 0.0]),
+                                 look_at=middle, up=np.array([0.0, 0.0, 1.0]), fov=3.0)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(np.array([59, 61, 62]), np.array([51, 93, 112])))
+    assert hits.hit.all()
+
+
+@pytest.mark.parametrize("name, pixel", [("instances.step", (95, 294)), ("thin_chamfer.step", (64, 273))])
+def test_default_view_ray_found_further_along_the_shell_is_hit(tmp_path, name, pixel):
+    """The default view at 320×180 of instances.step (a sphere corner's silhouette, |N·D| 0.11, t 121.95) and
+    thin_chamfer.step (the rim, |N·D| 0.017, t 107.93): a pixel-centre ray missed the coarse and the finer mesh and
+    its first shell hit led off the face; OCCT's `PerformNearest` meets the part (fixed with the shell walk of
+    `test_ray_crossing_a_thin_strip_far_from_where_it_met_its_shell_is_hit`)."""
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / name
+    sweep.PARTS[name](path)
+    renderer = Renderer(resolve(load_scene(path).with_image(320, 180, 1)))
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(np.array([pixel[0]]), np.array([pixel[1]])))
+    assert hits.hit.all()
+
+
+def test_near_double_knot_contours_keep_both_branches(tmp_path):
+    """near_knots.step (seventh sweep: a bicubic face with knot spans 1e-6 wide, 0.5 to 0.500001 in u): across that
+    near-double knot the surface is barely C1, and f's slope along u drops ×16 (a ridge at u = 0.5). The outermost
+    line (c_k = -7.865) crosses u twice there, on both sides of the ridge; the analytic contour's grid cell straddled
+    the knot, its interpolated crossing fell on the ridge's other side and the polish left that branch out: validate
+    at 320×180 failed, the traced centre at (285.1, 76.5) 4.49 px from any analytic segment, though the render's
+    normals agree with OCCT's. The knots are grid lines of the contour sampler now (`contours._patch_chains`)."""
+    from rtreflect.analysis.validate import validate_scene
+    from rtreflect.exchange.load import load_scene
+
+    path = tmp_path / "near_knots.step"
+    sweep.PARTS[path.name](path)
+    report = validate_scene(load_scene(path).with_image(320, 180))
+    assert report.passed, report.reasons
+    assert report.lines[0].max_px < 0.1

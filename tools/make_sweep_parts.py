@@ -70,6 +70,25 @@ Sixth sweep (vertices many faces share, trims across seams, concave loops, high 
   sphere_seam_hole.step  a sphere with a pocket across its seam and a hole beside its pole
   revolved_pinch.step  an hourglass profile revolved a full turn, touching the axis at an interior point
   corner_blend.step    a box corner whose three edges are filleted at 3, 5 and 7: the vertex blend where they meet
+Seventh sweep (far coordinates, exact axis views, thin and sloppy faces, sheets):
+  far_away.step        the filleted block and a filleted bicubic slab moved to car coordinates (25000, -3000, 1200)
+  axis_box.step        a box with filleted vertical edges, a boss along x and a hole along y: for views exactly
+                       along an axis (planes edge-on, N·D = 0 exactly)
+  closed_room.step     a box filleted all round, to be seen from inside (the camera in the solid)
+  spindle_torus.step   half a spindle torus (major radius 8 < minor 12): a self-intersecting surface, cusps on its axis
+  coincident_solids.step  two boxes and a cylinder in one compound, not fused: overlapping coplanar faces, one solid
+                       through another
+  long_strip.step      one bicubic face 1000 long and 0.1 wide, bent in plan and elevation (its mesh strays 1 from it)
+  near_knots.step      a bicubic face with knot spans of 1e-6 in u and 1e-6 and 1e-9 in v (unmerged near-duplicates)
+  high_degree_extrusion.step  a degree-8 B-spline curve extruded, and a rational quadratic profile revolved a full turn
+  open_sheets.step     open sheets: a curved face with a hole seen from its back, and three sheets sharing one edge
+  perforated.step      one planar face 100 × 60 with 331 round holes (trim with 331 inner loops)
+  sloppy_sewn.step     four bicubic faces moved 0.02 apart and sewn at tolerance 0.05 (edges 0.04 off their faces)
+  skewed_param.step    a domed bicubic face whose u speed |S_u| varies a thousandfold across it
+  polygon_outline.step a planar sheet outlined by a 280-segment polygon with an 80-segment polygonal hole
+  oversized_surface.step  a 40 × 30 trimmed piece (with a hole) of a bicubic surface 10,000 across, beside a box
+  slit.step            two blocks 0.001 apart (not fused): a slit seen along its length, a cylinder behind it
+  dense_net.step       a scanned-looking bicubic face, 48 × 48 control points with bumps, and a hole
 """
 
 from __future__ import annotations
@@ -1178,6 +1197,348 @@ def corner_blend():
     return fillet.Shape()
 
 
+# -- seventh sweep ------------------------------------------------------------------------------------------------
+
+
+#: Where `far_away` puts its parts: a car body's rear corner in vehicle coordinates (mm).
+FAR_OFFSET = (25000.0, -3000.0, 1200.0)
+
+
+def far_away():
+    """The filleted block and a small bicubic slab (a curved B-spline face extruded 6) with a 0.5 fillet on its top
+    edge along y = 0 and the two vertical edges at its ends, moved to car coordinates (25000, -3000, 1200): float32
+    resolution there is ~0.002."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Vec
+
+    n = 5
+    poles = [[(50.0 + 5.0 * i, 5.0 * j, 1.5 * math.sin(i) * math.cos(0.8 * j)) for j in range(n)] for i in range(n)]
+    knots = [(0.0, 4), (0.5, 1), (1.0, 4)]
+    sheet = _bspline_face(poles, 3, 3, knots, v_knots=knots)
+    slab = BRepPrimAPI_MakePrism(sheet, gp_Vec(0, 0, 6)).Shape()
+    fillet = BRepFilletAPI_MakeFillet(slab)
+    for edge in _edges(slab):  # the curved top face's edge along y = 0 and its two vertical neighbours
+        ends = _edge_ends(edge)
+        if max(abs(ends[0][1]), abs(ends[1][1])) < 1e-6 and (ends[0][2] > 3 or ends[1][2] > 3):
+            fillet.Add(0.5, edge)
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, filleted_block())
+    builder.Add(compound, fillet.Shape())
+    return _moved(compound, FAR_OFFSET)
+
+
+def axis_box():
+    """A 40 × 30 × 20 box whose four vertical edges are filleted at 5, with a cylinder boss (r 6, along +x) on its +x
+    face and a round hole (r 4) along y: seen exactly along an axis its planes are edge-on (N·D = 0 exactly)."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut, BRepAlgoAPI_Fuse
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    box = BRepPrimAPI_MakeBox(40.0, 30.0, 20.0).Shape()
+    fillet = BRepFilletAPI_MakeFillet(box)
+    for edge in _edges(box):
+        first, last = _edge_ends(edge)
+        if abs(last[2] - first[2]) > 1.0:
+            fillet.Add(5.0, edge)
+    shape = BRepAlgoAPI_Fuse(fillet.Shape(), _cylinder(40, 15, 10, (1, 0, 0), 6.0, 10.0)).Shape()
+    return BRepAlgoAPI_Cut(shape, _cylinder(20, -5, 10, (0, 1, 0), 4.0, 40.0)).Shape()
+
+
+def _edge_ends(edge):
+    """The two end points (numpy) of an ``edge``'s 3D curve."""
+    from OCP.BRep import BRep_Tool
+
+    first, last = BRep_Tool.Range_s(edge)
+    curve = BRep_Tool.Curve_s(edge, first, last)
+    return [np.array([p.X(), p.Y(), p.Z()]) for p in (curve.Value(first), curve.Value(last))]
+
+
+def closed_room():
+    """A 60 × 50 × 30 box with every edge filleted at 6, meant to be seen from inside (the camera in the solid): the
+    rays leave through the back of every face."""
+    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    box = BRepPrimAPI_MakeBox(60.0, 50.0, 30.0).Shape()
+    fillet = BRepFilletAPI_MakeFillet(box)
+    for edge in _edges(box):
+        fillet.Add(6.0, edge)
+    return fillet.Shape()
+
+
+def spindle_torus():
+    """One face on a spindle torus (major radius 8, minor 12: the surface passes through itself twice along its axis),
+    half of it in u (0 to π), the whole tube in v: a self-intersecting surface, two cusps on the axis."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_ToroidalSurface
+    from OCP.gp import gp_Ax3
+
+    surface = Geom_ToroidalSurface(gp_Ax3(), 8.0, 12.0)
+    return BRepBuilderAPI_MakeFace(surface, 0.0, math.pi, 0.0, 2 * math.pi, 1e-7).Face()
+
+
+def coincident_solids():
+    """Three solids in one compound, not fused: two boxes sharing part of a face (coplanar, overlapping: z = 10 for
+    both, the upper one shifted) and a cylinder driven through the lower box."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Pnt
+
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(0, 0, 0), gp_Pnt(40, 30, 10)).Shape())
+    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(10, 8, 10), gp_Pnt(50, 40, 22)).Shape())
+    builder.Add(compound, _cylinder(-10, 15, 5, (1, 0, 0), 4.0, 60.0))
+    return compound
+
+
+def long_strip():
+    """A bicubic strip 1000 long and 0.1 wide, bent in an S along its length and twisted: one B-spline face of aspect
+    10⁴."""
+    n = 12
+    poles = []
+    for i in range(n):
+        x = 1000.0 * i / (n - 1)
+        twist = 0.6 * math.sin(2 * math.pi * i / (n - 1))
+        row = []
+        for j in range(4):
+            w = 0.1 * (j / 3 - 0.5)
+            row.append((x, 60.0 * math.sin(2 * math.pi * x / 1000) + w * math.cos(twist), w * math.sin(twist)
+                        + 20.0 * math.sin(math.pi * x / 1000)))
+        poles.append(row)
+    knots = [(0.0, 4)] + [(k / (n - 3), 1) for k in range(1, n - 3)] + [(1.0, 4)]
+    return _bspline_face(poles, 3, 3, knots)
+
+
+def near_knots():
+    """A domed bicubic face whose u knot vector holds a span 1e-6 long (knots 0.5 and 0.500001) and whose v knots
+    hold two spans of 1e-6 and 1e-9 (a CAD export's unmerged near-duplicate knots)."""
+    poles = [[(4.0 * i, 4.0 * j, 3.0 * math.sin(0.5 * i) + 2.0 * math.cos(0.6 * j) + (1.5 if i == 3 else 0.0))
+              for j in range(8)] for i in range(7)]
+    u = [(0.0, 4), (0.25, 1), (0.5, 1), (0.500001, 1), (1.0, 4)]
+    v = [(0.0, 4), (0.3, 1), (0.300001, 1), (0.7, 1), (0.700000001, 1), (1.0, 4)]
+    return _bspline_face(poles, 3, 3, u, v_knots=v)
+
+
+def high_degree_extrusion():
+    """A closed-looking degree-8 B-spline curve (13 poles) extruded 25 along z, and beside it a rational quadratic
+    curve (a quarter ellipse and a conic arc, weights 0.5 to 2) revolved a full turn about z."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism, BRepPrimAPI_MakeRevol
+    from OCP.Geom import Geom_BSplineCurve
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.collections import Array1_double, Array1_gp_Pnt, Array1_int
+    from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt, gp_Vec
+
+    def curve(points, degree, knots, mults, weights=None):
+        poles = Array1_gp_Pnt(1, len(points))
+        for k, p in enumerate(points):
+            poles.SetValue(k + 1, gp_Pnt(*p))
+        kv, mv = Array1_double(1, len(knots)), Array1_int(1, len(knots))
+        for k, (value, mult) in enumerate(zip(knots, mults)):
+            kv.SetValue(k + 1, value)
+            mv.SetValue(k + 1, mult)
+        if weights is None:
+            return Geom_BSplineCurve(poles, kv, mv, degree)
+        w = Array1_double(1, len(weights))
+        for k, value in enumerate(weights):
+            w.SetValue(k + 1, value)
+        return Geom_BSplineCurve(poles, w, kv, mv, degree)
+
+    m = 13
+    ring = [(15.0 * math.cos(2 * math.pi * k / m) * (1 + 0.3 * math.sin(3 * 2 * math.pi * k / m)),
+             15.0 * math.sin(2 * math.pi * k / m) * (1 + 0.3 * math.sin(3 * 2 * math.pi * k / m)), 0.0)
+            for k in range(m)]
+    wavy = curve(ring, 8, [0.0, 0.5, 1.0], [9, 4, 9])
+    prism = BRepPrimAPI_MakePrism(BRepBuilderAPI_MakeEdge(wavy).Edge(), gp_Vec(0, 0, 25)).Shape()
+    conic = curve([(50.0, 0, 0), (62.0, 0, 0), (62.0, 0, 10), (55.0, 0, 20), (48.0, 0, 28)], 2,
+                  [0.0, 0.5, 1.0], [3, 2, 3], weights=[1.0, 0.5, 1.0, 2.0, 1.0])
+    axis = gp_Ax1(gp_Pnt(40.0, 0, 0), gp_Dir(0, 0, 1))
+    revolved = BRepPrimAPI_MakeRevol(BRepBuilderAPI_MakeEdge(conic).Edge(), axis, 2 * math.pi).Shape()
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, prism)
+    builder.Add(compound, revolved)
+    return compound
+
+
+def open_sheets():
+    """Open sheets, no solid: a curved bicubic sheet with a round hole whose back faces the 3/4 view's camera, and a
+    non-manifold compound of three planar sheets sharing one edge (a T: 0°, 120°, 240°) beside it."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakePolygon, BRepBuilderAPI_Sewing
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Pnt
+
+    n = 5
+    poles = [[(5.0 * i, 5.0 * j, 4.0 * math.sin(0.7 * i) * math.cos(0.5 * j)) for j in range(n)] for i in range(n)]
+    sheet = _bspline_face(poles, 3, 3, [(0.0, 4), (0.5, 1), (1.0, 4)], v_knots=[(0.0, 4), (0.5, 1), (1.0, 4)])
+    # face the sheet's back (its normal is -z-ish after the reversal) up to the camera
+    sheet = BRepAlgoAPI_Cut(sheet, _cylinder(10, 10, -20, (0, 0, 1), 3.0, 40.0)).Shape()
+    sheet = sheet.Reversed()
+    sewing = BRepBuilderAPI_Sewing(1e-6, True, True, True, True)  # non-manifold mode
+    for angle in (0.0, 120.0, 240.0):
+        a = math.radians(angle)
+        corners = [(40.0, 10.0, 0.0), (40.0, 10.0, 20.0),
+                   (40.0 + 15 * math.cos(a), 10.0 + 15 * math.sin(a), 20.0),
+                   (40.0 + 15 * math.cos(a), 10.0 + 15 * math.sin(a), 0.0)]
+        poly = BRepBuilderAPI_MakePolygon()
+        for c in corners:
+            poly.Add(gp_Pnt(*c))
+        poly.Close()
+        sewing.Add(BRepBuilderAPI_MakeFace(poly.Wire(), True).Face())
+    sewing.Perform()
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, sheet)
+    builder.Add(compound, sewing.SewedShape())
+    return compound
+
+
+def perforated():
+    """A 100 × 60 perforated sheet (one planar face, no thickness) with 17 rows of round holes (r 1, pitch 5, alternate
+    rows shifted by half a pitch, 331 holes): one trim with 331 inner loops."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
+    from OCP.gp import gp_Ax2, gp_Circ, gp_Dir, gp_Pln, gp_Pnt
+
+    maker = BRepBuilderAPI_MakeFace(gp_Pln(), 0.0, 100.0, 0.0, 60.0)
+    for row in range(17):
+        for col in range(20):
+            x = 3.0 + 5.0 * col + (2.5 if row % 2 else 0.0)
+            if x > 97.0:
+                continue
+            circle = gp_Circ(gp_Ax2(gp_Pnt(x, 2.5 + 3.5 * row, 0.0), gp_Dir(0, 0, -1)), 1.0)
+            maker.Add(BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(circle).Edge()).Wire())
+    from OCP.ShapeFix import ShapeFix_Face
+
+    fix = ShapeFix_Face(maker.Face())
+    fix.Perform()
+    return fix.Face()
+
+
+def sloppy_sewn():
+    """A bicubic dome cut into four faces whose shared edges were moved apart by up to 0.02 before sewing with tolerance
+    0.05 (a typical export's gaps): the sewn shell's edges carry tolerances far above their faces' precision."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Sewing
+
+    sewing = BRepBuilderAPI_Sewing(0.05)
+    for a in range(2):
+        for b in range(2):
+            n = 4
+            def z(x, y):
+                return 8.0 - 0.004 * ((x - 20) ** 2 + (y - 20) ** 2)
+            jitter = 0.02 * (1 if (a + b) % 2 else -1)
+            poles = [[(20.0 * a + 20.0 * i / (n - 1), 20.0 * b + 20.0 * j / (n - 1),
+                       z(20.0 * a + 20.0 * i / (n - 1), 20.0 * b + 20.0 * j / (n - 1)) + jitter) for j in range(n)]
+                     for i in range(n)]
+            sewing.Add(_bspline_face(poles, 3, 3, [(0.0, 4), (1.0, 4)]))
+    sewing.Perform()
+    return sewing.SewedShape()
+
+
+def skewed_param():
+    """A domed bicubic face whose u parametrization is squeezed a thousandfold at one side: its control points' u
+    spacing grows geometrically (×2.2 a row, 0.004 to 16), so |S_u| varies ~10³ across the domain."""
+    n = 10
+    xs = np.cumsum([0.0] + [0.004 * 2.2 ** k for k in range(n - 1)])
+    xs = 40.0 * xs / xs[-1]
+    poles = [[(float(x), 5.0 * j, 4.0 * math.sin(x / 8.0) * math.cos(0.4 * j)) for j in range(6)] for x in xs]
+    knots = [(0.0, 4)] + [(k / (n - 3), 1) for k in range(1, n - 3)] + [(1.0, 4)]
+    return _bspline_face(poles, 3, 3, knots, v_knots=[(0.0, 4), (1 / 3, 1), (2 / 3, 1), (1.0, 4)])
+
+
+def polygon_outline():
+    """A planar sheet whose outline is a 280-segment polygon (a wavy closed curve sampled as a scanned or tessellated
+    export's boundary) with an 80-segment polygonal hole: one face trimmed by 360 straight edges."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakePolygon
+    from OCP.gp import gp_Pnt
+
+    def polygon(count, radius, wave, centre=(0.0, 0.0)):
+        poly = BRepBuilderAPI_MakePolygon()
+        for k in range(count):
+            a = 2 * math.pi * k / count
+            r = radius * (1.0 + wave * math.sin(7 * a))
+            poly.Add(gp_Pnt(centre[0] + r * math.cos(a), centre[1] + r * math.sin(a), 0.0))
+        poly.Close()
+        return poly.Wire()
+
+    maker = BRepBuilderAPI_MakeFace(polygon(280, 40.0, 0.08), True)
+    hole = polygon(80, 8.0, 0.15, (10.0, 5.0))
+    hole.Reverse()
+    maker.Add(hole)
+    return maker.Face()
+
+
+def oversized_surface():
+    """A small trimmed piece (40 × 30, with a round hole) of a bicubic surface 10,000 × 10,000 across (a surface
+    extended far past its trim before it was cut, as some exports keep it), beside a 40 × 30 × 20 box: the surface's
+    control points span 250 times the part."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Common, BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Pnt
+
+    n = 6
+    poles = [[(-5000.0 + 2000.0 * i, -5000.0 + 2000.0 * j,
+               300.0 * math.sin(0.9 * i + 0.3) * math.cos(0.7 * j + 0.2) + 48.4)
+              for j in range(n)] for i in range(n)]
+    knots = [(0.0, 4), (1 / 3, 1), (2 / 3, 1), (1.0, 4)]
+    sheet = _bspline_face(poles, 3, 3, knots, v_knots=knots)
+    piece = BRepAlgoAPI_Common(sheet, BRepPrimAPI_MakeBox(gp_Pnt(0, 0, -200), gp_Pnt(40, 30, 200)).Shape()).Shape()
+    piece = BRepAlgoAPI_Cut(piece, _cylinder(20, 15, -200, (0, 0, 1), 5.0, 400.0)).Shape()
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, piece)
+    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(50, 0, -10), gp_Pnt(90, 30, 10)).Shape())
+    return compound
+
+
+def slit():
+    """Two 40 × 30 × 20 blocks 0.001 apart (a compound, not fused), their facing faces a slit seen along its length:
+    rays entering it meet one of two planes 0.001 apart at grazing incidence; a filleted cylinder stands behind."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.TopoDS import TopoDS_Compound
+    from OCP.gp import gp_Pnt
+
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(0, 0, 0), gp_Pnt(40, 15, 20)).Shape())
+    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(0, 15.001, 0), gp_Pnt(40, 30, 20)).Shape())
+    builder.Add(compound, _cylinder(60, 15, 0, (0, 0, 1), 6.0, 25.0))
+    return compound
+
+
+def dense_net():
+    """A scanned-looking bicubic face: a 48 × 48 control net (45 × 45 knot spans) over 60 × 60 with bumps of several
+    wavelengths, and a round hole."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+
+    n = 48
+    rng = np.random.default_rng(7)
+    bumps = rng.normal(0.0, 0.25, (n, n))
+    poles = [[(60.0 * i / (n - 1), 60.0 * j / (n - 1),
+               3.0 * math.sin(i / 6.0) * math.cos(j / 9.0) + 0.8 * math.sin(i / 1.7 + j / 2.3) + float(bumps[i, j]))
+              for j in range(n)] for i in range(n)]
+    knots = [(0.0, 4)] + [(k / (n - 3), 1) for k in range(1, n - 3)] + [(1.0, 4)]
+    face = _bspline_face(poles, 3, 3, knots, v_knots=knots)
+    return BRepAlgoAPI_Cut(face, _cylinder(25, 35, -20, (0, 0, 1), 6.0, 40.0)).Shape()
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -1238,6 +1599,22 @@ PARTS = {
     "sphere_seam_hole.step": lambda p: write_step(sphere_seam_hole(), p),
     "revolved_pinch.step": lambda p: write_step(revolved_pinch(), p),
     "corner_blend.step": lambda p: write_step(corner_blend(), p),
+    "far_away.step": lambda p: write_step(far_away(), p),
+    "axis_box.step": lambda p: write_step(axis_box(), p),
+    "closed_room.step": lambda p: write_step(closed_room(), p),
+    "spindle_torus.step": lambda p: write_step(spindle_torus(), p),
+    "coincident_solids.step": lambda p: write_step(coincident_solids(), p),
+    "long_strip.step": lambda p: write_step(long_strip(), p),
+    "near_knots.step": lambda p: write_step(near_knots(), p),
+    "high_degree_extrusion.step": lambda p: write_step(high_degree_extrusion(), p),
+    "open_sheets.step": lambda p: write_step(open_sheets(), p),
+    "perforated.step": lambda p: write_step(perforated(), p),
+    "sloppy_sewn.step": lambda p: write_step(sloppy_sewn(), p),
+    "skewed_param.step": lambda p: write_step(skewed_param(), p),
+    "polygon_outline.step": lambda p: write_step(polygon_outline(), p),
+    "oversized_surface.step": lambda p: write_step(oversized_surface(), p),
+    "slit.step": lambda p: write_step(slit(), p),
+    "dense_net.step": lambda p: write_step(dense_net(), p),
 }
 
 

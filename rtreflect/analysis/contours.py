@@ -383,7 +383,12 @@ def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float
     """contourpy's level sets f = c_j on patch k's grid, as chains, with each chain's tube index."""
     (u0, u1), (v0, v1) = field.surfaces.patches[k].domain
     n_u, n_v = _grid_size(field, k)
-    us, vs = np.linspace(u0, u1, n_u), np.linspace(v0, v1, n_v)
+    # The knots are grid lines too: f is only as smooth as the surface across a knot, and a cell straddling one
+    # (where f bends sharply, a near-double knot) interpolates a crossing onto the wrong piece, whence the polish
+    # jumps to another branch or fails (the sweep's near_knots.step: spans 1e-6 wide, f's slope ×16 across u = 0.5,
+    # one branch of the outermost line missing, 4.5 px from the traced one, at 320×180).
+    breaks_u, breaks_v = field.surfaces.patches[k].span_breaks()
+    us, vs = np.union1d(np.linspace(u0, u1, n_u), breaks_u), np.union1d(np.linspace(v0, v1, n_v), breaks_v)
     f = field.f_grid(k, us, vs)
     generator = contourpy.contour_generator(vs, us, f, line_type="Separate", corner_mask=True)
     lines_u, lines_v, chain_light = [], [], []

@@ -40,7 +40,10 @@ Three steps, each vectorised over the rays:
    suspect's first shell hit of another sheet (of any, for the grazing and ``aside`` suspects)
    starts Newton on its face (a short miss search, `SHELL_RESCUE_STEPS`, where Newton fails inside
    the domain); a point on the ray, on the face, nearer than the kept hit replaces it (at grazing
-   incidence the nearer of the sheet's two crossings, `tracing._other_root`).
+   incidence the nearer of the sheet's two crossings, `tracing._other_root`). A start that leads off its
+   face is followed by the ray's next shell hits, up to `SHELL_WALK` (passing where it leaves the shell it
+   tried): a ray running along a face thinner than the mesh's reach meets its shell first far from where
+   it crosses the face.
 
 Rays not suspected keep their hits bit for bit. The fine mesh is built on the first suspect, once
 per scene (thread-safe), and bounded by `FINE_MAX_VERTICES`.
@@ -65,6 +68,11 @@ from ..geometry.tessellation import Tessellation, _once, largest_factor, reader_
 SHELL_CHORDS = 2.0
 #: Shell hits walked per ray past its own face's passage (its two sheets and walls, a neighbour's wall).
 SHELL_STEPS = 6
+#: Shell hits per suspect that step 3 refines in turn (`_from_shell`), until one leads onto its face: a ray running
+#: along a face thinner than the mesh's reach meets its shell first far from where it crosses the face (the sweep's
+#: long_strip.step, a bicubic strip 1000 × 0.1 whose mesh strays 1 from it: a ray crossing it 366 along met its shell
+#: at 42, and crossed it at its 7th shell hit, the walk's 4th refinement, passing where it leaves the shells it tried).
+SHELL_WALK = 8
 #: Below this |N·D| at the kept hit the shell cannot tell the ray's own passage from a nearer sheet's
 #: (the passage is 2δ/|N·D| long): such rays are looked at again. At 0.2 (78°) on the teapot at
 #: 960×540, ~6% of the hits; every wrong hit found there had |N·D| ≤ 0.16 at one of its two points.
@@ -371,15 +379,55 @@ class SecondLook:
         verdict, no fallback: the finer mesh's trace has looked there too).
         """
         rays = rays[(entry.prim[rays] >= 0) & ~hits.fallback[rays]]
-        if len(rays) == 0:
-            return
+        prim, b1, b2, t_entry = (x[rays] for x in entry)
+        for step in range(SHELL_WALK):
+            if len(rays) == 0:
+                return
+            led = self._refined_from(hits, origins, directions, far, rays, prim, b1, b2, t_entry)
+            if step == SHELL_WALK - 1:
+                return
+            # Led nowhere (Newton left the face or failed): the ray's next shell hit before its kept hit (a ray running
+            # along a face thinner than the mesh's reach meets its shell first far from where it crosses the face). A
+            # start that led onto its face, to the kept hit or behind it, ends the walk: a grazing ray's shell hits
+            # before its kept hit are mostly its own face's, and lead there again.
+            rays, tried, t_entry = rays[~led], self.shell_mesh.face_patch[prim[~led]], t_entry[~led]
+            rays, prim, b1, b2, t_entry, tried = self._next_shell_hits(hits, origins, directions, far, rays, t_entry,
+                                                                        tried)
+            # The tried face's next hit is most often where the ray leaves its shell again, and leads where the entry
+            # did: passed once (halves the walk's Newton runs on the sweep's rational_high.step).
+            again = np.flatnonzero(self.shell_mesh.face_patch[prim] == tried)
+            if len(again):
+                r2, p2, c1, c2, t2, _ = self._next_shell_hits(hits, origins, directions, far, rays[again],
+                                                              t_entry[again], tried[again])
+                moved = again[np.isin(rays[again], r2)]  # in r2's order: `_next_shell_hits` keeps the rays' order
+                prim[moved], b1[moved], b2[moved], t_entry[moved] = p2, c1, c2, t2
+                keep = np.ones(len(rays), dtype=bool)
+                keep[again] = False
+                keep[moved] = True
+                rays, prim, b1, b2, t_entry = (x[keep] for x in (rays, prim, b1, b2, t_entry))
+
+    def _next_shell_hits(self, hits: Hits, origins, directions, far, rays, after, tag):
+        """Each ray's first shell hit past ``after`` (by float32 rounding) and before its kept hit: the rays that have
+        one, its triangle, barycentrics and t, and their ``tag``."""
+        slack = FLOAT32_SLACK * self.tessellation.extent
+        start = after + self._skip
+        end = np.where(hits.hit[rays], hits.t[rays], far[rays]) - slack
+        go = np.flatnonzero(start < end)
+        rays, start, end, tag = rays[go], start[go], end[go], tag[go]
+        mesh = self.shell.intersect(origins[rays] + start[:, None] * directions[rays], directions[rays], end - start)
+        met = mesh.prim >= 0
+        return rays[met], mesh.prim[met], mesh.b1[met], mesh.b2[met], mesh.t[met] + start[met], tag[met]
+
+    def _refined_from(self, hits: Hits, origins, directions, far, rays, prim, b1, b2, t_entry) -> np.ndarray:
+        """`_from_shell` from one shell hit (``prim``, ``b1``, ``b2`` at ``t_entry``) of each of ``rays``, in place:
+        which of them led to a point on the ray on its face (a nearer hit, then kept, or one not nearer)."""
         O, D = origins[rays], directions[rays]
-        patch, u, v = self.shell_mesh.start_parameters(entry.prim[rays], entry.b1[rays], entry.b2[rays])
+        patch, u, v = self.shell_mesh.start_parameters(prim, b1, b2)
         u0, v0 = u, v
-        u, v, derivs, converged, edge, normal, cosine = refine_all(self.surfaces, patch, u, v, O, D, entry.t[rays],
+        u, v, derivs, converged, edge, normal, cosine = refine_all(self.surfaces, patch, u, v, O, D, t_entry,
                                                                    self.tessellation.extent)
         # A start on a closed face's seam (its last wall or rim box) may lie on the side away from the hit.
-        over = _over_closed_seam(self.surfaces, patch, u, v, derivs, converged, edge, O, D, entry.t[rays],
+        over = _over_closed_seam(self.surfaces, patch, u, v, derivs, converged, edge, O, D, t_entry,
                                  self.tessellation.extent)
         _normals(self.surfaces, patch, derivs, D, over, normal, cosine, np.zeros(len(rays), dtype=bool))
         # Newton from a start far along a grazing ray can fail where the ray does meet the sheet: search there.
@@ -388,7 +436,7 @@ class SecondLook:
         off = edge & ~_stopped_at_pole(self.surfaces, patch, u, v, edge)
         stuck = np.flatnonzero(~converged & ~off)
         if len(stuck):
-            tol = _search_tolerance(entry.t[rays][stuck], self.tessellation.extent)
+            tol = _search_tolerance(t_entry[stuck], self.tessellation.extent)
             u2, v2, d2, ok2, _, _ = _rescue(self.surfaces, patch[stuck], u0[stuck], v0[stuck], O[stuck], D[stuck], tol,
                                             SHELL_RESCUE_STEPS)
             u[stuck], v[stuck], converged[stuck] = u2, v2, ok2
@@ -398,11 +446,12 @@ class SecondLook:
         t = np.einsum("ij,ij->i", derivs.S - O, D)
         kept = np.where(hits.hit[rays], hits.t[rays], far[rays])
         slack = FLOAT32_SLACK * self.tessellation.extent
-        ok = converged & (t > 0) & (t < kept - slack)
-        ok[ok] = self.surfaces.on_face(patch[ok], u[ok], v[ok])
+        led = converged.copy()
+        led[led] = self.surfaces.on_face(patch[led], u[led], v[led])
+        ok = led & (t > 0) & (t < kept - slack)
         rays, O, D, patch, u, v, t, normal, cosine = (x[ok] for x in (rays, O, D, patch, u, v, t, normal, cosine))
         if len(rays) == 0:
-            return
+            return led
         derivs = SurfaceDerivatives(derivs.S[ok], derivs.Su[ok], derivs.Sv[ok])
         _other_root(self.tessellation, self.surfaces, O, D, np.full(len(rays), VALID), patch, u, v, t, derivs,
                     normal, cosine, np.zeros(len(rays), dtype=bool))
@@ -411,3 +460,4 @@ class SecondLook:
         hits.Su[rays], hits.Sv[rays] = derivs.Su, derivs.Sv
         hits.N[rays] = facing(self.surfaces.normals(patch, u, v, derivs), D)
         hits.curvature[rays] = np.nan  # not known at the new hits: the AOV stage computes them
+        return led
