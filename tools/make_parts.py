@@ -34,6 +34,19 @@ def _edges(shape):
         explorer.Next()
 
 
+def compound_of(*shapes):
+    """The shapes as one compound (not fused: each keeps its faces)."""
+    from OCP.BRep import BRep_Builder
+    from OCP.TopoDS import TopoDS_Compound
+
+    compound = TopoDS_Compound()
+    builder = BRep_Builder()
+    builder.MakeCompound(compound)
+    for shape in shapes:
+        builder.Add(compound, shape)
+    return compound
+
+
 def trimmed_face():
     """A wavy bicubic B-spline face; boolean cuts give it a curved outer boundary and three holes."""
     from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
@@ -67,15 +80,15 @@ def trimmed_face():
     return shape
 
 
-def filleted_block():
+def filleted_block(size=(40.0, 30.0, 20.0), radius: float = 4.0):
     """A 40 × 30 × 20 block, every edge filleted at 4: 6 planes, 12 cylinders, 8 sphere corners (26 faces)."""
     from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
 
-    box = BRepPrimAPI_MakeBox(40.0, 30.0, 20.0).Shape()
+    box = BRepPrimAPI_MakeBox(*map(float, size)).Shape()
     fillet = BRepFilletAPI_MakeFillet(box)
     for edge in _edges(box):
-        fillet.Add(4.0, edge)
+        fillet.Add(radius, edge)
     return fillet.Shape()
 
 

@@ -103,7 +103,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 
-from make_parts import _edges, filleted_block, write_assembly, write_iges, write_step  # noqa: E402
+from make_parts import _edges, compound_of, filleted_block, write_assembly, write_iges, write_step  # noqa: E402
 
 
 def _faces(shape):
@@ -188,7 +188,6 @@ def _centre(face):
 
 def bottle(width=50.0, height=70.0, thickness=30.0):
     """Open CASCADE's MakeBottle tutorial, step by step (profile, prism, fillets, neck, shell, threads)."""
-    from OCP.BRep import BRep_Builder
     from OCP.BRepAlgoAPI import BRepAlgoAPI_Fuse
     from OCP.BRepBuilderAPI import (BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire,
                                     BRepBuilderAPI_Transform)
@@ -197,9 +196,9 @@ def bottle(width=50.0, height=70.0, thickness=30.0):
     from OCP.BRepOffsetAPI import BRepOffsetAPI_MakeThickSolid, BRepOffsetAPI_ThruSections
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeCylinder, BRepPrimAPI_MakePrism
     from OCP.GC import GC_MakeArcOfCircle, GC_MakeSegment, GC_MakeSegment2d
-    from OCP.Geom import Geom_CylindricalSurface, Geom_Plane
+    from OCP.Geom import Geom_CylindricalSurface
     from OCP.Geom2d import Geom2d_Ellipse, Geom2d_TrimmedCurve
-    from OCP.TopoDS import TopoDS, TopoDS_Compound
+    from OCP.TopoDS import TopoDS
     from OCP.collections import List_TopoDS_Shape
     from OCP.gp import gp_Ax1, gp_Ax2, gp_Ax2d, gp_Ax3, gp_Dir, gp_Dir2d, gp_Pnt, gp_Pnt2d, gp_Trsf, gp_Vec
 
@@ -253,12 +252,7 @@ def bottle(width=50.0, height=70.0, thickness=30.0):
         loft.AddWire(w)
     loft.CheckCompatibility(False)
     threading = loft.Shape()
-    compound = TopoDS_Compound()
-    builder = BRep_Builder()
-    builder.MakeCompound(compound)
-    builder.Add(compound, body)
-    builder.Add(compound, threading)
-    return compound
+    return compound_of(body, threading)
 
 
 def loft_hole():
@@ -314,17 +308,12 @@ def scaled_block(size: float):
 
 
 def two_solids():
-    from OCP.BRep import BRep_Builder
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox, BRepPrimAPI_MakeSphere
-    from OCP.TopoDS import TopoDS_Compound
     from OCP.gp import gp_Pnt
 
-    compound = TopoDS_Compound()
-    builder = BRep_Builder()
-    builder.MakeCompound(compound)
-    builder.Add(compound, BRepPrimAPI_MakeBox(20.0, 20.0, 20.0).Shape())
-    builder.Add(compound, BRepPrimAPI_MakeSphere(gp_Pnt(50, 10, 10), 10.0).Shape())
-    return compound
+    return compound_of(
+        BRepPrimAPI_MakeBox(20.0, 20.0, 20.0).Shape(),
+        BRepPrimAPI_MakeSphere(gp_Pnt(50, 10, 10), 10.0).Shape())
 
 
 def reversed_face():
@@ -361,11 +350,9 @@ def sliver():
 def small_fillet():
     """A 100 × 60 × 40 box with one edge filleted at 0.01 (a face 10⁴ times narrower than the part) and one at 2,
     in a compound with a free edge and a free vertex (entities with no surface, to be passed over)."""
-    from OCP.BRep import BRep_Builder
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeVertex
     from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
-    from OCP.TopoDS import TopoDS_Compound
     from OCP.gp import gp_Pnt
 
     box = BRepPrimAPI_MakeBox(100.0, 60.0, 40.0).Shape()
@@ -373,13 +360,10 @@ def small_fillet():
     edges = list(_edges(box))
     fillet.Add(0.01, edges[0])
     fillet.Add(2.0, edges[5])
-    compound = TopoDS_Compound()
-    builder = BRep_Builder()
-    builder.MakeCompound(compound)
-    builder.Add(compound, fillet.Shape())
-    builder.Add(compound, BRepBuilderAPI_MakeEdge(gp_Pnt(0, 0, 50), gp_Pnt(100, 60, 50)).Edge())
-    builder.Add(compound, BRepBuilderAPI_MakeVertex(gp_Pnt(50, 50, 50)).Vertex())
-    return compound
+    return compound_of(
+        fillet.Shape(),
+        BRepBuilderAPI_MakeEdge(gp_Pnt(0, 0, 50), gp_Pnt(100, 60, 50)).Edge(),
+        BRepBuilderAPI_MakeVertex(gp_Pnt(50, 50, 50)).Vertex())
 
 
 def union_curved(size: float = 50.0):
@@ -1208,10 +1192,8 @@ def far_away():
     """The filleted block and a small bicubic slab (a curved B-spline face extruded 6) with a 0.5 fillet on its top
     edge along y = 0 and the two vertical edges at its ends, moved to car coordinates (25000, -3000, 1200): float32
     resolution there is ~0.002."""
-    from OCP.BRep import BRep_Builder
     from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
     from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism
-    from OCP.TopoDS import TopoDS_Compound
     from OCP.gp import gp_Vec
 
     n = 5
@@ -1224,12 +1206,7 @@ def far_away():
         ends = _edge_ends(edge)
         if max(abs(ends[0][1]), abs(ends[1][1])) < 1e-6 and (ends[0][2] > 3 or ends[1][2] > 3):
             fillet.Add(0.5, edge)
-    compound = TopoDS_Compound()
-    builder = BRep_Builder()
-    builder.MakeCompound(compound)
-    builder.Add(compound, filleted_block())
-    builder.Add(compound, fillet.Shape())
-    return _moved(compound, FAR_OFFSET)
+    return _moved(compound_of(filleted_block(), fillet.Shape()), FAR_OFFSET)
 
 
 def axis_box():
@@ -1261,14 +1238,7 @@ def _edge_ends(edge):
 def closed_room():
     """A 60 × 50 × 30 box with every edge filleted at 6, meant to be seen from inside (the camera in the solid): the
     rays leave through the back of every face."""
-    from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
-    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
-
-    box = BRepPrimAPI_MakeBox(60.0, 50.0, 30.0).Shape()
-    fillet = BRepFilletAPI_MakeFillet(box)
-    for edge in _edges(box):
-        fillet.Add(6.0, edge)
-    return fillet.Shape()
+    return filleted_block((60.0, 50.0, 30.0), 6.0)
 
 
 def spindle_torus():
@@ -1285,18 +1255,13 @@ def spindle_torus():
 def coincident_solids():
     """Three solids in one compound, not fused: two boxes sharing part of a face (coplanar, overlapping: z = 10 for
     both, the upper one shifted) and a cylinder driven through the lower box."""
-    from OCP.BRep import BRep_Builder
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
-    from OCP.TopoDS import TopoDS_Compound
     from OCP.gp import gp_Pnt
 
-    compound = TopoDS_Compound()
-    builder = BRep_Builder()
-    builder.MakeCompound(compound)
-    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(0, 0, 0), gp_Pnt(40, 30, 10)).Shape())
-    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(10, 8, 10), gp_Pnt(50, 40, 22)).Shape())
-    builder.Add(compound, _cylinder(-10, 15, 5, (1, 0, 0), 4.0, 60.0))
-    return compound
+    return compound_of(
+        BRepPrimAPI_MakeBox(gp_Pnt(0, 0, 0), gp_Pnt(40, 30, 10)).Shape(),
+        BRepPrimAPI_MakeBox(gp_Pnt(10, 8, 10), gp_Pnt(50, 40, 22)).Shape(),
+        _cylinder(-10, 15, 5, (1, 0, 0), 4.0, 60.0))
 
 
 def long_strip():
@@ -1330,11 +1295,9 @@ def near_knots():
 def high_degree_extrusion():
     """A closed-looking degree-8 B-spline curve (13 poles) extruded 25 along z, and beside it a rational quadratic
     curve (a quarter ellipse and a conic arc, weights 0.5 to 2) revolved a full turn about z."""
-    from OCP.BRep import BRep_Builder
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
     from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism, BRepPrimAPI_MakeRevol
     from OCP.Geom import Geom_BSplineCurve
-    from OCP.TopoDS import TopoDS_Compound
     from OCP.collections import Array1_double, Array1_gp_Pnt, Array1_int
     from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt, gp_Vec
 
@@ -1363,21 +1326,14 @@ def high_degree_extrusion():
                   [0.0, 0.5, 1.0], [3, 2, 3], weights=[1.0, 0.5, 1.0, 2.0, 1.0])
     axis = gp_Ax1(gp_Pnt(40.0, 0, 0), gp_Dir(0, 0, 1))
     revolved = BRepPrimAPI_MakeRevol(BRepBuilderAPI_MakeEdge(conic).Edge(), axis, 2 * math.pi).Shape()
-    compound = TopoDS_Compound()
-    builder = BRep_Builder()
-    builder.MakeCompound(compound)
-    builder.Add(compound, prism)
-    builder.Add(compound, revolved)
-    return compound
+    return compound_of(prism, revolved)
 
 
 def open_sheets():
     """Open sheets, no solid: a curved bicubic sheet with a round hole whose back faces the 3/4 view's camera, and a
     non-manifold compound of three planar sheets sharing one edge (a T: 0°, 120°, 240°) beside it."""
-    from OCP.BRep import BRep_Builder
     from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakePolygon, BRepBuilderAPI_Sewing
-    from OCP.TopoDS import TopoDS_Compound
     from OCP.gp import gp_Pnt
 
     n = 5
@@ -1398,12 +1354,7 @@ def open_sheets():
         poly.Close()
         sewing.Add(BRepBuilderAPI_MakeFace(poly.Wire(), True).Face())
     sewing.Perform()
-    compound = TopoDS_Compound()
-    builder = BRep_Builder()
-    builder.MakeCompound(compound)
-    builder.Add(compound, sheet)
-    builder.Add(compound, sewing.SewedShape())
-    return compound
+    return compound_of(sheet, sewing.SewedShape())
 
 
 def perforated():
@@ -1484,10 +1435,8 @@ def oversized_surface():
     """A small trimmed piece (40 × 30, with a round hole) of a bicubic surface 10,000 × 10,000 across (a surface
     extended far past its trim before it was cut, as some exports keep it), beside a 40 × 30 × 20 box: the surface's
     control points span 250 times the part."""
-    from OCP.BRep import BRep_Builder
     from OCP.BRepAlgoAPI import BRepAlgoAPI_Common, BRepAlgoAPI_Cut
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
-    from OCP.TopoDS import TopoDS_Compound
     from OCP.gp import gp_Pnt
 
     n = 6
@@ -1498,29 +1447,19 @@ def oversized_surface():
     sheet = _bspline_face(poles, 3, 3, knots, v_knots=knots)
     piece = BRepAlgoAPI_Common(sheet, BRepPrimAPI_MakeBox(gp_Pnt(0, 0, -200), gp_Pnt(40, 30, 200)).Shape()).Shape()
     piece = BRepAlgoAPI_Cut(piece, _cylinder(20, 15, -200, (0, 0, 1), 5.0, 400.0)).Shape()
-    compound = TopoDS_Compound()
-    builder = BRep_Builder()
-    builder.MakeCompound(compound)
-    builder.Add(compound, piece)
-    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(50, 0, -10), gp_Pnt(90, 30, 10)).Shape())
-    return compound
+    return compound_of(piece, BRepPrimAPI_MakeBox(gp_Pnt(50, 0, -10), gp_Pnt(90, 30, 10)).Shape())
 
 
 def slit():
     """Two 40 × 30 × 20 blocks 0.001 apart (a compound, not fused), their facing faces a slit seen along its length:
     rays entering it meet one of two planes 0.001 apart at grazing incidence; a filleted cylinder stands behind."""
-    from OCP.BRep import BRep_Builder
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
-    from OCP.TopoDS import TopoDS_Compound
     from OCP.gp import gp_Pnt
 
-    compound = TopoDS_Compound()
-    builder = BRep_Builder()
-    builder.MakeCompound(compound)
-    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(0, 0, 0), gp_Pnt(40, 15, 20)).Shape())
-    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(0, 15.001, 0), gp_Pnt(40, 30, 20)).Shape())
-    builder.Add(compound, _cylinder(60, 15, 0, (0, 0, 1), 6.0, 25.0))
-    return compound
+    return compound_of(
+        BRepPrimAPI_MakeBox(gp_Pnt(0, 0, 0), gp_Pnt(40, 15, 20)).Shape(),
+        BRepPrimAPI_MakeBox(gp_Pnt(0, 15.001, 0), gp_Pnt(40, 30, 20)).Shape(),
+        _cylinder(60, 15, 0, (0, 0, 1), 6.0, 25.0))
 
 
 def dense_net():
