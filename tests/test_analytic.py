@@ -142,17 +142,16 @@ def test_silhouette_pixels_are_supersampled(peer):
 
 
 def test_faces_joined_with_no_stripe_near_are_not_supersampled(tmp_path, monkeypatch):
-    """Where two faces of a part meet and no stripe is near, the pixel is the surface's colour on both: it is not an
-    edge unless the hits are not one sheet continued or the shading steps there (`analytic.JOIN_SINE`,
-    `JOIN_COLOUR_STEP`). Open CASCADE's bottle (fillets, a neck on the body's shoulder, threads) at 240×135: 284 of
-    the pixels the patch rule alone supersampled are left to the closed form, and there the image is 16×16 samples'
-    to 0.005 (linear RGB). Taken without the shading test, a crease's shading step is missed (0.011 off); without
-    the tangent-plane test, occlusion edges (0.021); without both, 0.093. The silhouette stays supersampled."""
+    """Where two faces of a part meet and no stripe is within the neighbours' reach, the pixel is the surface's colour
+    on both: it is not an edge unless the hits are not one sheet continued or the shading steps there
+    (`analytic.JOIN_SINE`, `JOIN_COLOUR_STEP`). Open CASCADE's bottle (fillets, a neck on the body's shoulder,
+    threads) at 240×135: 87 of the pixels the patch rule alone supersampled are left to the closed form, and there
+    the image is 16×16 samples' to 0.005 (linear RGB); without the tangent-plane test, occlusion edges are missed
+    (0.021 off). The silhouette stays supersampled."""
     pytest.importorskip("OCP")
     import sys
 
     from rtreflect.integrator import analytic as analytic_module
-    from rtreflect.integrator import renderer as renderer_module
     from rtreflect.integrator.autorig import resolve
 
     sys.path.insert(0, str(ROOT / "tools"))
@@ -165,7 +164,7 @@ def test_faces_joined_with_no_stripe_near_are_not_supersampled(tmp_path, monkeyp
 
     def worst(colour_step: float, sine: float) -> float:
         """The largest error against 16×16 samples over the pixels these join tests leave to the closed form."""
-        monkeypatch.setattr(renderer_module, "JOIN_COLOUR_STEP", colour_step)
+        monkeypatch.setattr(analytic_module, "JOIN_COLOUR_STEP", colour_step)
         monkeypatch.setattr(analytic_module, "JOIN_SINE", sine)
         joined = renderer.render(threads=1)
         changed = np.flatnonzero(np.any(joined.rgba != every.rgba, axis=-1).ravel())
@@ -173,17 +172,47 @@ def test_faces_joined_with_no_stripe_near_are_not_supersampled(tmp_path, monkeyp
         reference = renderer.supersample(*np.divmod(changed, scene.image.width), 16)[0]
         return float(np.abs(joined.rgba.reshape(-1, 4)[changed] - reference).max())
 
-    colour_step, sine = renderer_module.JOIN_COLOUR_STEP, analytic_module.JOIN_SINE
-    monkeypatch.setattr(renderer_module, "JOIN_COLOUR_STEP", -1.0)  # no two faces' hits count as joined
+    colour_step, sine = analytic_module.JOIN_COLOUR_STEP, analytic_module.JOIN_SINE
+    monkeypatch.setattr(analytic_module, "JOIN_COLOUR_STEP", -1.0)  # no two faces' hits count as joined
     every = renderer.render(threads=1)
     assert worst(colour_step, sine) <= 0.005
-    assert worst(1.0, sine) > 0.005 and worst(colour_step, 10.0) > 0.005  # each test is needed
+    assert worst(colour_step, 10.0) > 0.005  # the tangent-plane test is needed
     # The silhouette: every pixel the 4×4 grid sees part covered is still supersampled (its A is the 4×4 grid's).
-    monkeypatch.setattr(renderer_module, "JOIN_COLOUR_STEP", colour_step)
+    monkeypatch.setattr(analytic_module, "JOIN_COLOUR_STEP", colour_step)
     monkeypatch.setattr(analytic_module, "JOIN_SINE", sine)
     grid = Renderer(dataclasses.replace(scene, image=dataclasses.replace(scene.image, samples=4))).render().rgba[..., 3]
     edge = (grid > 0) & (grid < 1)
     np.testing.assert_array_equal(renderer.render(threads=1).rgba[..., 3][edge], grid[edge])
+
+
+def test_a_crease_the_shading_shows_is_supersampled(monkeypatch):
+    """Two planes meeting at an 8° crease, seen at 45° under Lambert shading, no stripe near: the crease passes the
+    tangent-plane test (`analytic.JOIN_SINE`: each hit lies within 0.1·|ΔP| of the other's plane where the crease runs
+    between them), and the shade steps by 0.046. The colour test (`JOIN_COLOUR_STEP`) supersamples the pixels the
+    crease crosses: within 0.005 of 16×16 samples, where the closed form alone is 0.0086 off."""
+    from rtreflect.integrator import analytic as analytic_module
+
+    rise = np.tan(np.radians(8.0))
+    flat = NurbsSurface.bezier(np.array([[[-10.0, -10.0, 0.0], [-10.0, 10.0, 0.0]],
+                                         [[0.0, -10.0, 0.0], [0.0, 10.0, 0.0]]]))
+    tilted = NurbsSurface.bezier(np.array([[[0.0, -10.0, 0.0], [0.0, 10.0, 0.0]],
+                                           [[10.0, -10.0, 10.0 * rise], [10.0, 10.0, 10.0 * rise]]]))
+    scene = Scene(surfaces=[flat, tilted], image={"width": 64, "height": 48, "samples": ANALYTIC},
+                  camera={"projection": "orthographic", "eye": [-5.0, 0.0, 5.0], "look_at": [0.01, 0.0, 0.0],
+                          "up": [0.0, 1.0, 0.0], "view_height": 2.0},
+                  lights={"point": [0.0, 0.0, 3.0], "normal": [0.0, 0.0, 1.0], "direction": [0.0, 1.0, 0.0],
+                          "positions": [-100.0, 100.0], "radius": 0.05},  # their stripes far out of view
+                  render={"surface_color": [1.0, 1.0, 1.0], "line_color": [1.0, 0.0, 0.0],
+                          "background": [0.0, 0.0, 0.0], "shading": "lambert"})
+    renderer = Renderer(scene)
+    shown = renderer.render(threads=1)
+    monkeypatch.setattr(analytic_module, "JOIN_COLOUR_STEP", np.inf)
+    unseen = renderer.render(threads=1)
+    crossed = np.flatnonzero(np.any(shown.rgba != unseen.rgba, axis=-1).ravel())
+    assert unseen.stats.supersampled == 0 and shown.stats.supersampled >= len(crossed) >= 40
+    reference = renderer.supersample(*np.divmod(crossed, scene.image.width), 16)[0]
+    assert np.abs(shown.rgba.reshape(-1, 4)[crossed] - reference).max() <= 0.005
+    assert np.abs(unseen.rgba.reshape(-1, 4)[crossed] - reference).max() > 0.005
 
 
 @pytest.mark.parametrize("scene_name", ["peer", "teapot"])

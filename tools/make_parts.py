@@ -81,7 +81,8 @@ def trimmed_face():
 
 
 def filleted_block(size=(40.0, 30.0, 20.0), radius: float = 4.0):
-    """A 40 × 30 × 20 block, every edge filleted at 4: 6 planes, 12 cylinders, 8 sphere corners (26 faces)."""
+    """A block (by default 40 × 30 × 20), every edge filleted (by default at 4): 6 planes, 12 cylinders, 8 sphere corners
+    (26 faces)."""
     from OCP.BRepFilletAPI import BRepFilletAPI_MakeFillet
     from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
 

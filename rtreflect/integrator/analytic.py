@@ -19,8 +19,9 @@ renderer's own pipeline (exact surface point and normal, eye ray, reflection, th
 
 Pixels that this linear model does not describe are not stripe edges and are supersampled
 (`edge_pixels`): where one of the 8 neighbours disagrees on hit or miss, on the level (near a stripe), on the
-occlusion of the reflected ray (near a stripe) or on the face, where a stripe is near or the two hits do not
-continue one sheet (an occlusion or trim edge, a crease the shading shows: `JOIN_SINE`); and where the footprint
+occlusion of the reflected ray (near a stripe) or on the face, where a stripe may be within the neighbours' reach
+or the two hits do not continue one sheet (an occlusion edge, a crease: `JOIN_SINE`) or the shading steps
+(`JOIN_COLOUR_STEP`); and where the footprint
 spans about a level spacing or more, or σ bends within it (a neighbour's σ strays from the pixel's plane).
 """
 
@@ -137,17 +138,21 @@ def neighbours(grid: np.ndarray):
 
 
 def edge_pixels(hit: np.ndarray, patch: np.ndarray, level: np.ndarray, near: np.ndarray, blocked: np.ndarray,
-                untrusted: np.ndarray, P: np.ndarray, N: np.ndarray, shade: np.ndarray, shade_step: float) -> np.ndarray:
+                untrusted: np.ndarray, candidate: np.ndarray, P: np.ndarray, N: np.ndarray, shade: np.ndarray,
+                brightest: float) -> np.ndarray:
     """Pixels the linear stripe model does not describe (module doc): True where any of the 8 neighbours differs.
 
     (rows, columns) grids of the centre rays: ``near``, the footprint reaches a stripe; ``blocked``, the
     reflected ray is occluded before the stripe (False where not tested); ``untrusted``, near a stripe but
-    the footprint is too wide or the gradient unknown; ``P``, ``N`` (rows, columns, 3), the hit points and unit
-    normals, and ``shade``, the surface colour's factor k (1 where flat). A neighbour on another face counts only
-    near a stripe, or where the two hits do not continue one sheet (`JOIN_SINE`) or their shades differ by more than
-    ``shade_step``: where faces join with no stripe near, the pixel is the surface's colour on both.
+    the footprint is too wide or the gradient unknown; ``candidate``, the neighbours' σ do not bound the pixel away
+    from a stripe; ``P``, ``N`` (rows, columns, 3), the hit points and unit normals; ``shade``, the surface colour's
+    factor k (1 where flat), and ``brightest``, the surface colour's brightest channel. A neighbour on another face
+    counts only where either is a stripe candidate, or where the two hits do not continue one sheet (`JOIN_SINE`)
+    or their colours differ by more than `JOIN_COLOUR_STEP`: where faces join with no stripe within reach, the
+    pixel is the surface's colour on both.
     """
     edge = np.empty(hit.shape, dtype=bool)
+    shade_step = JOIN_COLOUR_STEP / brightest if brightest > 0 else np.inf
     # one compiled pass, the neighbours as `neighbours`
-    edge_flags(hit, patch, level, near, blocked, untrusted, P, N, shade, JOIN_SINE, float(shade_step), edge)
+    edge_flags(hit, patch, level, near, blocked, untrusted, candidate, P, N, shade, JOIN_SINE, float(shade_step), edge)
     return edge

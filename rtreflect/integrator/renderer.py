@@ -28,8 +28,8 @@ from ..trace import clearance
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
-from .analytic import (BENDING, EDGE_SAMPLES, JOIN_COLOUR_STEP, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbours,
-                       stripe_coverage, uv_footprint)
+from .analytic import (BENDING, EDGE_SAMPLES, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbours, stripe_coverage,
+                       uv_footprint)
 from .cull import RayBox
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect, reflect_rays
@@ -550,6 +550,9 @@ class Renderer:
             want = np.zeros(shape, dtype=bool)
             if crop[1]:  # one compiled pass over the crop (`kernels.pixels.stripe_candidates`)
                 stripe_candidates(grid_level, grid_sigma, float(self.stripe_reach), want[rs, cs])
+                # `edge_pixels`' stripe candidates, before `_across_levels` narrows them: which face joins are
+                # supersampled does not depend on that refinement (its film is the same bytes without it).
+                candidate = want[rs, cs].copy()
                 self._across_levels(shading, sigma, (rs, cs), want)
             want[:max(0, first - 1 - r0)] = False
             want[last + 2 - r0:] = False
@@ -565,13 +568,13 @@ class Renderer:
                            float(BENDING * self.half_width), grid(centre.untrusted))
                 hits = shading.hits
                 # The surface colour's factor k, the pixel's colour away from the stripes (a map mode's colours are
-                # compared below): a step of `JOIN_COLOUR_STEP` in it across two faces is an edge.
+                # compared below): a step in it across two faces is an edge (`analytic.JOIN_COLOUR_STEP`).
                 shade = self.surface_shade(shading) if shading.surface_rgb is None else None
                 shade = np.ones(len(level)) if shade is None else shade
-                brightest = float(np.max(self.scene.render.surface_color))
                 edge[rs, cs] = edge_pixels(*(grid(x) for x in (hits.hit, hits.patch, level, centre.near, centre.blocked,
-                                                               centre.untrusted, hits.P, hits.N, shade)),
-                                           JOIN_COLOUR_STEP / brightest if brightest > 0 else np.inf)
+                                                               centre.untrusted)), candidate,
+                                           *(grid(x) for x in (hits.P, hits.N, shade)),
+                                           float(np.max(self.scene.render.surface_color)))
                 if shading.surface_rgb is not None:  # a map mode: where its colour jumps (a band edge), supersample
                     rgb = grid(np.nan_to_num(shading.surface_rgb))
                     for other in neighbours(rgb):

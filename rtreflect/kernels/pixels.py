@@ -315,19 +315,23 @@ def _joined(P, N, shade, i, j, a, b, join_sine, shade_step):
 
 
 @njit(**JIT, aot=(
-    "void(b1[:, :], i8[:, :], i8[:, :], b1[:, :], b1[:, :], b1[:, :], f8[:, :, :], f8[:, :, :], f8[:, :], f8, f8, "
-    "b1[:, ::1])",
-    "void(b1[:, ::1], i8[:, ::1], i8[:, ::1], b1[:, ::1], b1[:, ::1], b1[:, ::1], f8[:, :, :], f8[:, :, :], f8[:, :], "
+    "void(b1[:, :], i8[:, :], i8[:, :], b1[:, :], b1[:, :], b1[:, :], b1[:, :], f8[:, :, :], f8[:, :, :], f8[:, :], "
     "f8, f8, b1[:, ::1])",
+    "void(b1[:, ::1], i8[:, ::1], i8[:, ::1], b1[:, ::1], b1[:, ::1], b1[:, ::1], b1[:, :], f8[:, :, :], f8[:, :, :], "
+    "f8[:, :], f8, f8, b1[:, ::1])",
 ))
-def edge_flags(hit, patch, level, near, blocked, untrusted, P, N, shade, join_sine, shade_step, edge):
-    """``edge``: ``untrusted``, or a neighbour differs on hit or miss, on the patch (both hit; either near a stripe,
-    or the two hits not one sheet continued, `_joined`), on the level (either near a stripe) or on the occlusion
-    (both near): `analytic.edge_pixels`.
+def edge_flags(hit, patch, level, near, blocked, untrusted, candidate, P, N, shade, join_sine, shade_step, edge):
+    """``edge``: ``untrusted``, or a neighbour differs on hit or miss, on the patch (both hit; either a stripe
+    candidate, or the two hits not one sheet continued, `_joined`), on the level (either near a stripe) or on the
+    occlusion (both near): `analytic.edge_pixels`.
 
-    Types: hit bool[:, :]; patch, level int64[:, :]; near, blocked, untrusted bool[:, :]; P, N float64[:, :, :]
-    (rows, columns, 3): the hit points and unit normals; shade float64[:, :]; join_sine, shade_step float64; edge
-    bool[:, :], written.
+    A stripe candidate (`stripe_candidates`: its neighbours' σ do not bound it away from a stripe) rather than near
+    one (its own footprint reaches it): across a crease σ jumps, and the other face's part of the pixel lies beyond
+    either centre's footprint, within the neighbours' reach.
+
+    Types: hit bool[:, :]; patch, level int64[:, :]; near, blocked, untrusted, candidate bool[:, :]; P, N
+    float64[:, :, :] (rows, columns, 3): the hit points and unit normals; shade float64[:, :]; join_sine, shade_step
+    float64; edge bool[:, :], written.
     """
     rows, cols = hit.shape
     for i in range(rows):
@@ -343,7 +347,8 @@ def edge_flags(hit, patch, level, near, blocked, untrusted, P, N, shade, join_si
                     a, b = _clamp(i + dr, rows), _clamp(j + dc, cols)
                     e = (hit[a, b] != h0
                          or (h0 and patch[a, b] != patch[i, j]
-                             and (n0 or near[a, b] or not _joined(P, N, shade, i, j, a, b, join_sine, shade_step)))
+                             and (candidate[i, j] or candidate[a, b]
+                                  or not _joined(P, N, shade, i, j, a, b, join_sine, shade_step)))
                          or ((n0 or near[a, b]) and level[a, b] != level[i, j])
                          or (n0 and near[a, b] and blocked[a, b] != blocked[i, j]))
             edge[i, j] = e

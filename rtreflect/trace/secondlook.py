@@ -376,7 +376,8 @@ class SecondLook:
         it goes on from the seam's other side (`tracing._over_closed_seam`: a seam wall's or rim box's start lies on
         one side only); where it fails inside the domain a
         short miss search (`SHELL_RESCUE_STEPS`) follows; a start that leads nowhere decides nothing (no miss
-        verdict, no fallback: the finer mesh's trace has looked there too).
+        verdict, no fallback: the finer mesh's trace has looked there too), and the ray's next shell hit is tried
+        instead, up to `SHELL_WALK` starts.
         """
         rays = rays[(entry.prim[rays] >= 0) & ~hits.fallback[rays]]
         prim, b1, b2, t_entry = (x[rays] for x in entry)
@@ -391,32 +392,31 @@ class SecondLook:
             # start that led onto its face, to the kept hit or behind it, ends the walk: a grazing ray's shell hits
             # before its kept hit are mostly its own face's, and lead there again.
             rays, tried, t_entry = rays[~led], self.shell_mesh.face_patch[prim[~led]], t_entry[~led]
-            rays, prim, b1, b2, t_entry, tried = self._next_shell_hits(hits, origins, directions, far, rays, t_entry,
-                                                                        tried)
+            at, prim, b1, b2, t_entry = self._next_shell_hits(hits, origins, directions, far, rays, t_entry)
+            rays, tried = rays[at], tried[at]
             # The tried face's next hit is most often where the ray leaves its shell again, and leads where the entry
             # did: passed once (halves the walk's Newton runs on the sweep's rational_high.step).
             again = np.flatnonzero(self.shell_mesh.face_patch[prim] == tried)
             if len(again):
-                r2, p2, c1, c2, t2, _ = self._next_shell_hits(hits, origins, directions, far, rays[again],
-                                                              t_entry[again], tried[again])
-                moved = again[np.isin(rays[again], r2)]  # in r2's order: `_next_shell_hits` keeps the rays' order
+                at, p2, c1, c2, t2 = self._next_shell_hits(hits, origins, directions, far, rays[again], t_entry[again])
+                moved = again[at]
                 prim[moved], b1[moved], b2[moved], t_entry[moved] = p2, c1, c2, t2
                 keep = np.ones(len(rays), dtype=bool)
                 keep[again] = False
                 keep[moved] = True
                 rays, prim, b1, b2, t_entry = (x[keep] for x in (rays, prim, b1, b2, t_entry))
 
-    def _next_shell_hits(self, hits: Hits, origins, directions, far, rays, after, tag):
-        """Each ray's first shell hit past ``after`` (by float32 rounding) and before its kept hit: the rays that have
-        one, its triangle, barycentrics and t, and their ``tag``."""
+    def _next_shell_hits(self, hits: Hits, origins, directions, far, rays, after):
+        """Each ray's first shell hit past ``after`` (by float32 rounding) and before its kept hit: the positions in
+        ``rays`` of the rays that have one, and its triangle, barycentrics and t."""
         slack = FLOAT32_SLACK * self.tessellation.extent
         start = after + self._skip
         end = np.where(hits.hit[rays], hits.t[rays], far[rays]) - slack
         go = np.flatnonzero(start < end)
-        rays, start, end, tag = rays[go], start[go], end[go], tag[go]
+        rays, start, end = rays[go], start[go], end[go]
         mesh = self.shell.intersect(origins[rays] + start[:, None] * directions[rays], directions[rays], end - start)
         met = mesh.prim >= 0
-        return rays[met], mesh.prim[met], mesh.b1[met], mesh.b2[met], mesh.t[met] + start[met], tag[met]
+        return go[met], mesh.prim[met], mesh.b1[met], mesh.b2[met], mesh.t[met] + start[met]
 
     def _refined_from(self, hits: Hits, origins, directions, far, rays, prim, b1, b2, t_entry) -> np.ndarray:
         """`_from_shell` from one shell hit (``prim``, ``b1``, ``b2`` at ``t_entry``) of each of ``rays``, in place:
@@ -446,9 +446,9 @@ class SecondLook:
         t = np.einsum("ij,ij->i", derivs.S - O, D)
         kept = np.where(hits.hit[rays], hits.t[rays], far[rays])
         slack = FLOAT32_SLACK * self.tessellation.extent
-        led = converged.copy()
+        led = converged & (t > 0)  # behind the eye: no crossing of this ray, the walk goes on
         led[led] = self.surfaces.on_face(patch[led], u[led], v[led])
-        ok = led & (t > 0) & (t < kept - slack)
+        ok = led & (t < kept - slack)
         rays, O, D, patch, u, v, t, normal, cosine = (x[ok] for x in (rays, O, D, patch, u, v, t, normal, cosine))
         if len(rays) == 0:
             return led

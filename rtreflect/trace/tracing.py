@@ -140,10 +140,11 @@ OTHER_ROOT_COS = 0.2
 #: 0.35: entries at |N·D| 0.22 and 0.32, caps 0.10 and 0.21 deep, were stored at their exits). ×2 as the second
 #: look's shell (`secondlook.SHELL_CHORDS`): the chord error is sampled, a triangle's interior may stray farther.
 OTHER_ROOT_CHORDS = 2.0
-#: Where Newton from the predicted other crossing goes back to the kept hit, the search for the ray's distance
-#: (`_rescue`) from the same start, at most this many steps: the sheet is not a parabola along the ray (a wave), and
-#: the descent from the predicted start runs down into the dip that prediction stood for (rational_high.step, a
-#: grazing close-up: 5 steps needed, 8 enough; its cost on parts/plate.step at 960×540, 1,098 such rays, 12 ms).
+#: Where Newton from the predicted other crossing fails, leaves the face or goes back to the kept hit, the search for
+#: the ray's distance (`_rescue`) from the same start, at most this many steps: the sheet is no parabola along the
+#: ray (a wave), and the descent from the predicted start runs down into the dip that prediction stood for
+#: (rational_high.step, a grazing close-up: 5 steps needed, 8 enough; its cost on parts/plate.step at 960×540,
+#: 1,098 such rays, 12 ms).
 OTHER_ROOT_RESCUE_STEPS = 30
 #: Rounds of `_other_root`: a crossing it finds has a nearer one of its own where it is a dip's far side (the second
 #: round finds it; a third for margin, run only on the rays the second replaced).
