@@ -256,6 +256,29 @@ def test_nothing_compared_fails(tmp_path):
         assert "FAIL: no traced line centre was compared" in result.output
 
 
+def test_close_up_of_a_big_curved_face_validates(tmp_path):
+    """The analytic lines of a close-up come from a grid of the face's visible window, not of the whole face.
+
+    revolved.step's automatic view narrowed to fov 0.2°: the automatic tubes fit the few millimetres seen, 12 lines
+    cross the image. The contour grid was sized from a probe of the whole face, whose points all fell outside the
+    image: cells hundreds of pixels wide, 1,300 analytic points missing against the traced lines."""
+    scene = tmp_path / "close.toml"
+    scene.write_text(f"""
+[camera]
+eye = [39.8212, -72.4591, 85.6889]
+look_at = [-0.344032, 0.568508, 30.9182]
+up = [0.0, 0.0, 1.0]
+fov = 0.2
+
+[[surface]]
+file = "{(SCENES.parent / "parts" / "revolved.step").as_posix()}"
+""")
+    report = validate_scene(load_scene(scene).with_image(WIDTH, HEIGHT, 1))
+    assert report.points >= 3000 and report.misses == 0
+    assert sum(line.points >= 200 for line in report.lines) >= 10  # most of the 12 lines compared along the image
+    assert report.max_px <= 0.5 and report.passed, report.reasons
+
+
 def test_tubes_sharing_a_position_count_once():
     scene = load_scene(SCENES / "hood.toml").with_image(WIDTH, HEIGHT, 1)
     twice = validate_scene(replace(scene, lights=replace(scene.lights, positions=np.array([0.5, -0.5, 0.5]))))

@@ -1055,9 +1055,9 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     # Only the hit a triangle at the mesh hit's distance leads to (the one the next query skips): within
     # the neighbour's band of it (2 chord errors grown as 1/cos θ there), plus the skipped step.
     cross = np.cross(d3.Su, d3.Sv)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # a ray in the face's tangent plane: cos = 0
         cos = np.abs(np.einsum("ij,ij->i", cross, D[rays])) / np.linalg.norm(cross, axis=1)
-    allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
+        allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
     reach = _rim_reach(band[pn], allowance, skip)
     ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
     # A ray with several faces refined (a corner): its nearest valid hit wins.
@@ -1095,8 +1095,8 @@ def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D
     with np.errstate(divide="ignore", invalid="ignore"):
         tp = np.einsum("ij,ij->i", normal[k], centre[k] - O) / nd
         margin = (deviation[k] + tol) / np.abs(nd) + 1000.0 * tol
-    # Comparisons with NaN or inf (a ray along the plane) are False: such rows are refined.
-    never = (tp + margin <= 0.0) | (tp - margin >= tr - slack) | (np.abs(tp - tm) - margin > reach[k])
+        # Comparisons with NaN or inf (a ray along the plane) are False: such rows are refined.
+        never = (tp + margin <= 0.0) | (tp - margin >= tr - slack) | (np.abs(tp - tm) - margin > reach[k])
     may[rows[never]] = False
     return may
 
