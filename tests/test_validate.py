@@ -501,3 +501,32 @@ def test_misses_beside_a_blocked_reflected_ray_are_not_counted_and_only_there(mo
     ring = _within(line4, margin) & ~_within(line4, margin - 1)
     assert misses_with(ring) == 0
     assert misses_with(~_within(line4, margin)) == alone
+
+
+def test_colour_bound_reaches_the_corner_samples_a_diagonal_neighbour_shows():
+    """σ may bend across a pixel's diagonal (σ_xy) where its four axis neighbours are smooth: the corner samples lie
+    halfway to the diagonal neighbours, so their steps bound the move too, and a pixel whose diagonal neighbour is
+    another tube's is not checked (the sweep's dense_net.step at 320×180: σ 1.2 at a pixel, within 1.4 at its axis
+    neighbours, −4.7 at a diagonal one; 4 of its 16 samples off the stripe a bound from the axes alone kept on).
+
+    The hood's film with one pixel inside a line drawn as bare surface: flagged where σ is smooth all round, not once a
+    diagonal neighbour's σ lies 6 radii off, nor where a diagonal neighbour sees another tube."""
+    from rtreflect.analysis.validate import colour_mismatches
+
+    renderer = Renderer(load_scene(SCENES / "hood.toml").with_image(WIDTH, HEIGHT, 1))
+    aovs = film_aovs(renderer, renderer.render().film)
+    checked, _ = colour_mismatches(renderer, aovs)
+    radius = renderer.lights.radius
+    sigma = aovs.line_offset
+    # A checked pixel well inside a line (all samples lit) and its 3 × 3 block of one tube.
+    inner = checked & (np.abs(sigma) < 0.3 * radius) & (aovs.line_coverage > 0.99)
+    y, x = next((y, x) for y, x in zip(*np.nonzero(inner))
+                if 2 <= y < HEIGHT - 2 and 2 <= x < WIDTH - 2 and (aovs.line_id[y - 1:y + 2, x - 1:x + 2] == aovs.line_id[y, x]).all())
+    aovs.line_coverage[y, x] = 0.0
+    assert colour_mismatches(renderer, aovs)[1][y, x]  # the check can fail here
+    aovs.line_offset[y - 1, x - 1] = sigma[y, x] - 6.0 * radius
+    assert not colour_mismatches(renderer, aovs)[1][y, x]
+    aovs.line_offset[y - 1, x - 1] = sigma[y, x]
+    aovs.line_id[y - 1, x + 1] = aovs.line_id[y, x] + 1
+    checked, wrong = colour_mismatches(renderer, aovs)
+    assert not checked[y, x] and not wrong[y, x]

@@ -72,7 +72,7 @@ from ..integrator.autorig import resolve
 from ..integrator.analytic import EDGE_SAMPLES
 from ..integrator.renderer import Renderer
 from ..exchange.scene import ANALYTIC, MAX_MESH_VERTICES, Scene
-from ..geometry.tessellation import largest_factor, tessellate
+from ..geometry.tessellation import distinct, largest_factor, tessellate
 from ..trace.accelerator import Accelerator
 from ..trace.tracing import occluded, refine
 
@@ -468,17 +468,23 @@ class TracedCentres:
         return TracedCentres(self.px[keep], self.light[keep], self.pixel_a[keep], self.pixel_b[keep])
 
 
-def _smooth_pairs(renderer: Renderer, aovs: PixelAOVs, axis: int,
+#: Pixel steps (rows, columns) to the neighbour of `_smooth_pairs`' axes 1 and 0 and of the two diagonals.
+STEPS = {1: (0, 1), 0: (1, 0), "diagonal": (1, 1), "antidiagonal": (1, -1)}
+
+
+def _smooth_pairs(renderer: Renderer, aovs: PixelAOVs, axis: int | str,
                   gap: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
-    """Flat indices (a, b) of neighbouring pixels along ``axis`` inside one smooth visible piece of a patch.
+    """Flat indices (a, b) of neighbouring pixels along ``axis`` (a key of `STEPS`) inside one smooth visible piece
+    of a patch.
 
     With ``gap`` (a tube's neighbour gap), also where f changes by less than gap / MIN_LINE_GAP_PX
     between them: there the two lines are resolved by the pixel grid.
     """
     height, width = aovs.f.shape
     index = np.arange(height * width).reshape(height, width)
-    a = index[:, :-1] if axis == 1 else index[:-1, :]
-    b = index[:, 1:] if axis == 1 else index[1:, :]
+    dy, dx = STEPS[axis]
+    a = index[:height - dy, max(0, -dx):width - max(0, dx)]
+    b = index[dy:, max(0, dx):width + min(0, dx)]
     a, b = a.ravel(), b.ravel()
     patch, f, fallback = aovs.patch.ravel(), aovs.f.ravel(), aovs.fallback.ravel()
     P, fp = aovs.P.reshape(-1, 3), renderer.camera.pixel_footprint(aovs.Z).ravel()
@@ -599,7 +605,7 @@ def blocked_pixels(renderer: Renderer, aovs: PixelAOVs) -> np.ndarray:
 
 def _filter_unblocked(renderer: Renderer, aovs: PixelAOVs, centres: TracedCentres) -> TracedCentres:
     """The centres whose two pixels see the tube: reflected rays unblocked (line.id already says it is ahead)."""
-    pixels = np.unique(np.concatenate([centres.pixel_a, centres.pixel_b]))
+    pixels = distinct(np.concatenate([centres.pixel_a, centres.pixel_b]))
     clear = np.zeros(aovs.f.size, dtype=bool)
     clear[pixels] = _unblocked(renderer, aovs, pixels)
     return centres.take(clear[centres.pixel_a] & clear[centres.pixel_b])
@@ -635,8 +641,12 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
     # line's centre, and its differences there understate how far σ moves within the pixel.
     sigma = d if aovs.line_offset is None else aovs.line_offset.ravel()
     checked = (aovs.patch.ravel() >= 0) & (aovs.coverage.ravel() >= 1.0 - 1e-6) & np.isfinite(aovs.line_coverage.ravel())
-    slope = np.zeros((2, size))
-    for i, axis in enumerate((1, 0)):
+    # Along rows, down columns and the two diagonals: a pixel's corner samples lie halfway to its diagonal
+    # neighbours, and σ's cross term σ_xy, which the axes' differences miss, reaches them (the sweep's
+    # dense_net.step at 320×180: σ 1.2 at a pixel, within 1.4 at its four neighbours, −4.7 and another tube's at
+    # two diagonal ones; 4 of its 16 samples off the stripe a first-order bound from the axes kept them on).
+    slope = np.zeros((len(STEPS), size))
+    for i, axis in enumerate(STEPS):
         a, b = _smooth_pairs(renderer, aovs, axis)
         same = line_id[a] == line_id[b]
         a, b = a[same], b[same]
@@ -654,10 +664,11 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
         checked &= has_next & has_prev
     g = np.hypot(slope[0], slope[1])
     radius, blur = spec.radius, spec.blur
-    # How far d may move to a sample in the pixel: 0.71·g to first order. Another mode's φ may bend within a pixel
+    # How far d may move to a sample in the pixel: 0.71·g to first order, or half the step to a diagonal neighbour
+    # (where a corner sample lies) where that is more. Another mode's φ may bend within a pixel
     # (a curvature map near a fold of its field), so there the second differences' share is added: d_xx x²/2 +
     # d_yy y²/2 with |x|, |y| ≤ ½ is at most (|d_xx| + |d_yy|)/8.
-    move = 0.71 * g
+    move = np.maximum(0.71 * g, 0.5 * np.maximum(slope[2], slope[3]))
     if not spec.along_ray:
         grid = np.nan_to_num(sigma.reshape(height, width))
         bend = np.zeros((height, width))

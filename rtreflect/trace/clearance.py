@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .accelerator import Accelerator
-from ..geometry.tessellation import Tessellation
+from ..geometry.tessellation import Tessellation, unique_rows
 from ..kernels import clearance as kernel
 
 #: The ball's reach beyond T's corners, in chord errors (the scene's largest): a segment past a mesh hit is the
@@ -170,7 +170,7 @@ def build(accelerator: Accelerator, tessellation: Tessellation, rounding: float,
     good &= np.isfinite(normal).all(axis=1)
     normal = np.ascontiguousarray(normal)
     # A corner's first copy (by its float32 coordinates): faces meeting along a seam share points, not indices.
-    _, first_copy = np.unique(vertices32, axis=0, return_inverse=True)
+    first_copy = unique_rows(vertices32)
     canon = np.ascontiguousarray(first_copy.reshape(-1)[faces], dtype=np.int64)
     slope = np.where(good, 0.0, np.inf)
     _slopes(vertices, faces, canon, normal, np.ascontiguousarray(centre), radius, reach, slope, threads)

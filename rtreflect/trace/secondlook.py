@@ -61,7 +61,7 @@ from .tracing import (FLOAT32_SLACK, VALID, Hits, _normals, _other_root, _over_c
                       _stopped_at_pole, facing, float32_rounding, refine_all, trace)
 from ..clock import NULL_CLOCK, StageClock
 from ..geometry.surfaces import SurfaceDerivatives, SurfaceSet
-from ..geometry.tessellation import Tessellation, _once, largest_factor, reader_mesh, tessellate
+from ..geometry.tessellation import Tessellation, _once, largest_factor, reader_mesh, tessellate, unique_rows
 
 #: Half-thickness of the shell in chord errors: the mesh-to-surface distance is sampled at edge
 #: midpoints and vertices (`_chord_error`), a triangle's interior may stray a little farther.
@@ -105,7 +105,9 @@ def subdivided(nodes: np.ndarray, triangles: np.ndarray, levels: int) -> tuple[n
     nodes, triangles = np.asarray(nodes, dtype=np.float64).reshape(-1, 2), np.asarray(triangles).reshape(-1, 3)
     for _ in range(levels):
         edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
-        unique, edge_of = np.unique(edges, axis=0, return_inverse=True)
+        edge_of = unique_rows(edges)
+        unique = np.empty((edge_of.max(initial=-1) + 1, 2), dtype=edges.dtype)
+        unique[edge_of] = edges
         mid = len(nodes) + edge_of.reshape(3, -1)  # the midpoints of edges 01, 12, 20 of every triangle
         nodes = np.concatenate([nodes, nodes[unique].mean(axis=1)])
         a, b, c = triangles.T
