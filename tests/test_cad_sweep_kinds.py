@@ -735,3 +735,32 @@ def test_near_double_knot_contours_keep_both_branches(tmp_path):
     report = validate_scene(load_scene(path).with_image(320, 180))
     assert report.passed, report.reasons
     assert report.lines[0].max_px < 0.1
+
+
+def test_ray_along_a_cones_generator_is_not_kept_off_its_ray(tmp_path):
+    """cone.step (r 15, 30 high), an extreme close-up (fov 0.5°, 120×120) looking along a generator at the base rim
+    from 2.6 away, 0.01 over the surface: rays beside the generator run nearly along the cone's straight lines, so the
+    sheet's curvature along them is ~0 (κ ~ 1e-14). `tracing._crossing_on_face` predicted the other crossing at
+    s = 2(n·D)/κ ~ 4·10¹¹ and took Newton's tolerance at that t: 0.4, so Newton "converged" at points up to 0.03 off
+    the ray (pixel (1, 59): t = 1.584 on the cone, OCCT's `PerformNearest` finds nothing; 19 pixels of column 59–60).
+    The tolerance is now the mesh hit's: every pixel-centre ray of the middle columns is OCCT's first hit."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "cone.step"
+    sweep.PARTS[path.name](path)
+    rim = np.array([2.38522265, 14.80914288, 0.0])  # on the base circle (r 15)
+    scene = load_scene(path).with_image(120, 120, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([2.20415926, 13.68497383, 2.33540897]), look_at=rim,
+                                 up=np.array([0.0, 0.0, 1.0]), fov=0.5)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = (x.ravel() for x in np.mgrid[0:120, 56:64])
+    origins, directions = renderer.camera.rays(rows, cols)
+    hits = assert_first_hits_are_occt(path, renderer, origins, directions)
+    P = hits.P[hits.hit] - origins[hits.hit]
+    assert np.linalg.norm(np.cross(P, directions[hits.hit]), axis=1).max() < 1e-9  # on the ray

@@ -878,7 +878,11 @@ def _crossing_on_face(tessellation: Tessellation, surfaces: SurfaceSet, rows, pa
     s = np.concatenate([(c - root) / kappa, (c + root) / kappa])
     k2, O2, D2, tm2 = (np.concatenate([x, x]) for x in (patch, O, D, tm))
     starts_u, starts_v = _into_domain(surfaces, k2, np.tile(u, 2) + s * np.tile(du, 2), np.tile(v, 2) + s * np.tile(dv, 2))
-    u3, v3, d3, ok3 = refine(surfaces, k2, starts_u, starts_v, O2, D2, tm2 + s, tessellation.extent)
+    # Newton's tolerance is taken at the mesh hit's t, not at the predicted crossing's: where the sheet is nearly
+    # straight along the ray (κ → 0) s₋ runs off to ~1/κ, and a tolerance scaled by it accepted points far off the ray
+    # (the sweep's cone.step, a ray along a generator at |N·D| = 0.006: s = 4·10¹¹, tolerance 0.4, a hit stored 0.03
+    # off its ray where OCCT finds none). The kept point must lie within reach of the mesh hit anyway (below).
+    u3, v3, d3, ok3 = refine(surfaces, k2, starts_u, starts_v, O2, D2, tm2, tessellation.extent)
     near3, t3 = _near_mesh_hit(d3, k2, O2, D2, tm2, band)
     ok3 &= near3 & surfaces.on_face(k2, u3, v3)
     t3 = np.where(ok3, t3, np.inf)
