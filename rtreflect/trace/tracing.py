@@ -1279,6 +1279,39 @@ def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values:
             spread_rows(target, rows, np.ascontiguousarray(value), picked, fill)
 
 
+def _off_plane(tessellation: Tessellation, surfaces: SurfaceSet, patch, previous, O, D, t_next, lift, skip):
+    """The next mesh queries' origin offsets (n, 3) or None (none yet): where a ray's mesh hit is on the same planar
+    face as its previous one (``previous``; None on the first query) and the next query's origin lies within float32
+    rounding (``skip``) of that plane, not heading back into it, the origin is moved off the plane to ``skip`` on the
+    side the ray heads for (along the plane where it runs in it).
+
+    Embree meets a plane the ray skims again at each query `skip` farther on until the ray is float32 rounding away
+    from it, `skip` / |n·D| along it: the sweep's faces.igs (the shelled box's faces unsewn), an extreme close-up (fov
+    0.05°) from an eye exactly in a rim face's plane (z = 20): every ray, at |n·D| ≤ 2·10⁻⁴, met the rim's mesh skirt
+    at t = 0, 9.4·10⁻⁵, 1.9·10⁻⁴, ... until `MAX_CANDIDATES` ran out: no pixel hit (all fallbacks) where OCCT's first
+    hit is the wall 2.69 on. A plane meets the ray once: its crossing was refined at the first of those hits, and a
+    query origin moved by `skip` (the rounding Embree already has) sees what lies beyond. Only after a repeat, so a
+    coplanar face's mesh at the same crossing still comes first."""
+    if previous is None:
+        return lift
+    centre, normal, _, planar = _net_planes(tessellation, surfaces)
+    rows = np.flatnonzero((patch == previous) & planar[patch])
+    if len(rows) == 0:
+        return lift
+    k = patch[rows]
+    X = O[rows] + t_next[rows, None] * D[rows] + (0.0 if lift is None else lift[rows])
+    h = np.einsum("ij,ij->i", X - centre[k], normal[k])
+    c = np.einsum("ij,ij->i", D[rows], normal[k])
+    side = np.where(c != 0.0, np.sign(c), np.where(h != 0.0, np.sign(h), 1.0))
+    near = (np.abs(h) < skip) & (h * c >= 0.0)
+    rows, k, h, side = rows[near], k[near], h[near], side[near]
+    if len(rows) == 0:
+        return lift
+    lift = np.zeros((len(patch), 3)) if lift is None else lift.copy()
+    lift[rows] += (side * skip - h)[:, None] * normal[k]
+    return lift
+
+
 def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet,
           origins: np.ndarray, directions: np.ndarray, clock: StageClock = NULL_CLOCK,
           max_distance: np.ndarray | None = None, clear: bool = True) -> Hits:
@@ -1297,6 +1330,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     rays, start, limit = np.arange(n), None, far
     # Past a mesh hit by float32 rounding of the scene's largest coordinates, with margin.
     skip = float32_rounding(tessellation)
+    # Per open ray: the previous mesh hit's face, and the query origin's offset off planes the ray skims (`_off_plane`).
+    last, lift = np.full(n, -1, dtype=np.int64), None
     slack = FLOAT32_SLACK * tessellation.extent
     crossing = np.zeros(n, dtype=bool)  # the kept hit is a `_crossing_on_face` one
     with clock.stage("clearance cones"):  # built once the BVH has traced enough rays to repay them
@@ -1311,17 +1346,22 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 mesh = accelerator.intersect(O, D, max_distance)
             else:  # beyond the last mesh hit: an any-hit test first, the full query only where it finds something
                 shifted = O + start[:, None] * D
+                if lift is not None:
+                    shifted += lift
                 some = accelerator.occluded(shifted, D, limit - start)
                 if not some.any():  # the common case (no sheet behind the first): no empty gathers and query
                     rays = rays[:0]
                     break
-                rays, O, D, shifted, start, limit = (x[some] for x in (rays, O, D, shifted, start, limit))
+                rays, O, D, shifted, start, limit, last = (x[some] for x in (rays, O, D, shifted, start, limit, last))
+                lift = None if lift is None else lift[some]
                 mesh = accelerator.intersect(shifted, D, limit - start)
                 mesh = mesh._replace(t=mesh.t + start)
         found = mesh.prim >= 0
         if not found.all():
             rays, O, D = rays[found], np.compress(found, O, axis=0), np.compress(found, D, axis=0)  # ~4× numpy's O[found]
             mesh = MeshHits(*(x[found] for x in mesh))
+            last = last[found]
+            lift = None if lift is None else lift[found]
         if len(rays) == 0:
             break
         # The rays still open are every ray in order (the first query, all found): slices, not index arrays.
@@ -1365,7 +1405,10 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             # Where the mesh around the hit's triangle provably leaves the segment clear (`clearance`), the any-hit
             # test would find nothing: not asked. (Not after the last query: a ray still open there is a fallback.)
             cones.drop(O, D, mesh.prim, nxt, limit, go)
-        rays, start, limit = rays[go], nxt[go], limit[go]
+        hit_patch = tessellation.face_patch[mesh.prim]
+        lift = _off_plane(tessellation, surfaces, hit_patch, last if start is not None else None, O, D, nxt, lift, skip)
+        rays, start, limit, last = rays[go], nxt[go], limit[go], hit_patch[go]
+        lift = None if lift is None else lift[go]
     if start is None:  # no mesh hit at all (the first query broke off): the rows are still unwritten
         _put_rows(hits.rows(), np.zeros(0, dtype=np.int64), (np.zeros((0, 3)),) * 4 + (np.zeros((0, 4)),), slice(None),
                   np.nan)
