@@ -823,3 +823,37 @@ def test_eye_in_a_planes_face_sees_past_the_plane(tmp_path):
     cols = np.concatenate([np.full(120, 20), np.arange(120)])
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
     assert hits.hit[rows >= 60].all()
+
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_rays_by_a_spheres_pole_hit_its_sheet(tmp_path, projection):
+    """hollow_sphere_cut.step (a sphere shell r 20 / 19.9), extreme close-ups of the outer sphere's pole (0, 0, -20) from
+    3 away, 30° off the axis: fov 0.05° at 120×120, and orthographic 0.0069 high. From the pole's mesh fan the start
+    lies on the far side of the pole in u, where |S_u| → 0: Newton and the search turned u by wild steps onto the pole
+    (or off the seam and onto it from the other side) and stalled there at its distance from the ray, judged a miss, so
+    rays passing up to 0.0035 from the pole went through the outer sheet to the inner one, 0.114 behind OCCT's first hit
+    (624 and 555 of the 14,400 pixels). Such candidates are searched again from the meridian towards the mesh hit
+    (`tracing._off_pole`): every pixel-centre ray of a row and a column through the pole is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "hollow_sphere_cut.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(120, 120, 1)
+    pole = np.array([0.0, 0.0, -20.0])
+    eye = np.array([1.66077879, 0.0, -23.0400352])
+    if projection == "perspective":
+        camera = dataclasses.replace(scene.camera, projection="perspective", eye=eye, look_at=pole,
+                                     up=np.array([0.0, 0.0, 1.0]), fov=0.05)
+    else:
+        camera = dataclasses.replace(scene.camera, projection="orthographic", eye=eye, look_at=pole,
+                                     up=np.array([0.0, -1.0, 0.0]), fov=30.0, view_height=0.006928203264916526)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows = np.concatenate([np.arange(120), np.full(120, 0), np.full(120, 54)])
+    cols = np.concatenate([np.full(120, 60), np.arange(120), np.arange(120)])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit.all()

@@ -473,6 +473,9 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         restarted.append(won)
         seam, at, reach, tried = seam[~ok3], at[~ok3], reach[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
         last = gap[~ok3]
+    # A mesh hit by a pole that nothing above resolved onto its face: the search again from the meridian towards it.
+    restarted.append(_off_pole(tessellation, surfaces, np.flatnonzero(status != VALID), prim, O, D, tm, band, status, pk,
+                               ur, vr, tr, derivs))
     crossed = _crossing_on_face(tessellation, surfaces, gone, gone_patch, O, D, tm, us, vs, band, status, pk, ur, vr, tr,
                                 derivs)
     restarted.append(crossed)
@@ -540,6 +543,44 @@ def _may_win_restart(tessellation: Tessellation, surfaces: SurfaceSet, rows, pn,
 #: with the hit beside it, it converges in a few (a sphere cut in two: 20 reach the hit), as the second look's
 #: `secondlook.SHELL_RESCUE_STEPS` from its shell starts.
 POLE_RESCUE_STEPS = 60
+
+
+def _off_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, prim, O, D, tm, band, status, pk, ur, vr, tr,
+              derivs) -> np.ndarray:
+    """Candidates ``rows`` (not VALID) whose mesh hit lies on a triangle with a vertex on a pole of its face (a collapsed
+    side, `SurfaceSet.collapsed`): the search (`_rescue`) on that face from the meridian that leaves the pole towards the
+    mesh hit, off the pole by its first-order distance (`_meridian_towards`). In place where it converges near the mesh
+    hit, on the face: VALID, whatever the candidate was (a miss, unresolved). Returns the rows replaced.
+
+    By a pole |S_u| → 0, and from a mesh start on the far side of it Newton and the search turn u by steps so wild that
+    they run onto the pole, or off the seam and onto the pole from its other side, and stall there at the pole's
+    distance from the ray: the sweep's hollow_sphere_cut.step, close-ups of its outer sphere's pole (fov 0.05°, and
+    orthographic 0.0069 high), rays passing 0.0035 from the pole were judged to miss the outer sheet and went on to the
+    inner one 0.114 behind OCCT's first hit (624 and 555 of 14,400 pixels). From the meridian towards the point the
+    search has no u to turn.
+    """
+    if len(rows) == 0:
+        return rows
+    faces, vertex_uv, face_patch = tessellation.start_arrays
+    corners = faces[prim[rows]]  # (m, 3) vertex indices
+    k = np.repeat(face_patch[prim[rows]], 3)
+    cu, cv = vertex_uv[corners.ravel(), 0], vertex_uv[corners.ravel(), 1]
+    pu, pv = _meridian_towards(surfaces, k, cu, cv, np.repeat(O[rows] + tm[rows, None] * D[rows], 3, axis=0))
+    moved = ((pu != cu) | (pv != cv)).reshape(-1, 3)  # the corners on a pole (moved off it towards the mesh hit)
+    on = moved.any(axis=1)
+    first = np.argmax(moved, axis=1)
+    rows, pick = rows[on], (np.arange(len(moved)) * 3 + first)[on]
+    if len(rows) == 0:
+        return rows
+    un, vn, patch = pu[pick], pv[pick], k[pick]
+    tol = _search_tolerance(tm[rows], tessellation.extent)
+    u2, v2, d2, ok2 = _rescue(surfaces, patch, un, vn, O[rows], D[rows], tol, POLE_RESCUE_STEPS)[:4]
+    near2, t2 = _near_mesh_hit(d2, patch, O[rows], D[rows], tm[rows], band)
+    ok2 &= near2 & surfaces.on_face(patch, u2, v2)
+    won = rows[ok2]
+    _store(won, ok2, patch, u2, v2, t2, d2, pk, ur, vr, tr, derivs)
+    status[won] = VALID
+    return won
 
 
 def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points, O, D, tm, band, status, pk, ur, vr,
