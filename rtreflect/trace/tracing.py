@@ -381,6 +381,12 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     """
     n = len(prim)
     band = tessellation.chord_error + FLOAT32_SLACK * tessellation.extent  # per patch: `JUMP_LIMIT`'s chord error
+    # The reach of the near-mesh-hit test (`_near_mesh_hit`) per patch: unbounded on a planar face (`_net_planes`), one
+    # sheet the ray crosses once, so a converged point ahead on it is that crossing however far float32 rounding put
+    # the mesh hit: at grazing incidence that distance grows as 1/|n·D| past the test's `GRAZING_ALLOWANCE` (the sweep's
+    # filleted_block.step, a close-up at fov 0.2° from 2.7e-4 off its side face y = 0: rays at |n·D| ~ 1e-4 met the
+    # face's mesh 0.007 from their crossing, were left unresolved and went on to the fillet 14 behind, 600 pixels).
+    near_reach = np.where(_net_planes(tessellation, surfaces)[3], np.inf, band)
     pk = np.empty(n, dtype=np.int64)
     us, vs, ur, vr, tr, cosine = (np.empty(n) for _ in range(6))
     S, Su, Sv, normal = (np.empty((n, 3)) for _ in range(4))
@@ -388,7 +394,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     table = surfaces.table
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
     nurbs_kernel.refine_mesh_hits(
-        *table.args, table.scale, *tessellation.start_arrays, band, np.ascontiguousarray(prim, dtype=np.int64),
+        *table.args, table.scale, *tessellation.start_arrays, near_reach, np.ascontiguousarray(prim, dtype=np.int64),
         f64(b1), f64(b2), f64(O), f64(D), f64(tm), tessellation.extent, NEWTON_TOLERANCE, NEWTON_MAX_STEPS,
         JUMP_LIMIT, GRAZING_ALLOWANCE, surface_module.DEGENERATE_SINE, surface_module.VANISHING_PARTIAL,
         pk, us, vs, ur, vr, S, Su, Sv, tr, normal, cosine, conv, near, edge, degenerate)
@@ -409,7 +415,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     if len(stuck):
         tol = _search_tolerance(tm[stuck], tessellation.extent)
         u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
-        near2, t2 = _near_mesh_hit(d2, pk[stuck], O[stuck], D[stuck], tm[stuck], band)
+        near2, t2 = _near_mesh_hit(d2, pk[stuck], O[stuck], D[stuck], tm[stuck], near_reach)
         in2 = surfaces.on_face(pk[stuck], u2, v2)
         ur[stuck], vr[stuck], tr[stuck] = u2, v2, t2
         for have, new in zip(derivs[:3], d2[:3]):
@@ -463,7 +469,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         _over_closed_seam(surfaces, pn[go], u3, v3, d3, ok, edge3, O[ray], D[ray], tm[ray], tessellation.extent)
         _search_at_pole(surfaces, pn[go], un[go], vn[go], u3, v3, d3, ok, edge3, O[ray], D[ray], tm[ray],
                         tessellation.extent)
-        near3, t3 = _near_mesh_hit(d3, pn[go], O[ray], D[ray], tm[ray], band)
+        near3, t3 = _near_mesh_hit(d3, pn[go], O[ray], D[ray], tm[ray], near_reach)
         ok &= near3 & surfaces.on_face(pn[go], u3, v3)
         ok3 = np.zeros(len(seam), dtype=bool)
         ok3[go] = ok
@@ -1323,16 +1329,18 @@ def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values:
 def _off_plane(tessellation: Tessellation, surfaces: SurfaceSet, patch, previous, O, D, t_next, lift, skip):
     """The next mesh queries' origin offsets (n, 3) or None (none yet): where a ray's mesh hit is on the same planar
     face as its previous one (``previous``; None on the first query) and the next query's origin lies within float32
-    rounding (``skip``) of that plane, not heading back into it, the origin is moved off the plane to ``skip`` on the
-    side the ray heads for (along the plane where it runs in it).
+    rounding (``skip``) of that plane, the origin is moved off the plane to ``skip`` on the side the ray heads for (on
+    its own side where it runs along the plane).
 
-    Embree meets a plane the ray skims again at each query `skip` farther on until the ray is float32 rounding away
-    from it, `skip` / |n·D| along it: the sweep's faces.igs (the shelled box's faces unsewn), an extreme close-up (fov
+    Embree meets a plane the ray skims again at each query `skip` farther on while the ray is within float32 rounding of
+    it, over 2 `skip` / |n·D| along it: the sweep's faces.igs (the shelled box's faces, unsewn), an extreme close-up (fov
     0.05°) from an eye exactly in a rim face's plane (z = 20): every ray, at |n·D| ≤ 2·10⁻⁴, met the rim's mesh skirt
     at t = 0, 9.4·10⁻⁵, 1.9·10⁻⁴, ... until `MAX_CANDIDATES` ran out: no pixel hit (all fallbacks) where OCCT's first
-    hit is the wall 2.69 on. A plane meets the ray once: its crossing was refined at the first of those hits, and a
-    query origin moved by `skip` (the rounding Embree already has) sees what lies beyond. Only after a repeat, so a
-    coplanar face's mesh at the same crossing still comes first."""
+    hit is the wall 2.69 on; filleted_block.step from 2.7·10⁻⁴ off its side face y = 0 (fov 0.2°): rays at |n·D| ~
+    10⁻⁴ met the face's mesh every 9.4·10⁻⁵ from 0.003 before their crossing, all 1,080 rays flagged fallbacks. A plane
+    meets the ray once, and two hits of it refined that crossing (Newton on a plane from any start; the near-mesh-hit
+    test is unbounded there, `_candidates`): a query origin moved past it by `skip` (the rounding Embree already has)
+    sees what lies beyond. Only after a repeat, so a coplanar face's mesh at the same crossing still comes first."""
     if previous is None:
         return lift
     centre, normal, _, planar = _net_planes(tessellation, surfaces)
@@ -1344,7 +1352,7 @@ def _off_plane(tessellation: Tessellation, surfaces: SurfaceSet, patch, previous
     h = np.einsum("ij,ij->i", X - centre[k], normal[k])
     c = np.einsum("ij,ij->i", D[rows], normal[k])
     side = np.where(c != 0.0, np.sign(c), np.where(h != 0.0, np.sign(h), 1.0))
-    near = (np.abs(h) < skip) & (h * c >= 0.0)
+    near = np.abs(h) < skip
     rows, k, h, side = rows[near], k[near], h[near], side[near]
     if len(rows) == 0:
         return lift
