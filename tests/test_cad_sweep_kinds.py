@@ -735,3 +735,155 @@ def test_near_double_knot_contours_keep_both_branches(tmp_path):
     report = validate_scene(load_scene(path).with_image(320, 180))
     assert report.passed, report.reasons
     assert report.lines[0].max_px < 0.1
+
+
+def test_ray_along_a_cones_generator_is_not_kept_off_its_ray(tmp_path):
+    """cone.step (r 15, 30 high), an extreme close-up (fov 0.5°, 120×120) looking along a generator at the base rim
+    from 2.6 away, 0.01 over the surface: rays beside the generator run nearly along the cone's straight lines, so the
+    sheet's curvature along them is ~0 (κ ~ 1e-14). `tracing._crossing_on_face` predicted the other crossing at
+    s = 2(n·D)/κ ~ 4·10¹¹ and took Newton's tolerance at that t: 0.4, so Newton "converged" at points up to 0.03 off
+    the ray (pixel (1, 59): t = 1.584 on the cone, OCCT's `PerformNearest` finds nothing; 19 pixels of column 59–60).
+    The tolerance is now the mesh hit's: every pixel-centre ray of the middle columns is OCCT's first hit."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "cone.step"
+    sweep.PARTS[path.name](path)
+    rim = np.array([2.38522265, 14.80914288, 0.0])  # on the base circle (r 15)
+    scene = load_scene(path).with_image(120, 120, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([2.20415926, 13.68497383, 2.33540897]), look_at=rim,
+                                 up=np.array([0.0, 0.0, 1.0]), fov=0.5)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = (x.ravel() for x in np.mgrid[0:120, 56:64])
+    origins, directions = renderer.camera.rays(rows, cols)
+    hits = assert_first_hits_are_occt(path, renderer, origins, directions)
+    P = hits.P[hits.hit] - origins[hits.hit]
+    assert np.linalg.norm(np.cross(P, directions[hits.hit]), axis=1).max() < 1e-9  # on the ray
+
+
+def test_thread_face_winding_twice_round_its_cylinder_is_read_whole(tmp_path):
+    """bottle.step (Open CASCADE's MakeBottle): the thread's side strips lie on the neck's cylinders and wind round them
+    twice (pcurves from u = 0.26 to 12.34). `BRepBuilderAPI_NurbsConvert` gives those cylinders a B-spline over one
+    period and keeps the pcurves, so the second turn lay outside the surface's domain: a close-up of the thread (fov
+    0.5°, 3.1 from it) traced every pixel to the neck 0.33 behind OCCT's first hit (`PerformNearest`), and the default
+    view had 2 such pixels. The reader now repeats a closed direction's surface over the periods its pcurves run
+    through (`occt._over_periods`): the faces' domains hold their trims, and every ray of the close-up is OCCT's."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "bottle.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(24, 24, 1)
+    for surface in scene.surfaces:
+        # No trim runs past its domain by more than 2 % of its width (by a sphere face's pole, where u does not move the
+        # point, the converted pcurves drift 1.4 % out); the thread faces' second turn ran 93 % past.
+        (u0, u1), (v0, v1) = surface.domain
+        uv = np.concatenate([surface.trim.outer, *surface.trim.holes])
+        past = max(u0 - uv[:, 0].min(), uv[:, 0].max() - u1, v0 - uv[:, 1].min(), uv[:, 1].max() - v1)
+        assert past <= 0.02 * max(u1 - u0, v1 - v0), surface.name
+    camera = dataclasses.replace(scene.camera, projection="perspective", eye=np.array([9.121436, 4.74024676, 70.29619221]),
+                                 look_at=np.array([6.63609766, 3.33058201, 74.35197351]), up=np.array([0.0, 0.0, 1.0]),
+                                 fov=0.5)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = np.divmod(np.arange(24 * 24), 24)
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit.all()
+
+
+def test_eye_in_a_planes_face_sees_past_the_plane(tmp_path):
+    """faces.igs (the shelled box's faces, unsewn), an extreme close-up (fov 0.05°, 120×120) from an eye exactly in
+    the plane of the rim's top (z = 20) at the inner wall x = 38, 2.7 from it: every ray leaves that plane at |n·D| ≤
+    2·10⁻⁴, and Embree met the rim face's mesh skirt at t = 0, then again every float32 step (9.4·10⁻⁵) on, until
+    `tracing.MAX_CANDIDATES` ran out: no pixel hit anything (all 14,400 fallbacks), where OCCT's first hit is the wall
+    for the lower half. After a repeat hit of a planar face the next query starts off its plane (`tracing._off_plane`):
+    every pixel-centre ray of a column and a row is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "faces.igs"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(120, 120, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective", eye=np.array([35.63703662, 14.6722148, 20.0]),
+                                 look_at=np.array([38.0, 13.38132202, 20.0]), up=np.array([0.0, 0.0, 1.0]), fov=0.05)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows = np.concatenate([np.arange(120), np.full(120, 90)])
+    cols = np.concatenate([np.full(120, 20), np.arange(120)])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit[rows >= 60].all()
+
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic"])
+def test_rays_by_a_spheres_pole_hit_its_sheet(tmp_path, projection):
+    """hollow_sphere_cut.step (a sphere shell r 20 / 19.9), extreme close-ups of the outer sphere's pole (0, 0, -20) from
+    3 away, 30° off the axis: fov 0.05° at 120×120, and orthographic 0.0069 high. From the pole's mesh fan the start
+    lies on the far side of the pole in u, where |S_u| → 0: Newton and the search turned u by wild steps onto the pole
+    (or off the seam and onto it from the other side) and stalled there at its distance from the ray, judged a miss, so
+    rays passing up to 0.0035 from the pole went through the outer sheet to the inner one, 0.114 behind OCCT's first hit
+    (624 and 555 of the 14,400 pixels). Such candidates are searched again from the meridian towards the mesh hit
+    (`tracing._off_pole`): every pixel-centre ray of a row and a column through the pole is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "hollow_sphere_cut.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(120, 120, 1)
+    pole = np.array([0.0, 0.0, -20.0])
+    eye = np.array([1.66077879, 0.0, -23.0400352])
+    if projection == "perspective":
+        camera = dataclasses.replace(scene.camera, projection="perspective", eye=eye, look_at=pole,
+                                     up=np.array([0.0, 0.0, 1.0]), fov=0.05)
+    else:
+        camera = dataclasses.replace(scene.camera, projection="orthographic", eye=eye, look_at=pole,
+                                     up=np.array([0.0, -1.0, 0.0]), fov=30.0, view_height=0.006928203264916526)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows = np.concatenate([np.arange(120), np.full(120, 0), np.full(120, 54)])
+    cols = np.concatenate([np.full(120, 60), np.arange(120), np.arange(120)])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit.all()
+
+
+def test_rays_skimming_a_side_face_from_just_off_it_hit_it(tmp_path):
+    """parts/filleted_block.step, a close-up (fov 0.2°, 120×120) from 2.7e-4 off its side face y = 0, looking along
+    it at 2.7: rays cross the face at |n·D| ~ 1e-4, where float32 rounding puts the face's mesh hits 0.003-0.007 from
+    the crossing along the ray, beyond the near-mesh-hit test's reach (`tracing.GRAZING_ALLOWANCE` caps its 1/|n·D|
+    growth): 600 rays were left unresolved and went on to the fillet 14 behind OCCT's first hit, and every ray meeting
+    the face was flagged a fallback (1,080: Embree met its plane again at each query). A planar face is one sheet: the
+    reach is unbounded there, and after a repeat hit the next query starts off its plane (`tracing._off_plane`). Every
+    pixel-centre ray of the middle column and the top row is OCCT's `PerformNearest`, none a fallback; validate at
+    320×180 passed after the fix (max 0.0024 px), failed before (1,080 pixels not the first hit)."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = Path(__file__).resolve().parents[1] / "parts" / "filleted_block.step"
+    scene = load_scene(path).with_image(120, 120, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([18.960001919428443, -0.00026925824202798324, 8.106377341937101]),
+                                 look_at=np.array([21.652584339708277, 0.0, 8.106377341937101]),
+                                 up=np.array([0.0, 0.0, 1.0]), fov=0.2)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows = np.concatenate([np.arange(120), np.zeros(120, dtype=int)])
+    cols = np.concatenate([np.full(120, 60), np.arange(120)])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert not hits.fallback.any()
+    assert np.count_nonzero(hits.patch == 7) > 60  # the side face fills the upper part of the view

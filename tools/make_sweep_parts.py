@@ -89,6 +89,11 @@ Seventh sweep (far coordinates, exact axis views, thin and sloppy faces, sheets)
   oversized_surface.step  a 40 × 30 trimmed piece (with a hole) of a bicubic surface 10,000 across, beside a box
   slit.step            two blocks 0.001 apart (not fused): a slit seen along its length, a cylinder behind it
   dense_net.step       a scanned-looking bicubic face, 48 × 48 control points with bumps, and a hole
+Eighth sweep (extreme close-ups; new surface kinds):
+  rational_extrusion.step  a surface of linear extrusion of a rational degree-7 curve (weights 0.2 to 6)
+  periodic_trimmed.step  a RectangularTrimmedSurface of a u-periodic B-spline tube, its u window across the period's end
+  touching_holes.step  a plate with two holes whose rims touch at a point, a third tangent to the second
+  thin_wide.step       a wall 100 long and 1e-5 thick on a base: a 100 × 1e-5 face seen face-on
 """
 
 from __future__ import annotations
@@ -761,10 +766,9 @@ def tiny_on_huge():
     return BRepAlgoAPI_Fuse(fused, _cylinder(-4, 2, 0, (0, 0, 1), 0.02, 0.3)).Shape()
 
 
-def periodic_bspline():
-    """A tube-like face on a B-spline surface periodic in u (Geom_BSplineSurface.SetUPeriodic), wavy radius,
-    bicubic; OCCT keeps it periodic through STEP."""
-    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+def _periodic_tube():
+    """The wavy bicubic tube surface of `periodic_bspline`: a Geom_BSplineSurface periodic in u (period 8, knots 0..8),
+    v from 0 to 1 (32 along z)."""
     from OCP.Geom import Geom_BSplineSurface
     from OCP.collections import Array1_double, Array1_int, Array2_gp_Pnt
     from OCP.gp import gp_Pnt
@@ -783,8 +787,15 @@ def periodic_bspline():
     vk, vm = Array1_double(1, 2), Array1_int(1, 2)
     vk.SetValue(1, 0.0), vk.SetValue(2, 1.0)
     vm.SetValue(1, nv), vm.SetValue(2, nv)
-    surface = Geom_BSplineSurface(net, uk, vk, um, vm, 3, nv - 1, True, False)
-    return BRepBuilderAPI_MakeFace(surface, 1e-7).Face()
+    return Geom_BSplineSurface(net, uk, vk, um, vm, 3, nv - 1, True, False)
+
+
+def periodic_bspline():
+    """A tube-like face on a B-spline surface periodic in u (Geom_BSplineSurface.SetUPeriodic), wavy radius,
+    bicubic; OCCT keeps it periodic through STEP."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+
+    return BRepBuilderAPI_MakeFace(_periodic_tube(), 1e-7).Face()
 
 
 def write_mirrored_assembly(path: Path) -> None:
@@ -1478,6 +1489,65 @@ def dense_net():
     return BRepAlgoAPI_Cut(face, _cylinder(25, 35, -20, (0, 0, 1), 6.0, 40.0)).Shape()
 
 
+
+# --- Eighth sweep: rational extrusions, rectangular trims across a period, pinched holes, thin wide faces. ---------
+
+def rational_extrusion():
+    """A surface of linear extrusion (Geom_SurfaceOfLinearExtrusion, from BRepPrimAPI_MakePrism of an edge) of a
+    rational degree-7 B-spline curve (one span, 8 poles, weights 0.2 to 6): an open wavy wall 30 high, tilted."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakePrism
+    from OCP.Geom import Geom_BSplineCurve
+    from OCP.collections import Array1_double, Array1_gp_Pnt, Array1_int
+    from OCP.gp import gp_Pnt, gp_Vec
+
+    points = [(0.0, 0.0, 0.0), (8.0, 14.0, 0.0), (16.0, -10.0, 0.0), (24.0, 12.0, 0.0), (32.0, -14.0, 0.0),
+              (40.0, 9.0, 0.0), (48.0, -6.0, 0.0), (56.0, 3.0, 0.0)]
+    weights = [1.0, 0.2, 6.0, 0.5, 3.0, 0.3, 2.0, 1.0]
+    poles, w = Array1_gp_Pnt(1, len(points)), Array1_double(1, len(points))
+    for k, (p, weight) in enumerate(zip(points, weights)):
+        poles.SetValue(k + 1, gp_Pnt(*p))
+        w.SetValue(k + 1, weight)
+    kv, mv = Array1_double(1, 2), Array1_int(1, 2)
+    kv.SetValue(1, 0.0), kv.SetValue(2, 1.0)
+    mv.SetValue(1, 8), mv.SetValue(2, 8)
+    curve = Geom_BSplineCurve(poles, w, kv, mv, 7)
+    return BRepPrimAPI_MakePrism(BRepBuilderAPI_MakeEdge(curve).Edge(), gp_Vec(4.0, 3.0, 30.0)).Shape()
+
+
+def periodic_trimmed():
+    """A face on a Geom_RectangularTrimmedSurface of `periodic_bspline`'s tube (periodic in u, period 8) trimmed to
+    u from 6.5 to 9.5: across the period's end (u = 8 ≡ 0), a 135° window of the tube, v from 0.2 to 0.8."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_RectangularTrimmedSurface
+
+    trimmed = Geom_RectangularTrimmedSurface(_periodic_tube(), 6.5, 9.5, 0.2, 0.8)
+    return BRepBuilderAPI_MakeFace(trimmed, 1e-7).Face()
+
+
+def touching_holes():
+    """A 60 × 40 × 3 plate drilled by two holes (r 6) whose rims touch at one point (centres 12 apart), and a third
+    (r 4) tangent to the second's rim from outside on the other side: inner loops touching each other."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+
+    plate = BRepPrimAPI_MakeBox(60.0, 40.0, 3.0).Shape()
+    for x, y, r in ((18.0, 20.0, 6.0), (30.0, 20.0, 6.0), (40.0, 20.0, 4.0)):
+        plate = BRepAlgoAPI_Cut(plate, _cylinder(x, y, -5.0, (0, 0, 1), r, 13.0)).Shape()
+    return plate
+
+
+def thin_wide():
+    """A box 100 long, 1e-5 thick and 10 high standing on a 20 × 20 × 2 base: a face 100 × 1e-5 (its top) to be seen
+    face-on, from above, and its two 100 × 10 sides 1e-5 apart."""
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Fuse
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.gp import gp_Pnt
+
+    wall = BRepPrimAPI_MakeBox(gp_Pnt(-40.0, 10.0, 2.0), 100.0, 1e-5, 10.0).Shape()
+    return BRepAlgoAPI_Fuse(BRepPrimAPI_MakeBox(20.0, 20.0, 2.0).Shape(), wall).Shape()
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -1554,6 +1624,10 @@ PARTS = {
     "oversized_surface.step": lambda p: write_step(oversized_surface(), p),
     "slit.step": lambda p: write_step(slit(), p),
     "dense_net.step": lambda p: write_step(dense_net(), p),
+    "rational_extrusion.step": lambda p: write_step(rational_extrusion(), p),
+    "periodic_trimmed.step": lambda p: write_step(periodic_trimmed(), p),
+    "touching_holes.step": lambda p: write_step(touching_holes(), p),
+    "thin_wide.step": lambda p: write_step(thin_wide(), p),
 }
 
 

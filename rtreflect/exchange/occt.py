@@ -70,6 +70,10 @@ TRIM_MAX_ROUNDS = 14
 #: first parameter count as starting there (`_into_pcurves_period`): OCCT's parameters agree to its tolerances (1e-9
 #: of the domain at cut corners, `SIDE_SNAP`), far below it; a cut that is not a whole period away lies far above.
 PERIOD_SHIFT_SLACK = 1e-6
+#: A closed face's non-seam pcurves that pass its surface's domain by more than this fraction of its width wind round it
+#: more than once (`_over_periods`: the bottle's thread strips, 93 % past). Less is drift: converted pcurves ending at a
+#: pole (bottle.step's sphere face, 1.4 %), Rhino's fitted pcurves (trimmed.3dm, 0.02 %), the 2D boxes' gap (1e-7).
+WINDING_PAST = 0.05
 #: Faces beyond which a progress bar is shown while a model loads (small parts load in well under a second).
 PROGRESS_FACES = 200
 
@@ -257,9 +261,13 @@ def bspline_of_face(face) -> NurbsSurface:
     if not (np.isfinite([umin, umax, vmin, vmax]).all() and umax > umin and vmax > vmin):
         raise FaceError(f"its (u, v) range is empty or not finite ({umin:g}..{umax:g}, {vmin:g}..{vmax:g})")
 
-    def cut(lo, hi, first, last, periodic, period, knots):
+    u_lo, u_hi, v_lo, v_hi = _pcurves_range(face)
+
+    def cut(lo, hi, first, last, periodic, period, knots, closed, pcurves_lo, pcurves_hi):
         if periodic:
             hi = min(hi, lo + period)
+        elif closed and _past(pcurves_lo, pcurves_hi, first, last):  # winds round more than once: `_over_periods`
+            lo, hi = first, last
         else:  # the pcurves' bounds may pass the surface's by their tolerance
             lo, hi = max(lo, first), min(hi, last)
         return _snap_to_knots(lo, knots, hi - lo, period), _snap_to_knots(hi, knots, hi - lo, period)
@@ -268,8 +276,8 @@ def bspline_of_face(face) -> NurbsSurface:
     vk = np.fromiter(surface.VKnots(), float)
     u_period = surface.UPeriod() if surface.IsUPeriodic() else 0.0
     v_period = surface.VPeriod() if surface.IsVPeriodic() else 0.0
-    u0, u1 = cut(umin, umax, u_first, u_last, surface.IsUPeriodic(), u_period, uk)
-    v0, v1 = cut(vmin, vmax, v_first, v_last, surface.IsVPeriodic(), v_period, vk)
+    u0, u1 = cut(umin, umax, u_first, u_last, surface.IsUPeriodic(), u_period, uk, surface.IsUClosed(), u_lo, u_hi)
+    v0, v1 = cut(vmin, vmax, v_first, v_last, surface.IsVPeriodic(), v_period, vk, surface.IsVClosed(), v_lo, v_hi)
     whole = (u0, u1, v0, v1) == (u_first, u_last, v_first, v_last)
     clamped = (surface.UMultiplicity(1) == surface.UDegree() + 1 and surface.UMultiplicity(len(uk)) == surface.UDegree() + 1
                and surface.VMultiplicity(1) == surface.VDegree() + 1 and surface.VMultiplicity(len(vk)) == surface.VDegree() + 1)
@@ -297,6 +305,8 @@ def bspline_of_face(face) -> NurbsSurface:
     knots_v = _into_pcurves_period(np.fromiter(surface.VKnotSequence(), float), v0, v_period)
     knots_u, poles, weights = clean_knots(knots_u, p, poles, weights, 0)
     knots_v, poles, weights = clean_knots(knots_v, q, poles, weights, 1)
+    knots_u, poles, weights = _over_periods(knots_u, p, poles, weights, 0, u_lo, u_hi)
+    knots_v, poles, weights = _over_periods(knots_v, q, poles, weights, 1, v_lo, v_hi)
     for direction, knots, degree, count in (("u", knots_u, p, poles.shape[0]), ("v", knots_v, q, poles.shape[1])):
         problem = knot_vector_problem(knots, degree, count)  # the rules every reader applies
         if problem:
@@ -308,6 +318,73 @@ def bspline_of_face(face) -> NurbsSurface:
     if problem:
         raise FaceError(problem)
     return surface
+
+
+def _pcurves_range(face) -> tuple[float, float, float, float]:
+    """(u_min, u_max, v_min, v_max) of the face's pcurves but its seams' and poles' (``BndLib_Add2dCurve.AddOptimal``:
+    tight, not the control polygon's box; NaN without such an edge). Not ``BRepTools.UVBounds``, which clips them to a
+    B-spline surface's bounds. A seam's converted pcurves drift off the seam by the poles (sphere_hole.step: u = 1.518
+    against the side π/2; `_on_seam_side` puts them back), which is no second turn."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Curve2d
+    from OCP.Bnd import Bnd_Box2d
+    from OCP.BndLib import BndLib_Add2dCurve
+
+    box = Bnd_Box2d()
+    for edge in _edges_of(face):
+        if BRep_Tool.IsClosed_s(edge, face) or BRep_Tool.Degenerated_s(edge):
+            continue
+        curve = BRepAdaptor_Curve2d(edge, face)
+        BndLib_Add2dCurve.AddOptimal_s(curve.Curve(), curve.FirstParameter(), curve.LastParameter(), 0.0, box)
+    if box.IsVoid():
+        return (math.nan,) * 4
+    return box.GetXMin(), box.GetXMax(), box.GetYMin(), box.GetYMax()
+
+
+def _past(lo: float, hi: float, first: float, last: float) -> bool:
+    """Whether the pcurves' range ``lo``..``hi`` passes the domain ``first``..``last`` by more than `WINDING_PAST` of
+    its width: a face winding round its closed surface more than once (`_over_periods`)."""
+    reach = WINDING_PAST * (last - first)
+    return bool(np.isfinite(lo) and np.isfinite(hi) and (lo < first - reach or hi > last + reach))
+
+
+def _over_periods(knots: np.ndarray, degree: int, poles: np.ndarray, weights: np.ndarray, axis: int, lo: float,
+                  hi: float):
+    """A closed direction's surface repeated over the whole periods its pcurves ``lo``..``hi`` run through, where they
+    run past its domain: (knots, poles, weights), unchanged otherwise.
+
+    A face on a periodic surface may wind round it more than once: the bottle's thread faces (bottle.step, MakeBottle:
+    the thread's side strips on the neck's cylinder) have pcurves from u = 0.26 to 12.34, two turns. Open CASCADE's
+    conversion (``BRepBuilderAPI_NurbsConvert``) gives their cylinders a B-spline over one period and keeps the
+    pcurves, and `Segment` cuts a periodic one to a period at most: the second turn lay outside the domain, and rays
+    at it went on to the neck behind (a close-up of the thread: every pixel 0.33 behind OCCT's first hit). On a closed
+    direction (its first and last control rows equal, weights too) the surface is periodic with its domain's width:
+    copies shifted by whole periods, joined at knots of multiplicity ``degree`` (the shared row once), are the same
+    surface on the pcurves' whole range (`bspline_of_face` leaves such a closed direction uncut for it). A domain
+    the pcurves pass by no more than `WINDING_PAST` of its width (`_past`) is kept.
+    """
+    a, b = float(knots[0]), float(knots[-1])
+    width = b - a
+    if not _past(lo, hi, a, b):
+        return knots, poles, weights
+    clamped = np.count_nonzero(knots == a) == degree + 1 and np.count_nonzero(knots == b) == degree + 1
+    first, last = np.take(poles, 0, axis=axis), np.take(poles, -1, axis=axis)
+    scale = float(np.max(np.abs(poles)))
+    closed = (np.max(np.abs(first - last)) <= PERIOD_SHIFT_SLACK * scale
+              and np.allclose(np.take(weights, 0, axis=axis), np.take(weights, -1, axis=axis), rtol=1e-12, atol=0.0))
+    if not (clamped and closed):
+        return knots, poles, weights
+    k0 = math.floor((lo - a) / width + PERIOD_SHIFT_SLACK)
+    k1 = math.ceil((hi - a) / width - PERIOD_SHIFT_SLACK)
+    inner = knots[degree + 1:len(knots) - degree - 1]
+    parts, rows, row_weights = [np.full(degree + 1, a + k0 * width)], [], []
+    for j in range(k0, k1):
+        parts += [inner + j * width, np.full(degree if j < k1 - 1 else degree + 1, a + (j + 1) * width)]
+        skip = slice(None) if j == k0 else slice(1, None)  # the row shared with the copy before: once
+        index = np.arange(poles.shape[axis])[skip]
+        rows.append(np.take(poles, index, axis=axis))
+        row_weights.append(np.take(weights, index, axis=axis))
+    return np.concatenate(parts), np.concatenate(rows, axis=axis), np.concatenate(row_weights, axis=axis)
 
 
 def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge: bool = False,

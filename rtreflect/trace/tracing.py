@@ -381,6 +381,12 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     """
     n = len(prim)
     band = tessellation.chord_error + FLOAT32_SLACK * tessellation.extent  # per patch: `JUMP_LIMIT`'s chord error
+    # The reach of the near-mesh-hit test (`_near_mesh_hit`) per patch: unbounded on a planar face (`_net_planes`), one
+    # sheet the ray crosses once, so a converged point ahead on it is that crossing however far float32 rounding put
+    # the mesh hit: at grazing incidence that distance grows as 1/|n·D| past the test's `GRAZING_ALLOWANCE` (the sweep's
+    # filleted_block.step, a close-up at fov 0.2° from 2.7e-4 off its side face y = 0: rays at |n·D| ~ 1e-4 met the
+    # face's mesh 0.007 from their crossing, were left unresolved and went on to the fillet 14 behind, 600 pixels).
+    near_reach = np.where(_net_planes(tessellation, surfaces)[3], np.inf, band)
     pk = np.empty(n, dtype=np.int64)
     us, vs, ur, vr, tr, cosine = (np.empty(n) for _ in range(6))
     S, Su, Sv, normal = (np.empty((n, 3)) for _ in range(4))
@@ -388,7 +394,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     table = surfaces.table
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
     nurbs_kernel.refine_mesh_hits(
-        *table.args, table.scale, *tessellation.start_arrays, band, np.ascontiguousarray(prim, dtype=np.int64),
+        *table.args, table.scale, *tessellation.start_arrays, near_reach, np.ascontiguousarray(prim, dtype=np.int64),
         f64(b1), f64(b2), f64(O), f64(D), f64(tm), tessellation.extent, NEWTON_TOLERANCE, NEWTON_MAX_STEPS,
         JUMP_LIMIT, GRAZING_ALLOWANCE, surface_module.DEGENERATE_SINE, surface_module.VANISHING_PARTIAL,
         pk, us, vs, ur, vr, S, Su, Sv, tr, normal, cosine, conv, near, edge, degenerate)
@@ -409,7 +415,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     if len(stuck):
         tol = _search_tolerance(tm[stuck], tessellation.extent)
         u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
-        near2, t2 = _near_mesh_hit(d2, pk[stuck], O[stuck], D[stuck], tm[stuck], band)
+        near2, t2 = _near_mesh_hit(d2, pk[stuck], O[stuck], D[stuck], tm[stuck], near_reach)
         in2 = surfaces.on_face(pk[stuck], u2, v2)
         ur[stuck], vr[stuck], tr[stuck] = u2, v2, t2
         for have, new in zip(derivs[:3], d2[:3]):
@@ -463,7 +469,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         _over_closed_seam(surfaces, pn[go], u3, v3, d3, ok, edge3, O[ray], D[ray], tm[ray], tessellation.extent)
         _search_at_pole(surfaces, pn[go], un[go], vn[go], u3, v3, d3, ok, edge3, O[ray], D[ray], tm[ray],
                         tessellation.extent)
-        near3, t3 = _near_mesh_hit(d3, pn[go], O[ray], D[ray], tm[ray], band)
+        near3, t3 = _near_mesh_hit(d3, pn[go], O[ray], D[ray], tm[ray], near_reach)
         ok &= near3 & surfaces.on_face(pn[go], u3, v3)
         ok3 = np.zeros(len(seam), dtype=bool)
         ok3[go] = ok
@@ -473,6 +479,9 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
         restarted.append(won)
         seam, at, reach, tried = seam[~ok3], at[~ok3], reach[~ok3], np.column_stack([tried[~ok3], pn[~ok3]])
         last = gap[~ok3]
+    # A mesh hit by a pole that nothing above resolved onto its face: the search again from the meridian towards it.
+    restarted.append(_off_pole(tessellation, surfaces, np.flatnonzero(status != VALID), prim, O, D, tm, band, status, pk,
+                               ur, vr, tr, derivs))
     crossed = _crossing_on_face(tessellation, surfaces, gone, gone_patch, O, D, tm, us, vs, band, status, pk, ur, vr, tr,
                                 derivs)
     restarted.append(crossed)
@@ -540,6 +549,44 @@ def _may_win_restart(tessellation: Tessellation, surfaces: SurfaceSet, rows, pn,
 #: with the hit beside it, it converges in a few (a sphere cut in two: 20 reach the hit), as the second look's
 #: `secondlook.SHELL_RESCUE_STEPS` from its shell starts.
 POLE_RESCUE_STEPS = 60
+
+
+def _off_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, prim, O, D, tm, band, status, pk, ur, vr, tr,
+              derivs) -> np.ndarray:
+    """Candidates ``rows`` (not VALID) whose mesh hit lies on a triangle with a vertex on a pole of its face (a collapsed
+    side, `SurfaceSet.collapsed`): the search (`_rescue`) on that face from the meridian that leaves the pole towards the
+    mesh hit, off the pole by its first-order distance (`_meridian_towards`). In place where it converges near the mesh
+    hit, on the face: VALID, whatever the candidate was (a miss, unresolved). Returns the rows replaced.
+
+    By a pole |S_u| → 0, and from a mesh start on the far side of it Newton and the search turn u by steps so wild that
+    they run onto the pole, or off the seam and onto the pole from its other side, and stall there at the pole's
+    distance from the ray: the sweep's hollow_sphere_cut.step, close-ups of its outer sphere's pole (fov 0.05°, and
+    orthographic 0.0069 high), rays passing 0.0035 from the pole were judged to miss the outer sheet and went on to the
+    inner one 0.114 behind OCCT's first hit (624 and 555 of 14,400 pixels). From the meridian towards the point the
+    search has no u to turn.
+    """
+    if len(rows) == 0:
+        return rows
+    faces, vertex_uv, face_patch = tessellation.start_arrays
+    corners = faces[prim[rows]]  # (m, 3) vertex indices
+    k = np.repeat(face_patch[prim[rows]], 3)
+    cu, cv = vertex_uv[corners.ravel(), 0], vertex_uv[corners.ravel(), 1]
+    pu, pv = _meridian_towards(surfaces, k, cu, cv, np.repeat(O[rows] + tm[rows, None] * D[rows], 3, axis=0))
+    moved = ((pu != cu) | (pv != cv)).reshape(-1, 3)  # the corners on a pole (moved off it towards the mesh hit)
+    on = moved.any(axis=1)
+    first = np.argmax(moved, axis=1)
+    rows, pick = rows[on], (np.arange(len(moved)) * 3 + first)[on]
+    if len(rows) == 0:
+        return rows
+    un, vn, patch = pu[pick], pv[pick], k[pick]
+    tol = _search_tolerance(tm[rows], tessellation.extent)
+    u2, v2, d2, ok2 = _rescue(surfaces, patch, un, vn, O[rows], D[rows], tol, POLE_RESCUE_STEPS)[:4]
+    near2, t2 = _near_mesh_hit(d2, patch, O[rows], D[rows], tm[rows], band)
+    ok2 &= near2 & surfaces.on_face(patch, u2, v2)
+    won = rows[ok2]
+    _store(won, ok2, patch, u2, v2, t2, d2, pk, ur, vr, tr, derivs)
+    status[won] = VALID
+    return won
 
 
 def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points, O, D, tm, band, status, pk, ur, vr,
@@ -878,7 +925,11 @@ def _crossing_on_face(tessellation: Tessellation, surfaces: SurfaceSet, rows, pa
     s = np.concatenate([(c - root) / kappa, (c + root) / kappa])
     k2, O2, D2, tm2 = (np.concatenate([x, x]) for x in (patch, O, D, tm))
     starts_u, starts_v = _into_domain(surfaces, k2, np.tile(u, 2) + s * np.tile(du, 2), np.tile(v, 2) + s * np.tile(dv, 2))
-    u3, v3, d3, ok3 = refine(surfaces, k2, starts_u, starts_v, O2, D2, tm2 + s, tessellation.extent)
+    # Newton's tolerance is taken at the mesh hit's t, not at the predicted crossing's: where the sheet is nearly
+    # straight along the ray (κ → 0) s₋ runs off to ~1/κ, and a tolerance scaled by it accepted points far off the ray
+    # (the sweep's cone.step, a ray along a generator at |N·D| = 0.006: s = 4·10¹¹, tolerance 0.4, a hit stored 0.03
+    # off its ray where OCCT finds none). The kept point must lie within reach of the mesh hit anyway (below).
+    u3, v3, d3, ok3 = refine(surfaces, k2, starts_u, starts_v, O2, D2, tm2, tessellation.extent)
     near3, t3 = _near_mesh_hit(d3, k2, O2, D2, tm2, band)
     ok3 &= near3 & surfaces.on_face(k2, u3, v3)
     t3 = np.where(ok3, t3, np.inf)
@@ -1275,6 +1326,41 @@ def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values:
             spread_rows(target, rows, np.ascontiguousarray(value), picked, fill)
 
 
+def _off_plane(tessellation: Tessellation, surfaces: SurfaceSet, patch, previous, O, D, t_next, lift, skip):
+    """The next mesh queries' origin offsets (n, 3) or None (none yet): where a ray's mesh hit is on the same planar
+    face as its previous one (``previous``; None on the first query) and the next query's origin lies within float32
+    rounding (``skip``) of that plane, the origin is moved off the plane to ``skip`` on the side the ray heads for (on
+    its own side where it runs along the plane).
+
+    Embree meets a plane the ray skims again at each query `skip` farther on while the ray is within float32 rounding of
+    it, over 2 `skip` / |n·D| along it: the sweep's faces.igs (the shelled box's faces, unsewn), an extreme close-up (fov
+    0.05°) from an eye exactly in a rim face's plane (z = 20): every ray, at |n·D| ≤ 2·10⁻⁴, met the rim's mesh skirt
+    at t = 0, 9.4·10⁻⁵, 1.9·10⁻⁴, ... until `MAX_CANDIDATES` ran out: no pixel hit (all fallbacks) where OCCT's first
+    hit is the wall 2.69 on; filleted_block.step from 2.7·10⁻⁴ off its side face y = 0 (fov 0.2°): rays at |n·D| ~
+    10⁻⁴ met the face's mesh every 9.4·10⁻⁵ from 0.003 before their crossing, all 1,080 rays flagged fallbacks. A plane
+    meets the ray once, and two hits of it refined that crossing (Newton on a plane from any start; the near-mesh-hit
+    test is unbounded there, `_candidates`): a query origin moved past it by `skip` (the rounding Embree already has)
+    sees what lies beyond. Only after a repeat, so a coplanar face's mesh at the same crossing still comes first."""
+    if previous is None:
+        return lift
+    centre, normal, _, planar = _net_planes(tessellation, surfaces)
+    rows = np.flatnonzero((patch == previous) & planar[patch])
+    if len(rows) == 0:
+        return lift
+    k = patch[rows]
+    X = O[rows] + t_next[rows, None] * D[rows] + (0.0 if lift is None else lift[rows])
+    h = np.einsum("ij,ij->i", X - centre[k], normal[k])
+    c = np.einsum("ij,ij->i", D[rows], normal[k])
+    side = np.where(c != 0.0, np.sign(c), np.where(h != 0.0, np.sign(h), 1.0))
+    near = np.abs(h) < skip
+    rows, k, h, side = rows[near], k[near], h[near], side[near]
+    if len(rows) == 0:
+        return lift
+    lift = np.zeros((len(patch), 3)) if lift is None else lift.copy()
+    lift[rows] += (side * skip - h)[:, None] * normal[k]
+    return lift
+
+
 def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: SurfaceSet,
           origins: np.ndarray, directions: np.ndarray, clock: StageClock = NULL_CLOCK,
           max_distance: np.ndarray | None = None, clear: bool = True) -> Hits:
@@ -1293,6 +1379,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     rays, start, limit = np.arange(n), None, far
     # Past a mesh hit by float32 rounding of the scene's largest coordinates, with margin.
     skip = float32_rounding(tessellation)
+    # Per open ray: the previous mesh hit's face, and the query origin's offset off planes the ray skims (`_off_plane`).
+    last, lift = np.full(n, -1, dtype=np.int64), None
     slack = FLOAT32_SLACK * tessellation.extent
     crossing = np.zeros(n, dtype=bool)  # the kept hit is a `_crossing_on_face` one
     with clock.stage("clearance cones"):  # built once the BVH has traced enough rays to repay them
@@ -1307,17 +1395,22 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
                 mesh = accelerator.intersect(O, D, max_distance)
             else:  # beyond the last mesh hit: an any-hit test first, the full query only where it finds something
                 shifted = O + start[:, None] * D
+                if lift is not None:
+                    shifted += lift
                 some = accelerator.occluded(shifted, D, limit - start)
                 if not some.any():  # the common case (no sheet behind the first): no empty gathers and query
                     rays = rays[:0]
                     break
-                rays, O, D, shifted, start, limit = (x[some] for x in (rays, O, D, shifted, start, limit))
+                rays, O, D, shifted, start, limit, last = (x[some] for x in (rays, O, D, shifted, start, limit, last))
+                lift = None if lift is None else lift[some]
                 mesh = accelerator.intersect(shifted, D, limit - start)
                 mesh = mesh._replace(t=mesh.t + start)
         found = mesh.prim >= 0
         if not found.all():
             rays, O, D = rays[found], np.compress(found, O, axis=0), np.compress(found, D, axis=0)  # ~4× numpy's O[found]
             mesh = MeshHits(*(x[found] for x in mesh))
+            last = last[found]
+            lift = None if lift is None else lift[found]
         if len(rays) == 0:
             break
         # The rays still open are every ray in order (the first query, all found): slices, not index arrays.
@@ -1361,7 +1454,10 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             # Where the mesh around the hit's triangle provably leaves the segment clear (`clearance`), the any-hit
             # test would find nothing: not asked. (Not after the last query: a ray still open there is a fallback.)
             cones.drop(O, D, mesh.prim, nxt, limit, go)
-        rays, start, limit = rays[go], nxt[go], limit[go]
+        hit_patch = tessellation.face_patch[mesh.prim]
+        lift = _off_plane(tessellation, surfaces, hit_patch, last if start is not None else None, O, D, nxt, lift, skip)
+        rays, start, limit, last = rays[go], nxt[go], limit[go], hit_patch[go]
+        lift = None if lift is None else lift[go]
     if start is None:  # no mesh hit at all (the first query broke off): the rows are still unwritten
         _put_rows(hits.rows(), np.zeros(0, dtype=np.int64), (np.zeros((0, 3)),) * 4 + (np.zeros((0, 4)),), slice(None),
                   np.nan)
