@@ -578,7 +578,14 @@ def _off_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, prim, O, D
     rows, pick = rows[on], (np.arange(len(moved)) * 3 + first)[on]
     if len(rows) == 0:
         return rows
-    un, vn, patch = pu[pick], pv[pick], k[pick]
+    return _search_off_pole(tessellation, surfaces, rows, k[pick], pu[pick], pv[pick], O, D, tm, band, status, pk, ur,
+                            vr, tr, derivs)
+
+
+def _search_off_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, patch, un, vn, O, D, tm, band, status, pk,
+                     ur, vr, tr, derivs) -> np.ndarray:
+    """The search (`_rescue`, `POLE_RESCUE_STEPS`) for rays ``rows`` on faces ``patch`` from (un, vn) off a pole; in
+    place where it converges near the mesh hit, on the face (VALID). Returns the rows replaced."""
     tol = _search_tolerance(tm[rows], tessellation.extent)
     u2, v2, d2, ok2 = _rescue(surfaces, patch, un, vn, O[rows], D[rows], tol, POLE_RESCUE_STEPS)[:4]
     near2, t2 = _near_mesh_hit(d2, patch, O[rows], D[rows], tm[rows], band)
@@ -611,14 +618,7 @@ def _across_pole(tessellation: Tessellation, surfaces: SurfaceSet, rows, points,
     if len(rows) == 0:
         return rows
     un, vn = _meridian_towards(surfaces, pn, un, vn, O[rows] + tm[rows, None] * D[rows])
-    tol = _search_tolerance(tm[rows], tessellation.extent)
-    u2, v2, d2, ok2 = _rescue(surfaces, pn, un, vn, O[rows], D[rows], tol, POLE_RESCUE_STEPS)[:4]
-    near2, t2 = _near_mesh_hit(d2, pn, O[rows], D[rows], tm[rows], band)
-    ok2 &= near2 & surfaces.on_face(pn, u2, v2)
-    won = rows[ok2]
-    _store(won, ok2, pn, u2, v2, t2, d2, pk, ur, vr, tr, derivs)
-    status[won] = VALID
-    return won
+    return _search_off_pole(tessellation, surfaces, rows, pn, un, vn, O, D, tm, band, status, pk, ur, vr, tr, derivs)
 
 
 #: Parameters along a pole's collapsed side that `_meridian_towards` compares (a meridian every 1/64 of the range).
