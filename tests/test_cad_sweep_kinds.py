@@ -887,3 +887,31 @@ def test_rays_skimming_a_side_face_from_just_off_it_hit_it(tmp_path):
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
     assert not hits.fallback.any()
     assert np.count_nonzero(hits.patch == 7) > 60  # the side face fills the upper part of the view
+
+
+@pytest.mark.parametrize("eye, fov, row, col", [((11.0, -16.0, 15.0), 0.5, 64, 60),
+                                                ((12.094, -17.079, 13.549), 2.0, 92, 109)])
+def test_rays_by_a_cones_apex_keep_its_nearer_crossing(tmp_path, eye, fov, row, col):
+    """cone_apex_view.step (a cone r 15, height 25), close-ups of its apex from 2.4-2.8 away at 120×120: a ray passing
+    the apex within ~0.01 crosses the cone twice there, up to ~140° apart round the axis, and the mesh's fan, inside the
+    cone by the apex, meets it only on its way out, so Newton went to the exit; the second-order prediction of the
+    entry landed on the apex, from where Newton and the search ran to the seam (1,936 and 36 of the 14,400 pixels kept
+    the exit, 0.0006-0.05 behind OCCT's first hit). Such rays search from their crossings of the apex's tangent cone
+    (`tracing._nearer_by_pole`): every pixel-centre ray of a row and a column through the failing pixels is OCCT's
+    `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "cone_apex_view.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(120, 120, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective", eye=np.array(eye),
+                                 look_at=np.array([10.068, -18.306, 13.730]), up=np.array([0.0, 0.0, 1.0]), fov=fov)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows = np.concatenate([np.arange(120), np.full(120, row)])
+    cols = np.concatenate([np.full(120, col), np.arange(120)])
+    assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))

@@ -46,6 +46,11 @@ CLOSED_FRACTION = 1e-12
 #: Levenberg–Marquardt search (`trace.tracing._candidates`), never worse than the stop itself: the fraction only
 #: bounds how often the search runs.
 COLLAPSED_FRACTION = 1e-4
+#: Meridians `SurfaceSet.apexes` takes the directions of, along a collapsed side.
+APEX_MERIDIANS = 17
+#: A pole is an apex where those directions stray from a plane by more than this (rms sine): a smooth pole's lie in its
+#: tangent plane to rounding, a cone of half-angle α's at cos α.
+APEX_SINE = 1e-6
 #: (u, v) closer than this fraction of the domain to one of its sides lies on that side: a CAD reader's pcurves and
 #: mesh nodes meet the domain's sides only to Open CASCADE's tolerances (1e-16 on seams, 1e-9 at cut corners). The
 #: CAD reader snaps trim loops so (`exchange.occt`), the tracer reads a mesh node so near a collapsed side as on the
@@ -366,6 +371,45 @@ class SurfaceSet:
             P = surface.points
             for side, row in enumerate((P[0], P[-1], P[:, 0], P[:, -1])):
                 out[k, side] = np.linalg.norm(np.ptp(row, axis=0)) <= COLLAPSED_FRACTION * surface.size
+        return out
+
+    @cached_property
+    def poles(self) -> np.ndarray:
+        """Per patch (P, 4, 3): the point its side u = u₀, u = u₁, v = v₀, v = v₁ collapses to where it does
+        (`collapsed`: S at the side's middle), NaN elsewhere; all patches' in one evaluation."""
+        out = np.full((len(self.patches), 4, 3), np.nan)
+        patch, side = np.nonzero(self.collapsed)
+        if len(patch):
+            u0, u1, v0, v1 = self.domains(patch)
+            mid_u, mid_v = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
+            u = np.choose(side, [u0, u1, mid_u, mid_u])
+            v = np.choose(side, [mid_v, mid_v, v0, v1])
+            out[patch, side] = self.evaluate(patch, u, v).S
+        return out
+
+    @cached_property
+    def apexes(self) -> np.ndarray:
+        """Per patch (P, 4): whether its side u = u₀, u = u₁, v = v₀, v = v₁ collapses to an apex, a pole whose tangent
+        cone is no plane (a cone's tip; not a sphere's pole): the directions S_v (S_u) in which its `APEX_MERIDIANS`
+        meridians leave it, as unit vectors, stray from their best plane by more than `APEX_SINE` (the least singular
+        value over the root of their count); all sides in one evaluation."""
+        out = np.zeros(self.collapsed.shape, dtype=bool)
+        patch, side = np.nonzero(self.collapsed)
+        if len(patch) == 0:
+            return out
+        u0, u1, v0, v1 = self.domains(patch)
+        w = np.linspace(0.0, 1.0, APEX_MERIDIANS)
+        along_u = (u0[:, None] + w * (u1 - u0)[:, None])  # the meridians of a side v = v_p
+        along_v = (v0[:, None] + w * (v1 - v0)[:, None])  # ... of a side u = u_p
+        on_u = (side < 2)[:, None]
+        u = np.where(on_u, np.choose(side, [u0, u1, u0, u0])[:, None], along_u).ravel()
+        v = np.where(on_u, along_v, np.choose(side, [v0, v0, v0, v1])[:, None]).ravel()
+        d = self.evaluate(np.repeat(patch, APEX_MERIDIANS), u, v)
+        leave = np.where(np.repeat(on_u.ravel(), APEX_MERIDIANS)[:, None], d.Su, d.Sv).reshape(len(patch), -1, 3)
+        length = np.linalg.norm(leave, axis=2, keepdims=True)
+        unit = np.divide(leave, length, out=np.zeros_like(leave), where=length > 0)
+        least = np.linalg.svd(unit, compute_uv=False)[:, -1] / np.sqrt(APEX_MERIDIANS)
+        out[patch, side] = least > APEX_SINE
         return out
 
     @cached_property

@@ -826,7 +826,20 @@ def _other_root(tessellation: Tessellation, surfaces: SurfaceSet, O, D, status, 
 
 def _nearer_crossing(tessellation: Tessellation, surfaces: SurfaceSet, O, D, rays, pk, ur, vr, tr, derivs, normal,
                      cosine, aside, curvature: np.ndarray | None) -> np.ndarray:
-    """One round of `_other_root` over the valid hits ``rays``: the rays whose hit it replaced, in place."""
+    """One round of `_other_root` over the valid hits ``rays``: the rays whose hit it replaced, in place. The second-order
+    prediction first (`_nearer_on_parabola`), then, for the others by a pole, the pole's tangent cone
+    (`_nearer_by_pole`)."""
+    won = _nearer_on_parabola(tessellation, surfaces, O, D, rays, pk, ur, vr, tr, derivs, normal, cosine, aside,
+                              curvature)
+    rest = rays[~np.isin(rays, won, assume_unique=True)] if len(won) else rays
+    by_pole = _nearer_by_pole(tessellation, surfaces, O, D, rest, pk, ur, vr, tr, derivs, cosine)
+    aside[by_pole] = True
+    return np.concatenate([won, by_pole]) if len(by_pole) else won
+
+
+def _nearer_on_parabola(tessellation: Tessellation, surfaces: SurfaceSet, O, D, rays, pk, ur, vr, tr, derivs, normal,
+                        cosine, aside, curvature: np.ndarray | None) -> np.ndarray:
+    """`_nearer_crossing` where the sheet along the ray is a parabola to second order (`_other_root`)."""
     cap = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error  # per face: a shallow cap's |κ| ≥ (n·D)²/cap
     keep = np.abs(cosine[rays]) < OTHER_ROOT_COS
     # A shallow cap needs |κ| ≥ (n·D)²/2Cδ, and |κ| ≤ max(|κ1|, |κ2|)(1 − (n·D)²) (the principal curvatures bound
@@ -864,6 +877,7 @@ def _nearer_crossing(tessellation: Tessellation, surfaces: SurfaceSet, O, D, ray
     t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
     slack = FLOAT32_SLACK * tessellation.extent
     ok3 &= (t3 > 0) & (t3 < tr[rays] - slack) & surfaces.on_face(pk[rays], u3, v3)
+
     back = np.flatnonzero(~ok3)
     if len(back):
         rb = rays[back]
@@ -881,6 +895,109 @@ def _nearer_crossing(tessellation: Tessellation, surfaces: SurfaceSet, O, D, ray
     for have, new in zip(derivs[:3], d3[:3]):
         have[won] = new[ok3]
     return won
+
+
+def _nearer_by_pole(tessellation: Tessellation, surfaces: SurfaceSet, O, D, rays, pk, ur, vr, tr, derivs, cosine):
+    """`_nearer_crossing` for valid hits ``rays`` by an apex of their face (a pole whose tangent cone is no plane,
+    `SurfaceSet.apexes`): the search (`_rescue`, `POLE_RESCUE_STEPS`)
+    from the nearer of the ray's two crossings of the pole's tangent cone (`_tangent_cone_starts`); where it converges
+    on the face before the kept hit by more than float32 rounding it replaces it, in place. Returns those rays.
+
+    By a cone's apex the sheet is no parabola along the ray: its normal turns round the apex between the crossings,
+    and the mesh's fan there lies inside the surface, so a ray entering it by the apex meets the fan only on its way
+    out, and Newton from there goes to the exit (the sweep's cone_apex_view.step in close-ups: rays 0.0006-0.0075 from
+    the apex kept the exit up to 0.05 behind the entry, the two up to ~140° apart round the axis: 1,936 of 14,400
+    pixels at 120×120, fov 0.5°); the parabola's prediction lands on the pole, from where Newton and the search run to
+    the seam. Looked for where a pole lies within the kept hit's passage (the shell's reach over |n·D|, as the second
+    look's: `secondlook.SecondLook.suspects`), where a nearer crossing is left to this round.
+    """
+    has_apex = surfaces.apexes.any(axis=1)
+    if len(rays) == 0 or not has_apex.any():
+        return rays[:0]
+    rays = rays[has_apex[pk[rays]]]
+    if len(rays) == 0:
+        return rays
+    reach = 2.0 * OTHER_ROOT_CHORDS * tessellation.chord_error[pk[rays]] / np.maximum(np.abs(cosine[rays]),
+                                                                                       OTHER_ROOT_COS)
+    at, un, vn = _tangent_cone_starts(surfaces, pk[rays], O[rays], D[rays], derivs.S[rays], reach)
+    if len(at) == 0:
+        return at
+    slack = FLOAT32_SLACK * tessellation.extent
+    rb = rays[at]
+    tol = _search_tolerance(tr[rb], tessellation.extent)
+    u4, v4, d4, ok4 = _rescue(surfaces, pk[rb], un, vn, O[rb], D[rb], tol, POLE_RESCUE_STEPS)[:4]
+    t4 = np.einsum("ij,ij->i", d4.S - O[rb], D[rb])
+    ok4 &= (t4 > 0) & (t4 < tr[rb] - slack)
+    ok4[ok4] = surfaces.on_face(pk[rb[ok4]], u4[ok4], v4[ok4])
+    _store(rb[ok4], ok4, pk[rb], u4, v4, t4, d4, pk, ur, vr, tr, derivs)
+    return rb[ok4]
+
+
+def _tangent_cone_starts(surfaces: SurfaceSet, patch, O, D, X, reach):
+    """Starts for the crossings of rays whose hit X lies within ``reach`` of an apex of its face (a pole, `apexes`) with
+    the pole's tangent cone (`_nearer_by_pole`), where it crosses the cone twice: (positions of those rays, u, v) of
+    the nearer crossing (the farther one is where the kept hit lies).
+
+    To first order the surface by a pole A (a side v = v_p; u ↔ v) is its tangent cone: S(w, v_p + h) ≈ A + h e(w),
+    e = S_v(w, v_p) turned into the domain, h ≥ 0. The ray meets the half-line of meridian w where e(w)·(D × (O − A))
+    = 0: a root between two of `POLE_MERIDIANS` + 1 meridians, placed by linear interpolation, and there t D − h e =
+    A − O gives the ray's t and the parameter step h off the pole (least squares).
+    """
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    with np.errstate(invalid="ignore"):  # NaN: no pole on that side; a smooth pole's cone is its tangent plane
+        distance = np.where(surfaces.apexes[patch], np.linalg.norm(surfaces.poles[patch] - X[:, None], axis=2), np.nan)
+    which = np.argmin(np.nan_to_num(distance, nan=np.inf), axis=1)
+    nearest = np.nan_to_num(distance[np.arange(len(patch)), which], nan=np.inf)
+    found_at, found_u, found_v, found_t = [], [], [], []
+    w = np.linspace(0.0, 1.0, POLE_MERIDIANS + 1)
+    for s, (lo, hi, pole) in enumerate(((v0, v1, u0), (v0, v1, u1), (u0, u1, v0), (u0, u1, v1))):
+        rows = np.flatnonzero((which == s) & (nearest <= reach))
+        if len(rows) == 0:
+            continue
+        m, n = len(rows), len(w)
+        along = (lo[rows, None] + w[None] * (hi - lo)[rows, None]).ravel()  # the meridians' parameters
+        fixed = np.repeat(pole[rows], n)
+        on_u = s < 2  # a pole on a side u = u_p: its meridians run along u, parametrised by v
+        d = surfaces.evaluate(np.repeat(patch[rows], n), *((fixed, along) if on_u else (along, fixed)))
+        inward = 1.0 if s % 2 == 0 else -1.0
+        e = (d.Su if on_u else d.Sv) * inward
+        A = d.S[::n]
+        normal = np.cross(D[rows], O[rows] - A)  # e(w) in the plane through the ray and A: this is 0
+        side_of = np.einsum("ij,ij->i", e, np.repeat(normal, n, axis=0)).reshape(m, n)
+        r, j = np.nonzero((side_of[:, :-1] <= 0) != (side_of[:, 1:] <= 0))
+        f0, f1 = side_of[r, j], side_of[r, j + 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = np.nan_to_num(f0 / (f0 - f1))
+        grid = along.reshape(m, n)
+        at_w = grid[r, j] + share * (grid[r, j + 1] - grid[r, j])
+        k = rows[r]
+        ed = surfaces.evaluate(patch[k], *((pole[k], at_w) if on_u else (at_w, pole[k])))
+        e_root = (ed.Su if on_u else ed.Sv) * inward
+        # The ray O + tD and the half-line A + h e meet where (t, h) solve t D − h e = A − O (least squares).
+        Dk, Ok, Ak = D[k], O[k], A[r]
+        de, ee = np.einsum("ij,ij->i", Dk, e_root), np.einsum("ij,ij->i", e_root, e_root)
+        b1, b2 = np.einsum("ij,ij->i", Dk, Ak - Ok), np.einsum("ij,ij->i", e_root, Ak - Ok)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            det = de * de - ee  # |D| = 1
+            t = (-ee * b1 + de * b2) / det
+            h = (-de * b1 + b2) / det
+        ok = np.isfinite(t) & np.isfinite(h) & (h > 0) & (t > 0)
+        k, at_w, t, h = k[ok], at_w[ok], t[ok], h[ok]
+        off = np.where(s % 2 == 0, np.minimum(pole[k] + h, (u1 if on_u else v1)[k]),
+                       np.maximum(pole[k] - h, (u0 if on_u else v0)[k]))
+        found_at.append(k)
+        found_u.append(off if on_u else at_w)
+        found_v.append(at_w if on_u else off)
+        found_t.append(t)
+    if not found_at:
+        return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)
+    at, u, v, t = (np.concatenate(x) for x in (found_at, found_u, found_v, found_t))
+    order = np.lexsort((t, at))
+    at, u, v = at[order], u[order], v[order]
+    # A ray crossing the cone once crosses it where its kept hit lies: only the nearer of two crossings is a start.
+    first = np.concatenate([[True], at[1:] != at[:-1]])
+    twice = np.flatnonzero(first[:-1] & (at[1:] == at[:-1]))  # each ray's nearest, where it has another
+    return at[twice], u[twice], v[twice]
 
 
 def _crossing_on_face(tessellation: Tessellation, surfaces: SurfaceSet, rows, patch, O, D, tm, us, vs, band, status, pk,
