@@ -915,3 +915,38 @@ def test_rays_by_a_cones_apex_keep_its_nearer_crossing(tmp_path, eye, fov, row, 
     rows = np.concatenate([np.arange(120), np.full(120, row)])
     cols = np.concatenate([np.full(120, col), np.arange(120)])
     assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+
+
+def test_trim_runs_into_a_spheres_pole_along_its_cut_meridian(tmp_path):
+    """hollow_sphere_cut.step: the outer sphere's trim where the quarter cut's planes x = 0 and y = 0 meet it, up into
+    its pole. Open CASCADE's NURBS conversion refits that edge's pcurve, and by the pole (|S_u| → 0) the fit wavers in u,
+    up to 9.4e-4 off the plane within 0.2 of the pole, and its end at the pole keeps the unconverted u (3π/2 where its
+    other samples lie at 4.75): close-ups of the pole showed the cut face instead of the sphere (24 of 6,400 pixels at
+    80×80, fov 0.5°, ~1e-4 from the edge). The trim now follows the 3D edge where a pcurve strays from it
+    (`exchange.occt._strays_from_edge`) and runs into a pole along its meridian (`_along_into_pole`): every trim point
+    within 0.25 of the pole's axis lies on one of the two planes (closed form), and every pixel-centre ray of a row and
+    a column through the failing pixels is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "hollow_sphere_cut.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(80, 80, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective", eye=np.array([-1.1329, -0.9014, 21.3799]),
+                                 look_at=np.array([0.0, 0.0, 20.0]), up=np.array([0.0, 0.0, 1.0]), fov=0.5)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    for surface in renderer.surfaces.patches:
+        if surface.trim is None:
+            continue
+        loop = surface.trim.outer
+        points = surface.evaluate(loop[:, 0], loop[:, 1]).S
+        near_axis = (np.hypot(points[:, 0], points[:, 1]) < 0.25) & (np.abs(points[:, 2]) > 19.0)
+        off_planes = np.minimum(np.abs(points[near_axis, 0]), np.abs(points[near_axis, 1]))
+        assert np.all(off_planes <= 1e-9), (surface.name, off_planes.max(initial=0.0))
+    rows = np.concatenate([np.arange(80), np.full(80, 45)])
+    cols = np.concatenate([np.full(80, 49), np.arange(80)])
+    assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))

@@ -40,7 +40,7 @@ import numpy as np
 from ..errors import SceneError
 from ..geometry.knots import MIN_KNOT_SPAN, knot_vector_problem
 from ..geometry.patches import patch_problem
-from ..geometry.surfaces import SIDE_SNAP, NurbsSurface
+from ..geometry.surfaces import SIDE_SNAP, NurbsSurface, collapsed_sides
 
 #: What to install for CAD input (pyproject.toml's [cad] extra).
 CAD_EXTRA = "pip install 'rtreflect[cad]'"
@@ -62,6 +62,9 @@ MESH_ANGLE = 0.5
 #: Largest model-space distance between a trim polyline and its pcurve's image, relative to the part's
 #: diagonal: 1e-5 is 0.01 px when the part spans 1000 px, far below what a pixel shows.
 TRIM_TOLERANCE = 1e-5
+#: An edge's trim follows its 3D edge (samples projected onto the surface) where the pcurve's samples stray from the
+#: edge by more than this fraction of the trim tolerance (`_strays_from_edge`).
+STRAY_FRACTION = 0.1
 #: Segments each pcurve starts with before bisection (a curved edge needs a few to show its bend).
 TRIM_START_SEGMENTS = 8
 #: Bisection rounds at most: 8 · 2^14 points an edge is far beyond any real edge's need.
@@ -432,12 +435,16 @@ def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge
         uv = np.r_[uv, mids[bad]][order]
         mids = None
     tangents = None
+    degenerate = BRep_Tool.Degenerated_s(edge)
+    seam = BRep_Tool.IsClosed_s(edge, face) and not degenerate
+    if not (onto_edge or seam or degenerate):
+        onto_edge = _strays_from_edge(edge, surface, ts, uv, tolerance)
     # A pole edge has no 3D curve to follow; a seam's pcurves are the domain's sides (and projecting onto a seam
     # could land on either side): put there (`_on_seam_side`). A seam is a straight side: its chords are exact.
-    if BRep_Tool.IsClosed_s(edge, face) and not BRep_Tool.Degenerated_s(edge):
+    if seam:
         uv = _on_seam_side(uv, surface, _seam_axis(edge, face, surface))
         tangents = np.full((len(uv) - 1, 4), np.nan)
-    elif onto_edge and not BRep_Tool.Degenerated_s(edge):
+    elif onto_edge and not degenerate:
         curve3d = BRepAdaptor_Curve(edge)
         mids_t = 0.5 * (ts[:-1] + ts[1:]) if with_tangents else ts[:0]  # the midpoints too: `_hermite_tangents`
         target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(t)) for t in np.r_[ts, mids_t])])
@@ -460,11 +467,52 @@ def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge
             curve.D1(float(t), point, vector)
             duv[k] = vector.X(), vector.Y()
         tangents = _hermite_tangents(ts, uv, duv, mids)
+    if not degenerate:
+        uv = _along_into_pole(uv, surface)
     if edge.Orientation() == TopAbs_REVERSED:
         uv = uv[::-1]
         if tangents is not None:  # each segment run backwards: its end tangents swapped and negated
             tangents = -tangents[::-1][:, [2, 3, 0, 1]]
     return (uv, tangents) if with_tangents else uv
+
+
+def _strays_from_edge(edge, surface: NurbsSurface, ts: np.ndarray, uv: np.ndarray, tolerance: float) -> bool:
+    """Whether the pcurve's samples ``uv`` (at the edge's parameters ``ts``) lie farther than `STRAY_FRACTION` of the
+    trim ``tolerance`` from the 3D edge's points there: then the trim follows the edge (`_edge_samples`' ``onto_edge``).
+
+    The NURBS conversion refits a face's pcurves where it reparametrises its surface, and by a pole the fit strays
+    where |S_u| → 0 makes errors in u cheap (hollow_sphere_cut.step: the cut's meridian edge wavers up to 9.4e-4 off
+    its plane within 0.2 of the pole, where the original face's classifier holds it exactly: close-ups there showed
+    the cut face instead of the sphere in 3-38 of 6,400 pixels). Within the trim tolerance, but a trim can follow the
+    edge to its samples' accuracy, not the refit's.
+    """
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+
+    curve = BRepAdaptor_Curve(edge)
+    points = np.array([(p.X(), p.Y(), p.Z()) for p in (curve.Value(float(t)) for t in ts)])
+    return bool(np.linalg.norm(surface.evaluate(uv[:, 0], uv[:, 1]).S - points, axis=1).max(initial=0.0)
+                > STRAY_FRACTION * tolerance)
+
+
+def _along_into_pole(uv: np.ndarray, surface: NurbsSurface) -> np.ndarray:
+    """An edge's samples with an end on a pole (a collapsed side, `collapsed_sides`) given the parameter along that
+    side of the sample next to it: every parameter there is the same 3D point, and the pcurve's end takes whichever
+    (the unconverted face's, hollow_sphere_cut.step's meridian: u = 3π/2 at the pole where its other samples lie at
+    u = 4.75), which slants the trim's last segment across the face by the pole; the edge runs into the pole along
+    its meridian."""
+    if len(uv) < 2:
+        return uv
+    (u0, u1), (v0, v1) = surface.domain
+    sides = collapsed_sides(surface)
+    snap = SIDE_SNAP
+    uv = uv.copy()
+    for end, near in ((0, 1), (-1, -2)):
+        u, v = uv[end]
+        if (sides[2] and abs(v - v0) <= snap * (v1 - v0)) or (sides[3] and abs(v - v1) <= snap * (v1 - v0)):
+            uv[end, 0] = uv[near, 0]
+        elif (sides[0] and abs(u - u0) <= snap * (u1 - u0)) or (sides[1] and abs(u - u1) <= snap * (u1 - u0)):
+            uv[end, 1] = uv[near, 1]
+    return uv
 
 
 #: A segment's cubic Hermite piece is used only where its midpoint lies at most this fraction of the chord's midpoint

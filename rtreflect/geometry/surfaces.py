@@ -282,6 +282,14 @@ def net_plane(surface: NurbsSurface) -> tuple[np.ndarray, np.ndarray, float]:
     return centre, normal, float(np.abs((net - centre) @ normal).max(initial=0.0))
 
 
+def collapsed_sides(surface: "NurbsSurface") -> np.ndarray:
+    """(4,): whether the surface's sides u = u₀, u = u₁, v = v₀, v = v₁ are collapsed to a point (a pole), to
+    `COLLAPSED_FRACTION` of its net's size (`SurfaceSet.collapsed`)."""
+    P = surface.points
+    return np.array([np.linalg.norm(np.ptp(row, axis=0)) <= COLLAPSED_FRACTION * surface.size
+                     for row in (P[0], P[-1], P[:, 0], P[:, -1])])
+
+
 class SurfaceSet:
     """All patches of a scene, numbered from 0; evaluation by (patch, u, v) arrays."""
 
@@ -366,12 +374,7 @@ class SurfaceSet:
         """Per patch (P, 4): whether its sides u = u₀, u = u₁, v = v₀, v = v₁ are collapsed to a point, to
         `COLLAPSED_FRACTION` of its net's size (the bounding-box diagonal of the side's control row: the side's
         image lies in the row's convex hull). Newton that runs onto such a side has not left the face through it."""
-        out = np.zeros((len(self.patches), 4), dtype=bool)
-        for k, surface in enumerate(self.patches):
-            P = surface.points
-            for side, row in enumerate((P[0], P[-1], P[:, 0], P[:, -1])):
-                out[k, side] = np.linalg.norm(np.ptp(row, axis=0)) <= COLLAPSED_FRACTION * surface.size
-        return out
+        return np.array([collapsed_sides(surface) for surface in self.patches], dtype=bool).reshape(-1, 4)
 
     @cached_property
     def poles(self) -> np.ndarray:
