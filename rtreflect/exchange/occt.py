@@ -40,7 +40,7 @@ import numpy as np
 from ..errors import SceneError
 from ..geometry.knots import MIN_KNOT_SPAN, knot_vector_problem
 from ..geometry.patches import patch_problem
-from ..geometry.surfaces import SIDE_SNAP, NurbsSurface, collapsed_sides
+from ..geometry.surfaces import SIDE_SNAP, NurbsSurface
 
 #: What to install for CAD input (pyproject.toml's [cad] extra).
 CAD_EXTRA = "pip install 'rtreflect[cad]'"
@@ -437,7 +437,8 @@ def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge
     tangents = None
     degenerate = BRep_Tool.Degenerated_s(edge)
     seam = BRep_Tool.IsClosed_s(edge, face) and not degenerate
-    if not (onto_edge or seam or degenerate):
+    # Open CASCADE's edge tolerance bounds how far its pcurves stray from it: most edges need no look.
+    if not (onto_edge or seam or degenerate) and BRep_Tool.Tolerance_s(edge) > STRAY_FRACTION * tolerance:
         onto_edge = _strays_from_edge(edge, surface, ts, uv, tolerance)
     # A pole edge has no 3D curve to follow; a seam's pcurves are the domain's sides (and projecting onto a seam
     # could land on either side): put there (`_on_seam_side`). A seam is a straight side: its chords are exact.
@@ -495,22 +496,28 @@ def _strays_from_edge(edge, surface: NurbsSurface, ts: np.ndarray, uv: np.ndarra
 
 
 def _along_into_pole(uv: np.ndarray, surface: NurbsSurface) -> np.ndarray:
-    """An edge's samples with an end on a pole (a collapsed side, `collapsed_sides`) given the parameter along that
-    side of the sample next to it: every parameter there is the same 3D point, and the pcurve's end takes whichever
+    """An edge's samples with an end on a pole (a collapsed side, `NurbsSurface.collapsed`) given the parameter along
+    that side of the sample next to it: every parameter there is the same 3D point, and the pcurve's end takes whichever
     (the unconverted face's, hollow_sphere_cut.step's meridian: u = 3π/2 at the pole where its other samples lie at
     u = 4.75), which slants the trim's last segment across the face by the pole; the edge runs into the pole along
     its meridian."""
     if len(uv) < 2:
         return uv
     (u0, u1), (v0, v1) = surface.domain
-    sides = collapsed_sides(surface)
-    snap = SIDE_SNAP
-    uv = uv.copy()
-    for end, near in ((0, 1), (-1, -2)):
-        u, v = uv[end]
-        if (sides[2] and abs(v - v0) <= snap * (v1 - v0)) or (sides[3] and abs(v - v1) <= snap * (v1 - v0)):
+    su, sv = SIDE_SNAP * (u1 - u0), SIDE_SNAP * (v1 - v0)
+    copied = False
+    for end, near in ((0, 1), (-1, -2)):  # two points: plain floats (numpy's per-call cost is 10× the test's)
+        u, v = float(uv[end, 0]), float(uv[end, 1])
+        on_v = (abs(v - v0) <= sv, abs(v - v1) <= sv)
+        on_u = (abs(u - u0) <= su, abs(u - u1) <= su)
+        if not (any(on_v) or any(on_u)):
+            continue
+        collapsed = surface.collapsed
+        if not copied:
+            uv, copied = uv.copy(), True
+        if (on_v[0] and collapsed[2]) or (on_v[1] and collapsed[3]):
             uv[end, 0] = uv[near, 0]
-        elif (sides[0] and abs(u - u0) <= snap * (u1 - u0)) or (sides[1] and abs(u - u1) <= snap * (u1 - u0)):
+        elif (on_u[0] and collapsed[0]) or (on_u[1] and collapsed[1]):
             uv[end, 1] = uv[near, 1]
     return uv
 

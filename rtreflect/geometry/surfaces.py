@@ -179,6 +179,15 @@ class NurbsSurface:
         """This patch alone as the kernels' flat table (patch index 0)."""
         return kernel.PatchTable.of([self])
 
+    @cached_property
+    def collapsed(self) -> np.ndarray:
+        """(4,): whether the sides u = u₀, u = u₁, v = v₀, v = v₁ are collapsed to a point (a pole), to
+        `COLLAPSED_FRACTION` of the net's size (the bounding-box diagonal of the side's control row: the side's image
+        lies in the row's convex hull); `SurfaceSet.collapsed` of every patch."""
+        P = self.points
+        return np.array([np.linalg.norm(np.ptp(row, axis=0)) <= COLLAPSED_FRACTION * self.size
+                         for row in (P[0], P[-1], P[:, 0], P[:, -1])])
+
     @classmethod
     def bezier(cls, points: np.ndarray, weights: np.ndarray | None = None, name: str = "") -> "NurbsSurface":
         """A single (rational) Bézier patch on [0, 1]²."""
@@ -282,14 +291,6 @@ def net_plane(surface: NurbsSurface) -> tuple[np.ndarray, np.ndarray, float]:
     return centre, normal, float(np.abs((net - centre) @ normal).max(initial=0.0))
 
 
-def collapsed_sides(surface: "NurbsSurface") -> np.ndarray:
-    """(4,): whether the surface's sides u = u₀, u = u₁, v = v₀, v = v₁ are collapsed to a point (a pole), to
-    `COLLAPSED_FRACTION` of its net's size (`SurfaceSet.collapsed`)."""
-    P = surface.points
-    return np.array([np.linalg.norm(np.ptp(row, axis=0)) <= COLLAPSED_FRACTION * surface.size
-                     for row in (P[0], P[-1], P[:, 0], P[:, -1])])
-
-
 class SurfaceSet:
     """All patches of a scene, numbered from 0; evaluation by (patch, u, v) arrays."""
 
@@ -374,7 +375,7 @@ class SurfaceSet:
         """Per patch (P, 4): whether its sides u = u₀, u = u₁, v = v₀, v = v₁ are collapsed to a point, to
         `COLLAPSED_FRACTION` of its net's size (the bounding-box diagonal of the side's control row: the side's
         image lies in the row's convex hull). Newton that runs onto such a side has not left the face through it."""
-        return np.array([collapsed_sides(surface) for surface in self.patches], dtype=bool).reshape(-1, 4)
+        return np.array([surface.collapsed for surface in self.patches], dtype=bool).reshape(-1, 4)
 
     @cached_property
     def poles(self) -> np.ndarray:
