@@ -950,3 +950,29 @@ def test_trim_runs_into_a_spheres_pole_along_its_cut_meridian(tmp_path):
     rows = np.concatenate([np.arange(80), np.full(80, 45)])
     cols = np.concatenate([np.full(80, 49), np.arange(80)])
     assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+
+
+def test_rays_from_inside_a_sphere_meet_it_along_its_seam(tmp_path):
+    """sphere_hole.step (a drilled sphere, r 20) seen from inside, fov 150° at 120×120, eye (0, 8, -5) looking at
+    (0, 0, -20): every ray from inside a closed sphere meets it, yet 21 pixels along one column (its seam) met nothing.
+    BRepMesh cut the converted sphere at another period than its domain (nodes at u 1.526-7.809, the domain
+    1.571-7.854), so a strip along the domain's seam side had no triangles, nor a shell. A reader mesh reaching outside
+    the domain (`tessellation.OFF_DOMAIN`) gives way to the span grid: every pixel-centre ray of the column and a row
+    through it is OCCT's `PerformNearest`, and all hit."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "sphere_hole.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(120, 120, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective", eye=np.array([0.0, 8.0, -5.0]),
+                                 look_at=np.array([0.0, 0.0, -20.0]), up=np.array([0.0, 1.0, 0.0]), fov=150.0)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows = np.concatenate([np.arange(120), np.full(120, 10)])
+    cols = np.concatenate([np.full(120, 57), np.arange(120)])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit.all()

@@ -127,6 +127,10 @@ def grid_faces(nu: int, nv: int) -> np.ndarray:
 #: behind Open CASCADE's first hit); a circle cut in two chords would be a strip through the axis, along its normals.
 #: The span grid meshes such a face instead.
 COARSE_AREA = 0.25
+#: A reader's triangulation with a node farther than this fraction of the domain outside it was cut at another period
+#: of a closed face (sphere_hole.step's sphere: its nodes at u 1.526-7.809, its domain 1.571-7.854): it leaves a strip
+#: along the domain's seam side unmeshed, and rays there passed through the face. The span grid meshes such a face.
+OFF_DOMAIN = 1e-6
 #: A triangle lies along the surface when a corner's normal makes a cosine below this (60°) with its plane's normal
 #: (BRepMesh at `occt.MESH_ANGLE` = 0.5 rad stays within ~0.25 rad). Weighed by area: slivers (a drilled sphere's
 #: along its hole) and a cone's triangles at its apex (normals turning about a point) fail it on a sliver of area.
@@ -142,6 +146,10 @@ def reader_mesh(surface: NurbsSurface) -> tuple[np.ndarray, np.ndarray] | None:
     uv, faces = np.asarray(nodes, dtype=np.float64).reshape(-1, 2), np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
     if len(faces) == 0:
         return uv, faces
+    (u0, u1), (v0, v1) = surface.domain
+    slack = OFF_DOMAIN * np.array([u1 - u0, v1 - v0])
+    if np.any(uv < np.array([u0, v0]) - slack) or np.any(uv > np.array([u1, v1]) + slack):
+        return None
     points = surface.evaluate(uv[:, 0], uv[:, 1]).S
     a, b, c = (points[faces[:, k]] for k in range(3))
     cross = np.cross(b - a, c - a)
