@@ -955,3 +955,32 @@ def test_seam_mesh_hit_at_a_rays_tangent_point_is_refined_onto_its_entry(tmp_pat
     np.testing.assert_array_equal(hits.hit, crosses)
     expected = -b[crosses] - np.sqrt(discriminant[crosses])
     np.testing.assert_allclose(hits.t[crosses], expected, rtol=0, atol=POINT_TOLERANCE * renderer.tessellation.extent)
+
+
+def test_rays_skimming_a_curved_faces_skirt_in_a_plane_go_on_past_it(tmp_path):
+    """bspline_prism.step (a B-spline curve extruded 20 up, capped), an extreme close-up (fov 0.28°, 64×64) from 7.4e-6
+    under its top plane z = 20, aimed at the side wall's top edge: rays rise 1e-4 per unit and cross z = 20 where they
+    meet the wall. The wall's mesh skirt lies in the plane z = 20 beyond its top edge, and the rays just under it met
+    the same skirt triangle again every float32 step (9.2e-5) until `tracing.MAX_CANDIDATES` ran out: 62 fallbacks along
+    the edge's image. `_off_plane` lifted the next query off a planar face's plane only; the curved wall's triangle met
+    twice is now lifted past by its own plane. Every pixel-centre ray of rows 10–35 is OCCT's `PerformNearest`, none a
+    fallback."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "bspline_prism.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(64, 64, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([0.2246038566622386, -18.889519963489725, 19.999992626762552]),
+                                 look_at=np.array([0.1900036214554106, -18.824410158004554, 20.0]),
+                                 up=np.array([-0.434246037767454, -0.23066563644284058, -0.8707604394135542]),
+                                 fov=0.28401883617073664)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = (x.ravel() for x in np.mgrid[10:36, 0:64])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert not hits.fallback.any() and hits.hit.sum() > 500

@@ -1356,11 +1356,12 @@ def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values:
             spread_rows(target, rows, np.ascontiguousarray(value), picked, fill)
 
 
-def _off_plane(tessellation: Tessellation, surfaces: SurfaceSet, patch, previous, O, D, t_next, lift, skip):
-    """The next mesh queries' origin offsets (n, 3) or None (none yet): where a ray's mesh hit is on the same planar
-    face as its previous one (``previous``; None on the first query) and the next query's origin lies within float32
-    rounding (``skip``) of that plane, the origin is moved off the plane to ``skip`` on the side the ray heads for (on
-    its own side where it runs along the plane).
+def _off_plane(tessellation: Tessellation, surfaces: SurfaceSet, prim, previous, O, D, t_next, lift, skip):
+    """The next mesh queries' origin offsets (n, 3) or None (none yet): where a ray's mesh hit (triangle ``prim``) is on
+    the same planar face as its previous one (``previous``, its triangle; None on the first query), or on the same
+    triangle of a curved face, and the next query's origin lies within float32 rounding (``skip``) of that plane (the
+    face's, or the triangle's own), the origin is moved off the plane to ``skip`` on the side the ray heads for (on its
+    own side where it runs along the plane).
 
     Embree meets a plane the ray skims again at each query `skip` farther on while the ray is within float32 rounding of
     it, over 2 `skip` / |n·D| along it: the sweep's faces.igs (the shelled box's faces, unsewn), an extreme close-up (fov
@@ -1370,24 +1371,37 @@ def _off_plane(tessellation: Tessellation, surfaces: SurfaceSet, patch, previous
     10⁻⁴ met the face's mesh every 9.4·10⁻⁵ from 0.003 before their crossing, all 1,080 rays flagged fallbacks. A plane
     meets the ray once, and two hits of it refined that crossing (Newton on a plane from any start; the near-mesh-hit
     test is unbounded there, `_candidates`): a query origin moved past it by `skip` (the rounding Embree already has)
-    sees what lies beyond. Only after a repeat, so a coplanar face's mesh at the same crossing still comes first."""
+    sees what lies beyond. Only after a repeat, so a coplanar face's mesh at the same crossing still comes first.
+    A triangle is a plane too: a curved face's skirt lying in a neighbour's plane was met so (bspline_prism.step, a
+    close-up at fov 0.28° from 7.4·10⁻⁶ under its top plane z = 20, rays rising 10⁻⁴ per unit onto the side wall's top
+    edge: the wall's skirt triangle in z = 20 every 9.2·10⁻⁵ until the candidates ran out, 62 rays flagged fallbacks);
+    the same triangle twice has been refined twice from its points."""
     if previous is None:
         return lift
     centre, normal, _, planar = _net_planes(tessellation, surfaces)
-    rows = np.flatnonzero((patch == previous) & planar[patch])
+    patch = tessellation.face_patch[prim]
+    on_face = (patch == tessellation.face_patch[previous]) & planar[patch]
+    rows = np.flatnonzero(on_face | (prim == previous))
     if len(rows) == 0:
         return lift
     k = patch[rows]
+    centre, normal = centre[k], normal[k]
+    own = np.flatnonzero(~on_face[rows])  # a curved face's triangle met twice: its own plane
+    if len(own):
+        a, b, c = (tessellation.vertices[tessellation.faces[prim[rows[own]], i]] for i in range(3))
+        m = np.cross(b - a, c - a)
+        with np.errstate(invalid="ignore", divide="ignore"):  # a zero-area triangle: no plane, NaN drops it below
+            centre[own], normal[own] = a, m / np.linalg.norm(m, axis=1, keepdims=True)
     X = O[rows] + t_next[rows, None] * D[rows] + (0.0 if lift is None else lift[rows])
-    h = np.einsum("ij,ij->i", X - centre[k], normal[k])
-    c = np.einsum("ij,ij->i", D[rows], normal[k])
+    h = np.einsum("ij,ij->i", X - centre, normal)
+    c = np.einsum("ij,ij->i", D[rows], normal)
     side = np.where(c != 0.0, np.sign(c), np.where(h != 0.0, np.sign(h), 1.0))
     near = np.abs(h) < skip
-    rows, k, h, side = rows[near], k[near], h[near], side[near]
+    rows, normal, h, side = rows[near], normal[near], h[near], side[near]
     if len(rows) == 0:
         return lift
-    lift = np.zeros((len(patch), 3)) if lift is None else lift.copy()
-    lift[rows] += (side * skip - h)[:, None] * normal[k]
+    lift = np.zeros((len(prim), 3)) if lift is None else lift.copy()
+    lift[rows] += (side * skip - h)[:, None] * normal
     return lift
 
 
@@ -1409,7 +1423,7 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     rays, start, limit = np.arange(n), None, far
     # Past a mesh hit by float32 rounding of the scene's largest coordinates, with margin.
     skip = float32_rounding(tessellation)
-    # Per open ray: the previous mesh hit's face, and the query origin's offset off planes the ray skims (`_off_plane`).
+    # Per open ray: the previous mesh hit's triangle, and the query origin's offset off planes the ray skims (`_off_plane`).
     last, lift = np.full(n, -1, dtype=np.int64), None
     slack = FLOAT32_SLACK * tessellation.extent
     crossing = np.zeros(n, dtype=bool)  # the kept hit is a `_crossing_on_face` one
@@ -1484,9 +1498,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             # Where the mesh around the hit's triangle provably leaves the segment clear (`clearance`), the any-hit
             # test would find nothing: not asked. (Not after the last query: a ray still open there is a fallback.)
             cones.drop(O, D, mesh.prim, nxt, limit, go)
-        hit_patch = tessellation.face_patch[mesh.prim]
-        lift = _off_plane(tessellation, surfaces, hit_patch, last if start is not None else None, O, D, nxt, lift, skip)
-        rays, start, limit, last = rays[go], nxt[go], limit[go], hit_patch[go]
+        lift = _off_plane(tessellation, surfaces, mesh.prim, last if start is not None else None, O, D, nxt, lift, skip)
+        rays, start, limit, last = rays[go], nxt[go], limit[go], mesh.prim[go]
         lift = None if lift is None else lift[go]
     if start is None:  # no mesh hit at all (the first query broke off): the rows are still unwritten
         _put_rows(hits.rows(), np.zeros(0, dtype=np.int64), (np.zeros((0, 3)),) * 4 + (np.zeros((0, 4)),), slice(None),
