@@ -984,3 +984,30 @@ def test_rays_skimming_a_curved_faces_skirt_in_a_plane_go_on_past_it(tmp_path):
     rows, cols = (x.ravel() for x in np.mgrid[10:36, 0:64])
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
     assert not hits.fallback.any() and hits.hit.sum() > 500
+
+
+def test_finer_traces_nearer_hit_is_kept_beside_an_undecided_candidate(tmp_path):
+    """far_away.step (the filleted block and slab 25 m out), orthographic 0.0079 high (1e-4 of the part) onto a sphere
+    corner's silhouette, 64×64: rays entering the corner at |N·D| ~ 0.0075 passed the coarse mesh; the second look's
+    finer trace found OCCT's entry but also an unresolved candidate 1.1 past it, and a fallback's hits were dropped
+    whole: 43 rays kept no hit (flagged fallbacks). A valid hit nearer than the kept one is taken now, the ray still
+    flagged: every pixel-centre ray of rows 50–63, columns 0–15 is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "far_away.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(64, 64, 1)
+    camera = dataclasses.replace(scene.camera, projection="orthographic",
+                                 eye=np.array([24891.046697924714, -2957.404166445089, 1206.1623641688943]),
+                                 look_at=np.array([25008.216618497685, -2971.2912274359815, 1218.9432212279103]),
+                                 up=np.array([0.08966113175936247, 0.9688727614472255, 0.2307519308202165]),
+                                 view_height=0.007912013666206594)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = (x.ravel() for x in np.mgrid[50:64, 0:16])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit.sum() > 100
