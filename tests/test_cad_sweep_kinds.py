@@ -1035,3 +1035,32 @@ def test_close_up_of_a_closed_faces_seam_has_the_lines_of_both_sides(tmp_path):
     report = validate_scene(dataclasses.replace(scene, camera=camera))
     assert report.passed, report.reasons
     assert report.misses == 0 and report.points > 3000
+
+
+def test_rim_neighbours_grazing_crossing_is_found_from_its_rim_vertex(tmp_path):
+    """huge_inch.step (the filleted block ×10,000, in inches: a sphere corner of r 1000 mm, chord error 31), a close-up
+    at fov 0.39° (64×64) from 4.6 off the corner, inside its mesh's chord error, looking along the cylinder it meets:
+    the rays enter the corner at |N·D| 0.001–0.027, 1–23 before its rim with the cylinder, and meet no triangle of it
+    but the rim's, coincident with the cylinder's (which Embree returned: a miss). `_rim_neighbours` refined the corner
+    from its rim vertex, where Newton stopped short of the entry or on the domain's edge: 1,382 of 2,048 rays went on
+    to the part's far side, 5,500 behind OCCT's first hit. Where Newton fails there, the neighbour's crossings are
+    predicted (`_crossing_on_face`): every pixel-centre ray of every third row, columns 0–24, is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "huge_inch.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(64, 64, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([9989.079755036168, 904.3265020045636, 4147.381332983185]),
+                                 look_at=np.array([9989.079745573295, 999.9999999999877, 4147.381331573136]),
+                                 up=np.array([-0.2960847816386944, -1.5207846430012912e-08, 0.9551616627995317]),
+                                 fov=0.38513608079775136)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = (x.ravel() for x in np.mgrid[0:64:3, 0:25])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit.all() and (hits.t < 200.0).sum() > 150

@@ -294,7 +294,7 @@ def test_second_look_from_the_shell_goes_on_across_a_closed_seam(plate_ray_onto_
 
     renderer, origins, directions, expected = plate_ray_onto_fillet
     monkeypatch.setattr(tracing, "SEAM_TRIES", 0)
-    monkeypatch.setattr(tracing, "_rim_neighbours", lambda *args: np.zeros(0, dtype=np.int64))
+    monkeypatch.setattr(tracing, "_rim_neighbours", lambda *args: (np.zeros(0, dtype=np.int64),) * 2)
     coarse = tracing.trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
     assert coarse.t[0] > expected[0] + 1.0  # without the restart: the floor behind
     hits = renderer.trace(origins, directions)

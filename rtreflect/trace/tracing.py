@@ -499,7 +499,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     aside[dipped] = True
     curvature = np.full((n, 4), np.nan)
     _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside, curvature)
-    beside = _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band, aside)
+    beside, beside_crossed = _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band,
+                                             aside)
     moved = np.flatnonzero(aside)
     _normals(surfaces, pk, derivs, D, moved, normal, cosine, degenerate)
     curvature[moved] = np.nan  # found beside: not the point the curvatures were taken at
@@ -509,6 +510,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     crossed_rows[crossed] = status[crossed] == VALID  # (`_other_root` may have replaced it since: still on its sheet)
     crossed_rows[dipped] = True  # found off the mesh as `_crossing_on_face`'s: `trace` weighs it so
     crossed_rows[beside] = False  # another face's hit now: `trace` weighs it as any mesh-led one
+    crossed_rows[beside_crossed] = True  # ... but for one its predicted crossing found, as `_crossing_on_face`'s
     return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside, curvature,
                        crossed_rows)
 
@@ -1060,9 +1062,10 @@ def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray
 
 
 def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, status, pk, ur, vr, tr, derivs,
-                    band, aside) -> np.ndarray:
+                    band, aside) -> tuple[np.ndarray, np.ndarray]:
     """Candidates on a triangle at its face's rim (valid, missed or unresolved): the neighbouring face across the rim
-    refined too, in place (VALID where it wins). Returns the rows whose candidate it replaced.
+    refined too, in place (VALID where it wins). Returns the rows whose candidate it replaced, and those of them found
+    by `_crossing_on_face` (not led there by a mesh hit: `trace` weighs them as such).
 
     Another face's triangle can meet the ray at the mesh hit's own distance, to float32 rounding: where
     faces join (a reader's mesh with a row of slivers lying in the neighbouring face's plane, faces
@@ -1081,7 +1084,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     not: pixels there keep their face).
     """
     if not tessellation.has_rim_neighbours:  # no face has a neighbour (a single patch): nothing across any rim
-        return np.zeros(0, dtype=np.int64)
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     patch_of, uv_of, gap_of = tessellation.rim_neighbour
     # Not only under a valid hit: the next query skips the coincident triangle past a miss or an unresolved candidate
     # too, and there the neighbour's valid hit wins outright (blocks.3dm, a close-up at fov 0.05° up a scaled
@@ -1129,8 +1132,26 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     may = _may_win_in_hull(tessellation, surfaces, rays, pn, O, D, tm, kept, win_reach, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     if len(rays) == 0:
-        return rays
+        return rays, rays
     u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
+    predicted = np.zeros(len(rays), dtype=bool)  # found by `_crossing_on_face`
+    # Where Newton fails, the neighbour's sheet may still cross the ray nearby at grazing incidence: its crossings
+    # predicted from the start (`_crossing_on_face`, on copies of the rows). huge_inch.step, a close-up at fov 0.39°
+    # from 4.6 off a sphere corner (r 1000), inside its mesh's chord error (31): the rays meet the corner's mesh only at
+    # its rim, 1–23 past their entry at |N·D| 0.001–0.027, and Newton from the rim vertex stopped short of the entry or
+    # on the domain's edge: 1,382 of 2,048 rays went on to the part's far side, 5,500 behind OCCT's first hit.
+    fail = np.flatnonzero(~ok3)
+    if len(fail):
+        ra = rays[fail]
+        status3, tr3 = np.full(len(fail), MISS), np.full(len(fail), np.inf)
+        pk3, ur3, vr3 = pn[fail].copy(), u3[fail].copy(), v3[fail].copy()
+        d4 = SurfaceDerivatives(*(x[fail] for x in d3[:3]))  # copies, written where a crossing is found
+        got = _crossing_on_face(tessellation, surfaces, np.arange(len(fail)), pn[fail], O[ra], D[ra], tm[ra], un[fail],
+                                vn[fail], band, status3, pk3, ur3, vr3, tr3, d4)
+        take = fail[got]
+        u3[take], v3[take], ok3[take], predicted[take] = ur3[got], vr3[got], True, True
+        for have, new in zip(d3[:3], d4[:3]):
+            have[take] = new[got]
     t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
     # Only the hit a triangle at the mesh hit's distance leads to (the one the next query skips): within
     # the neighbour's band of it (2 chord errors grown as 1/cos θ there), plus the skipped step.
@@ -1148,7 +1169,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     _store(won, pick, pn, u3, v3, t3, d3, pk, ur, vr, tr, derivs)
     status[won] = VALID
     aside[won] = True
-    return won
+    return won, won[predicted[pick]]
 
 
 def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, reach, slack) -> np.ndarray:
