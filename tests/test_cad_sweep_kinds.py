@@ -976,3 +976,209 @@ def test_rays_from_inside_a_sphere_meet_it_along_its_seam(tmp_path):
     cols = np.concatenate([np.full(120, 57), np.arange(120)])
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
     assert hits.hit.all()
+
+
+def test_candidate_on_a_rim_sliver_refines_the_face_across_whatever_its_status(tmp_path):
+    """blocks.3dm (a block instance of a capped cylinder scaled to an elliptic one), an extreme close-up (fov 0.054°,
+    64×64) from 0.61 below the cap's rim, looking up the wall (|n·D| ~ 1e-4) onto the cap face-on: every ray meets the
+    wall's mesh first, on a sliver at the rim in the cap's plane, where Newton on the wall is left unresolved (or
+    misses); the cap's coincident triangle is skipped by the next query, and `_rim_neighbours` refined the face across
+    the rim only under a valid hit: 1,073 rays hit nothing (1,063 flagged fallbacks) where Open CASCADE (the same placed
+    solids built from its primitives, `blocks_occt`) meets the cap, 6e-5 inside the rim for the last 10. The face across
+    is refined whatever the candidate's status now: every pixel-centre ray is OCCT's first hit, none a fallback."""
+    import dataclasses
+
+    from make_parts import write_step
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "blocks.3dm"
+    sweep.PARTS[path.name](path)
+    reference = tmp_path / "blocks.step"
+    write_step(sweep.blocks_occt(), reference)
+    scene = load_scene(path).with_image(64, 64, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([24.010403086050772, 15.378125336010575, 11.39406699803814]),
+                                 look_at=np.array([24.010343351416026, 15.378115171295123, 12.0]),
+                                 up=np.array([-0.31174514349762844, -0.9501657557117923, -4.6672068904849664e-05]),
+                                 fov=0.05369654569245449)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = np.divmod(np.arange(64 * 64), 64)
+    hits = assert_first_hits_are_occt(reference, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit.all() and not hits.fallback.any()
+
+
+def test_seam_mesh_hit_at_a_rays_tangent_point_is_refined_onto_its_entry(tmp_path):
+    """sphere.3dm (a Rhino sphere, r 15 about the origin, its seam the meridian y = 0, x > 0), an extreme close-up (fov
+    0.063°, 64×64) from 2.95 off the seam, looking along y at it: rays cross the sphere at |n·D| ≤ 0.003, the two
+    crossings ~0.09 apart about the seam, where the mesh (its seam vertices on the sphere) is met at the ray's tangent
+    point, the midpoint. Newton from there, where its Jacobian is singular, ended 2.6e-5 from the ray after its 8
+    steps, the search crawled off undecided: 252 rays showed background, flagged fallbacks (turned 0.3 rad off the seam,
+    the same view had none). Newton now goes on from where it stopped (`tracing._newton_on`): every pixel-centre ray
+    hits the sphere's nearer crossing (closed form), none a fallback."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import POINT_TOLERANCE
+
+    path = tmp_path / "sphere.3dm"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(64, 64, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([4.480831571963295, -2.948170591848605, 14.315102419061098]),
+                                 look_at=np.array([4.4808314838949235, 0.0, 14.315102137705344]),
+                                 up=np.array([0.7319312308420012, 8.689108986689624e-08, 0.6813785095804723]),
+                                 fov=0.062885631990952)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = np.divmod(np.arange(64 * 64), 64)
+    origins, directions = renderer.camera.rays(rows, cols)
+    hits = renderer.trace(origins, directions)
+    b = np.einsum("ij,ij->i", origins, directions)
+    discriminant = b * b - (np.einsum("ij,ij->i", origins, origins) - 15.0**2)
+    crosses = discriminant > 0.0
+    assert crosses.sum() > 1000 and not hits.fallback.any()
+    np.testing.assert_array_equal(hits.hit, crosses)
+    expected = -b[crosses] - np.sqrt(discriminant[crosses])
+    np.testing.assert_allclose(hits.t[crosses], expected, rtol=0, atol=POINT_TOLERANCE * renderer.tessellation.extent)
+
+
+def test_rays_skimming_a_curved_faces_skirt_in_a_plane_go_on_past_it(tmp_path):
+    """bspline_prism.step (a B-spline curve extruded 20 up, capped), an extreme close-up (fov 0.28°, 64×64) from 7.4e-6
+    under its top plane z = 20, aimed at the side wall's top edge: rays rise 1e-4 per unit and cross z = 20 where they
+    meet the wall. The wall's mesh skirt lies in the plane z = 20 beyond its top edge, and the rays just under it met
+    the same skirt triangle again every float32 step (9.2e-5) until `tracing.MAX_CANDIDATES` ran out: 62 fallbacks along
+    the edge's image. `_off_plane` lifted the next query off a planar face's plane only; the curved wall's triangle met
+    twice is now lifted past by its own plane. Every pixel-centre ray of rows 10–35 is OCCT's `PerformNearest`, none a
+    fallback."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "bspline_prism.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(64, 64, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([0.2246038566622386, -18.889519963489725, 19.999992626762552]),
+                                 look_at=np.array([0.1900036214554106, -18.824410158004554, 20.0]),
+                                 up=np.array([-0.434246037767454, -0.23066563644284058, -0.8707604394135542]),
+                                 fov=0.28401883617073664)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = (x.ravel() for x in np.mgrid[10:36, 0:64])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert not hits.fallback.any() and hits.hit.sum() > 500
+
+
+def test_finer_traces_nearer_hit_is_kept_beside_an_undecided_candidate(tmp_path):
+    """far_away.step (the filleted block and slab 25 m out), orthographic 0.0079 high (1e-4 of the part) onto a sphere
+    corner's silhouette, 64×64: rays entering the corner at |N·D| ~ 0.0075 passed the coarse mesh; the second look's
+    finer trace found OCCT's entry but also an unresolved candidate 1.1 past it, and a fallback's hits were dropped
+    whole: 43 rays kept no hit (flagged fallbacks). A valid hit nearer than the kept one is taken now, the ray still
+    flagged: every pixel-centre ray of rows 50–63, columns 0–15 is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "far_away.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(64, 64, 1)
+    camera = dataclasses.replace(scene.camera, projection="orthographic",
+                                 eye=np.array([24891.046697924714, -2957.404166445089, 1206.1623641688943]),
+                                 look_at=np.array([25008.216618497685, -2971.2912274359815, 1218.9432212279103]),
+                                 up=np.array([0.08966113175936247, 0.9688727614472255, 0.2307519308202165]),
+                                 view_height=0.007912013666206594)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = (x.ravel() for x in np.mgrid[50:64, 0:16])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit.sum() > 100
+
+
+def test_close_up_of_a_closed_faces_seam_has_the_lines_of_both_sides(tmp_path):
+    """sphere.3dm (one closed face, its seam the meridian y = 0, x > 0), a close-up at fov 0.19° of the seam at 320×180:
+    the contour grid's window took in the near probe points and seeds, which lie at both ends of u, so it spanned the
+    whole period and never narrowed: cells ~30× a pixel, and the analytic lines of one side of the seam were missing
+    (`validate`: 1,739 misses, 15.9 px, FAIL, where the render's hits are Open CASCADE's). Each side of the seam now
+    gets its own window (`contours._seam_split`): validate passes with every line on both sides."""
+    import dataclasses
+
+    from rtreflect.analysis.validate import validate_scene
+    from rtreflect.exchange.load import load_scene
+
+    path = tmp_path / "sphere.3dm"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(320, 180)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([12.055671799909666, 0.06472995415962002, -9.685406812466931]),
+                                 look_at=np.array([11.678003120838818, 0.0, -9.41404499190857]),
+                                 up=np.array([-0.5414347092976157, 0.5706464481876617, -0.6174229399193173]),
+                                 fov=0.18721414546389523)
+    report = validate_scene(dataclasses.replace(scene, camera=camera))
+    assert report.passed, report.reasons
+    assert report.misses == 0 and report.points > 3000
+
+
+def test_rim_neighbours_grazing_crossing_is_found_from_its_rim_vertex(tmp_path):
+    """huge_inch.step (the filleted block ×10,000, in inches: a sphere corner of r 1000 mm, chord error 31), a close-up
+    at fov 0.39° (64×64) from 4.6 off the corner, inside its mesh's chord error, looking along the cylinder it meets:
+    the rays enter the corner at |N·D| 0.001–0.027, 1–23 before its rim with the cylinder, and meet no triangle of it
+    but the rim's, coincident with the cylinder's (which Embree returned: a miss). `_rim_neighbours` refined the corner
+    from its rim vertex, where Newton stopped short of the entry or on the domain's edge: 1,382 of 2,048 rays went on
+    to the part's far side, 5,500 behind OCCT's first hit. Where Newton fails there, the neighbour's crossings are
+    predicted (`_crossing_on_face`): every pixel-centre ray of every third row, columns 0–24, is OCCT's `PerformNearest`."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from test_cad_hits import assert_first_hits_are_occt
+
+    path = tmp_path / "huge_inch.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(64, 64, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([9989.079755036168, 904.3265020045636, 4147.381332983185]),
+                                 look_at=np.array([9989.079745573295, 999.9999999999877, 4147.381331573136]),
+                                 up=np.array([-0.2960847816386944, -1.5207846430012912e-08, 0.9551616627995317]),
+                                 fov=0.38513608079775136)
+    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    rows, cols = (x.ravel() for x in np.mgrid[0:64:3, 0:25])
+    hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
+    assert hits.hit.all() and (hits.t < 200.0).sum() > 150
+
+
+def test_close_up_from_within_the_chord_error_seeds_the_contour_window(tmp_path):
+    """dense_net.step (a bumpy 48 × 48 bicubic face, chord error 0.62), a close-up of its edge x = 0 at fov 0.1° from
+    0.19 off the face: the coarse mesh stays outside the face there, so the seed rays that aim the contour grid's window
+    (`UlmetField.seed_uv`, then traced on the coarse mesh only) hit nothing, where the renderer's second look finds the
+    face: the window never zoomed, the analytic lines lay 130,000 px off, and `validate` at 320×180 compared none of
+    the 12 lines the render shows (a false FAIL; after the fix it passes, 2,895 points, 0 misses). The seeds are traced
+    as the renderer traces: half the seed rays hit, and the analytic lines cross the image (192×108 here)."""
+    import dataclasses
+
+    from rtreflect.analysis.contours import analytic_contours, field_of
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+
+    path = tmp_path / "dense_net.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).with_image(192, 108, 1)
+    camera = dataclasses.replace(scene.camera, projection="perspective",
+                                 eye=np.array([-0.13702600120979164, 17.335496501722222, -0.2438176019019809]),
+                                 look_at=np.array([0.0, 17.464159158342863, -0.3340430314080176]),
+                                 up=np.array([0.49473420368825133, 0.0799452663129129, 0.8653593600898469]),
+                                 fov=0.10048797552180194)
+    field = field_of(Renderer(resolve(dataclasses.replace(scene, camera=camera))))
+    assert len(field.seed_uv(0)) > 500
+    px = np.concatenate([polyline.px for line in analytic_contours(field).lines for polyline in line.polylines])
+    in_image = np.all((px >= 0.0) & (px <= [192.0, 108.0]), axis=1)
+    assert in_image.sum() > 500

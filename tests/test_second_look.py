@@ -286,13 +286,15 @@ def test_plate_ray_through_a_hole_meets_the_fillet_across_its_seam(plate_ray_ont
 
 
 def test_second_look_from_the_shell_goes_on_across_a_closed_seam(plate_ray_onto_fillet, monkeypatch):
-    """The same ray with the tracer's seam restarts switched off (`SEAM_TRIES` = 0: the coarse and the fine trace
+    """The same ray with the tracer's seam restarts and rim neighbours switched off (`SEAM_TRIES` = 0, no
+    `_rim_neighbours`, which refines the fillet across the rim of a missed candidate too: the coarse and the fine trace
     both go on to the hole's floor): the second look's start from the shell, the fillet's last rim box before its
     seam at u = 2π, must go on from the seam's other side too, and finds OCCT's hit."""
     from rtreflect.trace import tracing
 
     renderer, origins, directions, expected = plate_ray_onto_fillet
     monkeypatch.setattr(tracing, "SEAM_TRIES", 0)
+    monkeypatch.setattr(tracing, "_rim_neighbours", lambda *args: (np.zeros(0, dtype=np.int64),) * 2)
     coarse = tracing.trace(renderer.accelerator, renderer.tessellation, renderer.surfaces, origins, directions)
     assert coarse.t[0] > expected[0] + 1.0  # without the restart: the floor behind
     hits = renderer.trace(origins, directions)

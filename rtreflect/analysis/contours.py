@@ -105,18 +105,22 @@ class UlmetField:
     """f(u, v) and the visibility of contour points, for one scene's surfaces, camera, tubes and BVH."""
 
     def __init__(self, surfaces: SurfaceSet, tessellation: Tessellation, accelerator: Accelerator, camera: Camera,
-                 lights: TubeLights):
+                 lights: TubeLights, tracer=None):
         self.surfaces = surfaces
         self.tessellation = tessellation
         self.accelerator = accelerator
         self.camera = camera
         self.lights = lights
+        #: Camera rays (origins, directions) → `Hits` for `seed_uv`: the renderer's own trace where given (its second
+        #: look included), else the coarse `trace`.
+        self.tracer = tracer
         self._seeds = None  # `seed_uv`'s hits, traced on first use
 
     @classmethod
     def of(cls, renderer) -> "UlmetField":
-        """The field of a `render.Renderer`'s scene, sharing its patches, mesh, BVH, camera and tubes."""
-        return cls(renderer.surfaces, renderer.tessellation, renderer.accelerator, renderer.camera, renderer.lights)
+        """The field of a `render.Renderer`'s scene, sharing its patches, mesh, BVH, camera, tubes and trace."""
+        return cls(renderer.surfaces, renderer.tessellation, renderer.accelerator, renderer.camera, renderer.lights,
+                   renderer.trace)
 
     @property
     def levels(self) -> np.ndarray:
@@ -150,14 +154,21 @@ class UlmetField:
         return out.reshape(len(us), len(vs))
 
     def seed_uv(self, k: int) -> np.ndarray:
-        """(n, 2) (u, v) of patch k where camera rays on a coarse grid (`SEED_RAYS` across) hit it first."""
+        """(n, 2) (u, v) of patch k where camera rays on a coarse grid (`SEED_RAYS` across) hit it first.
+
+        Traced as the renderer traces its pixels (`tracer`): in a close-up from within the coarse mesh's chord error
+        of a face the coarse trace meets nothing there that its second look finds (dense_net.step, its edge at fov
+        0.1°, 320×180: no seed hit, the grid's window never zoomed, and `validate` compared no line of the 12 the render
+        shows, a false FAIL)."""
         if self._seeds is None:
             camera = self.camera
             step = max(camera.width, camera.height) / SEED_RAYS
             rows = np.arange(0.5 * step, camera.height, step).astype(int)
             cols = np.arange(0.5 * step, camera.width, step).astype(int)
             rows, cols = (a.ravel() for a in np.meshgrid(rows, cols, indexing="ij"))
-            hits = trace(self.accelerator, self.tessellation, self.surfaces, *camera.rays(rows, cols))
+            rays = camera.rays(rows, cols)
+            hits = (self.tracer(*rays) if self.tracer is not None
+                    else trace(self.accelerator, self.tessellation, self.surfaces, *rays))
             self._seeds = hits.patch[hits.hit], np.column_stack([hits.u, hits.v])[hits.hit]
         patch, uv = self._seeds
         return uv[patch == k]
@@ -262,8 +273,8 @@ class ModeField(UlmetField):
     """
 
     def __init__(self, surfaces: SurfaceSet, tessellation: Tessellation, accelerator: Accelerator, camera: Camera,
-                 lights: TubeLights, mode):
-        super().__init__(surfaces, tessellation, accelerator, camera, lights)
+                 lights: TubeLights, mode, tracer=None):
+        super().__init__(surfaces, tessellation, accelerator, camera, lights, tracer)
         self.mode = mode
 
     @property
@@ -305,7 +316,7 @@ def field_of(renderer) -> UlmetField:
     if isinstance(renderer.mode, ReflectionMode):
         return UlmetField.of(renderer)
     return ModeField(renderer.surfaces, renderer.tessellation, renderer.accelerator, renderer.camera, renderer.lights,
-                     renderer.mode)
+                     renderer.mode, renderer.trace)
 
 
 def eye_sees(scene, camera: Camera, R: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -378,9 +389,51 @@ class _Chains:
         self.ok = np.insert(self.ok, at, ok)
 
 
-def _grid_window(field: UlmetField, k: int) -> tuple[tuple[float, float, float, float], int, int]:
-    """The part (u0, u1, v0, v1) of patch k's domain the image can show, and grid points along u and v so that one
-    of its cells projects to about `GRID_CELL_PX` pixels.
+def _seam_split(field: UlmetField, k: int) -> list[tuple[float, float, float, float]]:
+    """Patch k's domain (u0, u1, v0, v1), or where the image shows it on both sides of a closed direction's seam
+    (`SurfaceSet.closed`), its two sides: split at the middle of the widest stretch of that parameter the image does
+    not show, for `_grid_window` to zoom into each.
+
+    One window round a seam's view spans the whole period (the near points lie at both of its ends), and is never
+    narrowed: its grid's cells were ~30× the pixel size in a close-up of a closed face's seam (sphere.3dm and
+    parts/trimmed.3dm's cylinder at fov 0.17–0.19°, 320×180: the analytic lines of one side missing, 1,500–1,700
+    misses and 16 px in `validate`, where the hits are Open CASCADE's). The shown parameters are the `PROBE` probe
+    points near the image and the seed rays' hits (`UlmetField.seed_uv`)."""
+    (u0, u1), (v0, v1) = field.surfaces.patches[k].domain
+    windows = [(u0, u1, v0, v1)]
+    closed = field.surfaces.closed[k]
+    if not closed.any():
+        return windows
+    size = np.array([field.camera.width, field.camera.height], dtype=np.float64)
+    margin = 0.25 * size.max()
+    us, vs = np.linspace(u0, u1, PROBE), np.linspace(v0, v1, PROBE)
+    uu, vv = np.meshgrid(us, vs, indexing="ij")
+    px, depth = field.project(np.full(uu.size, k), uu.ravel(), vv.ravel())
+    near = (depth > 0) & np.all((px >= -margin) & (px <= size + margin), axis=1)
+    shown = np.concatenate([np.column_stack([uu.ravel(), vv.ravel()])[near], field.seed_uv(k)])
+    for axis, (lo, hi) in enumerate(((u0, u1), (v0, v1))):
+        if not closed[axis] or len(shown) < 2:
+            continue
+        values = np.unique(shown[:, axis])
+        gaps = np.diff(values)
+        if len(gaps) == 0:
+            continue
+        widest = int(np.argmax(gaps))
+        # Across the seam the shown values are (values[0] − lo) + (hi − values[-1]) apart: split only where a stretch
+        # inside the domain is wider, i.e. the shown part straddles the seam.
+        if gaps[widest] <= (values[0] - lo) + (hi - values[-1]):
+            continue
+        cut = 0.5 * (values[widest] + values[widest + 1])
+        windows = [w for window in windows for w in (
+            ((window[0], cut, *window[2:]), (cut, *window[1:])) if axis == 0 else
+            ((*window[:2], window[2], cut), (*window[:3], cut)))]
+    return windows
+
+
+def _grid_window(field: UlmetField, k: int, window: tuple[float, float, float, float] | None = None,
+                 ) -> tuple[tuple[float, float, float, float], int, int]:
+    """The part (u0, u1, v0, v1) of patch k's domain (or of ``window`` in it, a side of a seam: `_seam_split`) the
+    image can show, and grid points along u and v so that one of its cells projects to about `GRID_CELL_PX` pixels.
 
     A `PROBE` × `PROBE` grid of the window (at first the whole domain) is projected; the probe points in front of
     the camera and within a quarter image of it are *near*. Where near neighbours lie more than that quarter image
@@ -391,7 +444,7 @@ def _grid_window(field: UlmetField, k: int) -> tuple[tuple[float, float, float, 
     analytic points missing in `validate`).
     """
     (u0, u1), (v0, v1) = field.surfaces.patches[k].domain
-    window = (u0, u1, v0, v1)
+    window = (u0, u1, v0, v1) if window is None else window
     size = np.array([field.camera.width, field.camera.height], dtype=np.float64)
     margin = 0.25 * size.max()
     seeds = field.seed_uv(k)
@@ -433,39 +486,40 @@ def _grid_window(field: UlmetField, k: int) -> tuple[tuple[float, float, float, 
 def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float]:
     """contourpy's level sets f = c_j on patch k's grid, as chains, with each chain's tube index."""
     (u0, u1), (v0, v1) = field.surfaces.patches[k].domain
-    (wu0, wu1, wv0, wv1), n_u, n_v = _grid_window(field, k)
-    # The knots are grid lines too: f is only as smooth as the surface across a knot, and a cell straddling one
-    # (where f bends sharply, a near-double knot) interpolates a crossing onto the wrong piece, whence the polish
-    # jumps to another branch or fails (the sweep's near_knots.step: spans 1e-6 wide, f's slope ×16 across u = 0.5,
-    # one branch of the outermost line missing, 4.5 px from the traced one, at 320×180).
-    breaks_u, breaks_v = field.surfaces.patches[k].span_breaks()
-    us = np.union1d(np.linspace(wu0, wu1, n_u), breaks_u[(breaks_u > wu0) & (breaks_u < wu1)])
-    vs = np.union1d(np.linspace(wv0, wv1, n_v), breaks_v[(breaks_v > wv0) & (breaks_v < wv1)])
-    f = field.f_grid(k, us, vs)
-    generator = contourpy.contour_generator(vs, us, f, line_type="Separate", corner_mask=True)
-    lines_u, lines_v, chain_light = [], [], []
-    finite = f[np.isfinite(f)]
-    lo, hi = (finite.min(), finite.max()) if finite.size else (np.inf, -np.inf)
-    for j, level in enumerate(field.levels):
-        if not lo <= level <= hi:
-            continue
-        for line in generator.lines(float(level)):
-            if len(line) >= 2:
-                lines_v.append(line[:, 0])
-                lines_u.append(line[:, 1])
-                chain_light.append(j)
-    for line_u, line_v, j in _small_loops(field, k, us, vs, f):
-        lines_u.append(line_u)
-        lines_v.append(line_v)
-        chain_light.append(j)
+    lines_u, lines_v, chain_light, cell = [], [], [], 0.0
+    for side in _seam_split(field, k):  # one grid per side of a seam the image shows both sides of
+        (wu0, wu1, wv0, wv1), n_u, n_v = _grid_window(field, k, side)
+        # The knots are grid lines too: f is only as smooth as the surface across a knot, and a cell straddling one
+        # (where f bends sharply, a near-double knot) interpolates a crossing onto the wrong piece, whence the polish
+        # jumps to another branch or fails (the sweep's near_knots.step: spans 1e-6 wide, f's slope ×16 across u = 0.5,
+        # one branch of the outermost line missing, 4.5 px from the traced one, at 320×180).
+        breaks_u, breaks_v = field.surfaces.patches[k].span_breaks()
+        us = np.union1d(np.linspace(wu0, wu1, n_u), breaks_u[(breaks_u > wu0) & (breaks_u < wu1)])
+        vs = np.union1d(np.linspace(wv0, wv1, n_v), breaks_v[(breaks_v > wv0) & (breaks_v < wv1)])
+        f = field.f_grid(k, us, vs)
+        generator = contourpy.contour_generator(vs, us, f, line_type="Separate", corner_mask=True)
+        finite = f[np.isfinite(f)]
+        lo, hi = (finite.min(), finite.max()) if finite.size else (np.inf, -np.inf)
+        for j, level in enumerate(field.levels):
+            if not lo <= level <= hi:
+                continue
+            for line in generator.lines(float(level)):
+                if len(line) >= 2:
+                    lines_v.append(line[:, 0])
+                    lines_u.append(line[:, 1])
+                    chain_light.append(j)
+        for line_u, line_v, j in _small_loops(field, k, us, vs, f):
+            lines_u.append(line_u)
+            lines_v.append(line_v)
+            chain_light.append(j)
+        # In the domain's unit square, like `UlmetField.polish`: the coarser side's, where there are two.
+        cell = max(cell, math.hypot((wu1 - wu0) / (u1 - u0) / (n_u - 1), (wv1 - wv0) / (v1 - v0) / (n_v - 1)))
     if not lines_u:
         empty = np.zeros(0)
         return _Chains(empty, empty, np.zeros(0, int), np.zeros(0, bool)), np.zeros(0, int), 0.0
     lengths = [len(a) for a in lines_u]
     chains = _Chains(np.concatenate(lines_u), np.concatenate(lines_v), np.repeat(np.arange(len(lengths)), lengths),
                      np.ones(sum(lengths), dtype=bool))
-    # In the domain's unit square, like `UlmetField.polish`.
-    cell = math.hypot((wu1 - wu0) / (u1 - u0) / (n_u - 1), (wv1 - wv0) / (v1 - v0) / (n_v - 1))
     return chains, np.asarray(chain_light), cell
 
 

@@ -24,13 +24,14 @@ Embree from just beyond the previous one (vectorised over the rays still open, a
   for the ray–surface distance stalls at a positive minimum (the ray passes the surface's
   silhouette; Newton on the distance decides where the search runs out of steps, `_passes_by`);
 - *unresolved*: neither could be shown (Newton and the search failed in the face's interior, or
-  the search, run too where Newton converged on another sheet, converged on it far from its mesh hit).
+  the search, run too where Newton converged on another sheet, converged on it far from its mesh hit). Where the
+  search is undecided and the ray does not pass by, Newton goes on from where it stopped (`_newton_on`).
   A Newton stop on a pole left so is tried on a face sharing the pole first (`_across_pole`: a sphere
   cut in two along meridians has its halves meet there, at one point, not along an edge).
 
-Two places beside a valid candidate's mesh hit are refined too (`_rim_neighbours`: the faces across
-its triangle's rim, whose coincident triangle the next query skips; `_other_root`: the nearer of two
-crossings of a sheet met at grazing incidence); and past a miss at a positive minimum, the ray is followed on while it
+Two places beside a candidate's mesh hit are refined too (`_rim_neighbours`: the faces across
+its triangle's rim, whose coincident triangle the next query skips, whatever the candidate's status; and beside a
+valid one, `_other_root`: the nearer of two crossings of a sheet met at grazing incidence); and past a miss at a positive minimum, the ray is followed on while it
 stays within the error band of the face (`_past_minimum`: the surface may dip across it where the mesh does not). A hit
 found so is flagged ``aside`` for the second look.
 
@@ -413,6 +414,7 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     pole_point = derivs.S[pole].copy()  # where Newton stopped on a pole (`_across_pole` starts there)
     restarted, passed = [stuck], []
     if len(stuck):
+        newton_u, newton_v = ur[stuck], vr[stuck]  # where Newton stopped (the search's results replace them)
         tol = _search_tolerance(tm[stuck], tessellation.extent)
         u2, v2, d2, ok2, flat2, edge2 = _rescue(surfaces, pk[stuck], us[stuck], vs[stuck], O[stuck], D[stuck], tol)
         near2, t2 = _near_mesh_hit(d2, pk[stuck], O[stuck], D[stuck], tm[stuck], near_reach)
@@ -431,6 +433,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
             passes = _passes_by(surfaces, pk[rows], u2[undecided], v2[undecided], O[rows], D[rows], tol[undecided])
             status[rows[passes]] = MISS
             passed.append(rows[passes])
+            _newton_on(surfaces, rows[~passes], newton_u[undecided[~passes]], newton_v[undecided[~passes]], O, D, tm,
+                       near_reach, tessellation.extent, status, pk, ur, vr, tr, derivs)
         # A pole stop still unresolved (the search undecided, or converged on the face far from the mesh hit: on
         # another crossing of the ray) is tried on the face sharing the pole.
         at_pole = (status[pole] == UNRESOLVED) & ~left[pole]
@@ -495,7 +499,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     aside[dipped] = True
     curvature = np.full((n, 4), np.nan)
     _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside, curvature)
-    beside = _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band, aside)
+    beside, beside_crossed = _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band,
+                                             aside)
     moved = np.flatnonzero(aside)
     _normals(surfaces, pk, derivs, D, moved, normal, cosine, degenerate)
     curvature[moved] = np.nan  # found beside: not the point the curvatures were taken at
@@ -505,8 +510,28 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     crossed_rows[crossed] = status[crossed] == VALID  # (`_other_root` may have replaced it since: still on its sheet)
     crossed_rows[dipped] = True  # found off the mesh as `_crossing_on_face`'s: `trace` weighs it so
     crossed_rows[beside] = False  # another face's hit now: `trace` weighs it as any mesh-led one
+    crossed_rows[beside_crossed] = True  # ... but for one its predicted crossing found, as `_crossing_on_face`'s
     return _Candidates(status, pk, ur, vr, t, derivs, normal, cosine, degenerate, us, vs, aside, curvature,
                        crossed_rows)
+
+
+def _newton_on(surfaces: SurfaceSet, rows, u, v, O, D, tm, near_reach, extent, status, pk, ur, vr, tr, derivs) -> None:
+    """Newton again from where the first `NEWTON_MAX_STEPS` stopped (``u``, ``v``), on rows the search left undecided
+    and not passing by (`_passes_by`); VALID in place where it converges near the mesh hit on the face.
+
+    A mesh hit at the very point where the ray is tangent to the sheet between its two close crossings starts Newton
+    where its Jacobian is singular: the first step overshoots, and the steps left are too few (sphere.3dm, a close-up
+    at fov 0.06° along its seam meridian, rays crossing the sheet at |n·D| ≤ 0.003 with the seam's mesh hit at the
+    tangent point: 252 of 2,048 rays ended 2.6e-5 from the ray after 8 steps, the search crawled off, and they were
+    fallbacks showing background where OCCT meets the sphere; a second run converged in 2 steps)."""
+    if len(rows) == 0:
+        return
+    u3, v3, d3, ok3 = refine(surfaces, pk[rows], u, v, O[rows], D[rows], tm[rows], extent)
+    near3, t3 = _near_mesh_hit(d3, pk[rows], O[rows], D[rows], tm[rows], near_reach)
+    ok3 &= near3 & surfaces.on_face(pk[rows], u3, v3)
+    won = rows[ok3]
+    _store(won, ok3, pk[rows], u3, v3, t3, d3, pk, ur, vr, tr, derivs)
+    status[won] = VALID
 
 
 def _store(won, pick, patch, u, v, t, derivatives: SurfaceDerivatives, pk, ur, vr, tr, derivs: SurfaceDerivatives):
@@ -1154,9 +1179,10 @@ def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray
 
 
 def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, status, pk, ur, vr, tr, derivs,
-                    band, aside) -> np.ndarray:
-    """Valid hits on a triangle at its face's rim: the neighbouring face across the rim refined too, in place.
-    Returns the rows whose hit it replaced.
+                    band, aside) -> tuple[np.ndarray, np.ndarray]:
+    """Candidates on a triangle at its face's rim (valid, missed or unresolved): the neighbouring face across the rim
+    refined too, in place (VALID where it wins). Returns the rows whose candidate it replaced, and those of them found
+    by `_crossing_on_face` (not led there by a mesh hit: `trace` weighs them as such).
 
     Another face's triangle can meet the ray at the mesh hit's own distance, to float32 rounding: where
     faces join (a reader's mesh with a row of slivers lying in the neighbouring face's plane, faces
@@ -1175,9 +1201,15 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     not: pixels there keep their face).
     """
     if not tessellation.has_rim_neighbours:  # no face has a neighbour (a single patch): nothing across any rim
-        return np.zeros(0, dtype=np.int64)
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     patch_of, uv_of, gap_of = tessellation.rim_neighbour
-    rays = np.flatnonzero((status == VALID) & tessellation.rim_face[prim])
+    # Not only under a valid hit: the next query skips the coincident triangle past a miss or an unresolved candidate
+    # too, and there the neighbour's valid hit wins outright (blocks.3dm, a close-up at fov 0.05° up a scaled
+    # cylinder's wall, |n·D| 1e-4, onto its cap: the rays met the wall's rim sliver first, Newton left it unresolved or
+    # missed, and the cap's triangle at the same t was never examined: 1,073 of 4,096 rays hit nothing, 1,063 of them
+    # fallbacks, where Open CASCADE meets the cap face-on).
+    kept = np.where(status == VALID, tr, np.inf)  # the hit a neighbour's must beat
+    rays = np.flatnonzero(tessellation.rim_face[prim])
     slack = FLOAT32_SLACK * tessellation.extent
     skip = float32_rounding(tessellation)  # as `trace`'s
     points = O[rays] + tm[rays, None] * D[rays]
@@ -1211,14 +1243,32 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     un, vn = np.concatenate([un[close], cuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1]])
     # A planar neighbour is met where the ray crosses its plane: rows whose crossing cannot win below are not refined.
     win_reach = _rim_reach(band, GRAZING_ALLOWANCE, skip)  # the reach test below at its largest allowance
-    may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], tr[rays], win_reach, slack)
+    may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], kept[rays], win_reach, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     # Any neighbour lies in its control net's hull: rows whose ray stays clear of it where a win could lie are not refined.
-    may = _may_win_in_hull(tessellation, surfaces, rays, pn, O, D, tm, tr, win_reach, slack)
+    may = _may_win_in_hull(tessellation, surfaces, rays, pn, O, D, tm, kept, win_reach, slack)
     rays, pn, un, vn = rays[may], pn[may], un[may], vn[may]
     if len(rays) == 0:
-        return rays
+        return rays, rays
     u3, v3, d3, ok3 = refine(surfaces, pn, un, vn, O[rays], D[rays], tm[rays], tessellation.extent)
+    predicted = np.zeros(len(rays), dtype=bool)  # found by `_crossing_on_face`
+    # Where Newton fails, the neighbour's sheet may still cross the ray nearby at grazing incidence: its crossings
+    # predicted from the start (`_crossing_on_face`, on copies of the rows). huge_inch.step, a close-up at fov 0.39°
+    # from 4.6 off a sphere corner (r 1000), inside its mesh's chord error (31): the rays meet the corner's mesh only at
+    # its rim, 1–23 past their entry at |N·D| 0.001–0.027, and Newton from the rim vertex stopped short of the entry or
+    # on the domain's edge: 1,382 of 2,048 rays went on to the part's far side, 5,500 behind OCCT's first hit.
+    fail = np.flatnonzero(~ok3)
+    if len(fail):
+        ra = rays[fail]
+        status3, tr3 = np.full(len(fail), MISS), np.full(len(fail), np.inf)
+        pk3, ur3, vr3 = pn[fail].copy(), u3[fail].copy(), v3[fail].copy()
+        d4 = SurfaceDerivatives(*(x[fail] for x in d3[:3]))  # copies, written where a crossing is found
+        got = _crossing_on_face(tessellation, surfaces, np.arange(len(fail)), pn[fail], O[ra], D[ra], tm[ra], un[fail],
+                                vn[fail], band, status3, pk3, ur3, vr3, tr3, d4)
+        take = fail[got]
+        u3[take], v3[take], ok3[take], predicted[take] = ur3[got], vr3[got], True, True
+        for have, new in zip(d3[:3], d4[:3]):
+            have[take] = new[got]
     t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
     # Only the hit a triangle at the mesh hit's distance leads to (the one the next query skips): within
     # the neighbour's band of it (2 chord errors grown as 1/cos θ there), plus the skipped step.
@@ -1227,15 +1277,16 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
         cos = np.abs(np.einsum("ij,ij->i", cross, D[rays])) / np.linalg.norm(cross, axis=1)
         allowance = np.clip(np.nan_to_num(1.0 / cos, nan=GRAZING_ALLOWANCE), 1.0, GRAZING_ALLOWANCE)
     reach = _rim_reach(band[pn], allowance, skip)
-    ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < tr[rays] - slack)
+    ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < kept[rays] - slack)
     # A ray with several faces refined (a corner): its nearest valid hit wins.
     pick = np.flatnonzero(ok3)
     pick = pick[np.lexsort((t3[pick], rays[pick]))]
     pick = pick[np.r_[True, rays[pick][1:] != rays[pick][:-1]]] if len(pick) else pick
     won = rays[pick]
     _store(won, pick, pn, u3, v3, t3, d3, pk, ur, vr, tr, derivs)
+    status[won] = VALID
     aside[won] = True
-    return won
+    return won, won[predicted[pick]]
 
 
 def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, reach, slack) -> np.ndarray:
@@ -1443,11 +1494,12 @@ def _put_rows(targets: tuple[np.ndarray, ...], rows: np.ndarray | slice, values:
             spread_rows(target, rows, np.ascontiguousarray(value), picked, fill)
 
 
-def _off_plane(tessellation: Tessellation, surfaces: SurfaceSet, patch, previous, O, D, t_next, lift, skip):
-    """The next mesh queries' origin offsets (n, 3) or None (none yet): where a ray's mesh hit is on the same planar
-    face as its previous one (``previous``; None on the first query) and the next query's origin lies within float32
-    rounding (``skip``) of that plane, the origin is moved off the plane to ``skip`` on the side the ray heads for (on
-    its own side where it runs along the plane).
+def _off_plane(tessellation: Tessellation, surfaces: SurfaceSet, prim, previous, O, D, t_next, lift, skip):
+    """The next mesh queries' origin offsets (n, 3) or None (none yet): where a ray's mesh hit (triangle ``prim``) is on
+    the same planar face as its previous one (``previous``, its triangle; None on the first query), or on the same
+    triangle of a curved face, and the next query's origin lies within float32 rounding (``skip``) of that plane (the
+    face's, or the triangle's own), the origin is moved off the plane to ``skip`` on the side the ray heads for (on its
+    own side where it runs along the plane).
 
     Embree meets a plane the ray skims again at each query `skip` farther on while the ray is within float32 rounding of
     it, over 2 `skip` / |n·D| along it: the sweep's faces.igs (the shelled box's faces, unsewn), an extreme close-up (fov
@@ -1457,24 +1509,37 @@ def _off_plane(tessellation: Tessellation, surfaces: SurfaceSet, patch, previous
     10⁻⁴ met the face's mesh every 9.4·10⁻⁵ from 0.003 before their crossing, all 1,080 rays flagged fallbacks. A plane
     meets the ray once, and two hits of it refined that crossing (Newton on a plane from any start; the near-mesh-hit
     test is unbounded there, `_candidates`): a query origin moved past it by `skip` (the rounding Embree already has)
-    sees what lies beyond. Only after a repeat, so a coplanar face's mesh at the same crossing still comes first."""
+    sees what lies beyond. Only after a repeat, so a coplanar face's mesh at the same crossing still comes first.
+    A triangle is a plane too: a curved face's skirt lying in a neighbour's plane was met so (bspline_prism.step, a
+    close-up at fov 0.28° from 7.4·10⁻⁶ under its top plane z = 20, rays rising 10⁻⁴ per unit onto the side wall's top
+    edge: the wall's skirt triangle in z = 20 every 9.2·10⁻⁵ until the candidates ran out, 62 rays flagged fallbacks);
+    the same triangle twice has been refined twice from its points."""
     if previous is None:
         return lift
     centre, normal, _, planar = _net_planes(tessellation, surfaces)
-    rows = np.flatnonzero((patch == previous) & planar[patch])
+    patch = tessellation.face_patch[prim]
+    on_face = (patch == tessellation.face_patch[previous]) & planar[patch]
+    rows = np.flatnonzero(on_face | (prim == previous))
     if len(rows) == 0:
         return lift
     k = patch[rows]
+    centre, normal = centre[k], normal[k]
+    own = np.flatnonzero(~on_face[rows])  # a curved face's triangle met twice: its own plane
+    if len(own):
+        a, b, c = (tessellation.vertices[tessellation.faces[prim[rows[own]], i]] for i in range(3))
+        m = np.cross(b - a, c - a)
+        with np.errstate(invalid="ignore", divide="ignore"):  # a zero-area triangle: no plane, NaN drops it below
+            centre[own], normal[own] = a, m / np.linalg.norm(m, axis=1, keepdims=True)
     X = O[rows] + t_next[rows, None] * D[rows] + (0.0 if lift is None else lift[rows])
-    h = np.einsum("ij,ij->i", X - centre[k], normal[k])
-    c = np.einsum("ij,ij->i", D[rows], normal[k])
+    h = np.einsum("ij,ij->i", X - centre, normal)
+    c = np.einsum("ij,ij->i", D[rows], normal)
     side = np.where(c != 0.0, np.sign(c), np.where(h != 0.0, np.sign(h), 1.0))
     near = np.abs(h) < skip
-    rows, k, h, side = rows[near], k[near], h[near], side[near]
+    rows, normal, h, side = rows[near], normal[near], h[near], side[near]
     if len(rows) == 0:
         return lift
-    lift = np.zeros((len(patch), 3)) if lift is None else lift.copy()
-    lift[rows] += (side * skip - h)[:, None] * normal[k]
+    lift = np.zeros((len(prim), 3)) if lift is None else lift.copy()
+    lift[rows] += (side * skip - h)[:, None] * normal
     return lift
 
 
@@ -1496,7 +1561,7 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     rays, start, limit = np.arange(n), None, far
     # Past a mesh hit by float32 rounding of the scene's largest coordinates, with margin.
     skip = float32_rounding(tessellation)
-    # Per open ray: the previous mesh hit's face, and the query origin's offset off planes the ray skims (`_off_plane`).
+    # Per open ray: the previous mesh hit's triangle, and the query origin's offset off planes the ray skims (`_off_plane`).
     last, lift = np.full(n, -1, dtype=np.int64), None
     slack = FLOAT32_SLACK * tessellation.extent
     crossing = np.zeros(n, dtype=bool)  # the kept hit is a `_crossing_on_face` one
@@ -1571,9 +1636,8 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
             # Where the mesh around the hit's triangle provably leaves the segment clear (`clearance`), the any-hit
             # test would find nothing: not asked. (Not after the last query: a ray still open there is a fallback.)
             cones.drop(O, D, mesh.prim, nxt, limit, go)
-        hit_patch = tessellation.face_patch[mesh.prim]
-        lift = _off_plane(tessellation, surfaces, hit_patch, last if start is not None else None, O, D, nxt, lift, skip)
-        rays, start, limit, last = rays[go], nxt[go], limit[go], hit_patch[go]
+        lift = _off_plane(tessellation, surfaces, mesh.prim, last if start is not None else None, O, D, nxt, lift, skip)
+        rays, start, limit, last = rays[go], nxt[go], limit[go], mesh.prim[go]
         lift = None if lift is None else lift[go]
     if start is None:  # no mesh hit at all (the first query broke off): the rows are still unwritten
         _put_rows(hits.rows(), np.zeros(0, dtype=np.int64), (np.zeros((0, 3)),) * 4 + (np.zeros((0, 4)),), slice(None),
