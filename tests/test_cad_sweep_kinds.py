@@ -23,6 +23,23 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 import make_sweep_parts as sweep  # noqa: E402
 
 
+def view_of(tmp_path, name: str, width: int, height: int, **camera):
+    """The sweep part ``name`` written into ``tmp_path`` and a `Renderer` of its automatic scene at width × height
+    with the camera's fields ``camera`` replaced (a close-up): (path, renderer)."""
+    import dataclasses
+
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+
+    path = tmp_path / name
+    sweep.PARTS[name](path)
+    scene = load_scene(path).with_image(width, height, 1)
+    fields = {key: np.array(value, dtype=float) if isinstance(value, (tuple, list)) else value
+              for key, value in camera.items()}
+    return path, Renderer(resolve(dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, **fields))))
+
+
 def _written_and_read(tmp_path_factory, name: str):
     """The sweep part ``name`` written to a fresh folder, and its read (rtreflect's `read_cad`)."""
     path = tmp_path_factory.mktemp("sweep") / name
@@ -899,19 +916,10 @@ def test_rays_by_a_cones_apex_keep_its_nearer_crossing(tmp_path, eye, fov, row, 
     the exit, 0.0006-0.05 behind OCCT's first hit). Such rays search from their crossings of the apex's tangent cone
     (`tracing._nearer_by_pole`): every pixel-centre ray of a row and a column through the failing pixels is OCCT's
     `PerformNearest`."""
-    import dataclasses
-
-    from rtreflect.exchange.load import load_scene
-    from rtreflect.integrator.autorig import resolve
-    from rtreflect.integrator.renderer import Renderer
     from test_cad_hits import assert_first_hits_are_occt
 
-    path = tmp_path / "cone_apex_view.step"
-    sweep.PARTS[path.name](path)
-    scene = load_scene(path).with_image(120, 120, 1)
-    camera = dataclasses.replace(scene.camera, projection="perspective", eye=np.array(eye),
-                                 look_at=np.array([10.068, -18.306, 13.730]), up=np.array([0.0, 0.0, 1.0]), fov=fov)
-    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    path, renderer = view_of(tmp_path, "cone_apex_view.step", 120, 120, projection="perspective", eye=eye,
+                             look_at=(10.068, -18.306, 13.730), up=(0.0, 0.0, 1.0), fov=fov)
     rows = np.concatenate([np.arange(120), np.full(120, row)])
     cols = np.concatenate([np.full(120, col), np.arange(120)])
     assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
@@ -926,19 +934,10 @@ def test_trim_runs_into_a_spheres_pole_along_its_cut_meridian(tmp_path):
     (`exchange.occt._strays_from_edge`) and runs into a pole along its meridian (`_along_into_pole`): every trim point
     within 0.25 of the pole's axis lies on one of the two planes (closed form), and every pixel-centre ray of a row and
     a column through the failing pixels is OCCT's `PerformNearest`."""
-    import dataclasses
-
-    from rtreflect.exchange.load import load_scene
-    from rtreflect.integrator.autorig import resolve
-    from rtreflect.integrator.renderer import Renderer
     from test_cad_hits import assert_first_hits_are_occt
 
-    path = tmp_path / "hollow_sphere_cut.step"
-    sweep.PARTS[path.name](path)
-    scene = load_scene(path).with_image(80, 80, 1)
-    camera = dataclasses.replace(scene.camera, projection="perspective", eye=np.array([-1.1329, -0.9014, 21.3799]),
-                                 look_at=np.array([0.0, 0.0, 20.0]), up=np.array([0.0, 0.0, 1.0]), fov=0.5)
-    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    path, renderer = view_of(tmp_path, "hollow_sphere_cut.step", 80, 80, projection="perspective",
+                             eye=(-1.1329, -0.9014, 21.3799), look_at=(0.0, 0.0, 20.0), up=(0.0, 0.0, 1.0), fov=0.5)
     for surface in renderer.surfaces.patches:
         if surface.trim is None:
             continue
@@ -959,19 +958,10 @@ def test_rays_from_inside_a_sphere_meet_it_along_its_seam(tmp_path):
     1.571-7.854), so a strip along the domain's seam side had no triangles, nor a shell. A reader mesh reaching outside
     the domain (`tessellation.OFF_DOMAIN`) gives way to the span grid: every pixel-centre ray of the column and a row
     through it is OCCT's `PerformNearest`, and all hit."""
-    import dataclasses
-
-    from rtreflect.exchange.load import load_scene
-    from rtreflect.integrator.autorig import resolve
-    from rtreflect.integrator.renderer import Renderer
     from test_cad_hits import assert_first_hits_are_occt
 
-    path = tmp_path / "sphere_hole.step"
-    sweep.PARTS[path.name](path)
-    scene = load_scene(path).with_image(120, 120, 1)
-    camera = dataclasses.replace(scene.camera, projection="perspective", eye=np.array([0.0, 8.0, -5.0]),
-                                 look_at=np.array([0.0, 0.0, -20.0]), up=np.array([0.0, 1.0, 0.0]), fov=150.0)
-    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    path, renderer = view_of(tmp_path, "sphere_hole.step", 120, 120, projection="perspective", eye=(0.0, 8.0, -5.0),
+                             look_at=(0.0, 0.0, -20.0), up=(0.0, 1.0, 0.0), fov=150.0)
     rows = np.concatenate([np.arange(120), np.full(120, 10)])
     cols = np.concatenate([np.full(120, 57), np.arange(120)])
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
@@ -1054,22 +1044,13 @@ def test_rays_skimming_a_curved_faces_skirt_in_a_plane_go_on_past_it(tmp_path):
     the edge's image. `_off_plane` lifted the next query off a planar face's plane only; the curved wall's triangle met
     twice is now lifted past by its own plane. Every pixel-centre ray of rows 10–35 is OCCT's `PerformNearest`, none a
     fallback."""
-    import dataclasses
-
-    from rtreflect.exchange.load import load_scene
-    from rtreflect.integrator.autorig import resolve
-    from rtreflect.integrator.renderer import Renderer
     from test_cad_hits import assert_first_hits_are_occt
 
-    path = tmp_path / "bspline_prism.step"
-    sweep.PARTS[path.name](path)
-    scene = load_scene(path).with_image(64, 64, 1)
-    camera = dataclasses.replace(scene.camera, projection="perspective",
-                                 eye=np.array([0.2246038566622386, -18.889519963489725, 19.999992626762552]),
-                                 look_at=np.array([0.1900036214554106, -18.824410158004554, 20.0]),
-                                 up=np.array([-0.434246037767454, -0.23066563644284058, -0.8707604394135542]),
-                                 fov=0.28401883617073664)
-    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    path, renderer = view_of(tmp_path, "bspline_prism.step", 64, 64, projection="perspective",
+                             eye=(0.2246038566622386, -18.889519963489725, 19.999992626762552),
+                             look_at=(0.1900036214554106, -18.824410158004554, 20.0),
+                             up=(-0.434246037767454, -0.23066563644284058, -0.8707604394135542),
+                             fov=0.28401883617073664)
     rows, cols = (x.ravel() for x in np.mgrid[10:36, 0:64])
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
     assert not hits.fallback.any() and hits.hit.sum() > 500
@@ -1081,22 +1062,13 @@ def test_finer_traces_nearer_hit_is_kept_beside_an_undecided_candidate(tmp_path)
     finer trace found OCCT's entry but also an unresolved candidate 1.1 past it, and a fallback's hits were dropped
     whole: 43 rays kept no hit (flagged fallbacks). A valid hit nearer than the kept one is taken now, the ray still
     flagged: every pixel-centre ray of rows 50–63, columns 0–15 is OCCT's `PerformNearest`."""
-    import dataclasses
-
-    from rtreflect.exchange.load import load_scene
-    from rtreflect.integrator.autorig import resolve
-    from rtreflect.integrator.renderer import Renderer
     from test_cad_hits import assert_first_hits_are_occt
 
-    path = tmp_path / "far_away.step"
-    sweep.PARTS[path.name](path)
-    scene = load_scene(path).with_image(64, 64, 1)
-    camera = dataclasses.replace(scene.camera, projection="orthographic",
-                                 eye=np.array([24891.046697924714, -2957.404166445089, 1206.1623641688943]),
-                                 look_at=np.array([25008.216618497685, -2971.2912274359815, 1218.9432212279103]),
-                                 up=np.array([0.08966113175936247, 0.9688727614472255, 0.2307519308202165]),
-                                 view_height=0.007912013666206594)
-    renderer = Renderer(resolve(dataclasses.replace(scene, camera=camera)))
+    path, renderer = view_of(tmp_path, "far_away.step", 64, 64, projection="orthographic",
+                             eye=(24891.046697924714, -2957.404166445089, 1206.1623641688943),
+                             look_at=(25008.216618497685, -2971.2912274359815, 1218.9432212279103),
+                             up=(0.08966113175936247, 0.9688727614472255, 0.2307519308202165),
+                             view_height=0.007912013666206594)
     rows, cols = (x.ravel() for x in np.mgrid[50:64, 0:16])
     hits = assert_first_hits_are_occt(path, renderer, *renderer.camera.rays(rows, cols))
     assert hits.hit.sum() > 100
