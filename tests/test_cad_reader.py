@@ -48,7 +48,8 @@ TRIM_BAND = 1e-4
 
 
 def occt_faces(path: Path):
-    """(original faces, converted faces) of a STEP or IGES file, read with OCP directly."""
+    """(shape, original faces, converted shape, converted faces) of a STEP or IGES file, read with OCP directly (the
+    shape itself where OCCT cannot convert it)."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
     from OCP.IGESControl import IGESControl_Reader
     from OCP.STEPControl import STEPControl_Reader
@@ -60,7 +61,10 @@ def occt_faces(path: Path):
     reader.ReadFile(str(path))
     reader.TransferRoots()
     shape = reader.OneShape()
-    converted = BRepBuilderAPI_NurbsConvert(shape, True).Shape()
+    try:
+        converted = BRepBuilderAPI_NurbsConvert(shape, True).Shape()
+    except Exception:  # OCCT cannot convert it (the sweep's periodic_trimmed.step): its faces are B-splines already
+        converted = shape
 
     def faces(s):
         out, explorer = [], TopExp_Explorer(s, TopAbs_FACE)

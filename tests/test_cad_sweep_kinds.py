@@ -1154,3 +1154,26 @@ def test_close_up_from_within_the_chord_error_seeds_the_contour_window(tmp_path)
     px = np.concatenate([polyline.px for line in analytic_contours(field).lines for polyline in line.polylines])
     in_image = np.all((px >= 0.0) & (px <= [192.0, 108.0]), axis=1)
     assert in_image.sum() > 500
+
+
+def test_model_open_cascade_cannot_convert_whole_reads_face_by_face(tmp_path):
+    """periodic_trimmed_box.step: a periodic B-spline tube's face across the period's end, beside a box. OCCT's NURBS
+    conversion of the whole model fails ("Knots interval values too close", from that face's edges), and the reader
+    refused the file. Now each face converts on its own (the tube's, already a B-spline, is kept as read): all 7 faces
+    read, the box's 12 edges are each shared by two faces (their keys come from the unconverted model) and the tube's
+    4 are its own; every pixel-centre ray's hit is tested against OCCT by tests/test_cad_sweep.py."""
+    from collections import Counter
+
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+
+    from test_cad_reader import occt_faces
+
+    path = tmp_path / "periodic_trimmed_box.step"
+    sweep.PARTS[path.name](path)
+    shape = occt_faces(path)[0]
+    with pytest.raises(Exception, match="Knots interval values too close"):
+        BRepBuilderAPI_NurbsConvert(shape, True).Shape()
+    model = read_cad(path)
+    assert len(model.surfaces) == 7 and not model.skipped
+    faces_per_edge = Counter(edge.key for surface in model.surfaces for edge in surface.trim.edges)
+    assert sorted(Counter(faces_per_edge.values()).items()) == [(1, 4), (2, 12)]

@@ -43,7 +43,8 @@ SHIPPED = sorted(p.name for p in (ROOT / "parts").iterdir() if p.suffix.lower() 
 #: rhino_mix.3dm (Rhino's revolve, pipe, cone and trimmed plane rebuilt in Open CASCADE), variable_fillet (fillets of
 #: varying radius cut just past C1 knots).
 SWEEP = ["union_big.step", "torus.step", "sphere_hole.step", "revolved_seam.step", "pipe_spline.step",
-         "rational_wild.step", "periodic_bspline.step", "kink.step", "rhino_mix.3dm", "variable_fillet.step"]
+         "rational_wild.step", "periodic_bspline.step", "kink.step", "rhino_mix.3dm", "variable_fillet.step",
+         "periodic_trimmed.step"]
 #: Faces still cut a little past a knot, leaving a knot span too narrow to evaluate derivatives in: checked by
 #: `test_known_sliver_spans` (a strict xfail) instead. variable_fillet.step's fillets 2 and 6 (a box's top edges
 #: filleted with radius 1 → 6) have pcurves ending 4.4e-7 and 4.8e-7 past their surfaces' knots v = 30 and 40

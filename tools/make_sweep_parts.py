@@ -94,6 +94,8 @@ Eighth sweep (extreme close-ups; new surface kinds):
   periodic_trimmed.step  a RectangularTrimmedSurface of a u-periodic B-spline tube, its u window across the period's end
   touching_holes.step  a plate with two holes whose rims touch at a point, a third tangent to the second
   thin_wide.step       a wall 100 long and 1e-5 thick on a base: a 100 × 1e-5 face seen face-on
+Tenth sweep:
+  periodic_trimmed_box.step  periodic_trimmed's face beside a box: the whole model does not convert, the box's faces do
 """
 
 from __future__ import annotations
@@ -1525,6 +1527,15 @@ def periodic_trimmed():
     return BRepBuilderAPI_MakeFace(trimmed, 1e-7).Face()
 
 
+def periodic_trimmed_box():
+    """`periodic_trimmed`'s face (which Open CASCADE's NURBS conversion refuses) and a 6 × 6 × 6 box inside the tube's
+    window, not fused: a model whose faces convert one by one but not as a whole."""
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.gp import gp_Pnt
+
+    return compound_of(periodic_trimmed(), BRepPrimAPI_MakeBox(gp_Pnt(-3.0, -3.0, 13.0), 6.0, 6.0, 6.0).Shape())
+
+
 def touching_holes():
     """A 60 × 40 × 3 plate drilled by two holes (r 6) whose rims touch at one point (centres 12 apart), and a third
     (r 4) tangent to the second's rim from outside on the other side: inner loops touching each other."""
@@ -1626,6 +1637,7 @@ PARTS = {
     "dense_net.step": lambda p: write_step(dense_net(), p),
     "rational_extrusion.step": lambda p: write_step(rational_extrusion(), p),
     "periodic_trimmed.step": lambda p: write_step(periodic_trimmed(), p),
+    "periodic_trimmed_box.step": lambda p: write_step(periodic_trimmed_box(), p),
     "touching_holes.step": lambda p: write_step(touching_holes(), p),
     "thin_wide.step": lambda p: write_step(thin_wide(), p),
 }

@@ -4,7 +4,8 @@ Steps (DESIGN.md, "CAD input"; measured facts in the project's OCP notes):
 
 1. ``BRepBuilderAPI_NurbsConvert`` turns every face into a B-spline face **first**: conversion
    re-parameterises planes, cylinders, cones, spheres, tori and revolved faces and rewrites the
-   pcurves to match, so trims and mesh are taken from the converted shape only.
+   pcurves to match, so trims and mesh are taken from the converted shape only. Where the whole shape does not
+   convert, each face converts on its own (`converted_faces`).
 2. Per face, the B-spline surface (location applied by ``BRep_Tool.Surface_s``) is cut to the
    face's (u, v) bounds with ``Geom_BSplineSurface.Segment``: this un-periodises periodic
    surfaces, clamps unclamped knot vectors, and keeps the geometry and the parameters (knot
@@ -903,17 +904,58 @@ def converted_alone(original, face, key_of):
     return alone, lambda edge: next(key for e, key in zip(mine, keys) if e.IsSame(edge))
 
 
-def convert_shape(shape, path: Path):
-    """Every face as a B-spline face (``BRepBuilderAPI_NurbsConvert``), or a `SceneError` naming the file."""
+def convert_shape(shape):
+    """Every face as a B-spline face (``BRepBuilderAPI_NurbsConvert``), or None where Open CASCADE cannot convert the
+    shape as a whole (then `converted_faces` converts it face by face)."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
 
     try:
         with quiet_stdout():
-            converter = BRepBuilderAPI_NurbsConvert(shape, True)
-            converted = converter.Shape()
-    except Exception as exc:
-        raise SceneError(path, "", f"Open CASCADE cannot convert the model's faces to NURBS ({exc})") from None
-    return converted
+            return BRepBuilderAPI_NurbsConvert(shape, True).Shape()
+    except Exception:  # OCCT's Standard_Failure: one face it cannot convert fails the whole shape
+        return None
+
+
+class _Unconvertible:
+    """A face Open CASCADE cannot convert on its own either, with its reason: `read_faces` names it (FaceError)."""
+
+    def __init__(self, reason: str):
+        self.reason = reason
+
+
+def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list]:
+    """Where the whole shape does not convert: each face of ``originals`` converted on its own, with its edges' key
+    maker (keys of the edges of ``shape``, the unconverted model, so faces sharing an edge still share its key: the
+    modifier keeps each face's edges in order, as `converted_alone` relies on).
+
+    A face that fails alone but already lies on a B-spline surface is kept as it is: the conversion would only have
+    rewritten its curves, which the trims sample through adaptors whatever their type (the sweep's
+    periodic_trimmed.step, a periodic B-spline tube's face across the period's end: "Knots interval values too close"
+    from the conversion of its edges). Any other face that fails is an `_Unconvertible`."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    _, original_key = edge_keys(shape, key_prefix)
+    faces, key_makers = [], []
+    for original in originals:
+        try:
+            with quiet_stdout():
+                alone = BRepBuilderAPI_NurbsConvert(original, True).Shape()
+            face = TopoDS.Face(TopExp_Explorer(alone, TopAbs_FACE).Current())
+        except Exception as exc:
+            if not isinstance(BRep_Tool.Surface_s(original), Geom_BSplineSurface):
+                faces.append(_Unconvertible(f"Open CASCADE cannot convert it to NURBS ({exc})"))
+                key_makers.append(None)
+                continue
+            face = original
+        mine, keys = _edges_of(face), [original_key(edge) for edge in _edges_of(original)]
+        faces.append(face)
+        key_makers.append(lambda edge, mine=mine, keys=keys: next(key for e, key in zip(mine, keys) if e.IsSame(edge)))
+    return faces, key_makers
 
 
 def read_xstep(reader, path: Path, kind: str) -> None:
@@ -957,30 +999,37 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     original_faces = count_entities(shape)["faces"]
     if original_faces == 0:
         raise no_surfaces_error(path, shape, what)
-    converted = convert_shape(shape, path)
-    lo, hi = shape_bounds(converted)
+    converted = convert_shape(shape)
+    lo, hi = shape_bounds(shape if converted is None else converted)
     diagonal = float(np.linalg.norm(hi - lo))
     if not (np.isfinite(diagonal) and diagonal > 0):
         raise SceneError(path, "", f"the model's bounding box is empty or not finite ({lo.tolist()} .. {hi.tolist()})")
 
     faces, originals = [], []
     for whole, out in ((converted, faces), (shape, originals)):
-        explorer = TopExp_Explorer(whole, TopAbs_FACE)
-        while explorer.More():
+        explorer = TopExp_Explorer(whole, TopAbs_FACE) if whole is not None else None
+        while explorer is not None and explorer.More():
             out.append(TopoDS.Face(explorer.Current()))
             explorer.Next()
     stem = name or path.stem
     # Keys unique per read: a scene that reads one file twice must not join the two copies' faces.
-    _, key_of = edge_keys(converted, f"{path}|{stem}|{next(_READS)}")
+    key_prefix = f"{path}|{stem}|{next(_READS)}"
+    if converted is None:  # face by face, each with its own key maker
+        faces, key_makers = converted_faces(originals, shape, key_prefix)
+    else:
+        _, key_of = edge_keys(converted, key_prefix)
+        key_makers = [key_of] * len(faces)
     surfaces, skipped, reversed_flags, meshed, indices, warnings = [], [], [], [], [], []
     with tqdm(faces, desc=f"reading {path.name}", unit="face", leave=False, file=sys.stderr,
               disable=None if len(faces) > PROGRESS_FACES else True) as bar:
         for index, face in enumerate(bar):
             try:
+                if isinstance(face, _Unconvertible):
+                    raise FaceError(face.reason)
                 reversed_face = (face.Orientation() == TopAbs_REVERSED) if reversed_faces is None else reversed_faces[index]
-                face_key_of = key_of
-                if len(originals) == len(faces) and seam_lost(face):
-                    face, face_key_of = converted_alone(originals[index], face, key_of)
+                face_key_of = key_makers[index]
+                if converted is not None and len(originals) == len(faces) and seam_lost(face):
+                    face, face_key_of = converted_alone(originals[index], face, face_key_of)
                 surface = bspline_of_face(face)
                 edges = face_edges(face, surface, face_key_of, trims_onto_edges) if topology else ()
                 trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal, trims_onto_edges, edges)
