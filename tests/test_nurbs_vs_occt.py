@@ -45,12 +45,6 @@ SHIPPED = sorted(p.name for p in (ROOT / "parts").iterdir() if p.suffix.lower() 
 SWEEP = ["union_big.step", "torus.step", "sphere_hole.step", "revolved_seam.step", "pipe_spline.step",
          "rational_wild.step", "periodic_bspline.step", "kink.step", "rhino_mix.3dm", "variable_fillet.step",
          "periodic_trimmed.step"]
-#: Faces still cut a little past a knot, leaving a knot span too narrow to evaluate derivatives in: checked by
-#: `test_known_sliver_spans` (a strict xfail) instead. variable_fillet.step's fillets 2 and 6 (a box's top edges
-#: filleted with radius 1 → 6) have pcurves ending 4.4e-7 and 4.8e-7 past their surfaces' knots v = 30 and 40
-#: (1.5e-8 and 1.2e-8 of the range, beyond `SIDE_SNAP`, so not snapped): S_vv is 8.6 and 15 of its scale off there.
-#: (Its fillets 7 and 9, cut 9.4e-9 and 1.2e-8 past a knot, 2.5e-10 and 4.4e-10 of the range, are snapped and pass.)
-KNOWN_SLIVERS = {"variable_fillet.step": (2, 6)}
 #: |S − S_occt| over the part's bounding-box diagonal: float64 rounding of the same sums (worst measured 1.1e-13,
 #: revolved_seam.step).
 POINT_TOLERANCE = 1e-12
@@ -170,21 +164,14 @@ def part(request):
 
 
 def test_evaluator_matches_open_cascade_on_every_face(part):
+    """Every face, variable_fillet.step's fillets 2 and 6 included: their pcurves end 4.4e-7 and 4.8e-7 past their
+    surfaces' knots v = 30 and 40 (1.5e-8 and 1.2e-8 of the range, beyond `SIDE_SNAP`), and cut there they kept a knot
+    span ~4.6e-7 wide whose S_vv came out 8.6 and 15 of its scale off; the cut moves out over such a span now
+    (`occt._snap_to_knots`)."""
     name, model, references = part
-    known = KNOWN_SLIVERS.get(name, ())
-    problems, _ = faults(model, references, SurfaceSet(model.surfaces),
-                         [k for k in range(len(model.surfaces)) if k not in known])
+    problems, _ = faults(model, references, SurfaceSet(model.surfaces))
     assert not problems, problems
     assert len(references) == len(model.surfaces) > 0
-
-
-@pytest.mark.xfail(strict=True, reason="the reader cuts these faces 1.2e-8-1.5e-8 of their range past a knot (beyond "
-                                       "SIDE_SNAP): a knot span ~4.6e-7 wide, S_vv 8.6-15 of its scale off")
-@pytest.mark.parametrize("name", KNOWN_SLIVERS)
-def test_known_sliver_spans(name, sweep_folder):
-    model, references = read_with_occt_surfaces(sweep_folder / name)
-    problems, _ = faults(model, references, SurfaceSet(model.surfaces), KNOWN_SLIVERS[name])
-    assert not problems, problems
 
 
 @pytest.mark.parametrize("change", ["point", "weight"])

@@ -78,6 +78,10 @@ PERIOD_SHIFT_SLACK = 1e-6
 #: more than once (`_over_periods`: the bottle's thread strips, 93 % past). Less is drift: converted pcurves ending at a
 #: pole (bottle.step's sphere face, 1.4 %), Rhino's fitted pcurves (trimmed.3dm, 0.02 %), the 2D boxes' gap (1e-7).
 WINDING_PAST = 0.05
+#: A cut that would keep less than this fraction of the knot span it falls in moves out to the span's far knot
+#: (`_snap_to_knots`): derivatives on a span of relative width w lose ~1/w² of float64's precision (S_vv came out 15 of
+#: its scale off at w ~ 5e-8), so at 1e-3 they stay within ~1e-10. The face's trims bound it in the wider domain.
+SLIVER_SPAN = 1e-3
 #: Faces beyond which a progress bar is shown while a model loads (small parts load in well under a second).
 PROGRESS_FACES = 200
 
@@ -222,7 +226,8 @@ def clean_knots(knots: np.ndarray, degree: int, poles: np.ndarray, weights: np.n
     return knots, poles, weights
 
 
-def _snap_to_knots(value: float, knots: np.ndarray, width: float, period: float = 0.0) -> float:
+def _snap_to_knots(value: float, knots: np.ndarray, width: float, period: float = 0.0, outward: int = 0,
+                   bounds: tuple[float, float] = (-math.inf, math.inf)) -> float:
     """``value`` moved onto the nearest knot within `SIDE_SNAP` of ``width`` (the cut's range; at least
     `MIN_KNOT_SPAN`), so cutting there leaves no sliver knot span. A periodic direction's knots (one period's) are
     first moved by whole periods to ``value``'s period where ``value`` lies outside their range.
@@ -231,13 +236,31 @@ def _snap_to_knots(value: float, knots: np.ndarray, width: float, period: float 
     u = -1.756e-9 beside the knot 0, leaving a 1.76e-9-wide span in which S_uu came out 0.65 of its scale off, and
     variable_fillet.step's fillets 9.4e-9 past a knot, S_vv 5.3e4 off (tests/test_nurbs_vs_occt.py). The trims and
     mesh nodes that far outside the cut are put on its side anyway (`_wire_loop`; the evaluator clamps to the domain).
+
+    Farther from the knot, a cut that would still leave less than `SLIVER_SPAN` of the knot span it falls in on the
+    kept side (``outward`` = +1 for the upper cut, −1 for the lower) moves out to that span's far knot instead, within
+    ``bounds``: the face keeps the whole span, which holds it (its trims bound it), and no point of the surface moves.
+    variable_fillet.step's fillets 2 and 6 end 4.4e-7 past a knot (1.5e-8 of their range: beyond the snap), and cut
+    there their S_vv came out 8.6 and 15 of its scale off.
     """
     reach = max(SIDE_SNAP * width, MIN_KNOT_SPAN * max(1.0, float(np.max(np.abs(knots)))))
     if period and not knots[0] - reach <= value <= knots[-1] + reach:  # the knots as OCCT gave them where they serve
         knots = knots + period * math.floor((value - knots[0]) / period)
     gap = np.abs(knots - value)
     k = int(np.argmin(gap))
-    return float(knots[k]) if gap[k] < reach else value
+    if gap[k] < reach:
+        return float(knots[k])
+    if outward == 0:
+        return value
+    if period:  # the span may run into the next period (or the one before)
+        knots = np.concatenate([knots[:-1] - period, knots, knots[1:] + period])
+    above = int(np.searchsorted(knots, value))  # the knots below and above ``value``: the kept side's is the inner one
+    inner, outer = (above - 1, above) if outward > 0 else (above, above - 1)
+    if not (0 <= inner < len(knots) and 0 <= outer < len(knots)):
+        return value
+    kept, span = abs(value - knots[inner]), abs(knots[outer] - knots[inner])
+    far = float(knots[outer])
+    return far if kept < SLIVER_SPAN * span and bounds[0] <= far <= bounds[1] else value
 
 
 def _into_pcurves_period(knots: np.ndarray, lo: float, period: float) -> np.ndarray:
@@ -274,7 +297,10 @@ def bspline_of_face(face) -> NurbsSurface:
             lo, hi = first, last
         else:  # the pcurves' bounds may pass the surface's by their tolerance
             lo, hi = max(lo, first), min(hi, last)
-        return _snap_to_knots(lo, knots, hi - lo, period), _snap_to_knots(hi, knots, hi - lo, period)
+        # Moved out over a sliver span only within the surface's bounds, and a periodic one's single period.
+        width = hi - lo
+        lo = _snap_to_knots(lo, knots, width, period, -1, (hi - period if periodic else first, math.inf))
+        return lo, _snap_to_knots(hi, knots, width, period, +1, (-math.inf, lo + period if periodic else last))
 
     uk = np.fromiter(surface.UKnots(), float)
     vk = np.fromiter(surface.VKnots(), float)
