@@ -37,7 +37,13 @@ from rtreflect.exchange.scene import load_scene  # noqa: E402
 from rtreflect.geometry import surfaces as surface_module  # noqa: E402
 from rtreflect.integrator.renderer import Renderer  # noqa: E402
 from rtreflect.kernels import nurbs  # noqa: E402
+from rtreflect.kernels.compiled import jit_namespace  # noqa: E402
 from rtreflect.trace import tracing  # noqa: E402
+
+#: The nurbs kernels as numba dispatchers (`kernels.compiled.jit_namespace`): with the AOT module loaded, the module's
+#: own names are `Kernel` wrappers, which a jitted function cannot call.
+_NURBS = jit_namespace(nurbs.__name__)
+new_scratch, point_at = _NURBS["new_scratch"], _NURBS["point_at"]
 
 FIELDS = ("patch", "u_start", "v_start", "u", "v", "S", "Su", "Sv", "t", "normal", "cosine", "converged", "near",
           "edge", "degenerate")
@@ -46,11 +52,11 @@ FIELDS = ("patch", "u_start", "v_start", "u", "v", "S", "Su", "Sv", "t", "normal
 @njit(nogil=True)
 def evaluations(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree, patch, u, v):
     """`point_at` of order 1 at each (patch, u, v), the sum of the results kept so nothing is optimised away."""
-    scratch = nurbs.new_scratch(max_degree)
+    scratch = new_scratch(max_degree)
     d = np.empty((6, 3))
     total = 0.0
     for i in range(patch.shape[0]):
-        nurbs.point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, patch[i], u[i],
+        point_at(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, patch[i], u[i],
                        v[i], 1, d, scratch)
         total += d[0, 0] + d[1, 1] + d[2, 2]
     return total
