@@ -193,7 +193,8 @@ def render(scenes: tuple[Path, ...], outdir: Path, width, height, samples, threa
     """Render the reflection lines of each SCENE file to OUTPUT/NAME.exr and .png.
 
     The EXR holds linear RGBA plus per-pixel AOVs from the pixel-centre ray
-    (P.X P.Y P.Z N.X N.Y N.Z u v patch Z f line.id line.dist); the PNG is 8-bit sRGB.
+    (P.X P.Y P.Z N.X N.Y N.Z u v patch Z f line.id line.dist phi K H k1 k2: the mode's
+    φ and the curvatures at the exact hit); the PNG is 8-bit sRGB.
     NAME is [output] name, by default the scene file's stem. With --overlay the PNG also
     shows the analytic reflection lines in [render] overlay_color, and NAME.contours.json
     holds them (per line: light index, polylines in pixels and in (u, v)); with
