@@ -783,14 +783,18 @@ def edge_keys(shape, prefix: str) -> tuple:
     return index, lambda edge: f"{prefix}#{index.FindIndex(edge)}"
 
 
-def face_edges(face, surface: NurbsSurface, key_of, onto_edges: bool = False) -> tuple:
+def face_edges(face, surface: NurbsSurface, key_of, onto_edges: bool = False, tolerance: float | None = None) -> tuple:
     """The face's B-rep edges as `FaceEdge`s (geometry/topology.py): each pcurve γ(t) and γ'(t) at `EDGE_SEGMENTS` + 1
     parameters spread evenly over the edge's range (SameParameter: the same t on every face of the edge).
 
     A seam edge of this face (``BRep_Tool.IsClosed_s``: both sides of a periodic surface's seam line) and a
     degenerate edge (a pole) are recorded by their flags only: they join the face to no other face.
     ``onto_edges``: the points are projected from the 3D edge onto the surface (pcurves fitted by ShapeFix
-    only approximate it, see `_edge_samples`).
+    only approximate it, see `_edge_samples`). Else an edge's points are projected so where its pcurve strays from the
+    3D edge by more than `STRAY_FRACTION` of the trim ``tolerance`` (`_strays_from_edge`), as its trim's are: the
+    NURBS conversion of a mirrored instance refits pcurves that run along the edge at another speed than the 3D
+    curve, and the two faces' points at the same t lay up to 6.4e-4 apart on an edge whose surfaces meet to 4e-13
+    (the sweep's mirrored_assembly.step: `continuity` called the copy's sphere corner open, G0 0.000119).
     """
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d
@@ -827,7 +831,8 @@ def face_edges(face, surface: NurbsSurface, key_of, onto_edges: bool = False) ->
         (u0, u1), (v0, v1) = surface.domain
         uv[:, 0], uv[:, 1] = np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)
         curve3d = BRepAdaptor_Curve(edge)
-        if onto_edges:
+        if onto_edges or (tolerance is not None and BRep_Tool.Tolerance_s(edge) > STRAY_FRACTION * tolerance
+                          and _strays_from_edge(edge, surface, t, uv, tolerance)):
             target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(tk)) for tk in t)])
             uv = project_onto_surface(surface, target, uv)
         out.append(FaceEdge(key, t, uv, duv, float(GCPnts_AbscissaPoint.Length_s(curve3d))))
@@ -1057,7 +1062,8 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
                 if converted is not None and len(originals) == len(faces) and seam_lost(face):
                     face, face_key_of = converted_alone(originals[index], face, face_key_of)
                 surface = bspline_of_face(face)
-                edges = face_edges(face, surface, face_key_of, trims_onto_edges) if topology else ()
+                edges = (face_edges(face, surface, face_key_of, trims_onto_edges, TRIM_TOLERANCE * diagonal)
+                         if topology else ())
                 trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal, trims_onto_edges, edges)
                 # Meshed face by face, its triangulation dropped once read: memory stays that of one face's
                 # mesh (the whole shape's at once took 560 MB on a 2000-face plate).
