@@ -978,15 +978,64 @@ def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list
                 alone = BRepBuilderAPI_NurbsConvert(original, True).Shape()
             face = TopoDS.Face(TopExp_Explorer(alone, TopAbs_FACE).Current())
         except Exception as exc:
-            if not isinstance(BRep_Tool.Surface_s(original), Geom_BSplineSurface):
-                faces.append(_Unconvertible(f"Open CASCADE cannot convert it to NURBS ({exc})"))
-                key_makers.append(None)
-                continue
-            face = original
+            if isinstance(BRep_Tool.Surface_s(original), Geom_BSplineSurface):
+                face = original
+            else:
+                face = _swept_converted(original)
+                if face is None:
+                    faces.append(_Unconvertible(f"Open CASCADE cannot convert it to NURBS ({exc})"))
+                    key_makers.append(None)
+                    continue
         mine, keys = _edges_of(face), [original_key(edge) for edge in _edges_of(original)]
         faces.append(face)
         key_makers.append(lambda edge, mine=mine, keys=keys: next(key for e, key in zip(mine, keys) if e.IsSame(edge)))
     return faces, key_makers
+
+
+#: `_swept_converted` keeps a converted face only where its pcurves on the new surface lie within this fraction of the
+#: face's bounding-box diagonal (or 10× the edge's own tolerance) of the 3D edges: the conversion kept (u, v).
+SWEPT_AGREEMENT = 1e-7
+
+
+def _swept_converted(original):
+    """A face the NURBS conversion refuses, converted by ``ShapeCustom.ConvertToBSpline`` (extrusions, revolutions,
+    offsets), or None unless every edge's pcurve, unchanged by it, still lies on the new surface along the 3D edge.
+
+    The conversion of a face on a surface of linear extrusion of a periodic B-spline curve, its window across the
+    curve's period end, fails on its edges ("Knots interval values too close"); ShapeCustom rewrites the surface
+    alone, in the same (u, v) (S(u, v) = C(u) + vD, C kept), so the pcurves stay valid. A revolution's rational circle
+    does not keep the angle as u: its pcurves then miss the new surface, and the face stays unconvertible.
+    """
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.ShapeCustom import ShapeCustom
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    try:
+        with quiet_stdout():
+            shape = ShapeCustom.ConvertToBSpline_s(original, True, True, True, False)
+        face = TopoDS.Face(TopExp_Explorer(shape, TopAbs_FACE).Current())
+        surface = BRep_Tool.Surface_s(face)
+        if not isinstance(surface, Geom_BSplineSurface):
+            return None
+        lo, hi = shape_bounds(original)
+        reach = SWEPT_AGREEMENT * float(np.linalg.norm(hi - lo))
+        for edge in _edges_of(face):
+            if BRep_Tool.Degenerated_s(edge):
+                continue
+            curve, curve3d = BRepAdaptor_Curve2d(edge, face), BRepAdaptor_Curve(edge)
+            t0, t1 = curve.FirstParameter(), curve.LastParameter()
+            allowed = max(reach, 10.0 * BRep_Tool.Tolerance_s(edge))
+            for t in np.linspace(t0, t1, 9):
+                uv = curve.Value(float(t))
+                if surface.Value(uv.X(), uv.Y()).Distance(curve3d.Value(float(t))) > allowed:
+                    return None
+    except Exception:  # OCCT's Standard_Failure
+        return None
+    return face
 
 
 def read_xstep(reader, path: Path, kind: str) -> None:
