@@ -1177,18 +1177,3 @@ def test_model_open_cascade_cannot_convert_whole_reads_face_by_face(tmp_path):
     assert len(model.surfaces) == 7 and not model.skipped
     faces_per_edge = Counter(edge.key for surface in model.surfaces for edge in surface.trim.edges)
     assert sorted(Counter(faces_per_edge.values()).items()) == [(1, 4), (2, 12)]
-
-
-def test_a_swept_face_converted_off_its_pcurves_is_refused_not_misplaced(tmp_path):
-    """The NURBS conversion refuses a face across its swept curve's period end; ShapeCustom's conversion is kept only
-    where the unchanged pcurves still lie on the new surface (`occt._swept_converted`). An extrusion keeps (u, v)
-    (extrusion_window.step reads, its hits Open CASCADE's: test_cad_sweep.py); a revolution's rational circle does
-    not: its pcurves land up to 3.5 off the 3D edges, so its face stays refused with the conversion's reason."""
-    from rtreflect.errors import SceneError
-    from rtreflect.exchange import occt
-
-    path = tmp_path / "revolution_window.step"
-    sweep.PARTS[path.name](path)
-    assert occt._swept_converted(occt_faces(path)[1][0]) is None
-    with pytest.raises(SceneError, match="cannot convert it to NURBS"):
-        read_cad(path)

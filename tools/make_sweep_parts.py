@@ -99,7 +99,7 @@ Tenth sweep:
   extrusion_window.step  a face on a surface of linear extrusion of a periodic B-spline curve, its u window across the
                        curve's period end (Open CASCADE's NURBS conversion refuses it), beside a box
   revolution_window.step a face on a surface of revolution of a periodic B-spline profile, its v window across the
-                       profile's period end (refused by the conversion; still refused: left open)
+                       profile's period end (refused by the conversion likewise)
 """
 
 from __future__ import annotations

@@ -981,7 +981,7 @@ def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list
             if isinstance(BRep_Tool.Surface_s(original), Geom_BSplineSurface):
                 face = original
             else:
-                face = _swept_converted(original)
+                face = _unwrapped_converted(original)
                 if face is None:
                     faces.append(_Unconvertible(f"Open CASCADE cannot convert it to NURBS ({exc})"))
                     key_makers.append(None)
@@ -992,44 +992,58 @@ def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list
     return faces, key_makers
 
 
-#: `_swept_converted` keeps a converted face only where its pcurves on the new surface lie within this fraction of the
-#: face's bounding-box diagonal (or 10× the edge's own tolerance) of the 3D edges: the conversion kept (u, v).
-SWEPT_AGREEMENT = 1e-7
+#: `_unwrapped_converted` keeps a converted face only where its pcurves lie within this fraction of the face's
+#: bounding-box diagonal (or 10× the edge's own tolerance) of its 3D edges.
+UNWRAPPED_AGREEMENT = 1e-7
 
 
-def _swept_converted(original):
-    """A face the NURBS conversion refuses, converted by ``ShapeCustom.ConvertToBSpline`` (extrusions, revolutions,
-    offsets), or None unless every edge's pcurve, unchanged by it, still lies on the new surface along the 3D edge.
+def _unwrapped_converted(original):
+    """A face the NURBS conversion refuses, converted again once each edge's 3D curve that is a periodic B-spline
+    (or a trimmed one) is replaced by its segment over the edge's range: the same points at the same parameters, no
+    period. None where that fails too, or where a converted pcurve misses its 3D edge (`UNWRAPPED_AGREEMENT`).
 
-    The conversion of a face on a surface of linear extrusion of a periodic B-spline curve, its window across the
-    curve's period end, fails on its edges ("Knots interval values too close"); ShapeCustom rewrites the surface
-    alone, in the same (u, v) (S(u, v) = C(u) + vD, C kept), so the pcurves stay valid. A revolution's rational circle
-    does not keep the angle as u: its pcurves then miss the new surface, and the face stays unconvertible.
+    A face on a swept surface of a periodic B-spline curve (a linear extrusion, a revolution), its window across the
+    curve's period end, has edges on that curve trimmed across its origin, and their conversion fails ("BSpline
+    curve: Knots interval values too close"); segmented, they convert, and the surface with them.
     """
-    from OCP.BRep import BRep_Tool
+    from OCP.BRep import BRep_Builder, BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d
-    from OCP.Geom import Geom_BSplineSurface
-    from OCP.ShapeCustom import ShapeCustom
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy, BRepBuilderAPI_NurbsConvert
+    from OCP.Geom import Geom_BSplineCurve, Geom_BSplineSurface, Geom_TrimmedCurve
     from OCP.TopAbs import TopAbs_FACE
     from OCP.TopExp import TopExp_Explorer
+    from OCP.TopLoc import TopLoc_Location
     from OCP.TopoDS import TopoDS
 
     try:
+        copy = TopoDS.Face(BRepBuilderAPI_Copy(original).Shape())
+        builder, unwrapped = BRep_Builder(), False
+        for edge in _edges_of(copy):
+            location = TopLoc_Location()
+            curve = BRep_Tool.Curve_s(edge, location, 0.0, 0.0)
+            basis = curve.BasisCurve() if isinstance(curve, Geom_TrimmedCurve) else curve
+            if isinstance(basis, Geom_BSplineCurve) and basis.IsPeriodic():
+                first, last = BRep_Tool.Range_s(edge)
+                segment = basis.Copy()
+                segment.Segment(first, last)
+                builder.UpdateEdge(edge, segment, location, BRep_Tool.Tolerance_s(edge))
+                unwrapped = True
+        if not unwrapped:
+            return None
         with quiet_stdout():
-            shape = ShapeCustom.ConvertToBSpline_s(original, True, True, True, False)
+            shape = BRepBuilderAPI_NurbsConvert(copy, True).Shape()
         face = TopoDS.Face(TopExp_Explorer(shape, TopAbs_FACE).Current())
         surface = BRep_Tool.Surface_s(face)
         if not isinstance(surface, Geom_BSplineSurface):
             return None
         lo, hi = shape_bounds(original)
-        reach = SWEPT_AGREEMENT * float(np.linalg.norm(hi - lo))
+        reach = UNWRAPPED_AGREEMENT * float(np.linalg.norm(hi - lo))
         for edge in _edges_of(face):
             if BRep_Tool.Degenerated_s(edge):
                 continue
             curve, curve3d = BRepAdaptor_Curve2d(edge, face), BRepAdaptor_Curve(edge)
-            t0, t1 = curve.FirstParameter(), curve.LastParameter()
             allowed = max(reach, 10.0 * BRep_Tool.Tolerance_s(edge))
-            for t in np.linspace(t0, t1, 9):
+            for t in np.linspace(curve.FirstParameter(), curve.LastParameter(), 9):
                 uv = curve.Value(float(t))
                 if surface.Value(uv.X(), uv.Y()).Distance(curve3d.Value(float(t))) > allowed:
                     return None
