@@ -41,7 +41,8 @@ WIDTH, HEIGHT = 96, 54
 #: Parts whose pixel-centre rays run through OCCT's checks (each a few seconds).
 SWEEP = ["sphere_hole.step", "torus.step", "cone.step", "shelled_box.step", "loft_hole.step", "bspline_prism.step",
          "two_solids.step", "reversed_face.step", "sliver.step", "faces.igs", "periodic_trimmed.step",
-         "periodic_trimmed_box.step"]
+         "periodic_trimmed_box.step", "extrusion_window.step",
+         "revolution_window.step"]
 
 
 def distance_to_face(face, point: np.ndarray) -> float:

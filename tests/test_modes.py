@@ -238,3 +238,31 @@ def test_a_mode_breaking_the_along_ray_contract_is_refused(monkeypatch, scene, a
     monkeypatch.setitem(MODES, name, lambda *args: Broken(build(*args)))
     with pytest.raises(TypeError, match=f"{field} is {'missing' if along_ray else 'given'}"):
         Renderer(load_scene(SCENES / scene))
+
+
+def test_auto_range_of_a_curvature_that_is_zero_is_not_its_rounding():
+    """K = 0 exactly on z = f(x) + g(y) with f piecewise linear (the sweep's kink.step: a degree 3 × 7 face with a C0
+    crease): the auto range stays at `FLAT_RANGE` / size², so K's rounding (up to 9e-17, the whole range before) maps
+    to the diverging map's middle on every pixel instead of full-range colour bands."""
+    import math
+
+    from rtreflect.modes.curvaturemap import FLAT_RANGE
+
+    points = np.array([[(10.0 * i, 8.0 * j, 8.0 * abs(i - 3) / 3 + 3.0 * math.sin(j)) for j in range(8)]
+                       for i in range(7)])
+    knots_u, knots_v = np.array([0.0] * 4 + [0.5] * 3 + [1.0] * 4), np.array([0.0] * 8 + [1.0] * 8)
+    kink = NurbsSurface(3, 7, knots_u, knots_v, points, np.ones(points.shape[:2]))
+    scene = Scene(surfaces=[kink], image={"width": 96, "height": 54, "samples": 1},
+                  camera={"eye": [30.0, -60.0, 70.0], "look_at": [30.0, 28.0, 3.0], "fov": 50.0},
+                  render={"mode": "curvature", "quantity": "gaussian", "range": "auto", "bands": 0})
+    low, high, _ = auto_range("gaussian", SurfaceSet([kink]))
+    size = float(np.linalg.norm(np.ptp(points.reshape(-1, 3), axis=0)))
+    assert high == pytest.approx(FLAT_RANGE / size**2, rel=1e-9) and low == -high
+    result = render(scene)
+    full = result.aov("A") == 1
+    assert full.sum() > 500
+    assert np.abs(result.aov("phi")[full]).max() < 1e-4 * high  # K is 0 to rounding
+    # The map's middle on every pixel: between its entries just either side of t = 0.5.
+    middle = linear_rgb(DIVERGING, np.array([0.499, 0.501]))
+    rgb = result.rgba[..., :3][full]
+    assert np.all((rgb >= middle.min(axis=0) - 1e-6) & (rgb <= middle.max(axis=0) + 1e-6))

@@ -96,6 +96,10 @@ Eighth sweep (extreme close-ups; new surface kinds):
   thin_wide.step       a wall 100 long and 1e-5 thick on a base: a 100 × 1e-5 face seen face-on
 Tenth sweep:
   periodic_trimmed_box.step  periodic_trimmed's face beside a box: the whole model does not convert, the box's faces do
+  extrusion_window.step  a face on a surface of linear extrusion of a periodic B-spline curve, its u window across the
+                       curve's period end (Open CASCADE's NURBS conversion refuses it), beside a box
+  revolution_window.step a face on a surface of revolution of a periodic B-spline profile, its v window across the
+                       profile's period end (refused by the conversion likewise)
 """
 
 from __future__ import annotations
@@ -1536,6 +1540,50 @@ def periodic_trimmed_box():
     return compound_of(periodic_trimmed(), BRepPrimAPI_MakeBox(gp_Pnt(-3.0, -3.0, 13.0), 6.0, 6.0, 6.0).Shape())
 
 
+def _periodic_curve(points):
+    """A periodic cubic B-spline curve through the control points ``points`` (xyz), knots 0, 1, … n."""
+    from OCP.Geom import Geom_BSplineCurve
+    from OCP.collections import Array1_double, Array1_gp_Pnt, Array1_int
+    from OCP.gp import gp_Pnt
+
+    n = len(points)
+    poles, knots, mults = Array1_gp_Pnt(1, n), Array1_double(1, n + 1), Array1_int(1, n + 1)
+    for i, p in enumerate(points):
+        poles.SetValue(i + 1, gp_Pnt(*p))
+    for i in range(n + 1):
+        knots.SetValue(i + 1, float(i))
+        mults.SetValue(i + 1, 1)
+    return Geom_BSplineCurve(poles, knots, mults, 3, True)
+
+
+def extrusion_window():
+    """A wavy periodic B-spline outline (9 poles, period 9) extruded along (0.1, 0.2, 1), the face u from -2.5 to 2.5
+    (across the period's end) and v from 0 to 15, beside a 6 × 6 × 6 box."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.Geom import Geom_SurfaceOfLinearExtrusion
+    from OCP.gp import gp_Dir, gp_Pnt
+
+    angles = [2 * math.pi * k / 9 for k in range(9)]
+    outline = _periodic_curve([(10 * math.cos(a) * (1 + 0.25 * math.cos(3 * a)), 8 * math.sin(a), 0.0) for a in angles])
+    face = BRepBuilderAPI_MakeFace(Geom_SurfaceOfLinearExtrusion(outline, gp_Dir(0.1, 0.2, 1.0)), -2.5, 2.5, 0.0, 15.0,
+                                   1e-7).Face()
+    return compound_of(face, BRepPrimAPI_MakeBox(gp_Pnt(-20.0, -3.0, 0.0), 6.0, 6.0, 6.0).Shape())
+
+
+def revolution_window():
+    """A periodic B-spline profile (8 poles, period 8) round (20, 0, 0) revolved about z, the face u (the angle) from
+    -1 to 1.5 and v from -2 to 3 (across the profile's period end)."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_SurfaceOfRevolution
+    from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt
+
+    angles = [2 * math.pi * k / 8 for k in range(8)]
+    profile = _periodic_curve([(20 + 5 * math.cos(a) + 1.5 * math.cos(2 * a), 0.0, 6 * math.sin(a)) for a in angles])
+    surface = Geom_SurfaceOfRevolution(profile, gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1)))
+    return BRepBuilderAPI_MakeFace(surface, -1.0, 1.5, -2.0, 3.0, 1e-7).Face()
+
+
 def touching_holes():
     """A 60 × 40 × 3 plate drilled by two holes (r 6) whose rims touch at one point (centres 12 apart), and a third
     (r 4) tangent to the second's rim from outside on the other side: inner loops touching each other."""
@@ -1638,6 +1686,8 @@ PARTS = {
     "rational_extrusion.step": lambda p: write_step(rational_extrusion(), p),
     "periodic_trimmed.step": lambda p: write_step(periodic_trimmed(), p),
     "periodic_trimmed_box.step": lambda p: write_step(periodic_trimmed_box(), p),
+    "extrusion_window.step": lambda p: write_step(extrusion_window(), p),
+    "revolution_window.step": lambda p: write_step(revolution_window(), p),
     "touching_holes.step": lambda p: write_step(touching_holes(), p),
     "thin_wide.step": lambda p: write_step(thin_wide(), p),
 }

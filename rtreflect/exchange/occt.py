@@ -783,14 +783,18 @@ def edge_keys(shape, prefix: str) -> tuple:
     return index, lambda edge: f"{prefix}#{index.FindIndex(edge)}"
 
 
-def face_edges(face, surface: NurbsSurface, key_of, onto_edges: bool = False) -> tuple:
+def face_edges(face, surface: NurbsSurface, key_of, onto_edges: bool = False, tolerance: float | None = None) -> tuple:
     """The face's B-rep edges as `FaceEdge`s (geometry/topology.py): each pcurve γ(t) and γ'(t) at `EDGE_SEGMENTS` + 1
     parameters spread evenly over the edge's range (SameParameter: the same t on every face of the edge).
 
     A seam edge of this face (``BRep_Tool.IsClosed_s``: both sides of a periodic surface's seam line) and a
     degenerate edge (a pole) are recorded by their flags only: they join the face to no other face.
     ``onto_edges``: the points are projected from the 3D edge onto the surface (pcurves fitted by ShapeFix
-    only approximate it, see `_edge_samples`).
+    only approximate it, see `_edge_samples`). Else an edge's points are projected so where its pcurve strays from the
+    3D edge by more than `STRAY_FRACTION` of the trim ``tolerance`` (`_strays_from_edge`), as its trim's are: the
+    NURBS conversion of a mirrored instance refits pcurves that run along the edge at another speed than the 3D
+    curve, and the two faces' points at the same t lay up to 6.4e-4 apart on an edge whose surfaces meet to 4e-13
+    (the sweep's mirrored_assembly.step: `continuity` called the copy's sphere corner open, G0 0.000119).
     """
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d
@@ -827,7 +831,8 @@ def face_edges(face, surface: NurbsSurface, key_of, onto_edges: bool = False) ->
         (u0, u1), (v0, v1) = surface.domain
         uv[:, 0], uv[:, 1] = np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)
         curve3d = BRepAdaptor_Curve(edge)
-        if onto_edges:
+        if onto_edges or (tolerance is not None and BRep_Tool.Tolerance_s(edge) > STRAY_FRACTION * tolerance
+                          and _strays_from_edge(edge, surface, t, uv, tolerance)):
             target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(tk)) for tk in t)])
             uv = project_onto_surface(surface, target, uv)
         out.append(FaceEdge(key, t, uv, duv, float(GCPnts_AbscissaPoint.Length_s(curve3d))))
@@ -973,15 +978,78 @@ def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list
                 alone = BRepBuilderAPI_NurbsConvert(original, True).Shape()
             face = TopoDS.Face(TopExp_Explorer(alone, TopAbs_FACE).Current())
         except Exception as exc:
-            if not isinstance(BRep_Tool.Surface_s(original), Geom_BSplineSurface):
-                faces.append(_Unconvertible(f"Open CASCADE cannot convert it to NURBS ({exc})"))
-                key_makers.append(None)
-                continue
-            face = original
+            if isinstance(BRep_Tool.Surface_s(original), Geom_BSplineSurface):
+                face = original
+            else:
+                face = _unwrapped_converted(original)
+                if face is None:
+                    faces.append(_Unconvertible(f"Open CASCADE cannot convert it to NURBS ({exc})"))
+                    key_makers.append(None)
+                    continue
         mine, keys = _edges_of(face), [original_key(edge) for edge in _edges_of(original)]
         faces.append(face)
         key_makers.append(lambda edge, mine=mine, keys=keys: next(key for e, key in zip(mine, keys) if e.IsSame(edge)))
     return faces, key_makers
+
+
+#: `_unwrapped_converted` keeps a converted face only where its pcurves lie within this fraction of the face's
+#: bounding-box diagonal (or 10× the edge's own tolerance) of its 3D edges.
+UNWRAPPED_AGREEMENT = 1e-7
+
+
+def _unwrapped_converted(original):
+    """A face the NURBS conversion refuses, converted again once each edge's 3D curve that is a periodic B-spline
+    (or a trimmed one) is replaced by its segment over the edge's range: the same points at the same parameters, no
+    period. None where that fails too, or where a converted pcurve misses its 3D edge (`UNWRAPPED_AGREEMENT`).
+
+    A face on a swept surface of a periodic B-spline curve (a linear extrusion, a revolution), its window across the
+    curve's period end, has edges on that curve trimmed across its origin, and their conversion fails ("BSpline
+    curve: Knots interval values too close"); segmented, they convert, and the surface with them.
+    """
+    from OCP.BRep import BRep_Builder, BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Copy, BRepBuilderAPI_NurbsConvert
+    from OCP.Geom import Geom_BSplineCurve, Geom_BSplineSurface, Geom_TrimmedCurve
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS
+
+    try:
+        copy = TopoDS.Face(BRepBuilderAPI_Copy(original).Shape())
+        builder, unwrapped = BRep_Builder(), False
+        for edge in _edges_of(copy):
+            location = TopLoc_Location()
+            curve = BRep_Tool.Curve_s(edge, location, 0.0, 0.0)
+            basis = curve.BasisCurve() if isinstance(curve, Geom_TrimmedCurve) else curve
+            if isinstance(basis, Geom_BSplineCurve) and basis.IsPeriodic():
+                first, last = BRep_Tool.Range_s(edge)
+                segment = basis.Copy()
+                segment.Segment(first, last)
+                builder.UpdateEdge(edge, segment, location, BRep_Tool.Tolerance_s(edge))
+                unwrapped = True
+        if not unwrapped:
+            return None
+        with quiet_stdout():
+            shape = BRepBuilderAPI_NurbsConvert(copy, True).Shape()
+        face = TopoDS.Face(TopExp_Explorer(shape, TopAbs_FACE).Current())
+        surface = BRep_Tool.Surface_s(face)
+        if not isinstance(surface, Geom_BSplineSurface):
+            return None
+        lo, hi = shape_bounds(original)
+        reach = UNWRAPPED_AGREEMENT * float(np.linalg.norm(hi - lo))
+        for edge in _edges_of(face):
+            if BRep_Tool.Degenerated_s(edge):
+                continue
+            curve, curve3d = BRepAdaptor_Curve2d(edge, face), BRepAdaptor_Curve(edge)
+            allowed = max(reach, 10.0 * BRep_Tool.Tolerance_s(edge))
+            for t in np.linspace(curve.FirstParameter(), curve.LastParameter(), 9):
+                uv = curve.Value(float(t))
+                if surface.Value(uv.X(), uv.Y()).Distance(curve3d.Value(float(t))) > allowed:
+                    return None
+    except Exception:  # OCCT's Standard_Failure
+        return None
+    return face
 
 
 def read_xstep(reader, path: Path, kind: str) -> None:
@@ -1057,7 +1125,8 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
                 if converted is not None and len(originals) == len(faces) and seam_lost(face):
                     face, face_key_of = converted_alone(originals[index], face, face_key_of)
                 surface = bspline_of_face(face)
-                edges = face_edges(face, surface, face_key_of, trims_onto_edges) if topology else ()
+                edges = (face_edges(face, surface, face_key_of, trims_onto_edges, TRIM_TOLERANCE * diagonal)
+                         if topology else ())
                 trim = trim_of_face(face, surface, TRIM_TOLERANCE * diagonal, trims_onto_edges, edges)
                 # Meshed face by face, its triangulation dropped once read: memory stays that of one face's
                 # mesh (the whole shape's at once took 560 MB on a 2000-face plate).

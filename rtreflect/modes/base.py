@@ -120,6 +120,9 @@ class Mode(Protocol):
     #: `Stripes.occlusion_t` and `Stripes.level_t` (how far the sampled and the analytic path test for occlusion),
     #: the others neither: `checked` refuses a mode that breaks this.
     along_ray: ClassVar[bool] = False
+    #: φ's period where φ is an angle that wraps (zebra: 360°, cut at ±180°), else None: the contours then find each
+    #: level on φ unwrapped about it (`contours._patch_chains`), not across the cut.
+    period: ClassVar[float | None] = None
 
     def phi(self, p: SurfacePoints) -> np.ndarray:
         """φ at the points (NaN where undefined)."""

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.curvature import curvatures
+from ..geometry.seams import part_size
 from .base import STRIPE_SHARE, Mode, Stripes, SurfacePoints, even_stripes
 from .colormaps import DIVERGING, SEQUENTIAL, linear_rgb
 from .lights import TubeLights
@@ -30,6 +31,11 @@ AUTO_GRID = 64
 UNITS = {"gaussian": "1/unit²", "mean": "1/unit", "k1": "1/unit", "k2": "1/unit", "maxabs": "1/unit",
          "radius": "unit"}
 SIGNED = ("gaussian", "mean", "k1", "k2")
+#: An "auto" range is never narrower than this many of the quantity's natural unit (1/size, 1/size² for K, size for
+#: the radius; size the part's bounding-box diagonal): below it the sampled values are the rounding of a quantity
+#: that is 0 (as continuity's FLAT_CURVATURE). The sweep's kink.step, K = 0 exactly (z = f(x) + g(y), f piecewise
+#: linear): its auto range was ±9e-17 and the map drew the rounding of K as full-range colour bands and lines.
+FLAT_RANGE = 1e-8
 
 
 def quantity_of(name: str, derivs, n: np.ndarray) -> np.ndarray:
@@ -62,14 +68,17 @@ def auto_range(name: str, surfaces) -> tuple[float, float, float]:
     q = q[np.isfinite(q)]
     if len(q) == 0:
         return (-1.0, 1.0, 0.0)
+    size = part_size(list(surfaces.patches))
+    floor = FLAT_RANGE * (size if name == "radius" else size ** -2.0 if name == "gaussian" else 1.0 / size)
     if name in SIGNED:
-        top = float(np.percentile(np.abs(q), AUTO_PERCENTILE))
+        top = max(float(np.percentile(np.abs(q), AUTO_PERCENTILE)), floor)
         low, high = -top, top
     else:
         low, high = float(np.percentile(q, 100.0 - AUTO_PERCENTILE)), float(np.percentile(q, AUTO_PERCENTILE))
-    if not high > low:  # a flat or constant field: a range around its value, so the map is defined
-        pad = max(abs(high), 1e-12)
-        low, high = low - pad, high + pad
+        if high - low < floor:  # a constant field (to rounding): a range around its value, so the map is defined
+            middle = 0.5 * (low + high)
+            pad = max(abs(middle), floor)
+            low, high = middle - pad, middle + pad
     clipped = float(np.mean((q < low) | (q > high)))
     return (low, high, clipped)
 

@@ -12,6 +12,7 @@ distance (φ = f depends on R too). Nothing occludes an environment map's stripe
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -26,6 +27,7 @@ class ZebraMode(Mode):
     step: float
     name: str = "zebra"
     stage: str = "zebra (reflected direction)"
+    period: ClassVar[float] = 360.0  # ψ wraps at ±180°
 
     @property
     def levels(self) -> np.ndarray:
