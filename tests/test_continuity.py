@@ -404,3 +404,26 @@ def test_converted_pcurves_that_stray_from_their_edge_give_no_false_gap(tmp_path
         tolerance = ShapeAnalysis_ShapeTolerance().Tolerance(occt_faces(path)[0], 1, TopAbs_EDGE)
         assert len(edges) == 96 and all(e.cls == "G1" for e in edges)
         assert max(e.g0_max for e in edges) <= tolerance
+
+
+def test_render_seams_text_fits_the_image(tmp_path):
+    """`render --seams` scales its labels and legend to the image: on g1_join at 160×90 the fixed 14-px legend and
+    labels changed 27 % of the PNG's pixels (the picture hidden); now the legend is left out where it would take more
+    than `LEGEND_WIDTH` × `LEGEND_HEIGHT` of it, and labels stop at `LABEL_AREA` (2.4 %: the seams and a label). At
+    640×360 the legend is drawn: its first swatch (top left) in the 'open' colour."""
+    import OpenImageIO as oiio
+
+    from rtreflect.analysis.seampicture import CLASS_COLOURS
+    from rtreflect.output.imagefiles import encode_srgb
+
+    def png(folder, width, height, *extra):
+        result = _run("render", "scenes/g1_join.toml", "-o", str(tmp_path / folder), "--width", str(width), "--height",
+                      str(height), "--samples", "1", *extra)
+        assert result.returncode == 0, result.stderr
+        return oiio.ImageBuf(str(next((tmp_path / folder).glob("*.png")))).get_pixels(oiio.UINT8).astype(int)
+
+    plain, drawn = png("plain", 160, 90), png("seams", 160, 90, "--seams")
+    assert np.mean(np.any(plain != drawn, axis=-1)) < 0.1
+    red = encode_srgb(np.array([[[*CLASS_COLOURS["open"], 1.0]]], dtype=np.float32))[0, 0, :3].astype(int)
+    large = png("large", 640, 360, "--seams")
+    assert np.all(np.abs(large[12:20, 12:20, :3] - red) <= 2)

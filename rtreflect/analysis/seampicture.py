@@ -3,7 +3,7 @@
 The seams are drawn with the overlay's anti-aliased line coverage (`overlay.coverage`,
 `overlay.blend`), coloured by the class each reaches; a seam short of G2 gets its worst value written beside
 its worst visible point (one label where symmetric copies would overlap);
-a legend names the colours. Points of a seam hidden from the eye (Embree occlusion, as
+a legend names the colours where it fits (text scaled to the image). Points of a seam hidden from the eye (Embree occlusion, as
 for the contours) are not drawn. The charts plot G0 (gap), G1 (angle) and the two
 sides' normal curvatures against arc length, one row of three panels per edge. Text is
 drawn by OpenImageIO's ``render_text`` (its built-in font), so no plotting library is needed.
@@ -25,9 +25,18 @@ from ..trace.tracing import occluded
 #: Linear RGB per class: red open, orange G0, yellow-green G1, blue G2 (distinct for the usual colour blindness).
 CLASS_COLOURS = {"open": (0.9, 0.0, 0.0), "G0": (1.0, 0.45, 0.0), "G1": (0.75, 0.75, 0.0), "G2": (0.0, 0.35, 1.0)}
 SEAM_WIDTH_PX = 3.0
+#: Text size of labels and legend: the image width over this, within [MIN_FONT_PX, FONT_PX] (fixed-size text on a
+#: 160×90 render covered the whole picture).
+FONT_PER_WIDTH = 40
 FONT_PX = 14
-#: Width of a character of the built-in font at FONT_PX, for keeping labels apart.
-LABEL_CHAR_PX = 8
+MIN_FONT_PX = 8
+#: Width of a character of the built-in font over its size, for keeping labels apart.
+CHAR_PER_FONT = 8 / 14
+#: The legend is drawn only where its box takes at most these fractions of the image's width and height: on a small
+#: render it would hide the seams it explains (their colours are listed in `rtreflect continuity --help`).
+LEGEND_WIDTH, LEGEND_HEIGHT = 0.6, 0.3
+#: Labels stop once their boxes cover this fraction of the image (the worst seams are labelled first).
+LABEL_AREA = 0.1
 PANEL = (240, 120)  # width, height of one chart panel in pixels
 MARGIN = 28
 
@@ -128,26 +137,37 @@ def draw_seams(rgba: np.ndarray, field: UlmetField, result) -> np.ndarray:
             if np.any(seen) and e.cls != "G2":  # label the seams that fall short of G2, at their worst visible point
                 quantity = {"open": s.g0, "G0": s.g1, "G1": s.jump}[e.cls]
                 at = np.flatnonzero(seen)[np.argmax(quantity[seen])]
-                labels.append((px[at], _label(e), colour))
+                labels.append((px[at], _label(e), list(CLASS_COLOURS).index(cls), -float(quantity[at])))
         if polylines:
             alpha = coverage(ContourLines(W, H, [ContourLine(0, 0.0, polylines)]), W, H, SEAM_WIDTH_PX)
             rgba = blend(rgba, alpha.astype(np.float32), colour)
-    placed: list[tuple[float, float, float, float]] = []
-    for (x, y), text, colour in labels:
-        box = (x + 6, y - 6 - FONT_PX, x + 6 + LABEL_CHAR_PX * len(text), y - 6)
-        clash = any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed)
-        if 0 <= x < W and 0 <= y < H and not clash:  # symmetric copies of a seam carry the same label: once
-            placed.append(box)
-            rgba[int(y) - 2:int(y) + 3, int(x) - 2:int(x) + 3] = (0.0, 0.0, 0.0, 1.0)  # the point the label refers to
-            rgba = _text(rgba, int(x) + 6, int(y) - 6, text)
-    # Legend, top left: a swatch and the class's meaning.
+    font = int(np.clip(W // FONT_PER_WIDTH, MIN_FONT_PX, FONT_PX))
+    char = CHAR_PER_FONT * font
+    # Legend, top left: a swatch and the class's meaning, where it fits (`LEGEND_WIDTH`, `LEGEND_HEIGHT`).
     th = result.thresholds
     meaning = {"open": f"open: gap > {th.g0:.2g}", "G0": f"G0: gap closed, normals > {th.g1_deg:g} deg apart",
                "G1": f"G1: tangent, curvature jump > {th.g2:.0%}", "G2": f"G2: curvature jump <= {th.g2:.0%}"}
-    for i, (cls, colour) in enumerate(CLASS_COLOURS.items()):
-        y = 10 + i * (FONT_PX + 6)
-        rgba[y:y + FONT_PX, 10:30] = (*colour, 1.0)  # opaque, also over a render's transparent background
-        rgba = _text(rgba, 36, y + FONT_PX - 2, meaning[cls])
+    swatch, row = int(round(1.4 * font)), font + 6
+    legend = (0.0, 0.0, 16 + swatch + char * max(map(len, meaning.values())), 10.0 + len(meaning) * row)
+    placed: list[tuple[float, float, float, float]] = []
+    if legend[2] <= LEGEND_WIDTH * W and legend[3] <= LEGEND_HEIGHT * H:
+        placed.append(legend)
+        for i, (cls, colour) in enumerate(CLASS_COLOURS.items()):
+            y = 10 + i * row
+            rgba[y:y + font, 10:10 + swatch] = (*colour, 1.0)  # opaque, also over a render's transparent background
+            rgba = _text(rgba, 16 + swatch, y + font - 2, meaning[cls], size=font)
+    # Labels by class (open first) and within one by their value, worst first, until they cover `LABEL_AREA`.
+    labels.sort(key=lambda label: label[2:])
+    area = 0.0
+    for (x, y), text, _, _ in labels:
+        box = (x + 6, y - 6 - font, x + 6 + char * len(text), y - 6)
+        clash = any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed)
+        inside = 0 <= x < W and 0 <= y < H and box[1] >= 0 and box[2] <= W
+        area += (box[2] - box[0]) * font if inside and not clash else 0.0
+        if inside and not clash and area <= LABEL_AREA * W * H:  # symmetric copies' labels once; none over the legend
+            placed.append(box)
+            rgba[int(y) - 2:int(y) + 3, int(x) - 2:int(x) + 3] = (0.0, 0.0, 0.0, 1.0)  # the point the label refers to
+            rgba = _text(rgba, int(x) + 6, int(y) - 6, text, size=font)
     return rgba
 
 
