@@ -188,3 +188,14 @@ def test_curvature_map_bending_within_a_pixel_is_no_colour_mismatch(tmp_path):
     report = validate_scene(scene, threads=1)
     assert report.colour_checked > 500 and report.colour_mismatches == 0
     assert report.passed, report.reasons
+
+
+def test_a_map_with_no_line_in_view_says_why_in_its_own_terms():
+    """The filleted block's Gaussian curvature in 6 bands: K is 0 on its planes and cylinders and 1/r² on its sphere
+    corners, so no level is crossed in view. Nothing is compared (FAIL), and the reason speaks of the map's levels,
+    not of tubes (which a curvature map has none of: the message said "no tube is reflected")."""
+    scene = load_scene(Path(__file__).resolve().parent.parent / "parts" / "filleted_block.step").replace(
+        image={"width": 160, "height": 90}, render={"mode": "curvature", "quantity": "gaussian", "bands": 6})
+    report = validate_scene(scene, threads=1)
+    assert not report.passed and "no traced line centre was compared" in report.reasons[0]
+    assert "tube" not in report.reasons[0] and "a region, not a line" in report.reasons[0]

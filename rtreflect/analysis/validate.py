@@ -978,7 +978,10 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
         reasons.insert(0, "no traced line centre was compared (the camera sees no surface)")
     elif len(deviations) == 0:
         why = ("every line's neighbour lies closer than the pixels resolve" if notes and len(notes) == sum(counted)
-               else "no tube is reflected where the camera sees the surface")
+               else "no tube is reflected where the camera sees the surface" if spec.along_ray
+               # A map mode: a level φ equals on whole faces (K = 0 on planes, draft 0° on walls) is a region, no line.
+               else "φ crosses none of the mode's levels where the camera sees the surface, or equals one on whole "
+                    "faces: zero curvature or draft on planes and walls is a region, not a line")
         reasons.insert(0, f"no traced line centre was compared ({why})")
     elif spec.along_ray and drawn < MIN_DRAWN_SHARE * seen:
         # A few stray centres (grazing rays at silhouettes) compare well, but the picture shows no lines.
