@@ -315,3 +315,22 @@ def test_cut_points_snap_onto_knots_within_side_snap(value, periods, snapped):
     assert _snap_to_knots(value, knots, period, period) == pytest.approx(snapped, rel=0, abs=1e-12)
     if periods == 0:  # not periodic: the same knots, the same verdict
         assert _snap_to_knots(value, knots, period) == snapped
+
+
+@pytest.mark.parametrize("knots, period, lo, hi, cut", [
+    ([0, 1, 2, 3], 0, 0.5, 2.0000001, (0.5, 3.0)),  # 1e-7 of a span kept past the knot 2: out to 3
+    ([0, 1, 2, 3], 0, 0.9999999, 2.5, (0.0, 2.5)),  # the lower cut alike: out to 0
+    ([0, 1, 2], 0, 1.0001, 1.0005, (1.0001, 1.0005)),  # the whole face inside one span: no sliver beside a span
+    ([0, 1, 1000], 0, 0.0, 1.0000001, (0.0, 1.0000001)),  # out to 1000 would be 999 face widths: kept
+    ([0, 1, 2, 3], 0, 0.5, 3.0 - 1e-6, (0.5, 3.0 - 1e-6)),  # just short of a knot: no sliver (the span is kept whole)
+    ([0, 2, 4, 6, 8], 8, 5.0, 8.0000001, (5.0, 10.0)),  # periodic: past the period's end, out to the next period's 2
+    ([0, 2, 4, 6, 8], 8, 2.5, 10.0000001, (2.5, 10.0000001)),  # ... not past lo + period (10.5): kept
+])
+def test_a_cut_leaving_a_sliver_span_moves_out_to_the_spans_far_knot(knots, period, lo, hi, cut):
+    """`occt._cut_at_knots` (`bspline_of_face`'s cut): a cut keeping less than `SLIVER_SPAN` of a knot span beyond
+    a knot inside the face's range moves out to that span's far knot, within the surface's bounds (a periodic one's
+    single period) and at most the range's width away; other cuts stay."""
+    from rtreflect.exchange.occt import _cut_at_knots
+
+    knots = np.array(knots, dtype=float)
+    assert _cut_at_knots(lo, hi, knots, period, knots[0], knots[-1]) == pytest.approx(cut, rel=0, abs=1e-12)

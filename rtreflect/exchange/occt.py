@@ -227,7 +227,8 @@ def clean_knots(knots: np.ndarray, degree: int, poles: np.ndarray, weights: np.n
 
 
 def _snap_to_knots(value: float, knots: np.ndarray, width: float, period: float = 0.0, outward: int = 0,
-                   bounds: tuple[float, float] = (-math.inf, math.inf)) -> float:
+                   bounds: tuple[float, float] = (-math.inf, math.inf),
+                   kept: tuple[float, float] = (-math.inf, math.inf)) -> float:
     """``value`` moved onto the nearest knot within `SIDE_SNAP` of ``width`` (the cut's range; at least
     `MIN_KNOT_SPAN`), so cutting there leaves no sliver knot span. A periodic direction's knots (one period's) are
     first moved by whole periods to ``value``'s period where ``value`` lies outside their range.
@@ -240,6 +241,9 @@ def _snap_to_knots(value: float, knots: np.ndarray, width: float, period: float 
     Farther from the knot, a cut that would still leave less than `SLIVER_SPAN` of the knot span it falls in on the
     kept side (``outward`` = +1 for the upper cut, −1 for the lower) moves out to that span's far knot instead, within
     ``bounds``: the face keeps the whole span, which holds it (its trims bound it), and no point of the surface moves.
+    Only where that knot lies inside the cut's range ``kept`` (else the piece kept is no sliver beside a span, but the
+    whole face inside one) and the move is at most the range's width (a face's domain stays about its size: the
+    contour grids and the curvature map's range sample the whole domain).
     variable_fillet.step's fillets 2 and 6 end 4.4e-7 past a knot (1.5e-8 of their range: beyond the snap), and cut
     there their S_vv came out 8.6 and 15 of its scale off.
     """
@@ -258,9 +262,18 @@ def _snap_to_knots(value: float, knots: np.ndarray, width: float, period: float 
     inner, outer = (above - 1, above) if outward > 0 else (above, above - 1)
     if not (0 <= inner < len(knots) and 0 <= outer < len(knots)):
         return value
-    kept, span = abs(value - knots[inner]), abs(knots[outer] - knots[inner])
-    far = float(knots[outer])
-    return far if kept < SLIVER_SPAN * span and bounds[0] <= far <= bounds[1] else value
+    sliver, span, far = abs(value - knots[inner]), abs(knots[outer] - knots[inner]), float(knots[outer])
+    inside = kept[0] < knots[inner] < kept[1] and abs(far - value) <= kept[1] - kept[0]
+    return far if sliver < SLIVER_SPAN * span and inside and bounds[0] <= far <= bounds[1] else value
+
+
+def _cut_at_knots(lo: float, hi: float, knots: np.ndarray, period: float, first: float, last: float
+                  ) -> tuple[float, float]:
+    """The cut [lo, hi] of one direction with both ends put on knots where `_snap_to_knots` says: moved out over a
+    sliver span only within the surface's bounds [first, last], and a periodic one's (``period`` > 0) single period."""
+    width, kept = hi - lo, (lo, hi)
+    lo = _snap_to_knots(lo, knots, width, period, -1, (hi - period if period else first, math.inf), kept)
+    return lo, _snap_to_knots(hi, knots, width, period, +1, (-math.inf, lo + period if period else last), kept)
 
 
 def _into_pcurves_period(knots: np.ndarray, lo: float, period: float) -> np.ndarray:
@@ -297,10 +310,7 @@ def bspline_of_face(face) -> NurbsSurface:
             lo, hi = first, last
         else:  # the pcurves' bounds may pass the surface's by their tolerance
             lo, hi = max(lo, first), min(hi, last)
-        # Moved out over a sliver span only within the surface's bounds, and a periodic one's single period.
-        width = hi - lo
-        lo = _snap_to_knots(lo, knots, width, period, -1, (hi - period if periodic else first, math.inf))
-        return lo, _snap_to_knots(hi, knots, width, period, +1, (-math.inf, lo + period if periodic else last))
+        return _cut_at_knots(lo, hi, knots, period if periodic else 0.0, first, last)
 
     uk = np.fromiter(surface.UKnots(), float)
     vk = np.fromiter(surface.VKnots(), float)
@@ -925,14 +935,23 @@ def converted_alone(original, face, key_of):
     with quiet_stdout():
         alone = BRepBuilderAPI_NurbsConvert(original, True).Shape()
     alone = TopoDS.Face(TopExp_Explorer(alone, TopAbs_FACE).Current())
-    mine, theirs = _edges_of(alone), _edges_of(face)
-    if len(mine) != len(theirs) or seam_lost(alone):
+    keyed = _keyed_by_order(alone, face, key_of)
+    if keyed is None or seam_lost(alone):
         # Alone it fails the same test, so the whole shape's conversion did not cause it (an exporter's edge
         # tolerance understating its pcurve's distance, say): the face as converted, as before this check (the
         # trim checks downstream still refuse a loop that encloses nothing).
         return face, key_of
+    return alone, keyed
+
+
+def _keyed_by_order(face, counterpart, key_of):
+    """The key maker of ``face``'s edges: each takes the key (``key_of``) of ``counterpart``'s edge in its place (the
+    NURBS conversion keeps a face's edges in order), or None where the two have not as many edges."""
+    mine, theirs = _edges_of(face), _edges_of(counterpart)
+    if len(mine) != len(theirs):
+        return None
     keys = [key_of(edge) for edge in theirs]
-    return alone, lambda edge: next(key for e, key in zip(mine, keys) if e.IsSame(edge))
+    return lambda edge: next(key for e, key in zip(mine, keys) if e.IsSame(edge))
 
 
 def convert_shape(shape):
@@ -956,8 +975,8 @@ class _Unconvertible:
 
 def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list]:
     """Where the whole shape does not convert: each face of ``originals`` converted on its own, with its edges' key
-    maker (keys of the edges of ``shape``, the unconverted model, so faces sharing an edge still share its key: the
-    modifier keeps each face's edges in order, as `converted_alone` relies on).
+    maker (keys of the edges of ``shape``, the unconverted model, so faces sharing an edge still share its key:
+    `_keyed_by_order`; each converts its copy of a shared edge alike).
 
     A face that fails alone but already lies on a B-spline surface is kept as it is: the conversion would only have
     rewritten its curves, which the trims sample through adaptors whatever their type (the sweep's
@@ -972,11 +991,13 @@ def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list
 
     _, original_key = edge_keys(shape, key_prefix)
     faces, key_makers = [], []
-    for original in originals:
+    for index, original in enumerate(originals):
+        keyed = None
         try:
             with quiet_stdout():
                 alone = BRepBuilderAPI_NurbsConvert(original, True).Shape()
             face = TopoDS.Face(TopExp_Explorer(alone, TopAbs_FACE).Current())
+            keyed = _keyed_by_order(face, original, original_key)
         except Exception as exc:
             if isinstance(BRep_Tool.Surface_s(original), Geom_BSplineSurface):
                 face = original
@@ -986,9 +1007,11 @@ def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list
                     faces.append(_Unconvertible(f"Open CASCADE cannot convert it to NURBS ({exc})"))
                     key_makers.append(None)
                     continue
-        mine, keys = _edges_of(face), [original_key(edge) for edge in _edges_of(original)]
         faces.append(face)
-        key_makers.append(lambda edge, mine=mine, keys=keys: next(key for e, key in zip(mine, keys) if e.IsSame(edge)))
+        # A face kept unconverted (or converted with its edges segmented) has edges whose parameter t may differ from
+        # a converted neighbour's along the same edge (the conversion reparametrises conics): sharing their keys would
+        # pair points by t that are not the same point (false gaps). Keys of its own: those edges are no seam.
+        key_makers.append(keyed or edge_keys(face, f"{key_prefix}|face {index}")[1])
     return faces, key_makers
 
 
