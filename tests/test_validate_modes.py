@@ -199,3 +199,40 @@ def test_a_map_with_no_line_in_view_says_why_in_its_own_terms():
     report = validate_scene(scene, threads=1)
     assert not report.passed and "no traced line centre was compared" in report.reasons[0]
     assert "tube" not in report.reasons[0] and "a region, not a line" in report.reasons[0]
+
+
+def test_a_line_mode_with_no_line_in_view_does_not_speak_of_maps(tmp_path):
+    """Isophotes every 90° on a plane whose normal is 45° from L: φ = 45° everywhere, no level crossed. Nothing is
+    compared (FAIL), and the reason speaks of the mode's lines, neither of tubes nor of a map's faces at a level."""
+    scene_file = tmp_path / "plane.toml"
+    scene_file.write_text("""
+[image]
+width = 64
+height = 36
+
+[camera]
+eye = [0.0, -3.0, 3.0]
+look_at = [0.0, 0.0, 0.0]
+
+[lights]
+point = [0.0, 0.0, 3.0]
+normal = [0.0, 0.0, 1.0]
+direction = [0.0, 1.0, 0.0]
+positions = [0.0]
+radius = 0.1
+
+[[surface]]
+degree = [1, 1]
+knots_u = [0.0, 0.0, 1.0, 1.0]
+knots_v = [0.0, 0.0, 1.0, 1.0]
+points = [[[-1.0, -1.0, -1.0], [-1.0, 1.0, -1.0]], [[1.0, -1.0, 1.0], [1.0, 1.0, 1.0]]]
+
+[render]
+mode = "isophote"
+step = 90.0
+light = [0.0, 0.0, 1.0]
+""")
+    report = validate_scene(load_scene(scene_file), threads=1)
+    assert not report.passed and "no traced line centre was compared" in report.reasons[0]
+    assert "tube" not in report.reasons[0] and "whole faces" not in report.reasons[0], report.reasons[0]
+    assert "none of the mode's lines" in report.reasons[0], report.reasons[0]

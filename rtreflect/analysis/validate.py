@@ -64,6 +64,7 @@ from .nearest import nearest_segment
 from .parallax import zebra_parallax
 from ..integrator.film import Film
 from ..modes.base import SurfacePoints, level_offset
+from ..modes.legend import LEGEND_MODES
 from ..modes.lights import reflect
 from ..modes.reflection import ReflectionMode
 from ..modes.profile import stripe_reach, stripe_weight
@@ -979,9 +980,11 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
     elif len(deviations) == 0:
         why = ("every line's neighbour lies closer than the pixels resolve" if notes and len(notes) == sum(counted)
                else "no tube is reflected where the camera sees the surface" if spec.along_ray
-               # A map mode: a level φ equals on whole faces (K = 0 on planes, draft 0° on walls) is a region, no line.
-               else "φ crosses none of the mode's levels where the camera sees the surface, or equals one on whole "
-                    "faces: zero curvature or draft on planes and walls is a region, not a line")
+               # A map: a level φ equals on whole faces (K = 0 on planes, draft 0° on walls) is a region, no line.
+               else "φ crosses none of the map's levels where the camera sees the surface, or equals one on whole "
+                    "faces: zero curvature or draft on planes and walls is a region, not a line"
+               if renderer.scene.render.mode in LEGEND_MODES
+               else "none of the mode's lines lies where the camera sees the surface")
         reasons.insert(0, f"no traced line centre was compared ({why})")
     elif spec.along_ray and drawn < MIN_DRAWN_SHARE * seen:
         # A few stray centres (grazing rays at silhouettes) compare well, but the picture shows no lines.
