@@ -147,27 +147,42 @@ def draw_seams(rgba: np.ndarray, field: UlmetField, result) -> np.ndarray:
     th = result.thresholds
     meaning = {"open": f"open: gap > {th.g0:.2g}", "G0": f"G0: gap closed, normals > {th.g1_deg:g} deg apart",
                "G1": f"G1: tangent, curvature jump > {th.g2:.0%}", "G2": f"G2: curvature jump <= {th.g2:.0%}"}
-    swatch, row = int(round(1.4 * font)), font + 6
-    legend = (0.0, 0.0, 16 + swatch + char * max(map(len, meaning.values())), 10.0 + len(meaning) * row)
+    longest = max(map(len, meaning.values()))
+
+    def legend_box(size: int) -> tuple[float, float, float, float]:
+        return 0.0, 0.0, 16 + round(1.4 * size) + CHAR_PER_FONT * size * longest, 10.0 + len(meaning) * (size + 6)
+
+    # The largest text size up to the labels' whose legend fits: it fits at some size exactly when it fits at the
+    # smallest, so whether a render gets a legend grows monotonically with its size.
+    fits = [f for f in range(font, MIN_FONT_PX - 1, -1)
+            if legend_box(f)[2] <= LEGEND_WIDTH * W and legend_box(f)[3] <= LEGEND_HEIGHT * H]
     placed: list[tuple[float, float, float, float]] = []
-    if legend[2] <= LEGEND_WIDTH * W and legend[3] <= LEGEND_HEIGHT * H:
-        placed.append(legend)
+    if fits:
+        size = fits[0]
+        placed.append(legend_box(size))
+        swatch = round(1.4 * size)
         for i, (cls, colour) in enumerate(CLASS_COLOURS.items()):
-            y = 10 + i * row
-            rgba[y:y + font, 10:10 + swatch] = (*colour, 1.0)  # opaque, also over a render's transparent background
-            rgba = _text(rgba, 16 + swatch, y + font - 2, meaning[cls], size=font)
-    # Labels by class (open first) and within one by their value, worst first, until they cover `LABEL_AREA`.
+            y = 10 + i * (size + 6)
+            rgba[y:y + size, 10:10 + swatch] = (*colour, 1.0)  # opaque, also over a render's transparent background
+            rgba = _text(rgba, 16 + swatch, y + size - 2, meaning[cls], size=size)
+    # Labels by class (open first) and within one by their value, worst first, until they cover `LABEL_AREA`; above
+    # and right of their point, else flipped left or below where that would leave the image.
     labels.sort(key=lambda label: label[2:])
     area = 0.0
     for (x, y), text, _, _ in labels:
-        box = (x + 6, y - 6 - font, x + 6 + char * len(text), y - 6)
+        if not (0 <= x < W and 0 <= y < H):
+            continue
+        width = char * len(text)
+        left = x + 6 if x + 6 + width <= W else x - 6 - width
+        base = y - 6 if y - 6 - font >= 0 else y + 6 + font
+        box = (left, base - font, left + width, base)
         clash = any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3] for b in placed)
-        inside = 0 <= x < W and 0 <= y < H and box[1] >= 0 and box[2] <= W
-        area += (box[2] - box[0]) * font if inside and not clash else 0.0
-        if inside and not clash and area <= LABEL_AREA * W * H:  # symmetric copies' labels once; none over the legend
-            placed.append(box)
-            rgba[int(y) - 2:int(y) + 3, int(x) - 2:int(x) + 3] = (0.0, 0.0, 0.0, 1.0)  # the point the label refers to
-            rgba = _text(rgba, int(x) + 6, int(y) - 6, text, size=font)
+        if clash or box[0] < 0 or box[3] > H or area + width * font > LABEL_AREA * W * H:
+            continue  # symmetric copies' labels once; none over the legend or another label
+        area += width * font
+        placed.append(box)
+        rgba[int(y) - 2:int(y) + 3, int(x) - 2:int(x) + 3] = (0.0, 0.0, 0.0, 1.0)  # the point the label refers to
+        rgba = _text(rgba, int(left), int(base), text, size=font)
     return rgba
 
 
