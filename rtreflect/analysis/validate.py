@@ -327,6 +327,16 @@ def mode_aovs(renderer: Renderer, film: Film, aovs: PixelAOVs) -> PixelAOVs:
                    map_bend=bend)
 
 
+def second_differences(grid: np.ndarray) -> np.ndarray:
+    """|g_xx| + |g_yy| of an image (H, W[, C]) by central differences (0 on its border rows and columns): where a
+    field bends within a pixel, g_xx x²/2 + g_yy y²/2 with |x|, |y| ≤ ½ moves its samples off the centre's value by at
+    most that over 8 (`map_bend`, and the σ bend in `colour_mismatches`)."""
+    bend = np.zeros_like(grid)
+    bend[:, 1:-1] += np.abs(grid[:, :-2] - 2.0 * grid[:, 1:-1] + grid[:, 2:])
+    bend[1:-1, :] += np.abs(grid[:-2, :] - 2.0 * grid[1:-1, :] + grid[2:, :])
+    return bend
+
+
 def map_bend(rgb: np.ndarray, line_color) -> np.ndarray:
     """(H, W) bound on how far a map mode's line share L, read against the pixel-centre surface colour (`line_coverage`),
     moves where the pixel shows its samples' mean colour: the colour's second differences to the neighbours,
@@ -336,9 +346,7 @@ def map_bend(rgb: np.ndarray, line_color) -> np.ndarray:
     where H is only C0) it is not: the sweep's periodic_bspline.step, mean curvature at 160×90, read L −0.033 and
     −0.040 at two pixels on its knot u = 5 (φ 0.0024 above both neighbours), beyond half a sample, a false FAIL.
     """
-    bend = np.zeros_like(rgb)
-    bend[:, 1:-1] += np.abs(rgb[:, :-2] - 2.0 * rgb[:, 1:-1] + rgb[:, 2:])
-    bend[1:-1, :] += np.abs(rgb[:-2, :] - 2.0 * rgb[1:-1, :] + rgb[2:, :])
+    bend = second_differences(rgb)
     contrast = np.asarray(line_color, dtype=np.float64) - rgb
     denom = np.sum(contrast * contrast, axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -697,11 +705,7 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
     # d_yy y²/2 with |x|, |y| ≤ ½ is at most (|d_xx| + |d_yy|)/8.
     move = np.maximum(0.71 * g, 0.5 * np.maximum(slope[2], slope[3]))
     if not spec.along_ray:
-        grid = np.nan_to_num(sigma.reshape(height, width))
-        bend = np.zeros((height, width))
-        bend[:, 1:-1] += np.abs(grid[:, :-2] - 2.0 * grid[:, 1:-1] + grid[:, 2:])
-        bend[1:-1, :] += np.abs(grid[:-2, :] - 2.0 * grid[1:-1, :] + grid[2:, :])
-        move = move + bend.ravel() / 8.0
+        move = move + second_differences(np.nan_to_num(sigma.reshape(height, width)).astype(np.float64)).ravel() / 8.0
     # The line's share each sample may show, by the stripe profile (monotone in d): at least its weight at the
     # farthest sample, d + move, at most at the nearest, d − move (NaN d, no tube ahead: 0).
     low = stripe_weight(d + move, radius, blur)
