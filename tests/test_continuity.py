@@ -427,3 +427,24 @@ def test_render_seams_text_fits_the_image(tmp_path):
     red = encode_srgb(np.array([[[*CLASS_COLOURS["open"], 1.0]]], dtype=np.float32))[0, 0, :3].astype(int)
     large = png("large", 640, 360, "--seams")
     assert np.all(np.abs(large[12:20, 12:20, :3] - red) <= 2)
+
+
+def test_edge_tangents_are_those_of_the_points_kept(tmp_path):
+    """Where an edge's points are the 3D edge's feet on the surface (mirrored_assembly.step: the conversion's refit
+    pcurves run along it at another speed), γ'(t) is the tangent of those feet, not of the refit pcurve: it matches the
+    central differences of γ along t (to their O(Δt²) error) on every edge of every face."""
+    pytest.importorskip("OCP")
+    sys.path.insert(0, str(ROOT / "tools"))
+    import make_sweep_parts as sweep
+
+    path = tmp_path / "mirrored_assembly.step"
+    sweep.PARTS[path.name](path)
+    worst = 0.0
+    for surface in load_scene(path).surfaces:
+        for edge in surface.trim.edges:
+            if edge.closed or edge.degenerated:
+                continue
+            central = (edge.uv[2:] - edge.uv[:-2]) / (edge.t[2:] - edge.t[:-2])[:, None]
+            scale = np.abs(edge.duv).max()
+            worst = max(worst, float(np.abs(central - edge.duv[1:-1]).max() / scale))
+    assert worst < 1e-3, worst

@@ -440,7 +440,7 @@ def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge
     """
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Curve2d
-    from OCP.gp import gp_Pnt, gp_Pnt2d, gp_Vec, gp_Vec2d
+    from OCP.gp import gp_Pnt2d, gp_Vec2d
     from OCP.TopAbs import TopAbs_REVERSED
 
     curve = BRepAdaptor_Curve2d(edge, face)
@@ -484,18 +484,11 @@ def _edge_samples(edge, face, surface: NurbsSurface, tolerance: float, onto_edge
         tangents = np.full((len(uv) - 1, 4), np.nan)
     elif onto_edge and not degenerate:
         curve3d = BRepAdaptor_Curve(edge)
-        mids_t = 0.5 * (ts[:-1] + ts[1:]) if with_tangents else ts[:0]  # the midpoints too: `_hermite_tangents`
-        target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(t)) for t in np.r_[ts, mids_t])])
-        start = np.r_[uv, (mids if mids is not None else at(mids_t)) if with_tangents else uv[:0]]
-        feet = project_onto_surface(surface, target, start)
-        uv, mids = feet[:len(ts)], feet[len(ts):]
-        if with_tangents:  # the projected curve's tangent: C'(t) in the surface's (u, v), least squares on S_u, S_v
-            d3 = np.empty((len(ts), 3))
-            point, vector = gp_Pnt(), gp_Vec()
-            for k, t in enumerate(ts):
-                curve3d.D1(float(t), point, vector)
-                d3[k] = vector.X(), vector.Y(), vector.Z()
-            tangents = _hermite_tangents(ts, uv, _surface_tangent(surface, uv, d3), mids)
+        uv, duv = _edge_feet(curve3d, surface, ts, uv)
+        if with_tangents:  # the midpoints too: `_hermite_tangents`
+            mids_t = 0.5 * (ts[:-1] + ts[1:])
+            mids = _edge_feet(curve3d, surface, mids_t, mids if mids is not None else at(mids_t))[0]
+            tangents = _hermite_tangents(ts, uv, duv, mids)
     if with_tangents and tangents is None:
         if mids is None:  # the last round split segments: the final ones' midpoints
             mids = at(0.5 * (ts[:-1] + ts[1:]))
@@ -583,6 +576,20 @@ def _hermite_tangents(ts: np.ndarray, uv: np.ndarray, duv: np.ndarray, mids: np.
     good = np.isfinite(tangents).all(axis=1) & (hermite_error <= HERMITE_MIDPOINT * chord_error)
     tangents[~good] = np.nan
     return tangents
+
+
+def _edge_feet(curve3d, surface: NurbsSurface, ts: np.ndarray, start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The feet on ``surface`` of the 3D edge's points C(t) at ``ts`` (`project_onto_surface` from the (u, v)
+    ``start``), and the projected curve's tangent there: C'(t) in the surface's (u, v) (`_surface_tangent`)."""
+    from OCP.gp import gp_Pnt, gp_Vec
+
+    target, d3 = np.empty((len(ts), 3)), np.empty((len(ts), 3))
+    point, vector = gp_Pnt(), gp_Vec()
+    for k, t in enumerate(ts):  # OCP per-point call (~1 µs)
+        curve3d.D1(float(t), point, vector)
+        target[k], d3[k] = (point.X(), point.Y(), point.Z()), (vector.X(), vector.Y(), vector.Z())
+    feet = project_onto_surface(surface, target, start)
+    return feet, _surface_tangent(surface, feet, d3)
 
 
 def _surface_tangent(surface: NurbsSurface, uv: np.ndarray, d3: np.ndarray) -> np.ndarray:
@@ -843,8 +850,7 @@ def face_edges(face, surface: NurbsSurface, key_of, onto_edges: bool = False, to
         curve3d = BRepAdaptor_Curve(edge)
         if onto_edges or (tolerance is not None and BRep_Tool.Tolerance_s(edge) > STRAY_FRACTION * tolerance
                           and _strays_from_edge(edge, surface, t, uv, tolerance)):
-            target = np.array([(p.X(), p.Y(), p.Z()) for p in (curve3d.Value(float(tk)) for tk in t)])
-            uv = project_onto_surface(surface, target, uv)
+            uv, duv = _edge_feet(curve3d, surface, t, uv)  # and the tangents of the projected curve there
         out.append(FaceEdge(key, t, uv, duv, float(GCPnts_AbscissaPoint.Length_s(curve3d))))
     return tuple(out)
 
