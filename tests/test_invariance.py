@@ -188,3 +188,77 @@ def test_bvh_works_in_its_own_centred_coordinates():
     accelerator: Accelerator = renderer.accelerator
     np.testing.assert_allclose(accelerator.centre, accelerator_module.bvh_centre(renderer.tessellation.vertices))
     assert np.abs(accelerator.centre - OFFSET).max() < 2.0
+
+
+# -- knots far from 0 for their spans (the eleventh sweep) ---------------------------------------
+
+
+def test_knots_far_from_zero_hit_where_open_cascade_does(tmp_path):
+    """An inline patch whose knots_u run 1e6 … 1e6 + 7 (spans 1–4 wide) is the same surface as with 0 … 7.
+
+    float64 resolves u there only to ~1e-10, S along u no finer than ~1e-10 of the patch: above Newton's
+    tolerance, so 1,803 of 2,325 rays that Open CASCADE sees hit it missed (96×64). The parser moves each
+    knot vector to start at 0. Checked against Open CASCADE's first hits on the surface with the given knots.
+    """
+    pytest.importorskip("OCP")
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.collections import Array1_double, Array1_int, Array2_gp_Pnt
+    from OCP.Geom import Geom_BSplineSurface
+    from OCP.gp import gp_Pnt
+    from test_cad_hits import occt_nearest
+
+    a, b = np.meshgrid(np.linspace(-1, 1, 6), np.linspace(-1, 1, 5), indexing="ij")
+    points = np.stack([a, b, 0.3 * np.sin(3 * a) * b], axis=-1)
+    knots_u = [1e6] * 4 + [1e6 + 1, 1e6 + 3] + [1e6 + 7] * 4
+    knots_v = [-5.0] * 3 + [-1.0, 0.0] + [2.0] * 3
+    rows = ",\n".join("  [" + ", ".join(f"[{x!r}, {y!r}, {z!r}]" for x, y, z in row) + "]" for row in points.tolist())
+    path = tmp_path / "far_knots.toml"
+    path.write_text(f"""[image]
+width = 64
+height = 48
+[camera]
+eye = [1.06, -2.26, 1.23]
+look_at = [0.0, 0.0, 0.0]
+fov = 50.0
+[lights]
+point = [0.0, 0.0, 3.0]
+normal = [0.0, 0.0, 1.0]
+direction = [0.0, 1.0, 0.0]
+spacing = 0.4
+count = 9
+[[surface]]
+degree = [3, 2]
+knots_u = {knots_u}
+knots_v = {knots_v}
+points = [
+{rows}
+]
+""")
+    renderer = Renderer(load_scene(path))
+    rows_, cols = np.divmod(np.arange(64 * 48), 64)
+    O, D = renderer.camera.rays(rows_, cols)
+    hits = renderer.trace(O, D)
+
+    poles = Array2_gp_Pnt(1, 6, 1, 5)
+    for i in range(6):
+        for j in range(5):
+            poles.SetValue(i + 1, j + 1, gp_Pnt(*points[i, j]))
+
+    def knots(values):
+        distinct, counts = np.unique(values, return_counts=True)
+        k, m = Array1_double(1, len(distinct)), Array1_int(1, len(distinct))
+        for i, (x, c) in enumerate(zip(distinct, counts)):
+            k.SetValue(i + 1, float(x))
+            m.SetValue(i + 1, int(c))
+        return k, m
+
+    (uk, um), (vk, vm) = knots(knots_u), knots(knots_v)
+    face = BRepBuilderAPI_MakeFace(Geom_BSplineSurface(poles, uk, vk, um, vm, 3, 2), 1e-7).Face()
+    expected = occt_nearest(face, O, D)
+    seen = np.isfinite(expected[:, 0])
+    assert seen.sum() > 0.2 * len(seen)
+    assert hits.hit[seen].all()
+    assert (hits.hit & ~seen).sum() <= 2  # a silhouette ray Open CASCADE's intersector passes
+    t = np.einsum("ij,ij->i", expected[seen] - O[seen], D[seen])
+    np.testing.assert_allclose(hits.t[seen], t, rtol=0, atol=1e-6 * renderer.tessellation.extent)
+    assert hits.fallback.sum() == 0

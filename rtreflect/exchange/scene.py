@@ -750,7 +750,10 @@ def _parse_inline_surface(t: _Table, index: int) -> NurbsSurface:
     else:
         weights = np.ones((nu, nv))
     t.finish()
-    surface = NurbsSurface(p, q, knots_u, knots_v, points, weights, name)
+    # Each knot vector is moved to start its domain at 0 (the surface is unchanged): float64 resolves a parameter
+    # only to 1e-16 of its magnitude, so knots far from 0 for their spans' width (1e6 … 1e6 + 7) leave S no finer than
+    # 1e-10 of the patch along them, above Newton's tolerance: 80 % of such a patch's rays missed it. u, v count from 0.
+    surface = NurbsSurface(p, q, knots_u - knots_u[p], knots_v - knots_v[q], points, weights, name)
     if not has_area(surface):
         raise t.error("points", ZERO_AREA)
     return surface
