@@ -197,7 +197,7 @@ def test_knots_far_from_zero_hit_where_open_cascade_does(tmp_path):
     """An inline patch whose knots_u run 1e6 … 1e6 + 7 (spans 1–4 wide) is the same surface as with 0 … 7.
 
     float64 resolves u there only to ~1e-10, S along u no finer than ~1e-10 of the patch: above Newton's
-    tolerance, so 1,803 of 2,325 rays that Open CASCADE sees hit it missed (96×64). The parser moves each
+    tolerance, so 1,803 of 2,325 rays that Open CASCADE sees hit it missed (96×64). The parser moves such a
     knot vector to start at 0. Checked against Open CASCADE's first hits on the surface with the given knots.
     """
     pytest.importorskip("OCP")
@@ -262,3 +262,6 @@ points = [
     t = np.einsum("ij,ij->i", expected[seen] - O[seen], D[seen])
     np.testing.assert_allclose(hits.t[seen], t, rtol=0, atol=1e-6 * renderer.tessellation.extent)
     assert hits.fallback.sum() == 0
+    # Only the knot vector far from 0 for its spans is moved (`scene.KNOT_OFFSET_SPANS`): v keeps the scene's
+    # parameters (its domain starts 5 spans from 0), so its AOV is the (u, v) the scene's author wrote.
+    assert renderer.surfaces.patches[0].domain == ((0.0, 7.0), (-5.0, 2.0))
