@@ -202,7 +202,9 @@ def test_knots_far_from_zero_hit_where_open_cascade_does(tmp_path):
     """
     pytest.importorskip("OCP")
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
-    from OCP.collections import Array1_double, Array1_int, Array2_gp_Pnt
+    from OCP.collections import Array2_gp_Pnt
+
+    from rtreflect.exchange.rhino import _knots_and_mults
     from OCP.Geom import Geom_BSplineSurface
     from OCP.gp import gp_Pnt
     from test_cad_hits import occt_nearest
@@ -244,15 +246,8 @@ points = [
         for j in range(5):
             poles.SetValue(i + 1, j + 1, gp_Pnt(*points[i, j]))
 
-    def knots(values):
-        distinct, counts = np.unique(values, return_counts=True)
-        k, m = Array1_double(1, len(distinct)), Array1_int(1, len(distinct))
-        for i, (x, c) in enumerate(zip(distinct, counts)):
-            k.SetValue(i + 1, float(x))
-            m.SetValue(i + 1, int(c))
-        return k, m
-
-    (uk, um), (vk, vm) = knots(knots_u), knots(knots_v)
+    # OCCT's distinct knots and multiplicities (the .3dm reader's conversion, given the knots without their end ones).
+    (uk, um), (vk, vm) = _knots_and_mults(knots_u[1:-1], 3), _knots_and_mults(knots_v[1:-1], 2)
     face = BRepBuilderAPI_MakeFace(Geom_BSplineSurface(poles, uk, vk, um, vm, 3, 2), 1e-7).Face()
     expected = occt_nearest(face, O, D)
     seen = np.isfinite(expected[:, 0])
