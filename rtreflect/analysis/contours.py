@@ -511,6 +511,9 @@ def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float
         for j, level in enumerate(field.levels):
             if field.period is not None:
                 unwrapped = _unwrapped(f, float(level), field.period)
+                near = unwrapped[np.isfinite(unwrapped)]
+                if not (near.size and near.min() <= level <= near.max()):  # no cell can cross it: no grid to build
+                    continue
                 lines = contourpy.contour_generator(vs, us, unwrapped, line_type="Separate", corner_mask=True).lines(
                     float(level))
             elif lo <= level <= hi:
