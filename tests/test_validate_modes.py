@@ -190,15 +190,74 @@ def test_curvature_map_bending_within_a_pixel_is_no_colour_mismatch(tmp_path):
     assert report.passed, report.reasons
 
 
-def test_a_map_with_no_line_in_view_says_why_in_its_own_terms():
-    """The filleted block's Gaussian curvature in 6 bands: K is 0 on its planes and cylinders and 1/r² on its sphere
-    corners, so no level is crossed in view. Nothing is compared (FAIL), and the reason speaks of the map's levels,
-    not of tubes (which a curvature map has none of: the message said "no tube is reflected")."""
-    scene = load_scene(Path(__file__).resolve().parent.parent / "parts" / "filleted_block.step").replace(
-        image={"width": 160, "height": 90}, render={"mode": "curvature", "quantity": "gaussian", "bands": 6})
-    report = validate_scene(scene, threads=1)
-    assert not report.passed and "no traced line centre was compared" in report.reasons[0]
-    assert "tube" not in report.reasons[0] and "a region, not a line" in report.reasons[0]
+PARTS = Path(__file__).resolve().parent.parent / "parts"
+
+
+def occt_face_kinds(path: Path) -> list[str]:
+    """Each face's analytic kind by Open CASCADE, before conversion (the reader keeps OCCT's face order): "plane",
+    "cylinder", "cone", "sphere", "torus" or "other", with "|pull" on a cylinder or cone whose axis is along +z."""
+    from OCP.BRepAdaptor import BRepAdaptor_Surface
+    from OCP.GeomAbs import GeomAbs_Cone, GeomAbs_Cylinder, GeomAbs_Plane, GeomAbs_Sphere, GeomAbs_Torus
+
+    from test_cad_reader import occt_faces
+
+    names = {GeomAbs_Plane: "plane", GeomAbs_Cylinder: "cylinder", GeomAbs_Cone: "cone", GeomAbs_Sphere: "sphere",
+             GeomAbs_Torus: "torus"}
+    kinds = []
+    for face in occt_faces(path)[1]:
+        surface = BRepAdaptor_Surface(face)
+        kind = names.get(surface.GetType(), "other")
+        if kind in ("cylinder", "cone"):
+            axis = (surface.Cylinder() if kind == "cylinder" else surface.Cone()).Axis().Direction()
+            kind += "|pull" if abs(abs(axis.Z()) - 1.0) < 1e-12 else ""
+        kinds.append(kind)
+    return kinds
+
+
+@pytest.mark.parametrize("part", ["filleted_block.step", "plate.step"])
+def test_map_regions_are_the_faces_where_the_closed_form_is_constant(part):
+    """A map draws no line on a face where φ is constant (`modes.regions`). Which faces those are follows from each
+    face's kind by Open CASCADE: K is constant on planes, cylinders, cones and spheres, H on planes, cylinders and
+    spheres, the draft angle (pull +z) on planes and on cylinders and cones along the pull; never on a torus."""
+    pytest.importorskip("OCP")
+    kinds = occt_face_kinds(PARTS / part)
+    expected = {"gaussian": ("plane", "cylinder", "cylinder|pull", "cone", "cone|pull", "sphere"),
+                "mean": ("plane", "cylinder", "cylinder|pull", "sphere"),
+                "draft": ("plane", "cylinder|pull", "cone|pull")}
+    assert "torus" in kinds or "sphere" in kinds
+    for quantity, constant in expected.items():
+        render = {"mode": "draft"} if quantity == "draft" else {"mode": "curvature", "quantity": quantity, "bands": 6}
+        mode = Renderer(resolve(load_scene(PARTS / part).replace(image={"width": 32, "height": 18},
+                                                                 render=render))).mode
+        assert mode.constant_faces.tolist() == [kind in constant for kind in kinds], quantity
+
+
+def test_a_map_with_no_line_in_view_shows_its_colours_and_passes():
+    """The filleted block's Gaussian curvature in 6 bands: K is 0 on its planes and cylinders (a level: the range is
+    symmetric) and 1/r² on its sphere corners. A level φ equals on a whole face is a region of the map, not a line:
+    those faces show the map's middle colour (K = 0), where the stripe painted them in the line colour (the picture
+    was all white), and validate passes with a note, where it failed for want of a line to compare."""
+    pytest.importorskip("OCP")
+    scene = resolve(load_scene(PARTS / "filleted_block.step").replace(
+        image={"width": 160, "height": 90}, render={"mode": "curvature", "quantity": "gaussian", "bands": 6}))
+    renderer = Renderer(scene)
+    result = renderer.render(threads=1)
+    patch, k = result.aov("patch"), result.aov("K")
+    constant = renderer.mode.constant_faces
+    inside = result.film.channel("A") == 1.0  # not on the silhouette
+    flat = inside & (patch >= 0) & np.isclose(k, 0.0, atol=1e-12)
+    flat &= constant[np.maximum(patch, 0).astype(int)]
+    assert flat.sum() > 1000
+    rgb = np.stack([result.film.channel(c) for c in "RGB"], axis=-1)[flat]
+    middle = renderer.mode.colors(np.zeros(1))[0]  # the diverging map's centre, K = 0
+    line = np.asarray(scene.render.line_color, dtype=np.float64)
+    assert np.all(line > middle + 0.05)  # the line colour is lighter in every channel: the two can be told apart
+    # The map's colour, but in the pixels beside a sphere corner (its dark red mixed in, supersampled): none lighter.
+    assert np.mean(np.abs(rgb - middle).max(axis=1) < 1e-3) > 0.95
+    assert not np.any(np.all(rgb > middle + 1e-3, axis=1))
+    report = validate_scene(scene, threads=1, renderer=renderer)
+    assert report.passed, report.reasons
+    assert report.colour_checked > 1000 and any("no iso-line in view" in note for note in report.notes)
 
 
 def test_a_line_mode_with_no_line_in_view_does_not_speak_of_maps(tmp_path):

@@ -130,6 +130,10 @@ class UlmetField:
     #: f's period where it is an angle that wraps (`modes.base.Mode.period`), else None.
     period: float | None = None
 
+    def lined(self, k: int) -> bool:
+        """Whether patch k's level sets are lines: not on a map's face where φ is constant (`modes.regions`)."""
+        return True
+
     def newton_scale(self) -> float:
         """φ's natural unit, for Newton's tolerance: the tube spacing (1 with one tube), not below rounding."""
         spacing = self.lights.spacing
@@ -287,6 +291,10 @@ class ModeField(UlmetField):
     @property
     def period(self) -> float | None:
         return self.mode.period
+
+    def lined(self, k: int) -> bool:
+        constant = getattr(self.mode, "constant_faces", None)
+        return constant is None or not constant[k]
 
     def newton_scale(self) -> float:
         """The smallest gap between the mode's levels (φ's natural unit), 1 with one level."""
@@ -670,6 +678,8 @@ def patch_contours(field: UlmetField, k: int) -> list[tuple[int, np.ndarray, np.
 
 def _classify(field: UlmetField, k: int) -> _Classified | None:
     """Patch k's level sets polished, subdivided and classified (steps 1–5 but the cuts' bisection); None if none."""
+    if not field.lined(k):
+        return None
     chains, chain_light, cell = _patch_chains(field, k)
     if len(chains.u) == 0:
         return None

@@ -981,13 +981,16 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
         drawn = int(np.count_nonzero((aovs.coverage > 0) & (aovs.line_id >= 0) & (aovs.line_dist <= spec.radius)))
     if seen == 0:
         reasons.insert(0, "no traced line centre was compared (the camera sees no surface)")
+    elif len(deviations) == 0 and renderer.scene.render.mode in LEGEND_MODES and not reasons and not notes \
+            and np.count_nonzero(checked):
+        # A map whose levels cross none of the faces in view (a face where φ is constant, K = 0 on a plane, a 0° wall,
+        # is a region of the map, not a line: `modes.regions`): its picture is the map's colours, checked line-free.
+        notes.append(f"no iso-line in view: φ crosses none of the map's levels where the camera sees the surface "
+                     f"(faces where it is constant are regions, not lines); {int(np.count_nonzero(checked))} pixels' "
+                     f"colours checked free of lines")
     elif len(deviations) == 0:
         why = ("every line's neighbour lies closer than the pixels resolve" if notes and len(notes) == sum(counted)
                else "no tube is reflected where the camera sees the surface" if spec.along_ray
-               # A map: a level φ equals on whole faces (K = 0 on planes, draft 0° on walls) is a region, no line.
-               else "φ crosses none of the map's levels where the camera sees the surface, or equals one on whole "
-                    "faces: zero curvature or draft on planes and walls is a region, not a line"
-               if renderer.scene.render.mode in LEGEND_MODES
                else "none of the mode's lines lies where the camera sees the surface")
         reasons.insert(0, f"no traced line centre was compared ({why})")
     elif spec.along_ray and drawn < MIN_DRAWN_SHARE * seen:

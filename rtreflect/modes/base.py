@@ -59,11 +59,11 @@ class Stripes:
     phi: np.ndarray | None = None
 
 
-def even_stripes(phi: np.ndarray, levels: np.ndarray, half_width: float) -> Stripes:
+def even_stripes(phi: np.ndarray, levels: np.ndarray, half_width: float, lined: np.ndarray | None = None) -> Stripes:
     """Nearest of sorted ``levels`` to each φ, |φ − c_k|, the stripe test |φ − c_k| ≤ half_width and the signed
-    offset σ = φ − c_k (NaN φ: none)."""
+    offset σ = φ − c_k (NaN φ: none; nor where ``lined`` is False, a map's region: `regions`)."""
     levels = np.asarray(levels, dtype=np.float64)
-    found = np.isfinite(phi)
+    found = np.isfinite(phi) if lined is None else np.isfinite(phi) & lined
     if len(levels) == 0:
         return Stripes(np.full(len(phi), -1), np.full(len(phi), np.nan), np.zeros(len(phi), dtype=bool),
                        offset=np.full(len(phi), np.nan))

@@ -13,6 +13,7 @@ b − 1 inner edges), `base.STRIPE_SHARE` of a band wide.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -21,6 +22,7 @@ from ..geometry.seams import part_size
 from .base import STRIPE_SHARE, Mode, Stripes, SurfacePoints, even_stripes
 from .colormaps import DIVERGING, SEQUENTIAL, linear_rgb
 from .lights import TubeLights
+from .regions import constant_faces
 
 #: "auto" range: the 98th percentile of |φ| (2 % of the sampled surface clips), so a few extreme
 #: points (near a pole or a sharp fillet) do not wash out the map of the rest.
@@ -118,8 +120,15 @@ class CurvatureMode(Mode):
         derivs = self.surfaces.evaluate(p.patch, p.u, p.v, order=2)
         return quantity_of(self.quantity, derivs, p.n)
 
+    @cached_property
+    def constant_faces(self) -> np.ndarray:
+        """Per face: φ constant over it, a region of the map where no iso-line is drawn (`regions`)."""
+        if len(self.levels) == 0:
+            return np.zeros(len(self.surfaces), dtype=bool)
+        return constant_faces(self.surfaces, self.phi, self.half_width)
+
     def stripes(self, p: SurfacePoints) -> Stripes:
-        return even_stripes(self.phi(p), self.levels, self.half_width)
+        return even_stripes(self.phi(p), self.levels, self.half_width, ~self.constant_faces[p.patch])
 
     def surface_rgb(self, p: SurfacePoints) -> np.ndarray:
         return self.colors(self.phi(p))
