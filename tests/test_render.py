@@ -290,3 +290,26 @@ def test_fallback_count_includes_the_pixel_centre_rays(monkeypatch, samples):
     expected = sample_hits + (int(centre_hit.sum()) if samples % 2 == 0 else 0)
     assert result.stats.fallbacks == expected
     assert result.stats.fallback_pixels == int(((result.film.channel("A") > 0) | centre_hit).sum())
+
+
+def test_renders_of_one_scene_share_its_geometry_and_give_a_fresh_builds_pixels(monkeypatch):
+    """The automatic rig's preview, the render after it and validate's each built the scene's tessellation, BVH and
+    second look (`integrator.scenegeometry`): on the plate 2 s of a 14 s `rtreflect render`. Now they share the last
+    one built for the same surfaces and settings; the film is the same bytes as a renderer's that built its own,
+    and other settings (``normals``) get their own."""
+    from rtreflect.exchange.load import load_scene as load_part
+    from rtreflect.integrator import scenegeometry
+    from rtreflect.integrator.autorig import resolve
+
+    pytest.importorskip("OCP")
+    scene = resolve(load_part(Path(__file__).resolve().parent.parent / "parts" / "filleted_block.step")
+                    .with_image(160, 90, 1))
+    shared = Renderer(scene)
+    assert shared.second_look is not None and Renderer(scene).second_look is shared.second_look  # the rig's preview's
+    film = shared.render(threads=1).film.pixels.copy()
+    monkeypatch.setattr(scenegeometry, "_last", None)  # forgotten: the next renderer builds its own
+    fresh = Renderer(scene)
+    assert fresh.second_look is not shared.second_look and fresh.accelerator is not shared.accelerator
+    assert fresh.render(threads=1).film.pixels.tobytes() == film.tobytes()  # bit for bit, NaN AOVs of misses too
+    mesh = Renderer(scene.with_render(normals="mesh"))
+    assert mesh.second_look is None and mesh.tessellation is not fresh.tessellation

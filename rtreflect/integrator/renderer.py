@@ -25,12 +25,12 @@ from typing import Callable, Iterator
 import numpy as np
 
 from ..trace import clearance
-from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera, rays_per_pixel, sample_offsets
 from ..clock import StageClock
 from .analytic import (BENDING, EDGE_SAMPLES, NEIGHBOURS, TRUSTED_SPAN, edge_pixels, neighbours, stripe_coverage,
                        uv_footprint)
 from .cull import RayBox
+from .scenegeometry import scene_geometry
 from .film import CHANNELS, COLOR_CHANNELS, Film, aov_planes, coverage_color, map_color
 from ..modes.lights import TubeLights, reflect, reflect_rays
 from ..modes.profile import stripe_reach, stripe_weight
@@ -38,14 +38,11 @@ from ..modes.shading import shade_factor
 from ..modes.base import SurfacePoints, level_offset, neighbour_levels, seen_at
 from ..modes.reflection import ReflectionMode
 from ..modes.registry import mode_of
-from ..trace.meshnormals import trace_mesh, vertex_normals
+from ..trace.meshnormals import trace_mesh
 from ..exchange.scene import ANALYTIC, ImageSpec, Scene
 from ..geometry.curvature import curvatures_at
-from ..geometry.surfaces import SurfaceSet
-from ..geometry.tessellation import tessellate
 from ..kernels.pixels import (bent_flags, clear_far, footprint_ends, level_crossings, spread_rows,
                               stripe_candidates)
-from ..trace.secondlook import SecondLook
 from ..trace.tracing import Hits, occluded, trace
 
 #: Most rays per tile (about 1.2 kB each in flight, see `tiling`): larger tiles buy no speed over numpy's overhead.
@@ -217,10 +214,10 @@ class Renderer:
 
     def __init__(self, scene: Scene):
         self.scene = scene
-        self.surfaces = SurfaceSet(list(scene.surfaces))
-        # The exact tracer's mesh encloses the surface (silhouettes exact); the mesh-normals path keeps S(nodes).
-        self.tessellation = tessellate(scene.surfaces, scene.render.tessellation, enclose=scene.render.normals != "mesh")
-        self.accelerator = Accelerator(self.tessellation)
+        # Patches, meshes, BVHs, second look: the surfaces' alone, shared with the scene's last render (`scenegeometry`).
+        geometry = scene_geometry(scene)
+        self.surfaces, self.tessellation, self.accelerator = geometry.surfaces, geometry.tessellation, geometry.accelerator
+        self.vertex_normals, self.second_look, self.ray_box = geometry.vertex_normals, geometry.second_look, geometry.ray_box
         self.camera = Camera(scene.camera, scene.image.width, scene.image.height)
         self.lights = TubeLights.from_spec(scene.lights)
         # The tubes as the stripes see them: out to where the soft edge's weight ends (`[render] blur`), so the
@@ -242,15 +239,6 @@ class Renderer:
         self.stripe_reach = stripe_reach(self.half_width, self.blur)
         self.neighbour_level = neighbour_levels(getattr(self.mode, "levels", np.zeros(0)))
         self.clock = StageClock()
-        # normals = "mesh": the analysis-mesh comparison path (meshnormals.py); the exact path is untouched.
-        self.vertex_normals = vertex_normals(self.tessellation, self.surfaces) if scene.render.normals == "mesh" else None
-        # Rays that run close to a sheet are traced again on a finer mesh (secondlook.py): the nearest exact hit.
-        self.second_look = None if self.vertex_normals is not None else SecondLook(
-            scene.surfaces, scene.render.tessellation, self.tessellation, self.surfaces)
-        # Camera rays are asked of the coarse mesh and the second look's shell (its finer mesh only for rays one of
-        # those met): a ray missing both meshes' box is a miss without asking Embree (`cull`).
-        self.ray_box = RayBox(self.tessellation.vertices,
-                              *(() if self.second_look is None else (self.second_look.shell_mesh.vertices,)))
         self._window: tuple[RayBox | None, tuple[slice, slice]] = (None, (slice(0, 0), slice(0, 0)))  # `window`
 
     def trace(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
