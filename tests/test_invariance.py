@@ -20,6 +20,7 @@ from reference import angle_between, to_rhino, xyz
 import rtreflect.geometry.surfaces as surfaces_module
 import rtreflect.trace.accelerator as accelerator_module
 import rtreflect.trace.tracing as tracing_module
+import rtreflect.integrator.scenegeometry as scenegeometry
 from rtreflect.analysis.validate import validate_scene
 from rtreflect.exchange.bpt import read_bpt
 from rtreflect.exchange.scene import load_scene
@@ -179,6 +180,7 @@ def test_validate_passes_the_translated_scene_and_fails_mesh_hits_kept_there(mon
 
     monkeypatch.setattr(tracing_module, "NEWTON_TOLERANCE", np.inf)
     monkeypatch.setattr(accelerator_module, "bvh_centre", lambda vertices: np.zeros(3))
+    monkeypatch.setattr(scenegeometry, "_last", None)  # the scene's BVH built again, uncentred (not the one above)
     report = validate_scene(far, threads=1)
     assert not report.passed, report.reasons
 

@@ -260,6 +260,27 @@ def test_a_map_with_no_line_in_view_shows_its_colours_and_passes():
     assert report.colour_checked > 1000 and any("no iso-line in view" in note for note in report.notes)
 
 
+def test_a_curvature_that_is_zero_to_rounding_is_a_region(tmp_path):
+    """The sweep's kink.step, z = f(x) + g(y) with f piecewise linear: K = 0 exactly, computed as ±9e-17. The map's
+    range is its rounding floor (`curvaturemap.FLAT_RANGE`, ±1.4e-12 here) and the noise, 2e-3 of a line's half
+    width, crossed the level 0 all over: contours of rounding, 15.3 px and 9 misses at 160×90. Within the floor the
+    face is constant (`regions`): no line, and validate passes with its colours checked."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+    import make_sweep_parts as sweep
+
+    pytest.importorskip("OCP")
+    path = tmp_path / "kink.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).replace(image={"width": 160, "height": 90},
+                                     render={"mode": "curvature", "quantity": "gaussian", "bands": 6})
+    renderer = Renderer(resolve(scene))
+    assert renderer.mode.constant_faces.all()
+    report = validate_scene(renderer.scene, threads=1, renderer=renderer)
+    assert report.passed and report.colour_checked > 1000, report.reasons
+
+
 def test_a_line_mode_with_no_line_in_view_does_not_speak_of_maps(tmp_path):
     """Isophotes every 90° on a plane whose normal is 45° from L: φ = 45° everywhere, no level crossed. Nothing is
     compared (FAIL), and the reason speaks of the mode's lines, neither of tubes nor of a map's faces at a level."""

@@ -67,6 +67,7 @@ def scene_geometry(scene) -> SceneGeometry:
     with _lock:
         if _last is not None and _last[0] is scene.surfaces and _last[1] == settings:
             return _last[2]
+        _last = None  # let go first: a batch holds one scene's geometry at a time, not the last one's and the next's
     geometry = SceneGeometry.build(scene)
     with _lock:
         _last = (scene.surfaces, settings, geometry)

@@ -56,6 +56,13 @@ def quantity_of(name: str, derivs, n: np.ndarray) -> np.ndarray:
         return 1.0 / largest  # radius: inf where flat
 
 
+def flat_floor(name: str, surfaces) -> float:
+    """`FLAT_RANGE` of quantity ``name``'s natural unit on these surfaces (1/size, 1/size² for K, size for the radius;
+    size the part's bounding-box diagonal): variations below it are rounding."""
+    size = part_size(list(surfaces.patches))
+    return FLAT_RANGE * (size if name == "radius" else size ** -2.0 if name == "gaussian" else 1.0 / size)
+
+
 def auto_range(name: str, surfaces) -> tuple[float, float, float]:
     """(min, max, share clipped) of the "auto" range of quantity ``name`` over the patches (module doc)."""
     t = (np.arange(AUTO_GRID) + 0.5) / AUTO_GRID
@@ -70,8 +77,7 @@ def auto_range(name: str, surfaces) -> tuple[float, float, float]:
     q = q[np.isfinite(q)]
     if len(q) == 0:
         return (-1.0, 1.0, 0.0)
-    size = part_size(list(surfaces.patches))
-    floor = FLAT_RANGE * (size if name == "radius" else size ** -2.0 if name == "gaussian" else 1.0 / size)
+    floor = flat_floor(name, surfaces)
     if name in SIGNED:
         top = max(float(np.percentile(np.abs(q), AUTO_PERCENTILE)), floor)
         low, high = -top, top
@@ -125,7 +131,9 @@ class CurvatureMode(Mode):
         """Per face: φ constant over it, a region of the map where no iso-line is drawn (`regions`)."""
         if len(self.levels) == 0:
             return np.zeros(len(self.surfaces), dtype=bool)
-        return constant_faces(self.surfaces, self.phi, self.half_width)
+        # At least the rounding floor of the "auto" range: a part whose K is 0 to rounding everywhere (the sweep's
+        # kink.step: ±9e-17 against a floor of 1.4e-12) has a map range at that floor, and its noise is no line.
+        return constant_faces(self.surfaces, self.phi, self.half_width, flat_floor(self.quantity, self.surfaces))
 
     def stripes(self, p: SurfacePoints) -> Stripes:
         return even_stripes(self.phi(p), self.levels, self.half_width, ~self.constant_faces[p.patch])
