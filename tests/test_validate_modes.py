@@ -281,6 +281,42 @@ def test_a_curvature_that_is_zero_to_rounding_is_a_region(tmp_path):
     assert report.passed and report.colour_checked > 1000, report.reasons
 
 
+def test_a_loop_that_encloses_no_pixel_centre_cannot_be_traced():
+    """Traced centres are sign changes of φ − c_k between neighbouring pixel centres: a closed contour with no centre
+    inside separates none, so validate does not count its points as misses (`validate.encloses_a_pixel_centre`)."""
+    from rtreflect.analysis.validate import encloses_a_pixel_centre
+
+    angle = np.linspace(0.0, 2.0 * np.pi, 65)
+    ring = np.column_stack([np.cos(angle), np.sin(angle)])
+    ring[-1] = ring[0]
+    assert not encloses_a_pixel_centre(10.0 + 0.3 * ring)  # between four centres, 0.71 from each
+    assert encloses_a_pixel_centre(10.5 + 0.3 * ring)  # round one
+    assert encloses_a_pixel_centre(10.0 + 0.8 * ring)  # round four
+    sliver = np.array([[0.0, 10.6], [100.0, 10.6], [100.0, 11.4], [0.0, 11.4], [0.0, 10.6]])
+    assert not encloses_a_pixel_centre(sliver)  # 100 px long between two rows of centres
+    assert encloses_a_pixel_centre(sliver + [0.0, 0.5])
+
+
+def test_a_sub_pixel_loop_of_a_level_is_no_miss(tmp_path):
+    """The sweep's rhino_mix.3dm, Gaussian curvature in 6 bands at 160×90: K = 0 rings a bump on its B-spline face
+    0.4 px across, round no pixel centre; its 18 points were misses, a false FAIL (15 at 640×360)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+    import make_sweep_parts as sweep
+
+    pytest.importorskip("OCP")
+    pytest.importorskip("rhino3dm")
+    path = tmp_path / "rhino_mix.3dm"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).replace(image={"width": 160, "height": 90},
+                                     render={"mode": "curvature", "quantity": "gaussian", "bands": 6})
+    report = validate_scene(scene, threads=1)
+    zero = [line for line in report.lines if line.position == 0.0][0]
+    assert zero.points > 50 and zero.misses == 0
+    assert report.passed, report.reasons
+
+
 def test_a_line_mode_with_no_line_in_view_does_not_speak_of_maps(tmp_path):
     """Isophotes every 90° on a plane whose normal is 45° from L: φ = 45° everywhere, no level crossed. Nothing is
     compared (FAIL), and the reason speaks of the mode's lines, neither of tubes nor of a map's faces at a level."""
