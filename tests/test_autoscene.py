@@ -257,3 +257,34 @@ def test_a_part_reflecting_sideways_gets_the_wall_on_the_camera_side(name: str, 
     above = resolve(small(load_scene(path)))
     assert abs(abs(above.lights.normal @ up) - 1.0) < 1e-12
     assert picture_facts(above)["reaching"] <= 0.2
+
+
+def test_a_camera_inside_the_part_gets_its_lights_inside(tmp_path: Path, monkeypatch) -> None:
+    """The sweep's closed_room.step (a 60 × 50 × 30 box filleted all round) seen from inside: the bank below the part
+    (the eye is below its centre) reached 0 lines, every reflected ray meeting a wall first, and nothing warned (f and
+    line.id ignore what blocks a reflected ray). The rig tries the plane near the top inside and keeps it: lines on
+    the floor and walls, read here from the picture's colour (white lines over a grey surface)."""
+    pytest.importorskip("OCP")
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tools"))
+    import make_sweep_parts as sweep
+    from rtreflect.integrator import autorig
+
+    path = tmp_path / "closed_room.step"
+    sweep.PARTS[path.name](path)
+    inside = load_scene(path).replace(image={"width": 160, "height": 90, "samples": 1},
+                                      camera={"eye": [10.0, 8.0, 12.0], "look_at": [60.0, 50.0, 5.0], "fov": 70.0})
+
+    def lit(scene):
+        result = Renderer(scene).render(threads=1)
+        bright = np.all(result.rgba[..., :3] > 0.9, axis=-1)
+        return float(bright.mean()), len(np.unique(result.aov("line.id")[bright]))
+
+    scene = resolve(inside)
+    assert 0.0 < scene.lights.point[2] < 30.0 and abs(scene.lights.normal[2]) == 1.0  # a level plane in the room
+    share, lines = lit(scene)
+    assert share > 0.05 and lines >= 6, (share, lines)
+    monkeypatch.setattr(autorig, "_unblocked", lambda preview, P, R, N, patch, tubes, f: np.isfinite(f))
+    outside = resolve(inside)
+    assert outside.lights.point[2] < 0.0 and lit(outside)[0] < 0.001

@@ -59,7 +59,6 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Callable
 
 import numpy as np
-import shapely
 
 from .contours import ContourLines, UlmetField, analytic_contours, field_of, reaches_light_plane  # noqa: F401 (UlmetField: callers)
 from .nearest import nearest_segment
@@ -814,6 +813,8 @@ def encloses_a_pixel_centre(loop: np.ndarray) -> bool:
     lo, hi = np.ceil(loop.min(axis=0) - 0.5), np.floor(loop.max(axis=0) - 0.5)  # the centres (i + 0.5) in its box
     if np.any(hi < lo):
         return False
+    import shapely  # noqa: PLC0415 (GEOS: not loaded by the command line's import, `tests/test_startup.py`)
+
     polygon = shapely.Polygon(loop)
     if not polygon.is_valid:
         return True

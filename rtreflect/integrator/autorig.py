@@ -11,7 +11,10 @@ the tubes run along the part's longest horizontal extent. Where under `MIN_REACH
 visible surface reflects towards that plane (a wall, a door skin, a bottle seen from above: its
 reflected rays go down or sideways) and more reflects towards a wall on the camera's side, the
 plane is that wall instead: vertical, facing the part from the camera's horizontal direction,
-as far out, with horizontal tubes.
+as far out, with horizontal tubes. A camera inside the part's box (a cabin, a room, a housing seen
+from within) may see a part that walls that plane off: where under `MIN_REACH_FRACTION` of the
+visible surface reflects towards it unblocked, the level plane near the part's top inside
+(`INSIDE_HEIGHT`) is tried and kept if more reaches it.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import numpy as np
 from ..exchange.scene import CameraSpec, ImageSpec, LightSpec, Scene
 from ..modes.lights import TubeLights, reflect
 from ..trace.camera import Camera
+from ..trace.tracing import occluded
 from ..trace.framing import ISO_NAMES, fit_camera, iso_directions, view_frame
 from .renderer import Renderer
 
@@ -46,6 +50,11 @@ MIN_REACHING = 10
 #: parts under it had 2-20 % of their visible surface lit by lines at all (a wall seen from above: 0 %), and 66-100 %
 #: towards the wall; those kept range from 37 % up.
 MIN_REACH_FRACTION = 0.25
+#: A camera inside the part (`light_rig`): the bank's plane this share of the way from the eye up to the part's top.
+#: Where the plane cuts a wall its reflected rays start on it (t ≈ 0) and f there is the wall's own e-coordinate: a tube
+#: near it draws a wide band. Through the eye, the walls at eye level made one band across the picture; halfway up
+#: (closed_room.step) a band along the left wall; near the top the cut lies along the ceiling's edge, as a room's lights.
+INSIDE_HEIGHT = 0.9
 
 
 def _vec(v: np.ndarray) -> str:
@@ -139,10 +148,12 @@ def camera_side(vertices: np.ndarray, eye: np.ndarray, model_up: np.ndarray) -> 
 
 
 def light_plane(vertices: np.ndarray, eye: np.ndarray, model_up: np.ndarray, spec: LightSpec,
-                wall: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+                wall: np.ndarray | None = None, inside: bool = False) -> tuple[np.ndarray, ...]:
     """(Q, m, c) of the automatic bank: the given values, else above the part on the camera's side, along its longest
     horizontal extent (y' on a tie: front to back, as in the shipped scenes); or, with ``wall`` (a horizontal unit
-    normal, `camera_side`), the vertical plane of that normal as far out, its tubes horizontal."""
+    normal, `camera_side`), the vertical plane of that normal as far out, its tubes horizontal; or, ``inside``, the
+    horizontal plane `INSIDE_HEIGHT` of the way from the eye up to the part's top (a camera inside the part,
+    `light_rig`)."""
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     centre, radius = 0.5 * (lo + hi), max(0.5 * float(np.linalg.norm(hi - lo)), 1e-12)
     up = _unit(np.asarray(model_up, dtype=np.float64))
@@ -166,9 +177,24 @@ def light_plane(vertices: np.ndarray, eye: np.ndarray, model_up: np.ndarray, spe
     c = _unit(c)
     if spec.point is not None:
         Q = spec.point
+    elif inside:  # near the top, as a room's lights: the plane cuts the walls there (`INSIDE_HEIGHT`)
+        Q = np.asarray(eye, dtype=np.float64) + INSIDE_HEIGHT * float(((vertices - eye) @ up).max(initial=0.0)) * up
     else:
         Q = centre + (float(((vertices - centre) @ m).max()) + LIGHT_HEIGHT * radius) * m
     return np.asarray(Q, dtype=np.float64), np.asarray(m, dtype=np.float64), c
+
+
+def _unblocked(preview: Renderer, P: np.ndarray, R: np.ndarray, N: np.ndarray, patch: np.ndarray, tubes: TubeLights,
+               f: np.ndarray) -> np.ndarray:
+    """Per visible preview pixel: its reflected ray (from P along R, leaving on the side of N) meets the light plane
+    (f finite) with no surface in between (`tracing.occluded`)."""
+    ok = np.isfinite(f)
+    rows = np.flatnonzero(ok)
+    if len(rows):
+        start = preview.accelerator.surface_origins(P[rows], N[rows], patch[rows])
+        t = tubes.plane_t(start, R[rows])
+        ok[rows] = ~occluded(preview.accelerator, preview.tessellation, preview.surfaces, start, R[rows], t)
+    return ok
 
 
 def light_rig(preview: Renderer, model_up: np.ndarray, spec: LightSpec) -> tuple[LightSpec, str]:
@@ -183,9 +209,9 @@ def light_rig(preview: Renderer, model_up: np.ndarray, spec: LightSpec) -> tuple
     idx = np.flatnonzero(hits.hit)
     P, R = hits.P[idx], reflect(-directions[idx], hits.N[idx])
 
-    def plane_and_f(wall):
+    def plane_and_f(wall, inside=False):
         """(Q, m, c), the bank's frame, and Ulmet's f of the preview's visible pixels (inf: not reaching the plane)."""
-        Q, m, c = light_plane(vertices, eye, model_up, spec, wall)
+        Q, m, c = light_plane(vertices, eye, model_up, spec, wall, inside)
         tubes = TubeLights.from_spec(LightSpec(Q, m, c, np.zeros(1), 1.0))
         return (Q, m, c), tubes, tubes.ulmet_f(P, R) if len(idx) else np.zeros(0)
 
@@ -195,6 +221,18 @@ def light_rig(preview: Renderer, model_up: np.ndarray, spec: LightSpec) -> tuple
         beside = plane_and_f(wall)
         if np.isfinite(beside[2]).sum() > np.isfinite(f).sum():
             (Q, m, c), tubes, f = beside
+    if spec.normal is None and spec.point is None and len(idx) and np.all((eye >= lo) & (eye <= hi)):
+        # A camera inside the part's box (a cabin, a room, the inside of a housing): the plane outside it may be
+        # walled off, every reflected ray meeting the part on its way (the sweep's closed_room.step: lines nowhere,
+        # and no warning, as f and line.id ignore what blocks them). The plane through the eye is tried too, and
+        # the one that more reflected rays reach unblocked is kept.
+        hits_N = hits.N[idx]
+        open_now = _unblocked(preview, P, R, hits_N, hits.patch[idx], tubes, f)
+        if open_now.mean() < MIN_REACH_FRACTION:
+            within = plane_and_f(None, inside=True)
+            if _unblocked(preview, P, R, hits_N, hits.patch[idx], within[1], within[2]).sum() > open_now.sum():
+                (Q, m, c), tubes, f = within
+                f = np.where(_unblocked(preview, P, R, hits_N, hits.patch[idx], tubes, f), f, np.nan)
     reaching = f[np.isfinite(f)]
     if len(reaching) >= MIN_REACHING:
         f_lo, f_hi = np.percentile(reaching, F_QUANTILES)
