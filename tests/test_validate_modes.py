@@ -172,6 +172,33 @@ def test_both_sides_of_a_v_seam_are_contoured(tmp_path):
     assert sum(line.misses for line in report.lines) == 0
 
 
+def test_a_level_set_along_a_seam_is_contoured_whole(tmp_path):
+    """The isophote 90° about the axis of the sweep's torus.step (R = 30, r = 8 about z) is its outer and inner
+    equators, z = 0, and the outer one is the face's v seam: φ there is 90° give or take rounding, and contourpy
+    followed the rounding's signs (bits of line, vertices wandering into the next grid row that Newton then
+    rejected). Snapped onto the level (`contours._snapped`), the seam is one line: every analytic vertex of level
+    90° lies on z = 0 (the closed form), and the traced line is within tolerance of it (6.9 px before, 13 px of the
+    equator without an analytic line: a false FAIL)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+    import make_sweep_parts as sweep
+
+    path = tmp_path / "torus.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).replace(image={"width": 160, "height": 90},
+                                     render={"mode": "isophote", "step": 10.0, "light": [0.0, 0.0, 1.0]})
+    renderer = Renderer(resolve(scene))
+    report = validate_scene(scene, threads=1, renderer=renderer)
+    equator = [line for line in report.contours.lines if line.position == 90.0][0]
+    uv = np.concatenate([p.uv for p in equator.polylines])
+    S = renderer.surfaces.evaluate(np.zeros(len(uv), dtype=int), uv[:, 0], uv[:, 1]).S
+    np.testing.assert_allclose(S[:, 2], 0.0, atol=1e-9)
+    assert np.ptp(np.concatenate([p.px for p in equator.polylines])[:, 0]) > 100  # across the image, not in bits
+    assert report.passed, (report.reasons, report.max_px)
+    assert report.lines[9].points > 30 and report.lines[9].max_px < 0.1
+
+
 def test_curvature_map_bending_within_a_pixel_is_no_colour_mismatch(tmp_path):
     """The sweep's periodic_bspline.step, mean curvature with 8 bands at 160×90: H is only C0 across its knot u = 5 and
     peaks there; two pixels on it, far from every iso-line, show their samples' mean map colour, which the centre's
