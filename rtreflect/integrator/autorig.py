@@ -11,7 +11,10 @@ the tubes run along the part's longest horizontal extent. Where under `MIN_REACH
 visible surface reflects towards that plane (a wall, a door skin, a bottle seen from above: its
 reflected rays go down or sideways) and more reflects towards a wall on the camera's side, the
 plane is that wall instead: vertical, facing the part from the camera's horizontal direction,
-as far out, with horizontal tubes.
+as far out, with horizontal tubes. For highlight lines (`[render] mode = "highlight"`) the tubes span
+the same quantiles of the highlight's own field, where the normal line (either way) meets the plane:
+the reflected rays' range missed it (the sweep's sliver.step, trimmed_face.step, offset_cylinder.step
+and parts/trimmed.3dm: highlight φ from −171 to −137 under a bank round 0, no line on the part).
 """
 
 from __future__ import annotations
@@ -195,10 +198,17 @@ def light_rig(preview: Renderer, model_up: np.ndarray, spec: LightSpec) -> tuple
         beside = plane_and_f(wall)
         if np.isfinite(beside[2]).sum() > np.isfinite(f).sum():
             (Q, m, c), tubes, f = beside
+    name = "f"
+    if preview.scene.render.mode == "highlight" and getattr(spec, "shape", None) != "circles" and len(idx):
+        # Highlight lines are where the normal line meets a tube, not the reflected ray: the bank spans that field.
+        f = tubes.ulmet_f(P, hits.N[idx])  # ahead along n ...
+        behind = tubes.ulmet_f(P, -hits.N[idx])  # ... or behind: the normal line either way (`HighlightMode.phi`)
+        f = np.where(np.isfinite(f), f, behind)
+        name = "the normal lines' plane coordinate"
     reaching = f[np.isfinite(f)]
     if len(reaching) >= MIN_REACHING:
         f_lo, f_hi = np.percentile(reaching, F_QUANTILES)
-        seen = f"f over the visible surface {f_lo:.4g} to {f_hi:.4g} ({F_QUANTILES[0]:g}-{F_QUANTILES[1]:g} %)"
+        seen = f"{name} over the visible surface {f_lo:.4g} to {f_hi:.4g} ({F_QUANTILES[0]:g}-{F_QUANTILES[1]:g} %)"
     else:
         f_lo, f_hi = -radius_part, radius_part
         seen = "few reflected rays of the preview reach the light plane: the bank spans the part's diameter"
