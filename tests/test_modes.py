@@ -294,3 +294,34 @@ def test_auto_range_of_max_curvature_on_a_sphere_is_not_the_rounding_at_its_umbi
     middle = linear_rgb(SEQUENTIAL, np.array([0.499, 0.501]))
     rgb = result.rgba[..., :3][full]
     assert np.all((rgb >= middle.min(axis=0) - 1e-6) & (rgb <= middle.max(axis=0) + 1e-6))
+
+
+def test_a_face_whose_curvature_is_zero_is_a_region_with_bands_at_the_flat_floor(tmp_path):
+    """The sweep's kink.step (z = f(x) + g(y), f piecewise linear: K = 0 exactly) with bands: the range is the flat
+    floor, ±`FLAT_RANGE`/size² = ±1.4e-12, and a line's half width (3.6e-14) put a thousandth of it below K's
+    rounding (2.9e-16 over the face), so the face was not counted constant: it was one stripe of the line colour,
+    and validate compared the rounding's sign changes (15.3 px off, 13 misses at 160×90). A face varying by less
+    than a thousandth of the flat floor is a region now: drawn in the map's middle colour, and validate passes."""
+    import sys
+
+    from rtreflect.analysis.validate import validate_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+    import make_sweep_parts as sweep
+
+    path = tmp_path / "kink.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).replace(image={"width": 160, "height": 90, "samples": 1},
+                                     render={"mode": "curvature", "quantity": "gaussian", "bands": 8})
+    renderer = Renderer(resolve(scene))
+    assert renderer.mode.constant_faces.all()
+    result = renderer.render(None, 1)
+    full = result.film.channel("A") == 1
+    assert full.sum() > 500
+    middle = linear_rgb(DIVERGING, np.array([0.499, 0.501]))
+    rgb = result.rgba[..., :3][full]
+    assert np.all((rgb >= middle.min(axis=0) - 1e-6) & (rgb <= middle.max(axis=0) + 1e-6))
+    report = validate_scene(scene, threads=1, renderer=renderer)
+    assert report.passed, report.reasons

@@ -22,7 +22,7 @@ from ..geometry.seams import part_size
 from .base import STRIPE_SHARE, Mode, Stripes, SurfacePoints, even_stripes
 from .colormaps import DIVERGING, SEQUENTIAL, linear_rgb
 from .lights import TubeLights
-from .regions import constant_faces
+from .regions import CONSTANT_SHARE, constant_faces
 
 #: "auto" range: the 98th percentile of |φ| (2 % of the sampled surface clips), so a few extreme
 #: points (near a pole or a sharp fillet) do not wash out the map of the rest.
@@ -62,6 +62,13 @@ def quantity_of(name: str, derivs, n: np.ndarray) -> np.ndarray:
         return 1.0 / largest  # radius: inf where flat
 
 
+def flat_floor(name: str, surfaces) -> float:
+    """`FLAT_RANGE` of quantity ``name``'s natural unit for the part (1/size, 1/size² for K, size for the radius;
+    size the bounding-box diagonal): below it a quantity's values are the rounding of 0."""
+    size = part_size(list(surfaces.patches))
+    return FLAT_RANGE * (size if name == "radius" else size ** -2.0 if name == "gaussian" else 1.0 / size)
+
+
 def auto_range(name: str, surfaces) -> tuple[float, float, float]:
     """(min, max, share clipped) of the "auto" range of quantity ``name`` over the patches (module doc)."""
     t = (np.arange(AUTO_GRID) + 0.5) / AUTO_GRID
@@ -76,8 +83,7 @@ def auto_range(name: str, surfaces) -> tuple[float, float, float]:
     q = q[np.isfinite(q)]
     if len(q) == 0:
         return (-1.0, 1.0, 0.0)
-    size = part_size(list(surfaces.patches))
-    floor = FLAT_RANGE * (size if name == "radius" else size ** -2.0 if name == "gaussian" else 1.0 / size)
+    floor = flat_floor(name, surfaces)
     if name in SIGNED:
         top = max(float(np.percentile(np.abs(q), AUTO_PERCENTILE)), floor)
         low, high = -top, top
@@ -132,7 +138,11 @@ class CurvatureMode(Mode):
         """Per face: φ constant over it, a region of the map where no iso-line is drawn (`regions`)."""
         if len(self.levels) == 0:
             return np.zeros(len(self.surfaces), dtype=bool)
-        return constant_faces(self.surfaces, self.phi, self.half_width)
+        # A thousandth of the flat floor too: a range at that floor (K = 0 on kink.step: ±1.4e-12, half width
+        # 3.6e-14) puts a thousandth of a half width below K's rounding (up to 1.5e-16), and the face, K = 0 exactly,
+        # was one stripe of the line colour, its traced "line" the rounding's sign changes (15 px off in validate).
+        return constant_faces(self.surfaces, self.phi, self.half_width,
+                              rounding=CONSTANT_SHARE * flat_floor(self.quantity, self.surfaces))
 
     def stripes(self, p: SurfacePoints) -> Stripes:
         return even_stripes(self.phi(p), self.levels, self.half_width, ~self.constant_faces[p.patch])

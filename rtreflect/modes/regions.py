@@ -46,8 +46,10 @@ def _side(lo: float, hi: float, breaks: np.ndarray) -> np.ndarray:
     return values
 
 
-def constant_faces(surfaces, phi: Callable[[SurfacePoints], np.ndarray], half_width: float) -> np.ndarray:
-    """Per face of a `SurfaceSet`: True where φ (``phi`` of `SurfacePoints`) is constant over it (module doc).
+def constant_faces(surfaces, phi: Callable[[SurfacePoints], np.ndarray], half_width: float,
+                   rounding: float = 0.0) -> np.ndarray:
+    """Per face of a `SurfaceSet`: True where φ (``phi`` of `SurfacePoints`) is constant over it (module doc), or
+    varies by no more than ``rounding`` (the mode's bound on rounding where its lines may be narrower than that).
 
     Points where φ is NaN (a degenerate normal at a pole) are passed over; a face with none left is not constant.
     """
@@ -76,4 +78,4 @@ def constant_faces(surfaces, phi: Callable[[SurfacePoints], np.ndarray], half_wi
         np.maximum.at(hi, pk[known], values[known])
         count += np.bincount(pk[known], minlength=faces)
     with np.errstate(invalid="ignore"):  # inf − inf: a radius of curvature infinite all over (a plane), lo == hi
-        return (count > 0) & ((hi == lo) | (hi - lo <= CONSTANT_SHARE * half_width))
+        return (count > 0) & ((hi == lo) | (hi - lo <= max(CONSTANT_SHARE * half_width, rounding)))
