@@ -199,6 +199,26 @@ def test_a_level_set_along_a_seam_is_contoured_whole(tmp_path):
     assert report.lines[9].points > 30 and report.lines[9].max_px < 0.1
 
 
+def test_a_contour_loop_round_no_pixel_centre_is_not_a_miss():
+    """A closed contour between pixel centres (φ on one side of its level at every centre) has no pixel pair to be
+    traced between. parts/trimmed_face.step's zebra at 160×90: ψ dips below 40° inside four pixel centres at
+    40.01°–40.03°, a loop found by the contours' `_small_loops`; its 26 points were counted as misses (a false
+    FAIL). The loop test is the even-odd rule, checked on ellipses against their closed form."""
+    from rtreflect.analysis.validate import _holds_pixel_centre
+
+    t = np.linspace(0.0, 2.0 * np.pi, 60)
+    t[-1] = 0.0  # closed: first point = last
+    ellipse = lambda cx, cy, a, b: np.column_stack([cx + a * np.cos(t), cy + b * np.sin(t)])  # noqa: E731
+    assert not _holds_pixel_centre(ellipse(89.45, 34.73, 0.25, 0.07))  # between the centres (89.5, 34.5), (89.5, 35.5)
+    assert _holds_pixel_centre(ellipse(89.5, 34.6, 0.25, 0.2))  # round (89.5, 34.5)
+    assert not _holds_pixel_centre(ellipse(10.0, 10.0, 0.45, 0.45))  # round a pixel corner, radius < √2/2
+    assert _holds_pixel_centre(ellipse(10.0, 10.0, 0.75, 0.75))  # round the four centres about that corner
+    scene = load_scene(Path(__file__).resolve().parent.parent / "parts" / "trimmed_face.step").replace(
+        image={"width": 160, "height": 90}, render={"mode": "zebra", "step": 10.0})
+    report = validate_scene(scene, threads=1)
+    assert report.passed and report.misses == 0, (report.reasons, [(l.position, l.misses) for l in report.lines])
+
+
 def test_curvature_map_bending_within_a_pixel_is_no_colour_mismatch(tmp_path):
     """The sweep's periodic_bspline.step, mean curvature with 8 bands at 160×90: H is only C0 across its knot u = 5 and
     peaks there; two pixels on it, far from every iso-line, show their samples' mean map colour, which the centre's
