@@ -219,6 +219,25 @@ def test_a_contour_loop_round_no_pixel_centre_is_not_a_miss():
     assert report.passed and report.misses == 0, (report.reasons, [(l.position, l.misses) for l in report.lines])
 
 
+def test_lines_in_view_but_unresolved_are_not_reported_as_no_line_in_view(tmp_path):
+    """The sweep's small_fillet.step, isophotes every 10° at 160×90: the fillet turns the normal by 88° over a few
+    pixels, so its eight isophotes (351 analytic points in the image) are nowhere resolved and nothing is compared
+    (FAIL). The reason said no line lay where the camera sees the surface; it now says where they are."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+    import make_sweep_parts as sweep
+
+    path = tmp_path / "small_fillet.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).replace(image={"width": 160, "height": 90}, render={"mode": "isophote", "step": 10.0})
+    report = validate_scene(scene, threads=1)
+    shown = sum(len(p.px) for line in report.contours.lines for p in line.polylines)
+    assert not report.passed and shown > 100
+    assert "lie where the pixels resolve no line" in report.reasons[0], report.reasons
+    assert "none of the mode's lines" not in report.reasons[0]
+
+
 def test_curvature_map_bending_within_a_pixel_is_no_colour_mismatch(tmp_path):
     """The sweep's periodic_bspline.step, mean curvature with 8 bands at 160×90: H is only C0 across its knot u = 5 and
     peaks there; two pixels on it, far from every iso-line, show their samples' mean map colour, which the centre's
