@@ -325,3 +325,39 @@ def test_a_face_whose_curvature_is_zero_is_a_region_with_bands_at_the_flat_floor
     assert np.all((rgb >= middle.min(axis=0) - 1e-6) & (rgb <= middle.max(axis=0) + 1e-6))
     report = validate_scene(scene, threads=1, renderer=renderer)
     assert report.passed, report.reasons
+
+
+def test_a_wall_drafted_exactly_at_a_threshold_is_one_colour(tmp_path):
+    """A vertical wall under pull +z has δ = 0° exactly, computed as 0 ± 1e-14°: its samples fell either side of 0°,
+    some flagged undercut red and some in the band [0°, 1°), a speckled wall (the sweep's huge_inch.step: 4 colour
+    mismatches at 160×90 from its scene file). δ within `ON_THRESHOLD` of a threshold is on it: every pixel of every
+    wall is the band above 0° (the closed form δ = 0), none red, validate passes, and δ = 1° ± 1e-12 is the band
+    above 1° on both sides (the colour rule, which fails without the snap)."""
+    import sys
+
+    from rtreflect.analysis.validate import validate_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+    import make_sweep_parts as sweep
+
+    path = tmp_path / "huge_inch.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).replace(image={"width": 160, "height": 90},
+                                     render={"mode": "draft", "pull": [0.0, 0.0, 1.0]})
+    renderer = Renderer(resolve(scene))
+    film = renderer.render(None, 1).film
+    phi, patch = film.channel("phi"), film.channel("patch")
+    inner = (film.channel("A") == 1) & (patch >= 0)
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        inner &= np.roll(patch, (dy, dx), axis=(0, 1)) == patch
+    wall = inner & (np.abs(phi - 90.0) < 1e-9)
+    assert wall.sum() > 200
+    expected = renderer.mode.colors(np.zeros(1))[0]
+    assert not np.allclose(expected, UNDERCUT_RGB)
+    np.testing.assert_allclose(film.pixels[..., :3][wall], np.broadcast_to(expected, (wall.sum(), 3)), atol=1e-6)
+    report = validate_scene(scene, threads=1, renderer=renderer)
+    assert report.passed and report.colour_mismatches == 0, report.reasons
+    np.testing.assert_array_equal(renderer.mode.colors(np.array([1.0 - 1e-12, 1.0 + 1e-12])),
+                                  renderer.mode.colors(np.array([1.0, 1.0])))
