@@ -238,6 +238,41 @@ def test_lines_in_view_but_unresolved_are_not_reported_as_no_line_in_view(tmp_pa
     assert "none of the mode's lines" not in report.reasons[0]
 
 
+def test_curvature_crossings_are_not_traced_across_a_knot_line(tmp_path):
+    """Curvature is only C⁰ (a crease) across a bicubic's simple knot and jumps across a doubled one: the sweep's
+    near_knots.step (knots u = 0.25, 0.5 / 0.500001, v = 0.3 / 0.300001) had H = 0 traced by the cubic through four
+    pixels straddling u = 0.25 and v = 0.3, 0.70 px off the analytic line at 320×180 (a false FAIL). Pixels in
+    different knot spans are no smooth pair now (`validate.knot_spans`): every pair of differing keys has a knot
+    between its (u, v), and validate passes."""
+    import sys
+
+    from rtreflect.analysis.validate import knot_spans
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+    import make_sweep_parts as sweep
+
+    path = tmp_path / "near_knots.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).replace(image={"width": 320, "height": 180},
+                                     render={"mode": "curvature", "quantity": "mean", "bands": 8})
+    renderer = Renderer(resolve(scene))
+    film = renderer.render(None, 1).film
+    key, patch = knot_spans(renderer, film), film.channel("patch")
+    u, v = film.channel("u").astype(float), film.channel("v").astype(float)
+    a, b = (slice(None), slice(None, -1)), (slice(None), slice(1, None))  # along rows
+    pair = (patch[a] >= 0) & (patch[a] == patch[b])
+    differ = pair & (key[a] != key[b])
+    assert differ.sum() > 50
+    breaks_u, breaks_v = renderer.surfaces.patches[0].span_breaks()
+    lo_u, hi_u = np.fmin(u[a], u[b])[differ], np.fmax(u[a], u[b])[differ]
+    lo_v, hi_v = np.fmin(v[a], v[b])[differ], np.fmax(v[a], v[b])[differ]
+    between = (((breaks_u[1:-1, None] > lo_u) & (breaks_u[1:-1, None] <= hi_u)).any(axis=0)
+               | ((breaks_v[1:-1, None] > lo_v) & (breaks_v[1:-1, None] <= hi_v)).any(axis=0))
+    assert between.all()
+    report = validate_scene(scene, threads=1, renderer=renderer)
+    assert report.passed and report.max_px < 0.1, (report.reasons, report.max_px)
+
+
 def test_curvature_map_bending_within_a_pixel_is_no_colour_mismatch(tmp_path):
     """The sweep's periodic_bspline.step, mean curvature with 8 bands at 160×90: H is only C0 across its knot u = 5 and
     peaks there; two pixels on it, far from every iso-line, show their samples' mean map colour, which the centre's
