@@ -1054,7 +1054,10 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
                else "no tube is reflected where the camera sees the surface" if spec.along_ray and not shown
                else f"the {shown} analytic points in the image lie where the pixels resolve no line: neighbouring "
                     f"lines closer than {MIN_LINE_GAP_PX:g} px, or within {CLEAN_MARGIN_PX} px of a face's edge"
-               if shown else "none of the mode's lines lies where the camera sees the surface")
+               if shown and not any(r.clean_points for r in reports)
+               else f"no pixel pair's φ crosses a level where {sum(r.clean_points for r in reports)} analytic points lie "
+                    f"in clean view" if any(r.clean_points for r in reports)
+               else "none of the mode's lines lies where the camera sees the surface")
         reasons.insert(0, f"no traced line centre was compared ({why})")
     elif spec.along_ray and drawn < MIN_DRAWN_SHARE * seen:
         # A few stray centres (grazing rays at silhouettes) compare well, but the picture shows no lines.
