@@ -266,3 +266,98 @@ def test_auto_range_of_a_curvature_that_is_zero_is_not_its_rounding():
     middle = linear_rgb(DIVERGING, np.array([0.499, 0.501]))
     rgb = result.rgba[..., :3][full]
     assert np.all((rgb >= middle.min(axis=0) - 1e-6) & (rgb <= middle.max(axis=0) + 1e-6))
+
+
+def test_auto_range_of_max_curvature_on_a_sphere_is_not_the_rounding_at_its_umbilics():
+    """max |κ| = 1/r on a sphere, but κ1,2 = H ± √(H² − K) round to ~√ε·H at an umbilic: over the 64 × 64 grid the
+    sampled values spread over 2e-8 of 1/r (the sweep's sphere.3dm). The auto range was that spread, so the map drew
+    the rounding as full-range colours and `validate` found lines' colours where none were (7 mismatches here, 398
+    on sphere.3dm at 160×90). Now the range is [0, 2/r] (`UMBILIC_RANGE`): the sphere is a region at its middle level,
+    drawn in the sequential map's middle colour, and validate passes."""
+    from rtreflect.analysis.validate import validate_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+    from rtreflect.modes.colormaps import SEQUENTIAL
+
+    r = 1.5
+    sphere = revolve([(r, 0.0, 1.0), (r, r, SQRT_HALF), (0.0, r, 1.0)], 2)
+    scene = solid_scene(sphere, {"mode": "curvature", "quantity": "maxabs", "bands": 8})
+    mode = Renderer(resolve(scene)).mode
+    assert mode.low == 0.0 and mode.high == pytest.approx(2.0 / r, rel=1e-7)
+    assert mode.constant_faces.all()
+    report = validate_scene(scene, threads=1)
+    assert report.passed and report.colour_checked > 1000, (report.reasons, report.colour_mismatches)
+    result = render(scene)
+    full = result.aov("A") == 1
+    np.testing.assert_allclose(result.aov("phi")[full], 1.0 / r, rtol=1e-6)
+    # The map's middle on every pixel: between its entries just either side of t = 0.5 (φ is 1/r to rounding).
+    middle = linear_rgb(SEQUENTIAL, np.array([0.499, 0.501]))
+    rgb = result.rgba[..., :3][full]
+    assert np.all((rgb >= middle.min(axis=0) - 1e-6) & (rgb <= middle.max(axis=0) + 1e-6))
+
+
+def test_a_face_whose_curvature_is_zero_is_a_region_with_bands_at_the_flat_floor(tmp_path):
+    """The sweep's kink.step (z = f(x) + g(y), f piecewise linear: K = 0 exactly) with bands: the range is the flat
+    floor, ±`FLAT_RANGE`/size² = ±1.4e-12, and a line's half width (3.6e-14) put a thousandth of it below K's
+    rounding (2.9e-16 over the face), so the face was not counted constant: it was one stripe of the line colour,
+    and validate compared the rounding's sign changes (15.3 px off, 13 misses at 160×90). A face varying by less
+    than the flat floor is a region now: drawn in the map's middle colour, and validate passes."""
+    import sys
+
+    from rtreflect.analysis.validate import validate_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+    import make_sweep_parts as sweep
+
+    path = tmp_path / "kink.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).replace(image={"width": 160, "height": 90, "samples": 1},
+                                     render={"mode": "curvature", "quantity": "gaussian", "bands": 8})
+    renderer = Renderer(resolve(scene))
+    assert renderer.mode.constant_faces.all()
+    result = renderer.render(None, 1)
+    full = result.film.channel("A") == 1
+    assert full.sum() > 500
+    middle = linear_rgb(DIVERGING, np.array([0.499, 0.501]))
+    rgb = result.rgba[..., :3][full]
+    assert np.all((rgb >= middle.min(axis=0) - 1e-6) & (rgb <= middle.max(axis=0) + 1e-6))
+    report = validate_scene(scene, threads=1, renderer=renderer)
+    assert report.passed, report.reasons
+
+
+def test_a_wall_drafted_exactly_at_a_threshold_is_one_colour(tmp_path):
+    """A vertical wall under pull +z has δ = 0° exactly, computed as 0 ± 1e-14°: its samples fell either side of 0°,
+    some flagged undercut red and some in the band [0°, 1°), a speckled wall (the sweep's huge_inch.step: 4 colour
+    mismatches at 160×90 from its scene file). δ within `ON_THRESHOLD` of a threshold is on it: every pixel of every
+    wall is the band above 0° (the closed form δ = 0), none red, validate passes, and δ = 1° ± 1e-12 is the band
+    above 1° on both sides (the colour rule, which fails without the snap)."""
+    import sys
+
+    from rtreflect.analysis.validate import validate_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+    import make_sweep_parts as sweep
+
+    path = tmp_path / "huge_inch.step"
+    sweep.PARTS[path.name](path)
+    scene = load_scene(path).replace(image={"width": 160, "height": 90},
+                                     render={"mode": "draft", "pull": [0.0, 0.0, 1.0]})
+    renderer = Renderer(resolve(scene))
+    film = renderer.render(None, 1).film
+    phi, patch = film.channel("phi"), film.channel("patch")
+    inner = (film.channel("A") == 1) & (patch >= 0)
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        inner &= np.roll(patch, (dy, dx), axis=(0, 1)) == patch
+    wall = inner & (np.abs(phi - 90.0) < 1e-9)
+    assert wall.sum() > 200
+    expected = renderer.mode.colors(np.zeros(1))[0]
+    assert not np.allclose(expected, UNDERCUT_RGB)
+    np.testing.assert_allclose(film.pixels[..., :3][wall], np.broadcast_to(expected, (wall.sum(), 3)), atol=1e-6)
+    report = validate_scene(scene, threads=1, renderer=renderer)
+    assert report.passed and report.colour_mismatches == 0, report.reasons
+    np.testing.assert_array_equal(renderer.mode.colors(np.array([1.0 - 1e-12, 1.0 + 1e-12])),
+                                  renderer.mode.colors(np.array([1.0, 1.0])))

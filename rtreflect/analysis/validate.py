@@ -213,6 +213,10 @@ class PixelAOVs:
     # A map mode's surface colour varies within a pixel, and a sampled pixel shows its samples' mean, not the centre's
     # colour the line share is read against: the share L this may move, (H, W) (`map_bend`); None for one colour.
     map_bend: np.ndarray | None = None
+    # Where φ is only as smooth as the surface's second derivatives (a curvature map), the knot span (u, v) of each
+    # pixel's hit as one key, (H, W) (`knot_spans`): φ creases or jumps across a knot line, so pixels in different
+    # spans are no smooth pair (`_smooth_pairs`). None where φ is smooth across knots.
+    span: np.ndarray | None = None
 
 
 def line_offsets(renderer: Renderer, points: SurfacePoints, level: np.ndarray, size: int,
@@ -295,6 +299,26 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
     )
 
 
+def knot_spans(renderer: Renderer, film: Film) -> np.ndarray:
+    """(H, W) key of each pixel's knot span: (patch, span of u, span of v) as one integer, −1 off the surface.
+
+    Curvature is C^(p − 2 − m) across a knot of multiplicity m: C⁰ (a crease) on a bicubic's simple knots, a jump
+    where a knot is doubled. The cubic through four pixels (`_crossing`) across such a knot line put the traced
+    centre of H = 0 0.70 px off the analytic one (the sweep's near_knots.step at 320×180, its rows straddling
+    u = 0.25 and v = 0.3 / 0.300001: φ −0.0015, −0.0017, 0.0079, −0.0086), and of max |κ| (where |κ1| = |κ2|, a
+    crease too, but not a knot: not caught here) 0.52 px."""
+    patch = film.channel("patch").astype(np.int64)
+    u, v = film.channel("u").astype(np.float64), film.channel("v").astype(np.float64)
+    key = np.full(patch.shape, -1, dtype=np.int64)
+    for k in np.unique(patch[patch >= 0]):
+        on = patch == k
+        breaks_u, breaks_v = renderer.surfaces.patches[int(k)].span_breaks()
+        su = np.searchsorted(breaks_u[1:-1], u[on], side="right")
+        sv = np.searchsorted(breaks_v[1:-1], v[on], side="right")
+        key[on] = (int(k) * (len(breaks_u) + 1) + su) * (len(breaks_v) + 1) + sv
+    return key
+
+
 def mode_aovs(renderer: Renderer, film: Film, aovs: PixelAOVs) -> PixelAOVs:
     """The AOVs as another mode's lines see them: f := φ (channel phi), line.id and line.dist of the mode's stripes.
 
@@ -325,7 +349,7 @@ def mode_aovs(renderer: Renderer, film: Film, aovs: PixelAOVs) -> PixelAOVs:
     return replace(aovs, f=film.channel("phi").astype(np.float64), line_id=line_id.reshape(height, width),
                    line_dist=line_dist.reshape(height, width), line_coverage=coverage,
                    line_offset=line_offsets(renderer, points, stripes.level_id, size, hit).reshape(height, width),
-                   map_bend=bend)
+                   map_bend=bend, span=knot_spans(renderer, film) if renderer.mode.name == "curvature" else None)
 
 
 def second_differences(grid: np.ndarray) -> np.ndarray:
@@ -525,6 +549,9 @@ def _smooth_pairs(renderer: Renderer, aovs: PixelAOVs, axis: int | str,
     patch, f, fallback = aovs.patch.ravel(), aovs.f.ravel(), aovs.fallback.ravel()
     P, fp = aovs.P.reshape(-1, 3), renderer.camera.pixel_footprint(aovs.Z).ravel()
     ok = (patch[a] >= 0) & (patch[a] == patch[b]) & ~fallback[a] & ~fallback[b]
+    if aovs.span is not None:
+        span = aovs.span.ravel()
+        ok &= span[a] == span[b]
     ok &= np.isfinite(f[a]) & np.isfinite(f[b])
     with np.errstate(invalid="ignore"):
         ok &= np.linalg.norm(P[a] - P[b], axis=1) <= JUMP_FOOTPRINTS * np.fmax(fp[a], fp[b])
@@ -778,7 +805,8 @@ def _segments(contours: ContourLines, light: int) -> _Segments:
 
 
 def _checkable_points(contours: ContourLines, light: int, clean: np.ndarray) -> np.ndarray:
-    """Analytic contour points of one tube that must have a traced centre nearby (see module doc)."""
+    """Analytic contour points of one tube that must have a traced centre nearby (see module doc); not those of a
+    loop round no pixel centre (`encloses_a_pixel_centre`)."""
     height, width = clean.shape
     out = []
     for poly in contours.lines[light].polylines:
@@ -808,7 +836,8 @@ def encloses_a_pixel_centre(loop: np.ndarray) -> bool:
     separates no two of them: nothing can trace it, at any accuracy. Such loops are sub-pixel rings round a shallow
     extremum of φ at a level, or slivers between two rows of centres (the sweep's rhino_mix.3dm, Gaussian curvature
     at 160×90: K = 0 round a bump 0.4 px across, 18 points counted as misses, a false FAIL). A loop GEOS cannot read
-    as a polygon is kept.
+    as a polygon is kept. (Also parts/trimmed_face.step's zebra at 160×90: ψ dips below 40° inside four pixel
+    centres at 40.01°–40.03°, a loop 0.5 × 0.15 px found by the contours' `_small_loops`, 26 points.)
     """
     lo, hi = np.ceil(loop.min(axis=0) - 0.5), np.floor(loop.max(axis=0) - 0.5)  # the centres (i + 0.5) in its box
     if np.any(hi < lo):
@@ -1013,8 +1042,18 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
                      f"(faces where it is constant are regions, not lines); {int(np.count_nonzero(checked))} pixels' "
                      f"colours checked free of lines")
     elif len(deviations) == 0:
+        # Analytic points in the image but none in clean view: the lines are there, unresolved (small_fillet.step's
+        # isophotes: 351 points on a fillet a few pixels wide was reported as no line where the camera looks).
+        image = np.array([renderer.camera.width, renderer.camera.height], dtype=np.float64)
+        shown = sum(int(np.count_nonzero(np.all((poly.px >= 0) & (poly.px <= image), axis=1)))
+                    for line in contours.lines for poly in line.polylines)
         why = ("every line's neighbour lies closer than the pixels resolve" if notes and len(notes) == sum(counted)
-               else "no tube is reflected where the camera sees the surface" if spec.along_ray
+               else "no tube is reflected where the camera sees the surface" if spec.along_ray and not shown
+               else f"the {shown} analytic points in the image lie where the pixels resolve no line: neighbouring "
+                    f"lines closer than {MIN_LINE_GAP_PX:g} px, or within {CLEAN_MARGIN_PX} px of a face's edge"
+               if shown and not any(r.clean_points for r in reports)
+               else f"no pixel pair's φ crosses a level where {sum(r.clean_points for r in reports)} analytic points lie "
+                    f"in clean view" if any(r.clean_points for r in reports)
                else "none of the mode's lines lies where the camera sees the surface")
         reasons.insert(0, f"no traced line centre was compared ({why})")
     elif spec.along_ray and drawn < MIN_DRAWN_SHARE * seen:

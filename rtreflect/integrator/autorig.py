@@ -14,7 +14,11 @@ plane is that wall instead: vertical, facing the part from the camera's horizont
 as far out, with horizontal tubes. A camera inside the part's box (a cabin, a room, a housing seen
 from within) may see a part that walls that plane off: where under `MIN_REACH_FRACTION` of the
 visible surface reflects towards it unblocked, the level plane near the part's top inside
-(`INSIDE_HEIGHT`) is tried and kept if more reaches it.
+(`INSIDE_HEIGHT`) is tried and kept if more reaches it (reflection lines: what blocks the reflected
+rays matters to them alone). For highlight lines (`[render] mode = "highlight"`) the tubes span
+the same quantiles of the highlight's own field, where the normal line (either way) meets the plane:
+the reflected rays' range missed it (the sweep's sliver.step, trimmed_face.step, offset_cylinder.step
+and parts/trimmed.3dm: highlight φ from −171 to −137 under a bank round 0, no line on the part).
 """
 
 from __future__ import annotations
@@ -221,11 +225,12 @@ def light_rig(preview: Renderer, model_up: np.ndarray, spec: LightSpec) -> tuple
         beside = plane_and_f(wall)
         if np.isfinite(beside[2]).sum() > np.isfinite(f).sum():
             (Q, m, c), tubes, f = beside
-    if spec.normal is None and spec.point is None and len(idx) and np.all((eye >= lo) & (eye <= hi)):
+    if (preview.scene.render.mode == "reflection" and spec.normal is None and spec.point is None and len(idx)
+            and np.all((eye >= lo) & (eye <= hi))):
         # A camera inside the part's box (a cabin, a room, the inside of a housing): the plane outside it may be
         # walled off, every reflected ray meeting the part on its way (the sweep's closed_room.step: lines nowhere,
-        # and no warning, as f and line.id ignore what blocks them). The plane through the eye is tried too, and
-        # the one that more reflected rays reach unblocked is kept.
+        # and no warning, as f and line.id ignore what blocks them). The level plane near the part's top inside is
+        # tried too, and the one that more reflected rays reach unblocked is kept.
         hits_N = hits.N[idx]
         open_now = _unblocked(preview, P, R, hits_N, hits.patch[idx], tubes, f)
         if open_now.mean() < MIN_REACH_FRACTION:
@@ -233,10 +238,17 @@ def light_rig(preview: Renderer, model_up: np.ndarray, spec: LightSpec) -> tuple
             if _unblocked(preview, P, R, hits_N, hits.patch[idx], within[1], within[2]).sum() > open_now.sum():
                 (Q, m, c), tubes, f = within
                 f = np.where(_unblocked(preview, P, R, hits_N, hits.patch[idx], tubes, f), f, np.nan)
+    name = "f"
+    if preview.scene.render.mode == "highlight" and getattr(spec, "shape", None) != "circles" and len(idx):
+        # Highlight lines are where the normal line meets a tube, not the reflected ray: the bank spans that field.
+        f = tubes.ulmet_f(P, hits.N[idx])  # ahead along n ...
+        behind = tubes.ulmet_f(P, -hits.N[idx])  # ... or behind: the normal line either way (`HighlightMode.phi`)
+        f = np.where(np.isfinite(f), f, behind)
+        name = "the normal lines' plane coordinate"
     reaching = f[np.isfinite(f)]
     if len(reaching) >= MIN_REACHING:
         f_lo, f_hi = np.percentile(reaching, F_QUANTILES)
-        seen = f"f over the visible surface {f_lo:.4g} to {f_hi:.4g} ({F_QUANTILES[0]:g}-{F_QUANTILES[1]:g} %)"
+        seen = f"{name} over the visible surface {f_lo:.4g} to {f_hi:.4g} ({F_QUANTILES[0]:g}-{F_QUANTILES[1]:g} %)"
     else:
         f_lo, f_hi = -radius_part, radius_part
         seen = "few reflected rays of the preview reach the light plane: the bank spans the part's diameter"

@@ -11,7 +11,8 @@ counters and a set of tube indices kept), so a streamed render needs no second p
   (f finite) more than one spacing beyond the outermost tubes at more than `PAST_BANK_SHARE` of the
   surface pixels (a wider bank would light them; rays leaving away from the plane it would not).
 
-The last two count tubes: circles (`[lights] shape`) get the first two only.
+The last two count tubes: circles (`[lights] shape`) get the first two only. All but the first are of
+reflection lines (f, line.id and line.dist are the reflected ray's in every mode): another mode gets the first only.
 """
 
 from __future__ import annotations
@@ -61,6 +62,10 @@ class ImageTally:
         if self.surface == 0:
             return ["the camera sees no surface: the image is empty (check [camera], or remove it to frame the part "
                     "automatically)"]
+        if self.scene.render.mode != "reflection":
+            # f, line.id and line.dist are the reflected ray's in every mode: they say nothing of another mode's lines
+            # (a highlight render with twelve lines on the part warned "0 distinct reflected lines visible").
+            return []
         if self.reaching == 0:
             return ["no reflected ray reaches the light plane (it lies behind the surface as the camera sees it): "
                     "no line can show (move [lights] to the camera's side, or remove it for the automatic rig)"]

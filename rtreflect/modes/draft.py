@@ -31,6 +31,10 @@ BANDS_FROM = 0.3
 UNDERCUT_RGB = np.array([0.8, 0.0, 0.0])
 #: Width of the lines at the band edges, degrees of φ: thin against the usual 1°–3° thresholds.
 EDGE_WIDTH = 0.1
+#: Draft angles this close to a threshold (or to 0°) are on it, degrees: a face drafted exactly at a threshold (a 0°
+#: wall, a 1° wall) has δ = t ± rounding (1e-14° on the sweep's huge_inch.step), and its samples fell on either side:
+#: a wall speckled red and band colour (4 colour mismatches at 160×90). Far below any drafting tolerance (0.01°).
+ON_THRESHOLD = 1e-9
 
 
 @dataclass(frozen=True)
@@ -71,7 +75,11 @@ class DraftMode(Mode):
         return self.colors(90.0 - self.phi(p))
 
     def colors(self, draft: np.ndarray) -> np.ndarray:
-        """Linear RGB of draft angles δ (degrees): their band's colour, `UNDERCUT_RGB` where δ < 0."""
+        """Linear RGB of draft angles δ (degrees): their band's colour, `UNDERCUT_RGB` where δ < 0; δ within
+        `ON_THRESHOLD` of a threshold or of 0° is on it (the band above it, no undercut)."""
+        draft = np.asarray(draft, dtype=np.float64)
+        for t in (0.0, *self.thresholds):
+            draft = np.where(np.abs(draft - t) <= ON_THRESHOLD, t, draft)
         bands = len(self.thresholds) + 1
         # Darker for less draft, lighter for more.
         rgb = linear_rgb(BANDS_MAP, BANDS_FROM + (1.0 - BANDS_FROM) * (self.band(draft) + 0.5) / bands)
