@@ -305,8 +305,8 @@ def knot_spans(renderer: Renderer, film: Film) -> np.ndarray:
     Curvature is C^(p − 2 − m) across a knot of multiplicity m: C⁰ (a crease) on a bicubic's simple knots, a jump
     where a knot is doubled. The cubic through four pixels (`_crossing`) across such a knot line put the traced
     centre of H = 0 0.70 px off the analytic one (the sweep's near_knots.step at 320×180, its rows straddling
-    u = 0.25 and v = 0.3 / 0.300001: φ −0.0015, −0.0017, 0.0079, −0.0086), and of max |κ| (where |κ1| = |κ2|, a
-    crease too, but not a knot: not caught here) 0.52 px."""
+    u = 0.25 and v = 0.3 / 0.300001: φ −0.0015, −0.0017, 0.0079, −0.0086). For max |κ| and the radius the key also
+    holds which of |κ1|, |κ2| is the larger: φ creases where they meet."""
     patch = film.channel("patch").astype(np.int64)
     u, v = film.channel("u").astype(np.float64), film.channel("v").astype(np.float64)
     key = np.full(patch.shape, -1, dtype=np.int64)
@@ -316,6 +316,14 @@ def knot_spans(renderer: Renderer, film: Film) -> np.ndarray:
         su = np.searchsorted(breaks_u[1:-1], u[on], side="right")
         sv = np.searchsorted(breaks_v[1:-1], v[on], side="right")
         key[on] = (int(k) * (len(breaks_u) + 1) + su) * (len(breaks_v) + 1) + sv
+    if getattr(renderer.mode, "quantity", None) in ("maxabs", "radius"):
+        # max(|κ1|, |κ2|) creases where the two meet: the branch it takes is part of the key (rational_high.step at
+        # 160×90: φ = |κ2| 0.0204, 0.0204 then κ1 0.0223, 0.0257 down a column, the cubic's centre 0.52 px off).
+        # Not on a face where φ is constant (a sphere, umbilic all over: which is larger is rounding there, and the
+        # key would split the face into noise that no colour check could pass).
+        k1, k2 = np.abs(film.channel("k1").astype(np.float64)), np.abs(film.channel("k2").astype(np.float64))
+        lined = (patch >= 0) & ~np.asarray(renderer.mode.constant_faces)[np.maximum(patch, 0)]
+        key = np.where(key >= 0, 2 * key + (lined & (k1 >= k2)), key)
     return key
 
 
