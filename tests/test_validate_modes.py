@@ -204,7 +204,9 @@ def test_a_contour_loop_round_no_pixel_centre_is_not_a_miss():
     traced between. parts/trimmed_face.step's zebra at 160×90: ψ dips below 40° inside four pixel centres at
     40.01°–40.03°, a loop found by the contours' `_small_loops`; its 26 points were counted as misses (a false
     FAIL). The loop test is checked on ellipses against their closed form."""
-    from rtreflect.analysis.validate import encloses_a_pixel_centre as _holds_pixel_centre
+    from rtreflect.analysis.validate import encloses_a_pixel_centre
+
+    _holds_pixel_centre = lambda loop: encloses_a_pixel_centre(loop, 200, 100)  # noqa: E731
 
     t = np.linspace(0.0, 2.0 * np.pi, 60)
     t[-1] = 0.0  # closed: first point = last
@@ -216,6 +218,14 @@ def test_a_contour_loop_round_no_pixel_centre_is_not_a_miss():
     sliver = np.array([[0.0, 10.6], [100.0, 10.6], [100.0, 11.4], [0.0, 11.4], [0.0, 10.6]])
     assert not _holds_pixel_centre(sliver)  # 100 px long between two rows of centres
     assert _holds_pixel_centre(sliver + [0.0, 0.5])
+    assert not _holds_pixel_centre(sliver + [250.0, 0.5])  # its centres beyond the image's right edge (x < 200 only)
+    assert _holds_pixel_centre(np.array([[-1e6, -1e6], [1e6, -1e6], [1e6, 1e6], [-1e6, 1e6], [-1e6, -1e6]]))  # round it all
+    ring = ellipse(100.0, 50.0, 1e5, 1e5)  # round the whole image, a huge box: the rows are clipped to the image
+    assert _holds_pixel_centre(ring)
+    horseshoe = np.array([[0.2, 0.2], [5.8, 0.2], [5.8, 5.8], [3.2, 5.8], [3.2, 1.2], [2.8, 1.2], [2.8, 5.8],
+                          [0.2, 5.8], [0.2, 0.2]])  # concave: its runs along row 3.5 hold centres, its notch none
+    assert _holds_pixel_centre(horseshoe)
+    assert not _holds_pixel_centre(np.array([[2.7, 1.0], [3.3, 1.0], [3.3, 9.0], [2.7, 9.0], [2.7, 1.0]]))
     scene = load_scene(Path(__file__).resolve().parent.parent / "parts" / "trimmed_face.step").replace(
         image={"width": 160, "height": 90}, render={"mode": "zebra", "step": 10.0})
     report = validate_scene(scene, threads=1)
@@ -390,6 +400,9 @@ def test_a_map_with_no_line_in_view_shows_its_colours_and_passes():
     report = validate_scene(scene, threads=1, renderer=renderer)
     assert report.passed, report.reasons
     assert report.colour_checked > 1000 and any("no iso-line in view" in note for note in report.notes)
+    # Without bands the map has no levels: nothing to compare, a FAIL (the note is for levels crossed nowhere).
+    plain = validate_scene(scene.replace(render={"bands": 0}), threads=1)
+    assert not plain.passed and "no traced line centre was compared" in plain.reasons[0], plain.reasons
 
 
 def test_a_line_mode_with_no_line_in_view_does_not_speak_of_maps(tmp_path):

@@ -31,11 +31,11 @@ import numpy as np
 from ..trace.accelerator import Accelerator
 from ..trace.camera import Camera
 from ..modes.base import SurfacePoints, seen_at
-from ..modes.lights import TubeLights
+from ..modes.lights import TubeLights, reaches_light_plane
 from ..modes.reflection import ReflectionMode
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import Tessellation
-from ..trace.tracing import facing, occluded, trace
+from ..trace.tracing import facing, trace
 
 #: Target size in pixels of one cell of the (u, v) grid that contourpy sees.
 GRID_CELL_PX = 2.0
@@ -359,25 +359,6 @@ def eye_sees(scene, camera: Camera, R: np.ndarray, a: np.ndarray) -> np.ndarray:
     hits = trace(scene.accelerator, scene.tessellation, scene.surfaces, origins, -a, max_distance=to_R - margin)
     seen &= ~(hits.fallback | (hits.hit & (hits.t < to_R - margin)))
     return seen
-
-
-def reaches_light_plane(scene, lights: TubeLights, R: np.ndarray, n: np.ndarray,
-                        patch: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """True where the reflected ray R + t s meets the light plane ahead (t > 0) with no surface on the way.
-
-    ``scene`` is anything with ``accelerator``, ``tessellation`` and ``surfaces`` (a `Renderer`, an
-    `UlmetField`); the occlusion is `tracing.occluded`, which respects trims.
-
-    n is the unit normal at R turned to the side the ray leaves from; the ray starts there,
-    off the surface by more than the mesh's chord error (`Accelerator.surface_origins`), as the
-    renderer's do.
-    """
-    t = lights.plane_t(R, s)
-    clear = t > 0
-    idx = np.flatnonzero(clear)
-    origin = scene.accelerator.surface_origins(R[idx], n[idx], patch[idx])
-    clear[idx] = ~occluded(scene.accelerator, scene.tessellation, scene.surfaces, origin, s[idx], t[idx])
-    return clear
 
 
 # -- polylines as flat arrays -------------------------------------------------------------------

@@ -28,9 +28,8 @@ from dataclasses import replace
 import numpy as np
 
 from ..exchange.scene import CameraSpec, ImageSpec, LightSpec, Scene
-from ..modes.lights import TubeLights, reflect
+from ..modes.lights import TubeLights, reaches_light_plane, reflect
 from ..trace.camera import Camera
-from ..trace.tracing import occluded
 from ..trace.framing import ISO_NAMES, fit_camera, iso_directions, view_frame
 from .renderer import Renderer
 
@@ -188,19 +187,6 @@ def light_plane(vertices: np.ndarray, eye: np.ndarray, model_up: np.ndarray, spe
     return np.asarray(Q, dtype=np.float64), np.asarray(m, dtype=np.float64), c
 
 
-def _unblocked(preview: Renderer, P: np.ndarray, R: np.ndarray, N: np.ndarray, patch: np.ndarray, tubes: TubeLights,
-               f: np.ndarray) -> np.ndarray:
-    """Per visible preview pixel: its reflected ray (from P along R, leaving on the side of N) meets the light plane
-    (f finite) with no surface in between (`tracing.occluded`)."""
-    ok = np.isfinite(f)
-    rows = np.flatnonzero(ok)
-    if len(rows):
-        start = preview.accelerator.surface_origins(P[rows], N[rows], patch[rows])
-        t = tubes.plane_t(start, R[rows])
-        ok[rows] = ~occluded(preview.accelerator, preview.tessellation, preview.surfaces, start, R[rows], t)
-    return ok
-
-
 def light_rig(preview: Renderer, model_up: np.ndarray, spec: LightSpec) -> tuple[LightSpec, str]:
     """The tubes of an automatic ``spec`` from the preview's visible f range, and the line saying what was chosen."""
     vertices = preview.tessellation.vertices
@@ -231,13 +217,14 @@ def light_rig(preview: Renderer, model_up: np.ndarray, spec: LightSpec) -> tuple
         # walled off, every reflected ray meeting the part on its way (the sweep's closed_room.step: lines nowhere,
         # and no warning, as f and line.id ignore what blocks them). The level plane near the part's top inside is
         # tried too, and the one that more reflected rays reach unblocked is kept.
-        hits_N = hits.N[idx]
-        open_now = _unblocked(preview, P, R, hits_N, hits.patch[idx], tubes, f)
+        reaching_from = lambda lights: reaches_light_plane(preview, lights, P, hits.N[idx], hits.patch[idx], R)  # noqa: E731
+        open_now = reaching_from(tubes)
         if open_now.mean() < MIN_REACH_FRACTION:
             within = plane_and_f(None, inside=True)
-            if _unblocked(preview, P, R, hits_N, hits.patch[idx], within[1], within[2]).sum() > open_now.sum():
+            open_within = reaching_from(within[1])
+            if open_within.sum() > open_now.sum():
                 (Q, m, c), tubes, f = within
-                f = np.where(_unblocked(preview, P, R, hits_N, hits.patch[idx], tubes, f), f, np.nan)
+                f = np.where(open_within, f, np.nan)
     name = "f"
     if preview.scene.render.mode == "highlight" and getattr(spec, "shape", None) != "circles" and len(idx):
         # Highlight lines are where the normal line meets a tube, not the reflected ray: the bank spans that field.

@@ -140,7 +140,9 @@ class CurvatureMode(Mode):
             return np.zeros(len(self.surfaces), dtype=bool)
         # At least the rounding floor of the "auto" range: a part whose K is 0 to rounding everywhere (the sweep's
         # kink.step: ±9e-17 against a floor of 1.4e-12) has a map range at that floor, and its noise is no line.
-        return constant_faces(self.surfaces, self.phi, self.half_width, flat_floor(self.quantity, self.surfaces))
+        # (An "auto" range's floor only: a range the user fixed below it asks for its own variations.)
+        floor = flat_floor(self.quantity, self.surfaces) if self.clipped is not None else 0.0
+        return constant_faces(self.surfaces, self.phi, self.half_width, floor)
 
     def stripes(self, p: SurfacePoints) -> Stripes:
         return even_stripes(self.phi(p), self.levels, self.half_width, ~self.constant_faces[p.patch])

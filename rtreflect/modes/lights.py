@@ -14,6 +14,7 @@ import numpy as np
 
 from ..exchange.scene import LightSpec
 from ..kernels import tubes as tubes_kernel
+from ..trace.tracing import occluded
 
 #: Point × tube pairs per chunk of the skew-line distances (eq. 4): about 80 MB of temporaries. `reach` (the
 #: renderer's path) no longer builds the tables: `integrator.tiling` still budgets memory with it.
@@ -177,3 +178,22 @@ class TubeLights:
                            line_id, line_dist, line_sigma, line_t, candidate, t_candidate, t_of, f)
         return TubeReach(line_id, line_dist, line_sigma, line_t, candidate, t_candidate, None if tube is None else t_of,
                          f)
+
+
+def reaches_light_plane(scene, lights: TubeLights, R: np.ndarray, n: np.ndarray,
+                        patch: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """True where the reflected ray R + t s meets the light plane ahead (t > 0) with no surface on the way.
+
+    ``scene`` is anything with ``accelerator``, ``tessellation`` and ``surfaces`` (a `Renderer`, an
+    `UlmetField`); the occlusion is `tracing.occluded`, which respects trims.
+
+    n is the unit normal at R turned to the side the ray leaves from; the ray starts there,
+    off the surface by more than the mesh's chord error (`Accelerator.surface_origins`), as the
+    renderer's do.
+    """
+    t = lights.plane_t(R, s)
+    clear = t > 0
+    idx = np.flatnonzero(clear)
+    origin = scene.accelerator.surface_origins(R[idx], n[idx], patch[idx])
+    clear[idx] = ~occluded(scene.accelerator, scene.tessellation, scene.surfaces, origin, s[idx], t[idx])
+    return clear
