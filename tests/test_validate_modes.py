@@ -251,25 +251,31 @@ def test_lines_in_view_but_unresolved_are_not_reported_as_no_line_in_view(tmp_pa
     assert "none of the mode's lines" not in report.reasons[0]
 
 
+def sweep_render(tmp_path: Path, name: str, size: tuple[int, int], render: dict):
+    """A sweep part (tools/make_sweep_parts.py) written to ``tmp_path``, in a scene of ``size`` and ``render``
+    settings: (the scene, its renderer, the film of one render)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
+    import make_sweep_parts as sweep
+
+    path = tmp_path / name
+    sweep.PARTS[name](path)
+    scene = load_scene(path).replace(image={"width": size[0], "height": size[1]}, render=render)
+    renderer = Renderer(resolve(scene))
+    return scene, renderer, renderer.render(None, 1).film
+
+
 def test_curvature_crossings_are_not_traced_across_a_knot_line(tmp_path):
     """Curvature is only C⁰ (a crease) across a bicubic's simple knot and jumps across a doubled one: the sweep's
     near_knots.step (knots u = 0.25, 0.5 / 0.500001, v = 0.3 / 0.300001) had H = 0 traced by the cubic through four
     pixels straddling u = 0.25 and v = 0.3, 0.70 px off the analytic line at 320×180 (a false FAIL). Pixels in
     different knot spans are no smooth pair now (`validate.knot_spans`): every pair of differing keys has a knot
     between its (u, v), and validate passes."""
-    import sys
-
     from rtreflect.analysis.validate import knot_spans
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
-    import make_sweep_parts as sweep
-
-    path = tmp_path / "near_knots.step"
-    sweep.PARTS[path.name](path)
-    scene = load_scene(path).replace(image={"width": 320, "height": 180},
-                                     render={"mode": "curvature", "quantity": "mean", "bands": 8})
-    renderer = Renderer(resolve(scene))
-    film = renderer.render(None, 1).film
+    scene, renderer, film = sweep_render(tmp_path, "near_knots.step", (320, 180),
+                                         {"mode": "curvature", "quantity": "mean", "bands": 8})
     key, patch = knot_spans(renderer, film), film.channel("patch")
     u, v = film.channel("u").astype(float), film.channel("v").astype(float)
     a, b = (slice(None), slice(None, -1)), (slice(None), slice(1, None))  # along rows
@@ -291,19 +297,10 @@ def test_max_curvature_crossings_are_not_traced_across_its_crease(tmp_path):
     160×90 had a column of φ = |κ2| 0.0204, 0.0204 then κ1 0.0223, 0.0257, and the cubic through them put the
     centre of the level 0.0209 0.52 px off the analytic line (a false FAIL). The branch is part of the pixel's key
     (`validate.knot_spans`): pixels either side of the crease are no smooth pair, and validate passes."""
-    import sys
-
     from rtreflect.analysis.validate import knot_spans
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
-    import make_sweep_parts as sweep
-
-    path = tmp_path / "rational_high.step"
-    sweep.PARTS[path.name](path)
-    scene = load_scene(path).replace(image={"width": 160, "height": 90},
-                                     render={"mode": "curvature", "quantity": "maxabs", "bands": 8})
-    renderer = Renderer(resolve(scene))
-    film = renderer.render(None, 1).film
+    scene, renderer, film = sweep_render(tmp_path, "rational_high.step", (160, 90),
+                                         {"mode": "curvature", "quantity": "maxabs", "bands": 8})
     key = knot_spans(renderer, film)
     larger = np.abs(film.channel("k1")) >= np.abs(film.channel("k2"))
     hit = film.channel("patch") >= 0
