@@ -8,10 +8,10 @@ the 206-face plate the preview's geometry (0.8 s) and its second look's finer me
 built again by the render: `rtreflect render parts/plate.step` took 16.4 s, 13.8 s with them shared.
 
 `scene_geometry` keeps the last one built (one scene's worth of memory, until the next is built or `forget`) and
-hands it to the next render of the same surfaces (the very tuple of the scene: `dataclasses.replace` keeps it) with the same settings. Everything in
-it is read-only to a render, or built on first use under its own lock (the finer mesh, the clearance cones), so
-renders may share it, in threads too; and a shared one gives the same pixels, bit for bit, as a fresh one (the
-tracer's answer for a ray depends on the ray alone, `test_render`'s invariance tests).
+hands it to the next render of the same surfaces (the very tuple of the scene: `dataclasses.replace` keeps it) with
+the same settings. Everything in it is read-only to a render, or built on first use under its own lock (the finer
+mesh, the clearance cones), so renders may share it, in threads too; and a shared one gives the same pixels, bit
+for bit, as a fresh one (the tracer's answer for a ray depends on the ray alone; `tests/test_render.py`).
 """
 
 from __future__ import annotations
