@@ -852,6 +852,8 @@ def encloses_a_pixel_centre(loop: np.ndarray, width: int, height: int) -> bool:
     sorted, bound the runs inside it, and a run holding a centre x = i + ½ (0 ≤ i < width) decides. Rows × segments
     of work, not centres × segments.
     """
+    if not np.isfinite(loop).all():  # a point that did not project: the loop is kept (checked as before)
+        return True
     rows = np.arange(max(0.0, np.ceil(loop[:, 1].min() - 0.5)), min(height - 1.0, np.floor(loop[:, 1].max() - 0.5)) + 1)
     if len(rows) == 0:
         return False
