@@ -228,9 +228,7 @@ def light_rig(preview: Renderer, model_up: np.ndarray, spec: LightSpec) -> tuple
     name = "f"
     if preview.scene.render.mode == "highlight" and getattr(spec, "shape", None) != "circles" and len(idx):
         # Highlight lines are where the normal line meets a tube, not the reflected ray: the bank spans that field.
-        f = tubes.ulmet_f(P, hits.N[idx])  # ahead along n ...
-        behind = tubes.ulmet_f(P, -hits.N[idx])  # ... or behind: the normal line either way (`HighlightMode.phi`)
-        f = np.where(np.isfinite(f), f, behind)
+        f = tubes.normal_line_f(P, hits.N[idx])  # the highlight's own φ (`HighlightMode.phi`)
         name = "the normal lines' plane coordinate"
     reaching = f[np.isfinite(f)]
     if len(reaching) >= MIN_REACHING:

@@ -16,7 +16,7 @@ import numpy as np
 
 from .base import Mode, Stripes, SurfacePoints
 from .circles import circle_mode
-from .lights import TubeLights, _dot
+from .lights import TubeLights
 
 
 @dataclass(frozen=True)
@@ -36,10 +36,7 @@ class HighlightMode(Mode):
         return self.lights.radius
 
     def phi(self, p: SurfacePoints) -> np.ndarray:
-        lam = self.lights.plane_t(p.R, p.n)  # either sign: the whole normal line
-        with np.errstate(invalid="ignore"):
-            f = _dot(p.R + lam[:, None] * p.n - self.lights.Q, self.lights.e)
-        return np.where(np.isfinite(lam), f, np.nan)
+        return self.lights.normal_line_f(p.R, p.n)
 
     def offset(self, p: SurfacePoints, level: np.ndarray) -> np.ndarray:
         """Signed skew-line distance of the normal line to tube ``level[i]`` (`base.level_offset`; the same for ±n)."""

@@ -120,6 +120,14 @@ class TubeLights:
                                np.ascontiguousarray(s, dtype=np.float64), d, t, ahead)
         return TubeDistances(d, t, ahead)
 
+    def normal_line_f(self, R: np.ndarray, n: np.ndarray) -> np.ndarray:
+        """The highlight's field (Beier and Chen): the e-coordinate where the normal line R + λn, λ of either sign,
+        meets the light plane; NaN where n is parallel to it."""
+        lam = self.plane_t(R, n)  # either sign: the whole normal line
+        with np.errstate(invalid="ignore"):
+            f = _dot(R + lam[:, None] * n - self.Q, self.e)
+        return np.where(np.isfinite(lam), f, np.nan)
+
     def ulmet_f(self, R: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Ulmet's function, general form of paper eq. (5): the e-coordinate where the reflected ray meets the light plane.
 
