@@ -357,15 +357,18 @@ def occt_face_kinds(path: Path) -> list[str]:
 def test_map_regions_are_the_faces_where_the_closed_form_is_constant(part):
     """A map draws no line on a face where φ is constant (`modes.regions`). Which faces those are follows from each
     face's kind by Open CASCADE: K is constant on planes, cylinders, cones and spheres, H on planes, cylinders and
-    spheres, the draft angle (pull +z) on planes and on cylinders and cones along the pull; never on a torus."""
+    spheres, the draft angle (pull +z) on planes and on cylinders and cones along the pull; never on a torus. So is
+    the isophotes' angle to a light straight down (their 0° level painted the top face white, 90° every wall)."""
     pytest.importorskip("OCP")
     kinds = occt_face_kinds(PARTS / part)
     expected = {"gaussian": ("plane", "cylinder", "cylinder|pull", "cone", "cone|pull", "sphere"),
                 "mean": ("plane", "cylinder", "cylinder|pull", "sphere"),
-                "draft": ("plane", "cylinder|pull", "cone|pull")}
+                "draft": ("plane", "cylinder|pull", "cone|pull"),
+                "isophote": ("plane", "cylinder|pull", "cone|pull")}
     assert "torus" in kinds or "sphere" in kinds
     for quantity, constant in expected.items():
-        render = {"mode": "draft"} if quantity == "draft" else {"mode": "curvature", "quantity": quantity, "bands": 6}
+        render = ({"mode": "draft"} if quantity == "draft" else {"mode": "isophote", "light": [0.0, 0.0, 1.0]}
+                  if quantity == "isophote" else {"mode": "curvature", "quantity": quantity, "bands": 6})
         mode = Renderer(resolve(load_scene(PARTS / part).replace(image={"width": 32, "height": 18},
                                                                  render=render))).mode
         assert mode.constant_faces.tolist() == [kind in constant for kind in kinds], quantity
@@ -403,10 +406,11 @@ def test_a_map_with_no_line_in_view_shows_its_colours_and_passes():
 
 
 def test_a_line_mode_with_no_line_in_view_does_not_speak_of_maps(tmp_path):
-    """Isophotes every 90° on a plane whose normal is 45° from L: φ = 45° everywhere, no level crossed. Nothing is
-    compared (FAIL), and the reason speaks of the mode's lines, neither of tubes nor of a map's faces at a level."""
-    scene_file = tmp_path / "plane.toml"
-    scene_file.write_text("""
+    """Highlight lines of a single tube far off the plane: none crosses it. Nothing is compared (FAIL), and the
+    reason speaks of the mode's lines, neither of tubes nor of a map's faces at a level. Isophotes every 90° on a
+    plane whose normal is 45° from L: φ = 45° everywhere, no level crossed, a region (`modes.regions`) with no line
+    to draw: passes with a note, its pixels checked free of lines."""
+    scene_text = """
 [image]
 width = 64
 height = 36
@@ -429,10 +433,13 @@ knots_v = [0.0, 0.0, 1.0, 1.0]
 points = [[[-1.0, -1.0, -1.0], [-1.0, 1.0, -1.0]], [[1.0, -1.0, 1.0], [1.0, 1.0, 1.0]]]
 
 [render]
-mode = "isophote"
-step = 90.0
-light = [0.0, 0.0, 1.0]
-""")
+"""
+    scene_file = tmp_path / "plane.toml"
+    scene_file.write_text(scene_text + 'mode = "isophote"\nstep = 90.0\nlight = [0.0, 0.0, 1.0]\n')
+    isophotes = validate_scene(load_scene(scene_file), threads=1)
+    assert isophotes.passed and isophotes.colour_checked > 200, isophotes.reasons
+    assert any("no iso-line in view" in note for note in isophotes.notes), isophotes.notes
+    scene_file.write_text(scene_text.replace("positions = [0.0]", "positions = [40.0]") + 'mode = "highlight"\n')
     report = validate_scene(load_scene(scene_file), threads=1)
     assert not report.passed and "no traced line centre was compared" in report.reasons[0]
     assert "tube" not in report.reasons[0] and "whole faces" not in report.reasons[0], report.reasons[0]

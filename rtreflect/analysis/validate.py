@@ -66,6 +66,7 @@ from .parallax import zebra_parallax
 from ..integrator.film import Film
 from ..modes.base import SurfacePoints, level_offset
 from ..modes.legend import LEGEND_MODES
+from ..modes.regions import FaceRegions
 from ..modes.lights import reflect
 from ..modes.reflection import ReflectionMode
 from ..modes.profile import stripe_reach, stripe_weight
@@ -1059,14 +1060,17 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
                 for line in contours.lines for poly in line.polylines)
     if seen == 0:
         reasons.insert(0, "no traced line centre was compared (the camera sees no surface)")
-    elif len(deviations) == 0 and renderer.scene.render.mode in LEGEND_MODES and len(c_k) and not reasons \
-            and not notes and np.count_nonzero(checked):
-        # A map whose levels cross none of the faces in view (a face where φ is constant, K = 0 on a plane, a 0° wall,
-        # is a region of the map, not a line: `modes.regions`): its picture is the map's colours, checked line-free.
-        # A level reached only along face edges (a fillet meeting a 0° wall: huge_inch.step's draft, 423 analytic
-        # points all within 2 px of an edge) is no line the pixels can check either: said so, not failed. (A map
-        # without levels has nothing to compare: it fails, as the docs say.)
-        where = ("φ crosses none of the map's levels where the camera sees the surface (faces where it is constant are "
+    elif len(deviations) == 0 and (renderer.scene.render.mode in LEGEND_MODES
+                                   or (isinstance(renderer.mode, FaceRegions) and not shown)) \
+            and len(c_k) and not reasons and not notes and np.count_nonzero(checked):
+        # A map or isophotes whose levels cross none of the faces in view (a face where φ is constant, K = 0 on a plane,
+        # a 0° wall, a plane facing the light, is a region, not a line: `modes.regions`): its picture is the map's
+        # colours or the shading, checked line-free.
+        # A map's level reached only along face edges (a fillet meeting a 0° wall: huge_inch.step's draft, 423
+        # analytic points all within 2 px of an edge) is no line the pixels can check either: said so, not failed.
+        # (Isophotes crowding on a fillet are lines in view, unresolved: they fail, below. A map without levels has
+        # nothing to compare: it fails, as the docs say.)
+        where = ("φ crosses none of the levels where the camera sees the surface (faces where it is constant are "
                  "regions, not lines)" if not shown else
                  f"its {shown} analytic points in the image lie only along face edges or where lines crowd, "
                  f"which the pixels cannot check at this size")

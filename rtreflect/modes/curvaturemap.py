@@ -13,16 +13,15 @@ b − 1 inner edges), `base.STRIPE_SHARE` of a band wide.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
 from ..geometry.curvature import curvatures
 from ..geometry.seams import part_size
-from .base import STRIPE_SHARE, Mode, Stripes, SurfacePoints, even_stripes
+from .base import STRIPE_SHARE, Mode, SurfacePoints
 from .colormaps import DIVERGING, SEQUENTIAL, linear_rgb
 from .lights import TubeLights
-from .regions import constant_faces
+from .regions import FaceRegions
 
 #: "auto" range: the 98th percentile of |φ| (2 % of the sampled surface clips), so a few extreme
 #: points (near a pole or a sharp fillet) do not wash out the map of the rest.
@@ -99,7 +98,7 @@ def auto_range(name: str, surfaces) -> tuple[float, float, float]:
 
 
 @dataclass(frozen=True)
-class CurvatureMode(Mode):
+class CurvatureMode(FaceRegions, Mode):
     surfaces: object  # SurfaceSet
     quantity: str
     low: float
@@ -133,19 +132,12 @@ class CurvatureMode(Mode):
         derivs = self.surfaces.evaluate(p.patch, p.u, p.v, order=2)
         return quantity_of(self.quantity, derivs, p.n)
 
-    @cached_property
-    def constant_faces(self) -> np.ndarray:
-        """Per face: φ constant over it, a region of the map where no iso-line is drawn (`regions`)."""
-        if len(self.levels) == 0:
-            return np.zeros(len(self.surfaces), dtype=bool)
-        # At least the rounding floor of the "auto" range: a part whose K is 0 to rounding everywhere (the sweep's
-        # kink.step: ±9e-17 against a floor of 1.4e-12) has a map range at that floor, and its noise is no line.
-        # (An "auto" range's floor only: a range the user fixed below it asks for its own variations.)
-        floor = flat_floor(self.quantity, self.surfaces) if self.clipped is not None else 0.0
-        return constant_faces(self.surfaces, self.phi, self.half_width, floor)
-
-    def stripes(self, p: SurfacePoints) -> Stripes:
-        return even_stripes(self.phi(p), self.levels, self.half_width, ~self.constant_faces[p.patch])
+    @property
+    def region_floor(self) -> float:
+        """At least the rounding floor of an "auto" range (`regions.FaceRegions`): a part whose K is 0 to rounding
+        everywhere (the sweep's kink.step: ±9e-17 against a floor of 1.4e-12) has a map range at that floor, and its
+        noise is no line. (An "auto" range's floor only: a range the user fixed below it asks for its variations.)"""
+        return flat_floor(self.quantity, self.surfaces) if self.clipped is not None else 0.0
 
     def surface_rgb(self, p: SurfacePoints) -> np.ndarray:
         return self.colors(self.phi(p))

@@ -13,15 +13,14 @@ degrees of φ wide.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
-from .base import Mode, Stripes, SurfacePoints, even_stripes
+from .base import Mode, SurfacePoints
 from .colormaps import linear_rgb
 from .isophote import angle_to
 from .lights import TubeLights
-from .regions import constant_faces
+from .regions import FaceRegions
 
 #: The bands' map: Crameri's oslo, sequential black-blue-white with no red in it, so the undercut flag stands out.
 BANDS_MAP = "crameri:oslo"
@@ -38,7 +37,7 @@ ON_THRESHOLD = 1e-9
 
 
 @dataclass(frozen=True)
-class DraftMode(Mode):
+class DraftMode(FaceRegions, Mode):
     surfaces: object  # SurfaceSet
     pull: np.ndarray
     thresholds: tuple
@@ -61,15 +60,6 @@ class DraftMode(Mode):
     def band(self, draft: np.ndarray) -> np.ndarray:
         """Band index of draft angles δ: 0 below t_1, …, m at or above t_m."""
         return np.searchsorted(np.asarray(self.thresholds), draft, side="right")
-
-    @cached_property
-    def constant_faces(self) -> np.ndarray:
-        """Per face: φ constant over it (a plane, a wall, a cylinder along the pull), a region of the map where no
-        band edge is drawn (`regions`): a 0° wall shows its band's colour, not the line colour."""
-        return constant_faces(self.surfaces, self.phi, self.half_width)
-
-    def stripes(self, p: SurfacePoints) -> Stripes:
-        return even_stripes(self.phi(p), self.levels, self.half_width, ~self.constant_faces[p.patch])
 
     def surface_rgb(self, p: SurfacePoints) -> np.ndarray:
         return self.colors(90.0 - self.phi(p))

@@ -4,7 +4,8 @@
 levels every ``step`` degrees from 0° to 180° and stripes `base.STRIPE_SHARE` of a step wide.
 n is the normal as written to the EXR (facing the camera). Isophotes inherit one order of
 continuity less than the surface: a G1 join with a curvature jump kinks them. L is
-``[render] light``, or the light plane's normal m when not given.
+``[render] light``, or the light plane's normal m when not given. On a face where φ is constant (a
+plane, or a cylinder or cone about L) a level is an area, not a line: none is drawn there (`regions`).
 """
 
 from __future__ import annotations
@@ -13,8 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import STRIPE_SHARE, Mode, Stripes, SurfacePoints, even_stripes
+from .base import STRIPE_SHARE, Mode, SurfacePoints
 from .lights import TubeLights
+from .regions import FaceRegions
 
 
 def angle_to(n: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -23,7 +25,8 @@ def angle_to(n: np.ndarray, direction: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class IsophoteMode(Mode):
+class IsophoteMode(FaceRegions, Mode):
+    surfaces: object  # SurfaceSet
     L: np.ndarray
     step: float
     name: str = "isophote"
@@ -41,13 +44,10 @@ class IsophoteMode(Mode):
     def phi(self, p: SurfacePoints) -> np.ndarray:
         return angle_to(p.n, self.L)
 
-    def stripes(self, p: SurfacePoints) -> Stripes:
-        return even_stripes(self.phi(p), self.levels, self.half_width)
-
     def surface_rgb(self, p: SurfacePoints) -> None:
         return None
 
 
 def isophote_mode(scene, lights: TubeLights, surfaces) -> IsophoteMode:
     L = scene.render.light if scene.render.light is not None else lights.m
-    return IsophoteMode(np.asarray(L, dtype=np.float64), float(scene.render.step))
+    return IsophoteMode(surfaces, np.asarray(L, dtype=np.float64), float(scene.render.step))

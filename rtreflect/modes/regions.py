@@ -1,11 +1,12 @@
 """Regions of a map: faces on which φ is constant, so a level there is an area, not a line.
 
-A map's iso-lines (curvature bands, draft thresholds) are the level sets φ = c_k, drawn as stripes
+A map's iso-lines (curvature bands, draft thresholds, isophotes) are the level sets φ = c_k, drawn as stripes
 |φ − c_k| ≤ w. On a face where φ is constant (K = 0 on planes, cylinders and cones; draft 0° on a
 wall or a vertical cylinder; H = 1/2r on a cylinder) the level set of a level at that value is the
 whole face: its stripe would paint the face in the line colour and hide the map's colour, which is
-what the designer asked to see (the filleted block's Gaussian map came out all white, and a mould's
-0° walls in the line colour instead of their band's). So a map draws no line on such a face: it
+what the designer asked to see (the filleted block's Gaussian map came out all white, a mould's
+0° walls in the line colour instead of their band's, and with the light straight down its isophotes
+0° and 90° painted the top and every wall white, the fillets' lines the only ones left). So a map draws no line on such a face: it
 shows the map's colour there, the renderer's stripes (`base.even_stripes`) and the analytic
 contours (`analysis.contours`) alike, and `validate` compares nothing there.
 
@@ -18,11 +19,12 @@ or outside every one, never crossed by a level with room for a line.
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Callable
 
 import numpy as np
 
-from .base import SurfacePoints
+from .base import Stripes, SurfacePoints, even_stripes
 
 #: Cells per side of each face's domain whose centres are sampled. Not its edges: on a sphere's collapsed side
 #: (a pole) the fundamental forms degenerate and K came out anywhere from −5e14 to 3e16 for 1/r² = 0.0625.
@@ -79,3 +81,24 @@ def constant_faces(surfaces, phi: Callable[[SurfacePoints], np.ndarray], half_wi
         count += np.bincount(pk[known], minlength=faces)
     with np.errstate(invalid="ignore"):  # inf − inf: a radius of curvature infinite all over (a plane), lo == hi
         return (count > 0) & ((hi == lo) | (hi - lo <= max(CONSTANT_SHARE * half_width, floor)))
+
+
+class FaceRegions:
+    """A level-set mode's faces where φ is constant and their stripes (module doc): mixed into a mode dataclass with
+    ``surfaces`` (its `SurfaceSet`), ``phi``, ``levels`` and ``half_width``. ``region_floor`` is the variation below
+    which φ counts as constant whatever the half width (a map's rounding floor; 0 here)."""
+
+    @property
+    def region_floor(self) -> float:
+        return 0.0
+
+    @cached_property
+    def constant_faces(self) -> np.ndarray:
+        """Per face: φ constant over it, a region where no line is drawn (a plane in a Gaussian map or facing the
+        isophotes' light, a 0° wall in a draft map)."""
+        if len(self.levels) == 0:
+            return np.zeros(len(self.surfaces.patches), dtype=bool)
+        return constant_faces(self.surfaces, self.phi, self.half_width, self.region_floor)
+
+    def stripes(self, p: SurfacePoints) -> Stripes:
+        return even_stripes(self.phi(p), self.levels, self.half_width, ~self.constant_faces[p.patch])
