@@ -365,19 +365,22 @@ def full_cylinder(radius: float = 1.0, height: float = 2.0) -> NurbsSurface:
 
 def test_closed_sides_of_surfaces_of_revolution():
     """`SurfaceSet.closed` against the construction: a full cylinder and a sphere are closed around (u) only (the
-    sphere's v ends are its two distinct poles), a torus in both directions, a quarter cylinder in neither, and a
-    full cylinder whose seam is opened by 1e-6 of its radius is not closed."""
+    sphere's v ends are its two distinct poles), a torus in both directions, a quarter cylinder in neither; a full
+    cylinder whose seam is opened by 1e-4 of its radius is not closed, one opened by 1e-8 (an exporter's
+    tolerance, `CLOSED_FRACTION`) is."""
     c = math.sqrt(0.5)
     sphere = revolved(np.array([[0, -1], [1, -1], [1, 0], [1, 1], [0, 1]], dtype=float), np.array([1, c, 1, c, 1]), 2,
                       np.array([0, 0, 0, 1, 1, 2, 2, 2], dtype=float))
     torus = revolved(np.column_stack([2.0 + 0.5 * CIRCLE_XY[:, 0], 0.5 * CIRCLE_XY[:, 1]]), CIRCLE_W, 2, CIRCLE_KNOTS)
-    opened = full_cylinder()
-    points = opened.points.copy()
-    points[-1, :, 1] -= 1e-6  # the last control row, at u = 4, moved off the first one
-    opened = NurbsSurface(2, 1, opened.knots_u, opened.knots_v, points, opened.weights)
-    surfaces = SurfaceSet([full_cylinder(), sphere, torus, quarter_cylinder(), opened])
+    def opened(gap: float) -> NurbsSurface:
+        cylinder = full_cylinder()
+        points = cylinder.points.copy()
+        points[-1, :, 1] -= gap  # the last control row, at u = 4, moved off the first one
+        return NurbsSurface(2, 1, cylinder.knots_u, cylinder.knots_v, points, cylinder.weights)
+
+    surfaces = SurfaceSet([full_cylinder(), sphere, torus, quarter_cylinder(), opened(1e-4), opened(1e-8)])
     np.testing.assert_array_equal(surfaces.closed, [[True, False], [True, False], [True, True], [False, False],
-                                                    [False, False]])
+                                                    [False, False], [True, False]])
     S = sphere.evaluate(np.array([0.0, 4.0, 1.3]), np.array([0.0, 0.0, 2.0])).S  # the poles, any u
     np.testing.assert_allclose(S, [[0, 0, -1], [0, 0, -1], [0, 0, 1]], atol=1e-15)
 

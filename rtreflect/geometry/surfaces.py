@@ -35,9 +35,12 @@ DEGENERATE_SINE = 1e-10
 #: Also unchanged by rescaling u or v.
 VANISHING_PARTIAL = 1e-8
 #: A patch is closed in u (v) where its edges u = u₀ and u = u₁ (v₀, v₁) coincide to this fraction of its reach: a
-#: periodic face's seam, whose two sides' control rows agree to float64 rounding (~1e-15 of the reach); as
-#: `seams.CLOSED_FRACTION` for a curve's ends.
-CLOSED_FRACTION = 1e-12
+#: periodic face's seam, whose two sides' control rows agree to float64 rounding (~1e-15 of the reach) when Open
+#: CASCADE made it, but only to the exporter's tolerance from other CAD systems (pythonocc-demos' surf114.igs, an
+#: apple: 2.4e-5 over a reach of 251, 1e-7). At 1e-12 that seam counted as an edge: Newton from a mesh hit on one
+#: side stopped at the domain's edge and the ray kept the far side (the apple showed its inside near the seam). A
+#: gap of 1e-6 of the reach is ~1/500 of a pixel with the part filling 1920 pixels.
+CLOSED_FRACTION = 1e-6
 #: A side of a patch's domain is collapsed (a pole: a sphere's, a cone's apex, a revolved profile ending on or next
 #: to its axis) where its control row spans at most this fraction of the net's size: the side's image lies in the
 #: row's convex hull (clamped knots, weights > 0), so within that of one point. Exact poles span ~1e-16 of the size
