@@ -363,3 +363,130 @@ def test_newton_stopped_on_a_closed_seam_goes_on_from_its_other_side():
     x = np.sqrt(1.0 - y * y)
     np.testing.assert_allclose(derivs.S, np.column_stack([x, y, np.ones(len(y))]), rtol=0, atol=1e-12)
     assert ((u > 0) & (u < 0.1)).sum() == 3 and 3.9 < u[3] < 4.0
+
+
+def cylinder_with_open_seam(gap: float, seam_deg: float) -> str:
+    """A scene: the unit cylinder x² + y² = 1, |z| ≤ 1, as a rational quadratic closed in u whose seam (at
+    ``seam_deg`` from +x) is left open by ``gap`` (its last control row moved out by that share), as CAD exports
+    leave a periodic face's seam (the IGES apple of pythonocc-demos' surf114.igs: 2.4e-5 over a reach of 251)."""
+    w = float(np.sqrt(0.5))
+    circle = [(1, 0, 1), (1, 1, w), (0, 1, 1), (-1, 1, w), (-1, 0, 1), (-1, -1, w), (0, -1, 1), (1, -1, w), (1, 0, 1)]
+    c, s = np.cos(np.radians(seam_deg)), np.sin(np.radians(seam_deg))
+    rows, weights = [], []
+    for k, (x, y, weight) in enumerate(circle):
+        scale = 1.0 + gap if k == len(circle) - 1 else 1.0
+        rows.append([[scale * (c * x - s * y), scale * (s * x + c * y), z] for z in (-1.0, 1.0)])
+        weights.append([weight, weight])
+    return f"""
+[image]
+width = 320
+height = 180
+
+[camera]
+eye = [0.35, -4.0, 0.3]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 0.0, 1.0]
+fov = 30.0
+
+[lights]
+point = [0.0, 0.0, 4.0]
+normal = [0.0, 0.0, 1.0]
+direction = [0.0, 1.0, 0.0]
+spacing = 0.3
+count = 12
+radius = 0.03
+
+[[surface]]
+degree = [2, 1]
+knots_u = [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1]
+knots_v = [0, 0, 1, 1]
+points = {rows}
+weights = {weights}
+
+[render]
+tessellation = 2
+"""
+
+
+@pytest.mark.parametrize("seam_deg", [-5.0, 0.0, 7.0, 190.0])
+def test_a_seam_left_open_by_rounding_is_crossed_as_a_closed_one(tmp_path, seam_deg):
+    """A periodic face's seam a CAD export leaves open by 1e-7 of the face (the two edges' control rows not
+    identical) near the silhouette: a ray whose mesh hit lay on one side and whose exact hit on the other got
+    Newton stopped at the domain's edge and kept the cylinder's far side, 0.5–0.7 farther (43 pixels at 320×180,
+    seam at 0°; the apple of surf114.igs showed its inside). Such a face counts as closed (`SurfaceSet.closed`,
+    `CLOSED_FRACTION`): every first hit is the cylinder's, the closed form's nearer root."""
+    scene_file = tmp_path / "open_seam.toml"
+    scene_file.write_text(cylinder_with_open_seam(1e-7, seam_deg))
+    renderer = Renderer(load_scene(scene_file))
+    assert renderer.surfaces.closed.tolist() == [[True, False]]
+    O, D = pixel_rays(renderer)
+    hits = renderer.trace(O, D)
+    a = D[:, 0] ** 2 + D[:, 1] ** 2
+    b = 2.0 * (O[:, 0] * D[:, 0] + O[:, 1] * D[:, 1])
+    disc = b * b - 4.0 * a * (O[:, 0] ** 2 + O[:, 1] ** 2 - 1.0)
+    with np.errstate(invalid="ignore"):
+        t = (-b - np.sqrt(disc)) / (2.0 * a)
+    t = np.where((disc >= 0) & (np.abs(O[:, 2] + t * D[:, 2]) <= 1.0), t, np.inf)
+    assert np.array_equal(hits.hit, np.isfinite(t)) and not hits.fallback.any()
+    # The seam's 1e-7 offset, seen at grazing incidence (|N·D| ~ 0.01 on the silhouette): ~1e-5 along the ray.
+    assert np.abs(hits.t[hits.hit] - t[hits.hit]).max() < 1e-4
+
+
+def test_a_stack_of_sheets_within_the_band_is_decided_not_a_fallback(tmp_path):
+    """The band behind a kept hit is the largest chord error's (`tracing._band`): a coarse curved face anywhere in
+    the scene makes it long, and a ray through a stack of thin plates meets every plate behind the first within
+    it. 16 plates 0.25 apart behind the first, a dome meshed to a chord error of ~0.6: with 12 candidates a ray
+    (every one here) was still open and a fallback; now decided, at the first plate, the closed form's."""
+    plates = []
+    for k in range(17):
+        y = 0.25 * k
+        plates.append(f"""
+[[surface]]
+degree = [1, 1]
+knots_u = [0.0, 0.0, 1.0, 1.0]
+knots_v = [0.0, 0.0, 1.0, 1.0]
+points = [[[-1.0, {y}, -1.0], [-1.0, {y}, 1.0]], [[1.0, {y}, -1.0], [1.0, {y}, 1.0]]]
+""")
+    # A bicubic dome 40 behind the plates, its four inner control points raised by 6.
+    side = np.linspace(-10.0, 10.0, 4)
+    dome = [[[x, 40.0 + (6.0 if i in (1, 2) and j in (1, 2) else 0.0), z] for j, z in enumerate(side)]
+            for i, x in enumerate(side)]
+    scene_file = tmp_path / "stack.toml"
+    scene_file.write_text(f"""
+[image]
+width = 48
+height = 32
+
+[camera]
+eye = [0.0, -3.0, 0.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 0.0, 1.0]
+fov = 20.0
+
+[lights]
+point = [0.0, 0.0, 6.0]
+normal = [0.0, 0.0, 1.0]
+direction = [0.0, 1.0, 0.0]
+positions = [0.0]
+radius = 0.05
+""" + "".join(plates) + f"""
+[[surface]]
+degree = [3, 3]
+knots_u = [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0]
+knots_v = [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0]
+points = {[[[float(c) for c in p] for p in row] for row in dome]}
+
+[render]
+tessellation = 2
+""")
+    renderer = Renderer(load_scene(scene_file))
+    chord = renderer.tessellation.chord_error
+    assert chord[-1] > 0.5 and chord[:-1].max() < 1e-6
+    O, D = pixel_rays(renderer)
+    hits = renderer.trace(O, D)
+    t = -O[:, 1] / D[:, 1]  # the plane y = 0 of the first plate
+    on = np.all(np.abs((O + t[:, None] * D)[:, [0, 2]]) < 1.0, axis=1)
+    assert on.sum() > 1000 and np.array_equal(hits.hit[on], on[on])
+    assert not hits.fallback.any()
+    np.testing.assert_allclose(hits.t[on], t[on], rtol=0, atol=1e-9)
+    assert np.all(hits.patch[on] == 0)

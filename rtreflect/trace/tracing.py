@@ -75,8 +75,12 @@ GRAZING_ALLOWANCE = 10.0
 #: Mesh hits examined per ray: the first and those behind it within the error band (or past misses).
 #: Bounds the work on a ray through a stack of sheets; a ray still open after them is a fallback. 12, not 8:
 #: a ray grazing a fillet meets its mesh many times within the band, grown ×10 at grazing incidence
-#: (parts/plate.step at 480×270: 3 edge samples were still open after 8, their hits the same after 12).
-MAX_CANDIDATES = 12
+#: (parts/plate.step at 480×270: 3 edge samples were still open after 8, their hits the same after 12). 24, not
+#: 12: the band is the largest chord error's, and on a long part with thin ribs (pythonocc-demos' 11752.stp, an
+#: Inventor export 1295 across: a cylinder's chord error 2.4, most faces' 0.03) a ray past a rib's edge met 12
+#: mesh hits of the ribs behind it within the band (2 pixels at 480×270; decided, the same hits, after 24).
+#: Only rays still open pay for the extra rounds.
+MAX_CANDIDATES = 24
 #: A mesh lies within its chord error of the surface along the normal (measured at edge midpoints,
 #: which can fall a little short of the true maximum): twice it bounds the mesh-to-surface gap.
 BAND_CHORDS = 2.0
