@@ -75,7 +75,7 @@ from ..integrator.autorig import resolve
 from ..integrator.analytic import EDGE_SAMPLES
 from ..integrator.renderer import Renderer
 from ..exchange.scene import ANALYTIC, MAX_MESH_VERTICES, Scene
-from ..geometry.tessellation import distinct, largest_factor, tessellate
+from ..geometry.tessellation import Tessellation, distinct, largest_factor, tessellate
 from ..trace.accelerator import Accelerator
 from ..trace.tracing import occluded, refine
 
@@ -127,6 +127,11 @@ NOTE_UNRESOLVED_SHARE = 0.5
 #: Not 4 (nor 2): the renderer's second look traces suspect rays on a 4× mesh (trace/secondlook.py), and the
 #: check must not share the mesh it judges.
 FINE_TESSELLATION = 6
+#: A face the renderer meshes by its reader's triangulation (a CAD face) gets the fewest segments per span, up to
+#: the factor above, whose span grid lies within this share of that triangulation's chord error of the surface:
+#: its span grid at the scene's own count is often far finer already (sunglasses_lens.igs of pythonocc-core, 9
+#: faces of 13 × 13 spans: 6.2 million vertices at the factor above, 49 s of a 50 s validate at 320×180).
+FINE_CHORD_SHARE = 1.0 / 16.0
 #: How far beyond an exact point the fine mesh's hit may lie, in fine chord errors: 2 chords (the mesh-to-surface
 #: gap across the surface) grown 10× for incidence down to cos θ = 0.1.
 FINE_BAND_CHORDS = 20.0
@@ -424,6 +429,27 @@ def fine_tessellation_factor(renderer: Renderer) -> int:
                           MAX_MESH_VERTICES)
 
 
+def fine_mesh(renderer: Renderer) -> Tessellation:
+    """The nearer-hit check's enclosing mesh (`nearer_surface`): each face's span grid at `fine_tessellation_factor`
+    × the scene's segments per knot span, or, on a face the renderer meshes by its reader's triangulation, at the
+    fewest multiple of them, from 1 up, whose chord error (measured at the scene's count, falling as its square)
+    is at most `FINE_CHORD_SHARE` of that triangulation's."""
+    per_span = renderer.scene.render.tessellation
+    most = fine_tessellation_factor(renderer)
+    grids = [replace(s, mesh_uv=None) if s.mesh_uv is not None else s for s in renderer.scene.surfaces]
+    factors = np.full(len(grids), most, dtype=np.int64)
+    read = np.flatnonzero([s.mesh_uv is not None for s in renderer.scene.surfaces])
+    if len(read) and most > 1:
+        grid_chord = tessellate([grids[k] for k in read], per_span, enclose=True).chord_error
+        target = FINE_CHORD_SHARE * renderer.tessellation.chord_error[read]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            needed = np.ceil(np.sqrt(grid_chord / target))
+        # A face its reader meshed exactly (a plane: target 0) needs no more than its grid's own exactness.
+        needed = np.where(target > 0, needed, np.where(grid_chord > 0, most, 1))
+        factors[read] = np.clip(np.nan_to_num(needed, nan=most), 1, most).astype(np.int64)
+    return tessellate(grids, factors * per_span, enclose=True)
+
+
 def _well_inside(surfaces, patch, u, v, Su, Sv, margin: float) -> np.ndarray:
     """True where (u, v) lies on its face (domain and trim) with the points ``margin`` away along S_u and S_v too.
 
@@ -443,9 +469,9 @@ def nearer_surface(renderer: Renderer, patch: np.ndarray, Z: np.ndarray, origins
                    directions: np.ndarray) -> np.ndarray:
     """True where an exact surface point lies on the ray (O, D) before the stored hit at distance Z.
 
-    Independent of the renderer's candidate search (tracing.py): a mesh of its own,
-    `fine_tessellation_factor` × the scene's segments per knot span (the span grid on every face,
-    also where a reader gave its own triangulation), enclosing the surface, in its own BVH.
+    Independent of the renderer's candidate search (tracing.py): a mesh of its own (`fine_mesh`: the span grid on
+    every face, also where a reader gave its own triangulation, finer than the renderer's), enclosing the surface,
+    in its own BVH.
     Along each ray, every fine-mesh hit up to Z − tol + `FINE_BAND_CHORDS` fine chord errors is
     taken in turn (at most `FINE_MAX_HITS`) and refined by Newton on its own face (`refine`, the
     shared solver). One that converges (S(u, v) on the ray to Newton's tolerance), inside its
@@ -460,9 +486,7 @@ def nearer_surface(renderer: Renderer, patch: np.ndarray, Z: np.ndarray, origins
     nearer = np.zeros(len(Z), dtype=bool)
     if len(Z) == 0:
         return nearer
-    scene_surfaces = [replace(s, mesh_uv=None) if s.mesh_uv is not None else s for s in renderer.scene.surfaces]
-    fine = tessellate(scene_surfaces, fine_tessellation_factor(renderer) * renderer.scene.render.tessellation,
-                      enclose=True)
+    fine = fine_mesh(renderer)
     accelerator = Accelerator(fine)
     surfaces = renderer.surfaces
     extent = renderer.tessellation.extent  # the part's size, as for the on-surface test

@@ -540,11 +540,13 @@ def _widened(surface: NurbsSurface, uv: np.ndarray, points: np.ndarray, faces: n
     return moved
 
 
-def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span: int,
+def tessellate(surfaces: list[NurbsSurface] | tuple[NurbsSurface, ...], per_span,
                enclose: bool = False, widen: bool = False) -> Tessellation:
-    """All patches' meshes; ``enclose``: vertices moved so the mesh covers the surface (`_enclosing`), for the exact
-    tracer; ``widen``: a domain's edge vertices moved out past the edge too (`_widened`), for the second look."""
-    meshes = tuple(tessellate_patch(s, k, per_span, enclose, widen) for k, s in enumerate(surfaces))
+    """All patches' meshes at ``per_span`` segments per knot span (one count, or one per patch); ``enclose``: vertices
+    moved so the mesh covers the surface (`_enclosing`), for the exact tracer; ``widen``: a domain's edge vertices
+    moved out past the edge too (`_widened`), for the second look."""
+    counts = np.broadcast_to(np.asarray(per_span, dtype=np.int64), (len(surfaces),))
+    meshes = tuple(tessellate_patch(s, k, int(n), enclose, widen) for k, (s, n) in enumerate(zip(surfaces, counts)))
     offsets = np.cumsum([0] + [len(m.vertices) for m in meshes])
     return Tessellation(
         vertices=np.concatenate([m.vertices for m in meshes]),
