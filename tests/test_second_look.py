@@ -354,3 +354,35 @@ def test_plate_rays_onto_its_top_plane_need_no_second_look():
     near = np.random.default_rng(5).choice(near, 40, replace=False)
     expected = occt_nearest(occt_faces(part)[0], origins[near], directions[near])
     np.testing.assert_allclose(hits.P[near], expected, rtol=0, atol=1e-6 * r.tessellation.extent)
+
+
+def test_an_own_shell_hit_far_from_the_kept_hit_in_u_v_is_another_part_of_the_face():
+    """Inside a ray's passage its own face's shell hits are its way in (`SecondLook.suspects`), unless they lie
+    farther in (u, v) than `FOLD_TRIANGLES` of their triangle's extent: another part of the same face curling back
+    in front (pythonocc-demos' surf114.igs, a leaf). Across a closed face's seam (u = 0 and 1 of a full cylinder)
+    the distance is the shorter way round."""
+    from test_surfaces import full_cylinder
+
+    from rtreflect.trace import secondlook
+
+    scene = load_scene(SCENES / "hood.toml").with_image(32, 18, 1)
+    look = Renderer(replace(scene, surfaces=(full_cylinder(), plane_behind()),
+                            render=replace(scene.render, tessellation=4))).second_look
+    assert look.surfaces.closed[0].tolist() == [True, False]
+    sheet = np.flatnonzero(look.shell_mesh.face_patch == 0)[:2 * 16 * 4]
+    third = np.full(len(sheet), 1.0 / 3.0)
+    _, u, v = look.shell_mesh.start_parameters(sheet, third, third)
+    extent_u, extent_v = look._triangle_uv_extent
+    elsewhere = look._elsewhere_on_face
+    assert not elsewhere(sheet, third, third, u, v).any()  # at the kept hit itself
+    assert not elsewhere(sheet, third, third, u + extent_u[sheet], v).any()  # one triangle over
+    far = secondlook.FOLD_TRIANGLES * 1.5
+    assert elsewhere(sheet, third, third, u, v + far * extent_v[sheet]).all()
+    (u0, u1), _ = look.surfaces.patches[0].domain
+    # Just across the seam from a triangle at u = 0: near, the short way round; the same distance inside: far.
+    first = sheet[u < u0 + extent_u[sheet]]
+    assert len(first) > 0
+    t1 = np.full(len(first), 1.0 / 3.0)
+    _, uf, vf = look.shell_mesh.start_parameters(first, t1, t1)
+    assert not elsewhere(first, t1, t1, u1 - (uf - u0), vf).any()
+    assert elsewhere(first, t1, t1, uf + 0.5 * (u1 - u0), vf).all()

@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import threading
 from dataclasses import replace
+from functools import cached_property
 
 import numpy as np
 
@@ -66,6 +67,10 @@ from ..geometry.tessellation import Tessellation, _once, largest_factor, reader_
 #: Half-thickness of the shell in chord errors: the mesh-to-surface distance is sampled at edge
 #: midpoints and vertices (`_chord_error`), a triangle's interior may stray a little farther.
 SHELL_CHORDS = 2.0
+#: An own face's shell hit inside the passage farther than this many of its triangle's (u, v) extents from the kept
+#: hit's (u, v) is another part of the face (`SecondLook._elsewhere_on_face`): the passage itself spans a triangle or
+#: two of the sheet around the hit (2δ/|N·D| ≤ 10 shell half-widths, a triangle's chord error being far less than its size).
+FOLD_TRIANGLES = 4.0
 #: Shell hits walked per ray past its own face's passage (its two sheets and walls, a neighbour's wall).
 SHELL_STEPS = 6
 #: Shell hits per suspect that step 3 refines in turn (`_from_shell`), until one leads onto its face: a ray running
@@ -320,6 +325,9 @@ class SecondLook:
             t = mesh.t + start
             own = met & (self.shell_mesh.face_patch[np.maximum(mesh.prim, 0)] == hits.patch[rays])
             other = met & ~own
+            other[own] = self._elsewhere_on_face(mesh.prim[own], mesh.b1[own], mesh.b2[own], hits.u[rays[own]],
+                                                 hits.v[rays[own]])
+            own &= ~other
             look[rays[other]] = True
             for have, new in zip(entry, (mesh.prim, mesh.b1, mesh.b2, t)):
                 have[rays[other]] = new[other]
@@ -333,6 +341,35 @@ class SecondLook:
             for have, new in zip(entry, mesh):
                 have[rays] = new
         return np.flatnonzero(look), entry
+
+    def _elsewhere_on_face(self, prim: np.ndarray, b1: np.ndarray, b2: np.ndarray, u: np.ndarray,
+                           v: np.ndarray) -> np.ndarray:
+        """True where a shell hit of the kept hit's own face, inside its passage, lies more than `FOLD_TRIANGLES` of
+        its triangle's (u, v) extent from the kept (u, v) (across a closed face's seam the shorter way): not the
+        ray's passage to its hit (which crosses a triangle or two of the sheet around it) but another part of the
+        same face folding back within the passage, which the ray may cross first (pythonocc-demos' surf114.igs: a
+        leaf curling 23 in front of its own hit, inside a 31-long passage at |N·D| 0.24, kept the far side)."""
+        patch, us, vs = self.shell_mesh.start_parameters(prim, b1, b2)
+        extent_u, extent_v = self._triangle_uv_extent
+        u0, u1, v0, v1 = self.surfaces.domains(patch)
+        closed = self.surfaces.closed[patch]
+        du, dv = np.abs(us - u), np.abs(vs - v)
+        du = np.where(closed[:, 0], np.minimum(du, (u1 - u0) - du), du)
+        dv = np.where(closed[:, 1], np.minimum(dv, (v1 - v0) - dv), dv)
+        return (du > FOLD_TRIANGLES * extent_u[prim]) | (dv > FOLD_TRIANGLES * extent_v[prim])
+
+    @cached_property
+    def _triangle_uv_extent(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per shell triangle, the spread of its vertices' u and of their v; a wall's or rim box's (whose vertices
+        lie along one mesh edge, no spread across it) the largest of its face's sheet triangles'."""
+        uv = self.shell_mesh.vertex_uv[self.shell_mesh.faces]  # (T, 3, 2)
+        spread = uv.max(axis=1) - uv.min(axis=1)
+        sheets = 2 * int(np.count_nonzero(~flat(self.tessellation, self.surfaces)[self.tessellation.face_patch]))
+        patch = self.shell_mesh.face_patch
+        largest = np.zeros((len(self.surfaces.patches), 2))
+        np.maximum.at(largest, patch[:sheets], spread[:sheets])
+        spread[sheets:] = largest[patch[sheets:]]
+        return spread[:, 0], spread[:, 1]
 
     def _in_front_of_all(self, hits: Hits, origins: np.ndarray) -> np.ndarray:
         """Rays whose kept hit lies on a plane supporting the scene, from its clear side (`clear_sides`): none nearer."""
