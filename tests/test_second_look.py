@@ -386,3 +386,61 @@ def test_an_own_shell_hit_far_from_the_kept_hit_in_u_v_is_another_part_of_the_fa
     _, uf, vf = look.shell_mesh.start_parameters(first, t1, t1)
     assert not elsewhere(first, t1, t1, u1 - (uf - u0), vf).any()
     assert elsewhere(first, t1, t1, uf + 0.5 * (u1 - u0), vf).all()
+
+
+def _arc(a0: float, a1: float):
+    """A circular arc of radius 1 from angle a0 to a1 as a rational quadratic B-spline: points, weights, knots."""
+    n = int(np.ceil((a1 - a0) / (np.pi / 2)))
+    half = 0.5 * (a1 - a0) / n
+    points, weights, knots = [(np.cos(a0), np.sin(a0))], [1.0], [0.0] * 3
+    for k in range(n):
+        middle = a0 + (2 * k + 1) * half
+        points += [(np.cos(middle) / np.cos(half), np.sin(middle) / np.cos(half)), (np.cos(middle + half),
+                                                                                    np.sin(middle + half))]
+        weights += [np.cos(half), 1.0]
+        knots += [(k + 1) / n] * 2 if k < n - 1 else []
+    return points, weights, knots + [1.0] * 3
+
+
+def bowl(top_deg: float = 40.0) -> NurbsSurface:
+    """The unit sphere from latitude −80° up to ``top_deg``: a bowl open at the top, its rim a circle that curves in
+    the sphere's tangent plane (a rational biquadratic: a full circle in u times a meridian arc in v)."""
+    around, w_around, k_around = _arc(0.0, 2 * np.pi)
+    meridian, w_meridian, k_meridian = _arc(np.radians(-80.0), np.radians(top_deg))
+    points = np.array([[[x * r, y * r, z] for r, z in meridian] for x, y in around])
+    weights = np.outer(w_around, w_meridian)
+    return NurbsSurface(2, 2, np.array(k_around), np.array(k_meridian), points, weights, name="bowl")
+
+
+@pytest.mark.parametrize("tessellation, eye", [(2, (0.8, 0.0, 2.5)), (2, (1.2, 0.0, 2.5)), (2, (2.0, 0.0, 4.0)),
+                                               (4, (1.2, 0.0, 2.5))])
+def test_a_ray_leaving_a_bowl_just_below_its_rim_stops_there(tessellation, eye):
+    """Looking down into a bowl, rays that leave its inside at grazing incidence just below the rim cross the sheet
+    twice: first in the opening, off the face, then on it. Newton from a rim box's start on the edge ran to the first
+    and stopped on the edge, and the ray kept what lay behind (1–2 pixels of 160×120 at tessellation 2 and 4); the
+    boxes' corners on the face's side start inside the domain now (`secondlook._inside_the_edge`). Every first hit is
+    the closed form's: the sphere's nearer root below the rim, else the floor."""
+    floor = NurbsSurface.bezier(np.array([[[x, y, -1.05] for y in (-3.0, 3.0)] for x in (-3.0, 3.0)]), name="floor")
+    scene = load_scene(SCENES / "hood.toml").with_image(160, 120, 1)
+    scene = replace(scene, surfaces=(bowl(), floor), render=replace(scene.render, tessellation=tessellation),
+                    camera=replace(scene.camera, eye=np.array(eye), look_at=np.zeros(3), up=np.array([0.0, 0.0, 1.0]),
+                                   fov=50.0))
+    renderer = Renderer(scene)
+    rows, cols = np.divmod(np.arange(160 * 120), 160)
+    O, D = renderer.camera.rays(rows, cols)
+    hits = renderer.trace(O, D)
+    b, c = 2.0 * np.einsum("ij,ij->i", O, D), np.einsum("ij,ij->i", O, O) - 1.0
+    disc = b * b - 4.0 * c
+    expected = np.full(len(O), np.inf)
+    with np.errstate(invalid="ignore"):
+        for sign in (-1.0, 1.0):
+            t = 0.5 * (-b + sign * np.sqrt(disc))
+            z = O[:, 2] + t * D[:, 2]
+            on = (disc >= 0) & (t > 0) & (z <= np.sin(np.radians(40.0))) & (z >= np.sin(np.radians(-80.0)))
+            expected = np.where(on & (t < expected), t, expected)
+        t = (-1.05 - O[:, 2]) / D[:, 2]
+        P = O + t[:, None] * D
+        on = (t > 0) & np.all(np.abs(P[:, :2]) <= 3.0, axis=1)
+        expected = np.where(on & (t < expected), t, expected)
+    assert np.array_equal(hits.hit, np.isfinite(expected)) and not hits.fallback.any()
+    assert np.abs(hits.t[hits.hit] - expected[hits.hit]).max() < 1e-6

@@ -234,8 +234,37 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
                for end, n_end in ((pa, normal[a]), (pb, normal[b])) for side in (-1.0, 1.0) for sheet in (1.0, -1.0)]
     vertices = np.stack(corners, axis=1).reshape(-1, 3)
     faces = (first + 8 * np.arange(len(a)))[:, None, None] + _BOX[None]
-    uv = np.stack([tessellation.vertex_uv[a]] * 4 + [tessellation.vertex_uv[b]] * 4, axis=1).reshape(-1, 2)
+    # The corners on the face's side of the edge start Newton inside the domain, as far in as the box reaches: a
+    # start on the edge itself runs to a crossing past it where the ray crosses the sheet twice (a bowl's inside
+    # left at grazing incidence just below its rim, the nearer crossing in the opening), stopping on the edge.
+    inner = [_inside_the_edge(surfaces, patch, tessellation.vertex_uv[end], width[:, 0], across) for end in (a, b)]
+    uv = np.stack([inner[0][0], inner[0][0], inner[0][1], inner[0][1], inner[1][0], inner[1][0], inner[1][1],
+                   inner[1][1]], axis=1).reshape(-1, 2)
     return vertices, faces.reshape(-1, 3), uv, np.repeat(patch, 12)
+
+
+def _inside_the_edge(surfaces: SurfaceSet, patch: np.ndarray, uv: np.ndarray, width: np.ndarray,
+                     across: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For rim-box corners at a domain-edge vertex's (u, v): their (u, v) on the side −``across`` and on the side
+    +``across`` (`_rim_boxes`): the vertex's own on the side away from the face, and on the face's side the vertex's
+    moved into the domain by ``width`` along the surface (its step across the edge over |S_u| or |S_v|), clamped."""
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    u, v = uv[:, 0], uv[:, 1]
+    derivs = surfaces.evaluate(patch, u, v)
+    on_u = (u == u0) | (u == u1)  # an edge u = const: inward along ±u, else along ±v
+    inward = np.where(on_u, np.where(u == u0, 1.0, -1.0), np.where(v == v0, 1.0, -1.0))
+    partial = np.where(on_u[:, None], derivs.Su, derivs.Sv)
+    speed = np.linalg.norm(partial, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        step = np.nan_to_num(np.where(speed > 0, width / speed, 0.0))
+    moved = uv.copy()
+    moved[:, 0] = np.where(on_u, np.clip(u + inward * step, u0, u1), u)
+    moved[:, 1] = np.where(on_u, v, np.clip(v + inward * step, v0, v1))
+    # Which side of the box is the face's: the one +across points to where the inward partial does.
+    face_side = np.einsum("ij,ij->i", inward[:, None] * partial, across) > 0
+    plus = np.where(face_side[:, None], moved, uv)
+    minus = np.where(face_side[:, None], uv, moved)
+    return minus, plus
 
 
 def isolated(shell_mesh: Tessellation, reach: float) -> np.ndarray:
@@ -309,10 +338,13 @@ class SecondLook:
         before = np.where(ask, np.clip(np.minimum(passage, np.where(hits.hit, hits.t - slack, far)), 0.0, None), 0.0)
         look |= ask & self.shell.occluded(origins, directions, before)
         rays = np.flatnonzero(ask)
-        # Within the passage only another face's shell does: walk its hits, unless no other face's shell comes
-        # within the longest passage of the kept face's (`isolated`: then every hit there is its own).
+        # Within the passage only another face's shell does, or the own face's far from the hit in (u, v)
+        # (`_elsewhere_on_face`): walk its hits, unless no other face's shell comes within the longest passage of
+        # the kept face's (`isolated`) and the passage is shorter than the face's longest mesh edge (then every
+        # hit there is its own way in: the shell around a triangle or two).
         rays = rays[~look[rays] & hits.hit[rays]]
-        rays = rays[~self.isolated[hits.patch[rays]]]
+        patch = hits.patch[rays]
+        rays = rays[~self.isolated[patch] | (hits.t[rays] - passage[rays] > self.tessellation.edge_length[patch])]
         start, end = np.maximum(passage[rays], 0.0), hits.t[rays] - slack
         for _ in range(SHELL_STEPS):
             go = start < end
