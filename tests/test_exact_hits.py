@@ -365,10 +365,18 @@ def test_newton_stopped_on_a_closed_seam_goes_on_from_its_other_side():
     assert ((u > 0) & (u < 0.1)).sum() == 3 and 3.9 < u[3] < 4.0
 
 
-def cylinder_with_open_seam(gap: float, seam_deg: float) -> str:
-    """A scene: the unit cylinder x² + y² = 1, |z| ≤ 1, as a rational quadratic closed in u whose seam (at
-    ``seam_deg`` from +x) is left open by ``gap`` (its last control row moved out by that share), as CAD exports
-    leave a periodic face's seam (the IGES apple of pythonocc-demos' surf114.igs: 2.4e-5 over a reach of 251)."""
+def viewed_from(eye, surfaces, size: tuple[int, int], fov: float, tessellation: int):
+    """The hood scene's image, lights and settings with other ``surfaces`` seen from ``eye`` towards the origin (+z up)."""
+    scene = hood_scene(*size, tessellation=tessellation, surfaces=surfaces)
+    camera = replace(scene.camera, eye=np.asarray(eye, dtype=np.float64), look_at=np.zeros(3),
+                     up=np.array([0.0, 0.0, 1.0]), fov=fov)
+    return replace(scene, camera=camera)
+
+
+def cylinder_with_open_seam(gap: float, seam_deg: float) -> NurbsSurface:
+    """The unit cylinder x² + y² = 1, |z| ≤ 1, as a rational quadratic closed in u whose seam (at ``seam_deg`` from
+    +x) is left open by ``gap`` (its last control row moved out by that share), as CAD exports leave a periodic
+    face's seam (the IGES apple of pythonocc-demos' surf114.igs: 2.4e-5 over a reach of 251)."""
     w = float(np.sqrt(0.5))
     circle = [(1, 0, 1), (1, 1, w), (0, 1, 1), (-1, 1, w), (-1, 0, 1), (-1, -1, w), (0, -1, 1), (1, -1, w), (1, 0, 1)]
     c, s = np.cos(np.radians(seam_deg)), np.sin(np.radians(seam_deg))
@@ -377,47 +385,18 @@ def cylinder_with_open_seam(gap: float, seam_deg: float) -> str:
         scale = 1.0 + gap if k == len(circle) - 1 else 1.0
         rows.append([[scale * (c * x - s * y), scale * (s * x + c * y), z] for z in (-1.0, 1.0)])
         weights.append([weight, weight])
-    return f"""
-[image]
-width = 320
-height = 180
-
-[camera]
-eye = [0.35, -4.0, 0.3]
-look_at = [0.0, 0.0, 0.0]
-up = [0.0, 0.0, 1.0]
-fov = 30.0
-
-[lights]
-point = [0.0, 0.0, 4.0]
-normal = [0.0, 0.0, 1.0]
-direction = [0.0, 1.0, 0.0]
-spacing = 0.3
-count = 12
-radius = 0.03
-
-[[surface]]
-degree = [2, 1]
-knots_u = [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1]
-knots_v = [0, 0, 1, 1]
-points = {rows}
-weights = {weights}
-
-[render]
-tessellation = 2
-"""
+    return NurbsSurface(2, 1, np.array([0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1], dtype=float),
+                        np.array([0.0, 0.0, 1.0, 1.0]), np.array(rows), np.array(weights), name="cylinder")
 
 
 @pytest.mark.parametrize("seam_deg", [-5.0, 0.0, 7.0, 190.0])
-def test_a_seam_left_open_by_rounding_is_crossed_as_a_closed_one(tmp_path, seam_deg):
+def test_a_seam_left_open_by_rounding_is_crossed_as_a_closed_one(seam_deg):
     """A periodic face's seam a CAD export leaves open by 1e-7 of the face (the two edges' control rows not
     identical) near the silhouette: a ray whose mesh hit lay on one side and whose exact hit on the other got
     Newton stopped at the domain's edge and kept the cylinder's far side, 0.5–0.7 farther (43 pixels at 320×180,
     seam at 0°; the apple of surf114.igs showed its inside). Such a face counts as closed (`SurfaceSet.closed`,
     `CLOSED_FRACTION`): every first hit is the cylinder's, the closed form's nearer root."""
-    scene_file = tmp_path / "open_seam.toml"
-    scene_file.write_text(cylinder_with_open_seam(1e-7, seam_deg))
-    renderer = Renderer(load_scene(scene_file))
+    renderer = Renderer(viewed_from([0.35, -4.0, 0.3], [cylinder_with_open_seam(1e-7, seam_deg)], (320, 180), 30.0, 2))
     assert renderer.surfaces.closed.tolist() == [[True, False]]
     O, D = pixel_rays(renderer)
     hits = renderer.trace(O, D)
@@ -432,54 +411,19 @@ def test_a_seam_left_open_by_rounding_is_crossed_as_a_closed_one(tmp_path, seam_
     assert np.abs(hits.t[hits.hit] - t[hits.hit]).max() < 1e-4
 
 
-def test_a_stack_of_sheets_within_the_band_is_decided_not_a_fallback(tmp_path):
+def test_a_stack_of_sheets_within_the_band_is_decided_not_a_fallback():
     """The band behind a kept hit is the largest chord error's (`tracing._band`): a coarse curved face anywhere in
     the scene makes it long, and a ray through a stack of thin plates meets every plate behind the first within
     it. 16 plates 0.25 apart behind the first, a dome meshed to a chord error of ~0.6: with 12 candidates a ray
     (every one here) was still open and a fallback; now decided, at the first plate, the closed form's."""
-    plates = []
-    for k in range(17):
-        y = 0.25 * k
-        plates.append(f"""
-[[surface]]
-degree = [1, 1]
-knots_u = [0.0, 0.0, 1.0, 1.0]
-knots_v = [0.0, 0.0, 1.0, 1.0]
-points = [[[-1.0, {y}, -1.0], [-1.0, {y}, 1.0]], [[1.0, {y}, -1.0], [1.0, {y}, 1.0]]]
-""")
+    plates = [plane_patch([-1.0, 0.25 * k, -1.0], [2.0, 0.0, 0.0], [0.0, 0.0, 2.0], name=f"plate {k}")
+              for k in range(17)]
     # A bicubic dome 40 behind the plates, its four inner control points raised by 6.
     side = np.linspace(-10.0, 10.0, 4)
-    dome = [[[x, 40.0 + (6.0 if i in (1, 2) and j in (1, 2) else 0.0), z] for j, z in enumerate(side)]
-            for i, x in enumerate(side)]
-    scene_file = tmp_path / "stack.toml"
-    scene_file.write_text(f"""
-[image]
-width = 48
-height = 32
-
-[camera]
-eye = [0.0, -3.0, 0.0]
-look_at = [0.0, 0.0, 0.0]
-up = [0.0, 0.0, 1.0]
-fov = 20.0
-
-[lights]
-point = [0.0, 0.0, 6.0]
-normal = [0.0, 0.0, 1.0]
-direction = [0.0, 1.0, 0.0]
-positions = [0.0]
-radius = 0.05
-""" + "".join(plates) + f"""
-[[surface]]
-degree = [3, 3]
-knots_u = [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0]
-knots_v = [0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0]
-points = {[[[float(c) for c in p] for p in row] for row in dome]}
-
-[render]
-tessellation = 2
-""")
-    renderer = Renderer(load_scene(scene_file))
+    dome = np.array([[[x, 40.0 + (6.0 if i in (1, 2) and j in (1, 2) else 0.0), z] for j, z in enumerate(side)]
+                     for i, x in enumerate(side)])
+    renderer = Renderer(viewed_from([0.0, -3.0, 0.0], plates + [NurbsSurface.bezier(dome, name="dome")], (48, 32),
+                                    20.0, 2))
     chord = renderer.tessellation.chord_error
     assert chord[-1] > 0.5 and chord[:-1].max() < 1e-6
     O, D = pixel_rays(renderer)
