@@ -347,27 +347,42 @@ def test_resolution_is_decided_per_line(offset, tmp_path):
 # --- Issue 11 item 2: a stored hit that is not the nearest exact surface point on its ray -------------------
 
 
-@pytest.mark.parametrize("part", ["plate.step", "trimmed.3dm"])
-def test_the_nearer_check_meshes_a_cad_face_finely_enough(part):
+@pytest.mark.parametrize("part", ["plate.step", "trimmed.3dm", "tiny_on_huge.step"])
+def test_the_nearer_check_meshes_a_cad_face_finely_enough(part, tmp_path):
     """The nearer-hit check's own mesh (`validate.fine_mesh`) lies within `FINE_CHORD_SHARE` of the renderer's chord
     error of every face its reader meshed (the chord errors measured on both meshes, `tessellation._chord_error`),
-    where it no longer takes the span grid at `fine_tessellation_factor` on every face: fewer vertices."""
+    where it no longer takes the span grid at `fine_tessellation_factor` on every face: fewer vertices. A face whose
+    reader mesh the renderer dropped (tiny_on_huge.step's pin, `reader_mesh`) is meshed by the span grid there, the
+    second look's at 4×: the check's is at the full factor, never that one."""
     pytest.importorskip("OCP")
+    import sys
+
     from rtreflect.analysis import validate as V
     from rtreflect.exchange.load import load_scene as load_any
-    from rtreflect.geometry.tessellation import tessellate
+    from rtreflect.geometry.tessellation import reader_mesh, tessellate
     from rtreflect.integrator.autorig import resolve
 
-    renderer = Renderer(resolve(load_any(Path(__file__).resolve().parents[1] / "parts" / part).with_image(64, 36, 1)))
+    path = Path(__file__).resolve().parents[1] / "parts" / part
+    if not path.exists():  # a sweep part (tools/make_sweep_parts.py)
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+        import make_sweep_parts as sweep
+
+        path = tmp_path / part
+        sweep.PARTS[part](path)
+    renderer = Renderer(resolve(load_any(path).with_image(64, 36, 1)))
     fine = V.fine_mesh(renderer)
     coarse = renderer.tessellation.chord_error
-    read = np.array([s.mesh_uv is not None for s in renderer.scene.surfaces])
+    read = np.array([reader_mesh(s) is not None for s in renderer.scene.surfaces])
     assert read.any() and (coarse[read] > 0).any()
     slack = 1e-12 * renderer.tessellation.extent
     assert np.all(fine.chord_error[read] <= V.FINE_CHORD_SHARE * coarse[read] + slack)
     grids = [replace(s, mesh_uv=None) for s in renderer.scene.surfaces]
     most = V.fine_tessellation_factor(renderer) * renderer.scene.render.tessellation
     assert len(fine.vertices) < len(tessellate(grids, most, enclose=True).vertices)
+    dropped = np.flatnonzero(~read & np.array([s.mesh_uv is not None for s in renderer.scene.surfaces]))
+    assert (part == "tiny_on_huge.step") == (len(dropped) > 0)
+    for k in dropped:
+        assert len(fine.meshes[k].uv) == len(tessellate([grids[k]], most, enclose=True).vertices)
 
 
 def test_validate_fails_a_hit_behind_a_nearer_surface(monkeypatch):

@@ -75,7 +75,7 @@ from ..integrator.autorig import resolve
 from ..integrator.analytic import EDGE_SAMPLES
 from ..integrator.renderer import Renderer
 from ..exchange.scene import ANALYTIC, MAX_MESH_VERTICES, Scene
-from ..geometry.tessellation import Tessellation, distinct, largest_factor, tessellate
+from ..geometry.tessellation import Tessellation, distinct, largest_factor, reader_mesh, tessellate
 from ..trace.accelerator import Accelerator
 from ..trace.tracing import occluded, refine
 
@@ -438,15 +438,19 @@ def fine_mesh(renderer: Renderer) -> Tessellation:
     most = fine_tessellation_factor(renderer)
     grids = [replace(s, mesh_uv=None) if s.mesh_uv is not None else s for s in renderer.scene.surfaces]
     factors = np.full(len(grids), most, dtype=np.int64)
-    read = np.flatnonzero([s.mesh_uv is not None for s in renderer.scene.surfaces])
+    # The faces the renderer meshes by their reader's triangulation: not those whose triangulation `reader_mesh`
+    # dropped as too coarse, which it meshes by the span grid (the second look's at 4×: the check must not share it).
+    read = np.flatnonzero([reader_mesh(s) is not None for s in renderer.scene.surfaces])
     if len(read) and most > 1:
         grid_chord = tessellate([grids[k] for k in read], per_span, enclose=True).chord_error
         target = FINE_CHORD_SHARE * renderer.tessellation.chord_error[read]
         with np.errstate(divide="ignore", invalid="ignore"):
             needed = np.ceil(np.sqrt(grid_chord / target))
-        # A face its reader meshed exactly (a plane: target 0) needs no more than its grid's own exactness.
+        # A face its reader meshed exactly (a plane: target 0) needs no more than its grid's own exactness; a figure
+        # that is not finite decides nothing: the full factor.
         needed = np.where(target > 0, needed, np.where(grid_chord > 0, most, 1))
-        factors[read] = np.clip(np.nan_to_num(needed, nan=most), 1, most).astype(np.int64)
+        known = np.isfinite(target) & np.isfinite(grid_chord)
+        factors[read] = np.where(known, np.clip(np.nan_to_num(needed, nan=most, posinf=most), 1, most), most)
     return tessellate(grids, factors * per_span, enclose=True)
 
 
@@ -1085,11 +1089,11 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
     if seen == 0:
         reasons.insert(0, "no traced line centre was compared (the camera sees no surface)")
     elif len(deviations) == 0 and (renderer.scene.render.mode in LEGEND_MODES
-                                   or (isinstance(renderer.mode, FaceRegions) and not shown)) \
+                                   or (isinstance(renderer.mode, FaceRegions) and not shown and drawn == 0)) \
             and len(c_k) and not reasons and not notes and np.count_nonzero(checked):
         # A map or isophotes whose levels cross none of the faces in view (a face where φ is constant, K = 0 on a plane,
         # a 0° wall, a plane facing the light, is a region, not a line: `modes.regions`): its picture is the map's
-        # colours or the shading, checked line-free.
+        # colours or the shading, checked line-free (isophotes: no pixel centre within a stripe either).
         # A map's level reached only along face edges (a fillet meeting a 0° wall: huge_inch.step's draft, 423
         # analytic points all within 2 px of an edge) is no line the pixels can check either: said so, not failed.
         # (Isophotes crowding on a fillet are lines in view, unresolved: they fail, below. A map without levels has

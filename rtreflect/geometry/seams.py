@@ -40,7 +40,9 @@ LOOP_PIECES_PER_SPAN = 2
 FOOT_NEWTON_STEPS = 12
 #: Points of a candidate stretch that must all lie within the tolerance of the partner curve.
 STRETCH_CHECKS = 9
-#: A curve whose end points lie within this fraction of the patch's reach of each other is closed (periodic).
+#: A curve whose end points lie within this fraction of the patch's reach of each other is closed (periodic). Not
+#: `surfaces.CLOSED_FRACTION` (1e-6, an exporter's open seam): a boundary curve taken as open only ends its shared
+#: stretches at its ends (the partner is matched up to there all the same), where a face taken as open stopped Newton.
 CLOSED_FRACTION = 1e-12
 #: A trim loop turning by more than this at a vertex (in (u, v)) has a corner there: a B-rep vertex.
 CORNER_DEG = 20.0

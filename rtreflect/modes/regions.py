@@ -6,9 +6,10 @@ wall or a vertical cylinder; H = 1/2r on a cylinder) the level set of a level at
 whole face: its stripe would paint the face in the line colour and hide the map's colour, which is
 what the designer asked to see (the filleted block's Gaussian map came out all white, a mould's
 0° walls in the line colour instead of their band's, and with the light straight down its isophotes
-0° and 90° painted the top and every wall white, the fillets' lines the only ones left). So a map draws no line on such a face: it
-shows the map's colour there, the renderer's stripes (`base.even_stripes`) and the analytic
-contours (`analysis.contours`) alike, and `validate` compares nothing there.
+0° and 90° painted the top and every wall white, the fillets' lines the only ones left). So a map
+(or the isophotes) draws no line on such a face: it shows the map's colour (the shading) there, the
+renderer's stripes (`base.even_stripes`) and the analytic contours (`analysis.contours`) alike, and
+`validate` compares nothing there.
 
 A face is constant where φ, sampled on a grid over its whole domain (the centres of `CONSTANT_GRID` cells a
 side and every knot span's midpoint, at most `CONSTANT_MAX_SIDE` a side: interior points, as a pole on a

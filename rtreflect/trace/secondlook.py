@@ -24,8 +24,10 @@ Three steps, each vectorised over the rays:
    (t* − 2δ/|N·D|, the flat-sheet entry with a factor 2 for curvature), whatever its face (Embree's
    occlusion query, cheaper than the nearest hit); or another face's shell triangle within the passage:
    the shell's hits there are walked along the ray (at most `SHELL_STEPS`), so a neighbouring face the
-   ray meets where it meets the kept face's edge is not hidden behind it, except for faces no other
-   face's shell comes near (`isolated`); or, for a ray that missed, any shell triangle; or a hit the
+   ray meets where it meets the kept face's edge is not hidden behind it, nor the kept face's own shell
+   far from the hit in (u, v), another part of the face folding back in front (`FOLD_TRIANGLES`); not
+   walked on faces no other face's shell comes near (`isolated`) unless the passage is longer than the
+   face's longest mesh edge; or, for a ray that missed, any shell triangle; or a hit the
    tracer found beside its mesh hit (``Hits.aside``: no mesh hit led there).
 2. **Look again.** The suspects are traced once more by the same candidate search (`trace`) on a
    finer enclosing mesh (`FINE_FACTOR` × the scene's segments per knot span, a chord error ~1/16
@@ -68,9 +70,13 @@ from ..geometry.tessellation import Tessellation, _once, largest_factor, reader_
 #: midpoints and vertices (`_chord_error`), a triangle's interior may stray a little farther.
 SHELL_CHORDS = 2.0
 #: An own face's shell hit inside the passage farther than this many of its triangle's (u, v) extents from the kept
-#: hit's (u, v) is another part of the face (`SecondLook._elsewhere_on_face`): the passage itself spans a triangle or
-#: two of the sheet around the hit (2δ/|N·D| ≤ 10 shell half-widths, a triangle's chord error being far less than its size).
+#: hit's (u, v) is another part of the face (`SecondLook._elsewhere_on_face`): on a mesh that follows its face the
+#: passage spans a triangle or two of the sheet around the hit (2δ/|N·D| ≤ 10 shell half-widths, a triangle's chord
+#: error far less than its size). On a coarse one (a sphere in 4 × 2 cells) it can span the face: no (u, v) test
+#: tells a fold there (README, "Real exports").
 FOLD_TRIANGLES = 4.0
+#: A rim box's inner corners start at most this share of the domain across its edge inside it (`_inside_the_edge`).
+INSIDE_SHARE = 0.25
 #: Shell hits walked per ray past its own face's passage (its two sheets and walls, a neighbour's wall).
 SHELL_STEPS = 6
 #: Shell hits per suspect that step 3 refines in turn (`_from_shell`), until one leads onto its face: a ray running
@@ -161,10 +167,11 @@ def clear_sides(tessellation: Tessellation, surfaces: SurfaceSet, flat_faces: np
     return centre, normal, clear
 
 
-def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator, Tessellation]:
-    """A BVH of the mesh moved by ±`SHELL_CHORDS` chord errors along the exact normals (module doc, step 1), and
-    the shell as a `Tessellation` (each sheet's vertices keep their (u, v) and face; a wall triangle's face is that
-    of its rim edge), so a shell hit gives a starting (u, v) as a mesh hit does (`Tessellation.start_parameters`).
+def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator, Tessellation, int]:
+    """A BVH of the mesh moved by ±`SHELL_CHORDS` chord errors along the exact normals (module doc, step 1), the
+    shell as a `Tessellation` (each sheet's vertices keep their (u, v) and face; a wall triangle's face is that
+    of its rim edge), so a shell hit gives a starting (u, v) as a mesh hit does (`Tessellation.start_parameters`),
+    and how many of its triangles are the two sheets' (the first; walls and rim boxes follow).
     The `flat` faces' triangles are left out, not their vertices (which keep the BVH's box, hence its float32
     origin, that of the mesh); the `_rim_boxes` are added."""
     normal = np.nan_to_num(surfaces.normals(tessellation.vertex_patch, tessellation.vertex_uv[:, 0],
@@ -188,7 +195,7 @@ def shell(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[Accelerator
                       vertex_patch=np.concatenate([tessellation.vertex_patch] * 2 + [box_patch[::12].repeat(8)]),
                       face_patch=shell_patch,
                       boundary=np.concatenate([tessellation.boundary, tessellation.boundary + n]))
-    return Accelerator(shelled), shelled
+    return Accelerator(shelled), shelled, 2 * len(faces)
 
 
 #: A box's 12 triangles over its 8 corners, corner index 4·(end b) + 2·(outer side) + (lower sheet).
@@ -237,26 +244,33 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
     # The corners on the face's side of the edge start Newton inside the domain, as far in as the box reaches: a
     # start on the edge itself runs to a crossing past it where the ray crosses the sheet twice (a bowl's inside
     # left at grazing incidence just below its rim, the nearer crossing in the opening), stopping on the edge.
-    inner = [_inside_the_edge(surfaces, patch, tessellation.vertex_uv[end], width[:, 0], across) for end in (a, b)]
+    # Which domain edge each rim edge lies on is the edge's (both ends), not a vertex's: a corner vertex is on two.
+    (ua, va), (ub, vb) = tessellation.vertex_uv[a].T, tessellation.vertex_uv[b].T
+    u0, u1, v0, v1 = surfaces.domains(patch)
+    on_u = (ua == ub) & ((ua == u0) | (ua == u1))
+    inward = np.where(on_u, np.where(ua == u0, 1.0, -1.0), np.where(va == v0, 1.0, -1.0))
+    inner = [_inside_the_edge(surfaces, patch, tessellation.vertex_uv[end], width[:, 0], across, on_u, inward)
+             for end in (a, b)]
     uv = np.stack([inner[0][0], inner[0][0], inner[0][1], inner[0][1], inner[1][0], inner[1][0], inner[1][1],
                    inner[1][1]], axis=1).reshape(-1, 2)
     return vertices, faces.reshape(-1, 3), uv, np.repeat(patch, 12)
 
 
-def _inside_the_edge(surfaces: SurfaceSet, patch: np.ndarray, uv: np.ndarray, width: np.ndarray,
-                     across: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For rim-box corners at a domain-edge vertex's (u, v): their (u, v) on the side −``across`` and on the side
-    +``across`` (`_rim_boxes`): the vertex's own on the side away from the face, and on the face's side the vertex's
-    moved into the domain by ``width`` along the surface (its step across the edge over |S_u| or |S_v|), clamped."""
+def _inside_the_edge(surfaces: SurfaceSet, patch: np.ndarray, uv: np.ndarray, width: np.ndarray, across: np.ndarray,
+                     on_u: np.ndarray, inward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For rim-box corners at one end (u, v) of rim edges on a domain edge (u = const where ``on_u``, else v = const;
+    ``inward`` ±1 the sign of the step into the domain): their (u, v) on the side −``across`` and on the side
+    +``across`` (`_rim_boxes`): the end's own on the side away from the face, and on the face's side the end's moved
+    into the domain by ``width`` along the surface (over |S_u| or |S_v| there, at most `INSIDE_SHARE` of the domain
+    across: near a pole the partial vanishes), clamped to it."""
     u0, u1, v0, v1 = surfaces.domains(patch)
     u, v = uv[:, 0], uv[:, 1]
     derivs = surfaces.evaluate(patch, u, v)
-    on_u = (u == u0) | (u == u1)  # an edge u = const: inward along ±u, else along ±v
-    inward = np.where(on_u, np.where(u == u0, 1.0, -1.0), np.where(v == v0, 1.0, -1.0))
     partial = np.where(on_u[:, None], derivs.Su, derivs.Sv)
     speed = np.linalg.norm(partial, axis=1)
+    most = INSIDE_SHARE * np.where(on_u, u1 - u0, v1 - v0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        step = np.nan_to_num(np.where(speed > 0, width / speed, 0.0))
+        step = np.minimum(np.nan_to_num(np.where(speed > 0, width / speed, 0.0)), most)
     moved = uv.copy()
     moved[:, 0] = np.where(on_u, np.clip(u + inward * step, u0, u1), u)
     moved[:, 1] = np.where(on_u, v, np.clip(v + inward * step, v0, v1))
@@ -271,7 +285,8 @@ def isolated(shell_mesh: Tessellation, reach: float) -> np.ndarray:
     """Per face: True where no other face's shell comes within ``reach`` of its own (bounding boxes: conservative).
 
     A ray's passage of its kept hit lies within its face's shell's box grown by the longest passage,
-    so there it can meet no other face's shell: its walk is skipped (always so in a one-face scene).
+    so there it can meet no other face's shell: its walk is skipped unless the passage is longer than the face's
+    longest mesh edge (where its own shell far from the hit may lie in it, `SecondLook._elsewhere_on_face`).
     A `flat` face has no shell: its box (its mesh's, where its hits lie) counts as its own, not as another's.
     """
     faces = int(shell_mesh.vertex_patch.max(initial=-1)) + 1
@@ -295,7 +310,7 @@ class SecondLook:
     def __init__(self, scene_surfaces, per_span: int, tessellation: Tessellation, surfaces: SurfaceSet):
         self._scene_surfaces, self._per_span = list(scene_surfaces), per_span
         self.tessellation, self.surfaces = tessellation, surfaces
-        self.shell, self.shell_mesh = shell(tessellation, surfaces)
+        self.shell, self.shell_mesh, self._sheet_triangles = shell(tessellation, surfaces)
         self._reach = 2.0 * SHELL_CHORDS * float(tessellation.chord_error.max(initial=0.0))
         # Past a shell hit by float32 rounding of the scene's largest coordinates, with margin (as `trace`'s).
         self._skip = float32_rounding(tessellation)
@@ -392,14 +407,19 @@ class SecondLook:
 
     @cached_property
     def _triangle_uv_extent(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per shell triangle, the spread of its vertices' u and of their v; a wall's or rim box's (whose vertices
-        lie along one mesh edge, no spread across it) the largest of its face's sheet triangles'."""
+        """Per shell triangle, the spread of its vertices' u and of their v, at least the mean of its face's sheet
+        triangles' (a sliver or a triangle at a pole is no measure of where the passage reaches); a wall's or rim
+        box's (its corners at one mesh edge's ends) the largest of its face's sheet triangles'."""
         uv = self.shell_mesh.vertex_uv[self.shell_mesh.faces]  # (T, 3, 2)
         spread = uv.max(axis=1) - uv.min(axis=1)
-        sheets = 2 * int(np.count_nonzero(~flat(self.tessellation, self.surfaces)[self.tessellation.face_patch]))
-        patch = self.shell_mesh.face_patch
-        largest = np.zeros((len(self.surfaces.patches), 2))
+        sheets, patch = self._sheet_triangles, self.shell_mesh.face_patch
+        faces = len(self.surfaces.patches)
+        largest = np.zeros((faces, 2))
         np.maximum.at(largest, patch[:sheets], spread[:sheets])
+        count = np.maximum(np.bincount(patch[:sheets], minlength=faces), 1)[:, None]
+        total = [np.bincount(patch[:sheets], spread[:sheets, k], minlength=faces) for k in (0, 1)]
+        mean = np.stack(total, axis=1) / count
+        spread[:sheets] = np.maximum(spread[:sheets], mean[patch[:sheets]])
         spread[sheets:] = largest[patch[sheets:]]
         return spread[:, 0], spread[:, 1]
 
