@@ -220,9 +220,12 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
     """
     u0, u1, v0, v1 = surfaces.domains(patch)
     (ua, va), (ub, vb) = tessellation.vertex_uv[a].T, tessellation.vertex_uv[b].T
-    on_edge = (((ua == u0) & (ub == u0)) | ((ua == u1) & (ub == u1))
-               | ((va == v0) & (vb == v0)) | ((va == v1) & (vb == v1)))
-    a, b, patch = a[on_edge], b[on_edge], patch[on_edge]
+    # Which domain edge a rim edge lies on is the edge's (both ends), not a vertex's: a corner vertex is on two.
+    low_u, high_u = (ua == u0) & (ub == u0), (ua == u1) & (ub == u1)
+    on_u = low_u | high_u
+    on_edge = on_u | ((va == v0) & (vb == v0)) | ((va == v1) & (vb == v1))
+    inward = np.where(on_u, np.where(low_u, 1.0, -1.0), np.where(va == v0, 1.0, -1.0))  # the step into the domain
+    a, b, patch, on_u, inward = a[on_edge], b[on_edge], patch[on_edge], on_u[on_edge], inward[on_edge]
     pa, pb = tessellation.vertices[a], tessellation.vertices[b]
     across = np.cross(pb - pa, normal[a] + normal[b])
     big = np.abs(across).max(axis=1, initial=0.0, keepdims=True)  # scaled first: tiny edges' norms do not underflow
@@ -234,7 +237,8 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
     # An edge straight in the tangent plane (a cylinder's seam, a circle curving along the normal): its wall suffices.
     rounding = float32_rounding(tessellation)
     bent = SHELL_CHORDS * sagitta > rounding
-    a, b, patch, pa, pb, across, sagitta = (x[bent] for x in (a, b, patch, pa, pb, across, sagitta))
+    a, b, patch, pa, pb, across, sagitta, on_u, inward = (x[bent] for x in (a, b, patch, pa, pb, across, sagitta,
+                                                                              on_u, inward))
     width = (SHELL_CHORDS * sagitta)[:, None]
     depth = (SHELL_CHORDS * tessellation.chord_error[patch])[:, None]
     corners = [end + side * width * across + sheet * depth * n_end
@@ -244,11 +248,6 @@ def _rim_boxes(tessellation: Tessellation, surfaces: SurfaceSet, normal: np.ndar
     # The corners on the face's side of the edge start Newton inside the domain, as far in as the box reaches: a
     # start on the edge itself runs to a crossing past it where the ray crosses the sheet twice (a bowl's inside
     # left at grazing incidence just below its rim, the nearer crossing in the opening), stopping on the edge.
-    # Which domain edge each rim edge lies on is the edge's (both ends), not a vertex's: a corner vertex is on two.
-    (ua, va), (ub, vb) = tessellation.vertex_uv[a].T, tessellation.vertex_uv[b].T
-    u0, u1, v0, v1 = surfaces.domains(patch)
-    on_u = (ua == ub) & ((ua == u0) | (ua == u1))
-    inward = np.where(on_u, np.where(ua == u0, 1.0, -1.0), np.where(va == v0, 1.0, -1.0))
     inner = [_inside_the_edge(surfaces, patch, tessellation.vertex_uv[end], width[:, 0], across, on_u, inward)
              for end in (a, b)]
     uv = np.stack([inner[0][0], inner[0][0], inner[0][1], inner[0][1], inner[1][0], inner[1][0], inner[1][1],
