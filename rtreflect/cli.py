@@ -31,7 +31,7 @@ try:  # the collector back on even where an import fails (a caller importing cli
     from . import __version__  # noqa: E402
     from .errors import WARNING, RtreflectError, error_lines, one_line  # noqa: E402
     from .output.imagefiles import check_distinct_outputs, output_paths, prepare_output_folder, removed_note, write_json  # noqa: E402,E501
-    from .interrupts import Interrupted, signals_as_exceptions  # noqa: E402
+    from .interrupts import Interrupted, interruption, signals_as_exceptions  # noqa: E402
     from .analysis.overlay import contours_file_name  # noqa: E402
     from .exchange.load import load_scene  # noqa: E402
     from .integrator.autorig import resolve  # noqa: E402
@@ -914,8 +914,7 @@ def _run() -> None:
             # Not standalone: click would print a usage block over several lines for a bad option.
             status = cli.main(prog_name="rtreflect", standalone_mode=False)
         except Interrupted as exc:
-            click.echo(f"rtreflect: interrupted by {exc}: unfinished output removed, finished files kept", err=True)
-            sys.exit(exc.exit_status)
+            _stopped(exc)
         except NO_ARGS_IS_HELP as exc:  # `rtreflect` alone: the help is the answer
             exc.show()
             sys.exit(exc.exit_code)
@@ -928,4 +927,13 @@ def _run() -> None:
         except click.Abort:  # end of input at a prompt, or Ctrl-C where SIGINT could not be caught
             click.echo("rtreflect: aborted", err=True)
             sys.exit(stop_status(KeyboardInterrupt()))
+        except Exception as exc:  # an error raised while the stack unwound from a signal is that signal's
+            if interruption(exc) is None:
+                raise
+            _stopped(interruption(exc))
     sys.exit(status if isinstance(status, int) else 0)
+
+
+def _stopped(exc: Interrupted) -> "NoReturn":  # noqa: F821
+    click.echo(f"rtreflect: interrupted by {exc}: unfinished output removed, finished files kept", err=True)
+    sys.exit(exc.exit_status)

@@ -571,3 +571,36 @@ def test_concurrent_renders_of_one_name_leave_a_matching_pair(tmp_path: Path, mo
                 for ext in ("exr", "png"))
     assert exr == png
     assert read_image(outdir / "base.exr")[0].shape[1] == read_image(outdir / "base.png")[0].shape[1] == 48
+
+
+def test_an_error_raised_while_unwinding_from_a_signal_exits_as_the_signal(monkeypatch, capsys):
+    """A stop signal raised inside `threading.Condition.wait` (the render waiting for a tile) can leave the
+    condition's lock released, and the ``with`` round it then raises "cannot release un-acquired lock" over the
+    interruption: the command exited 1, not 128 + signal (once in four CI runs of the SIGTERM test above). An
+    exception whose context is the interruption is the interruption (`interrupts.interruption`)."""
+    import threading
+
+    from rtreflect import cli as cli_module
+    from rtreflect.interrupts import Interrupted
+
+    def render_interrupted_in_wait(*args, **kwargs):
+        condition = threading.Condition()
+        with condition:
+            try:
+                raise Interrupted(signal.SIGTERM)
+            except Interrupted:
+                condition.release()  # as the signal did: the lock let go before the exception left `wait`
+                raise
+
+    monkeypatch.setattr(cli_module.cli, "main", render_interrupted_in_wait)
+    with pytest.raises(SystemExit) as exit_info:
+        cli_module._run()
+    assert exit_info.value.code == 128 + signal.SIGTERM
+    assert "interrupted by SIGTERM" in capsys.readouterr().err
+
+    def plain_error(*args, **kwargs):
+        raise RuntimeError("not a signal")
+
+    monkeypatch.setattr(cli_module.cli, "main", plain_error)
+    with pytest.raises(RuntimeError, match="not a signal"):
+        cli_module._run()
