@@ -164,3 +164,29 @@ def test_points_that_are_not_finite_have_no_neighbour():
         assert np.isnan(got[1][bad]).all() and np.isnan(got[2][bad]).all() and np.isinf(got[3][bad]).all()
         for column, expected in zip(got, alone):
             np.testing.assert_array_equal(column[good], expected)
+
+
+def test_domain_span_is_each_faces_extent_in_u_and_v():
+    """`Tessellation._domain_span` (half of it bounds `across_seam`'s (u, v) test): per face its vertices' extent in u
+    and in v, whatever order the vertices come in; a face with no vertex spans nothing; a NaN (u, v) spreads to its
+    face's figure (as np.ptp would), not to the others'."""
+    rng = np.random.default_rng(5)
+    lows, sizes = rng.uniform(-5, 5, (5, 2)), rng.uniform(0.1, 3.0, (5, 2))
+    patch, uv = [], []
+    for face in (0, 1, 3, 4):  # face 2 has no vertex
+        corners = lows[face] + sizes[face] * np.array([[0, 0], [1, 0], [0, 1], [1, 1]])
+        inner = lows[face] + sizes[face] * rng.uniform(0, 1, (20, 2))
+        uv.append(np.concatenate([corners, inner]))
+        patch.append(np.full(24, face))
+    uv, patch = np.concatenate(uv), np.concatenate(patch)
+    order = rng.permutation(len(uv))
+    uv, patch = uv[order], patch[order]
+    uv[np.flatnonzero(patch == 4)[3], 1] = np.nan
+    tessellation = Tessellation(vertices=np.zeros((len(uv), 3)), faces=np.zeros((0, 3), dtype=np.int64), vertex_uv=uv,
+                                vertex_patch=patch, face_patch=np.zeros(0, dtype=np.int64), chord_error=np.zeros(5),
+                                meshes=(), boundary=np.arange(len(uv)), edge_length=np.ones(5))
+    span = tessellation._domain_span
+    expected = sizes.copy()
+    expected[2] = 0.0
+    np.testing.assert_allclose(span[[0, 1, 2, 3]], expected[[0, 1, 2, 3]], rtol=1e-12, atol=0)
+    assert span[4, 0] == pytest.approx(sizes[4, 0], rel=1e-12) and np.isnan(span[4, 1])

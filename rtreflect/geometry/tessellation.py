@@ -376,12 +376,12 @@ class Tessellation:
     @cached_property
     def _domain_span(self) -> np.ndarray:
         """(patches, 2): the extent of each patch's vertices in u and in v."""
-        span = np.zeros((int(self.vertex_patch.max(initial=-1)) + 1, 2))
-        for k in range(len(span)):
-            uv = self.vertex_uv[self.vertex_patch == k]
-            if len(uv):
-                span[k] = np.ptp(uv, axis=0)
-        return span
+        # One pass over the vertices (a mask per patch cost 2.1 s on pythonocc-demos' 11752.stp, 1,018 faces).
+        patches = int(self.vertex_patch.max(initial=-1)) + 1
+        low, high = np.full((patches, 2), np.inf), np.full((patches, 2), -np.inf)
+        np.minimum.at(low, self.vertex_patch, self.vertex_uv)  # NaN propagates, as through np.ptp
+        np.maximum.at(high, self.vertex_patch, self.vertex_uv)
+        return np.where((np.bincount(self.vertex_patch, minlength=patches) > 0)[:, None], high - low, 0.0)
 
     @cached_property
     def _boundary_uv(self) -> tuple[np.ndarray, np.ndarray]:
