@@ -349,6 +349,7 @@ def test_tiles_fit_the_budget_and_tube_pairs_stop_growing_at_a_chunk(tmp_path, b
     from dataclasses import replace
 
     from rtreflect.trace.camera import rays_per_pixel
+    from rtreflect.integrator.renderer import TILES_AHEAD
     from rtreflect.integrator.tiling import WRITER_ROWS, rays_per_tile, tile_bytes
 
     base = load_scene(small_scene("hood", tmp_path / "hood.toml", samples=4))
@@ -359,7 +360,8 @@ def test_tiles_fit_the_budget_and_tube_pairs_stop_growing_at_a_chunk(tmp_path, b
         rays = rays_per_tile(scene, budget, 2)
         rows = (2 + WRITER_ROWS) * scene.image.width * len(CHANNELS) * 4
         pixels = -(-rays // rays_per_pixel(scene.image.samples))
-        assert rows + 2 * (tile_bytes(scene, rays) + pixels * len(CHANNELS) * 4) <= budget
+        # Two tiles in flight, each with its pixels and those of a finished tile waiting to be taken (TILES_AHEAD).
+        assert rows + 2 * (tile_bytes(scene, rays) + (1 + TILES_AHEAD) * pixels * len(CHANNELS) * 4) <= budget
         sizes[tubes] = rays
     assert sizes[1] >= sizes[20] >= sizes[2000] >= sizes[10000] > 0
     if budget_mb >= 128:  # room for a whole chunk per tile: past it, more tubes cost nothing more
@@ -372,6 +374,7 @@ def test_analytic_spans_of_a_narrow_window_fit_the_budget(budget_mb):
     """samples = "analytic": a span of the pixel window holds more pixels than rays (the columns outside the window
     are film, not rays); its film rows count in the budget, with the tiles in flight (the peer scene: a window of
     about half the width)."""
+    from rtreflect.integrator.renderer import TILES_AHEAD
     from rtreflect.integrator.tiling import WRITER_ROWS, rays_per_tile, tile_bytes
 
     from dataclasses import replace
@@ -387,7 +390,7 @@ def test_analytic_spans_of_a_narrow_window_fit_the_budget(budget_mb):
     rows = (2 + WRITER_ROWS) * scene.image.width * pixel_bytes
     widest = max(stop - start for start, stop in spans)
     assert widest > rays  # the case: a span of more pixels than rays
-    assert rows + 2 * (tile_bytes(scene, rays) + widest * pixel_bytes) <= budget
+    assert rows + 2 * (tile_bytes(scene, rays) + (1 + TILES_AHEAD) * widest * pixel_bytes) <= budget
 
 # -- issue 11: files, workers and the cluster ---------------------------------------------------
 def test_symlinked_scene_renders_under_its_own_name(tmp_path):

@@ -18,7 +18,7 @@ from ..trace.camera import rays_per_pixel
 from ..errors import RtreflectError
 from .film import CHANNELS
 from ..modes.lights import TUBE_ENTRIES_PER_CHUNK
-from .renderer import RAYS_PER_TILE, WINDOW_TILE_PIXELS
+from .renderer import RAYS_PER_TILE, TILES_AHEAD, WINDOW_TILE_PIXELS
 from ..exchange.scene import ANALYTIC, Scene
 
 #: Default budget: this fraction of the machine's physical memory.
@@ -77,7 +77,8 @@ def tile_bytes(scene: Scene, rays: int) -> int:
 
 
 def rays_per_tile(scene: Scene, max_memory: int, tiles_in_flight: int) -> int:
-    """Rays per tile so that ``tiles_in_flight`` tiles and the output rows fit in ``max_memory`` bytes.
+    """Rays per tile so that ``tiles_in_flight`` tiles, the pixels of as many more finished and waiting to be taken
+    (`renderer.TILES_AHEAD` per tile in flight) and the output rows fit in ``max_memory`` bytes.
 
     At most `RAYS_PER_TILE` (larger tiles buy no speed) and at least one pixel's rays;
     a budget that cannot hold even one pixel per tile is an `RtreflectError`, raised
@@ -90,14 +91,14 @@ def rays_per_tile(scene: Scene, max_memory: int, tiles_in_flight: int) -> int:
     usable = (max_memory - rows) // max(1, tiles_in_flight)
     # An analytic render's span of the pixel window holds up to WINDOW_TILE_PIXELS pixels per ray (`pixel_spans`).
     pixels_per_ray = WINDOW_TILE_PIXELS if scene.image.samples == ANALYTIC else 1
-    per_ray = bytes_per_ray(scene) + pixels_per_ray * pixel_bytes // per_pixel + 1
+    per_ray = bytes_per_ray(scene) + (1 + TILES_AHEAD) * pixels_per_ray * pixel_bytes // per_pixel + 1
     tubes = max(1, len(scene.lights.positions))
     # tile_bytes is linear in the rays up to a full chunk of tube pairs, then grows by per_ray only.
     below_chunk = min(max(0, usable) // (per_ray + BYTES_PER_TUBE_ENTRY * tubes), TUBE_ENTRIES_PER_CHUNK // tubes)
     beyond_chunk = (usable - BYTES_PER_TUBE_ENTRY * TUBE_ENTRIES_PER_CHUNK) // per_ray
     rays = max(below_chunk, beyond_chunk)
     if rays < per_pixel:
-        need = rows + tiles_in_flight * (tile_bytes(scene, per_pixel) + per_pixel * pixel_bytes)
+        need = rows + tiles_in_flight * (tile_bytes(scene, per_pixel) + (1 + TILES_AHEAD) * per_pixel * pixel_bytes)
         raise RtreflectError(
             f"{scene.path}: image: needs about {format_size(need)} of working memory even with one-pixel tiles "
             f"({per_pixel} rays/pixel, {len(scene.lights.positions)} tubes, {scene.image.width} px rows, "
