@@ -361,10 +361,20 @@ def mode_aovs(renderer: Renderer, film: Film, aovs: PixelAOVs) -> PixelAOVs:
         bend = map_bend(surface.reshape(height, width, 3), render.line_color)
     else:
         bend = None
-    return replace(aovs, f=film.channel("phi").astype(np.float64), line_id=line_id.reshape(height, width),
+    phi = film.channel("phi").astype(np.float64)
+    span = knot_spans(renderer, film) if renderer.mode.name == "curvature" else None
+    if span is not None and len(renderer.mode.levels):
+        # A region inside a face (φ at a level to rounding, no stripe: `modes.regions`) is a piece of its own: along
+        # its edge φ leaves the level without crossing it, no line the pixels can trace (the sweep's kink.step, κ1 ≡ 0
+        # where the face bends one way: the analytic contour runs along that edge).
+        region = np.zeros(size, dtype=bool)
+        lined = ~np.asarray(renderer.mode.constant_faces)[points.patch]
+        region[hit] = lined & np.isfinite(phi.ravel()[hit]) & (stripes.level_id < 0)
+        span = np.where(span >= 0, 2 * span + region.reshape(height, width), span)
+    return replace(aovs, f=phi, line_id=line_id.reshape(height, width),
                    line_dist=line_dist.reshape(height, width), line_coverage=coverage,
                    line_offset=line_offsets(renderer, points, stripes.level_id, size, hit).reshape(height, width),
-                   map_bend=bend, span=knot_spans(renderer, film) if renderer.mode.name == "curvature" else None)
+                   map_bend=bend, span=span)
 
 
 def second_differences(grid: np.ndarray) -> np.ndarray:

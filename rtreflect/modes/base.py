@@ -59,9 +59,11 @@ class Stripes:
     phi: np.ndarray | None = None
 
 
-def even_stripes(phi: np.ndarray, levels: np.ndarray, half_width: float, lined: np.ndarray | None = None) -> Stripes:
+def even_stripes(phi: np.ndarray, levels: np.ndarray, half_width: float, lined: np.ndarray | None = None,
+                 floor: float = 0.0) -> Stripes:
     """Nearest of sorted ``levels`` to each φ, |φ − c_k|, the stripe test |φ − c_k| ≤ half_width and the signed
-    offset σ = φ − c_k (NaN φ: none; nor where ``lined`` is False, a map's region: `regions`)."""
+    offset σ = φ − c_k (NaN φ: none; nor where ``lined`` is False, a map's region face, nor where φ lies within
+    ``floor`` > 0 of its level, a region inside a face: `regions`)."""
     levels = np.asarray(levels, dtype=np.float64)
     found = np.isfinite(phi) if lined is None else np.isfinite(phi) & lined
     if len(levels) == 0:
@@ -70,6 +72,9 @@ def even_stripes(phi: np.ndarray, levels: np.ndarray, half_width: float, lined: 
     right = np.clip(np.searchsorted(levels, np.where(found, phi, 0.0)), 0, len(levels) - 1)
     left = np.clip(right - 1, 0, len(levels) - 1)
     pick = np.where(np.abs(phi - levels[left]) <= np.abs(phi - levels[right]), left, right)
+    if floor > 0.0:
+        with np.errstate(invalid="ignore"):
+            found &= ~(np.abs(phi - levels[pick]) <= floor)
     sigma = np.where(found, phi - levels[pick], np.nan)
     dist = np.abs(sigma)
     return Stripes(np.where(found, pick, -1), dist, found & (dist <= half_width), offset=sigma)

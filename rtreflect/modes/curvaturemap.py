@@ -13,6 +13,7 @@ b − 1 inner edges), `base.STRIPE_SHARE` of a band wide.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -132,7 +133,7 @@ class CurvatureMode(FaceRegions, Mode):
         derivs = self.surfaces.evaluate(p.patch, p.u, p.v, order=2)
         return quantity_of(self.quantity, derivs, p.n)
 
-    @property
+    @cached_property
     def region_floor(self) -> float:
         """At least the rounding floor of an "auto" range (`regions.FaceRegions`): a part whose K is 0 to rounding
         everywhere (the sweep's kink.step: ±9e-17 against a floor of 1.4e-12) has a map range at that floor, and its
@@ -143,7 +144,12 @@ class CurvatureMode(FaceRegions, Mode):
         return self.colors(self.phi(p))
 
     def colors(self, phi: np.ndarray) -> np.ndarray:
-        """Linear RGB of values φ on the map over [low, high] (clipped to the end colours)."""
+        """Linear RGB of values φ on the map over [low, high] (clipped to the end colours). A value within the
+        `region_floor` of 0 is 0 (rounding): on a signed map 0 lies half-way between two table entries, and the
+        rounding's sign picked one or the other, a blotch across kink.step's κ1 = 0 region (R 0.832 or 0.841)."""
+        floor = self.region_floor
+        if floor > 0.0:
+            phi = np.where(np.abs(phi) <= floor, 0.0, phi)
         t = (np.clip(np.where(np.isposinf(phi), self.high, phi), self.low, self.high) - self.low) / (self.high - self.low)
         return linear_rgb(self.colormap, t)
 

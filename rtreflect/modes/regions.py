@@ -16,6 +16,12 @@ side and every knot span's midpoint, at most `CONSTANT_MAX_SIDE` a side: interio
 domain edge leaves the curvatures there to rounding) with its own normals, varies by
 at most `CONSTANT_SHARE` of a line's half width: its whole visible part lies within a stripe then,
 or outside every one, never crossed by a level with room for a line.
+
+A region can also lie inside a face: on a ruled face K = 0, one principal curvature is 0 all over and κ1 is exactly
+that 0 wherever the other is negative (the sweep's kink.step, bspline_prism.step). Where the mode has a rounding floor
+(`region_floor`: an "auto" curvature range's), a point whose φ lies within it of a level is in a region, wherever
+it lies: no stripe there (`base.even_stripes`), and its edge, where φ leaves the level without crossing it, is no
+line `validate` traces. A level crossed transversally loses a band floor/|∇φ| wide, far below a pixel.
 """
 
 from __future__ import annotations
@@ -102,4 +108,4 @@ class FaceRegions:
         return constant_faces(self.surfaces, self.phi, self.half_width, self.region_floor)
 
     def stripes(self, p: SurfacePoints) -> Stripes:
-        return even_stripes(self.phi(p), self.levels, self.half_width, ~self.constant_faces[p.patch])
+        return even_stripes(self.phi(p), self.levels, self.half_width, ~self.constant_faces[p.patch], self.region_floor)
