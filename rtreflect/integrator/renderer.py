@@ -53,8 +53,9 @@ RAYS_PER_TILE = 1 << 16
 TRACE_ALL = 0.75
 #: Tiles queued per render thread besides the one it renders: a thread done with its tile starts the next while an
 #: earlier one still renders (they are handed over in image order). A finished tile waiting for its turn holds only
-#: its pixels (`tiling.rays_per_tile` counts them). On the peer scene (bench/peer.toml, tiles of unequal cost) 0.089 →
-#: 0.083 s on two threads; no change where the tiles cost alike (bench/render_bench.py).
+#: its pixels (`tiling.rays_per_tile` counts them). On the peer scene at samples = 1 (row bands of unequal cost)
+#: 0.090 → 0.084 s on two threads (best of 6, A/B in one process); no change where the tiles cost alike (its analytic
+#: default's window spans, bench/render_bench.py).
 TILES_AHEAD = 1
 #: samples = "analytic": most pixels of a span of the pixel window's rows (`pixel_spans`), in tiles of rays_per_tile
 #: pixels (each 88 B of film, against ~1.2 kB a ray in flight): a narrow window's span holds few rays, many pixels.
