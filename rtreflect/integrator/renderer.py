@@ -730,8 +730,9 @@ class Renderer:
                stats: RenderStats | None = None, film: Film | None = None) -> Iterator[Tile]:
         """Tiles in image order, rendered ``threads`` at a time.
 
-        At most ``threads`` tiles are in flight, and `TILES_AHEAD` per thread queued or finished and waiting to be
-        taken (their pixels only), so memory is bounded by the tile size, not the image size. ``stats`` (if given) counts rays
+        At most ``threads`` tiles render at once and ``threads`` × (1 + `TILES_AHEAD`) are handed to the pool, the
+        others queued or finished and waiting to be taken (their pixels only), so memory is bounded by the tile size,
+        not the image size. ``stats`` (if given) counts rays
         and fallbacks as tiles are yielded. ``film``: each tile is rendered straight into its span of it
         (`Film.span`; the tile's pixels are that view), else into an array of its own.
         """

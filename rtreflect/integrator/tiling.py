@@ -1,7 +1,8 @@
 """Tile sizes from a memory budget: big images in bounded memory.
 
 A render streams its image tile by tile (`Renderer.stream` → `ImageWriter`), so its
-working memory is the tiles in flight plus one partial row, not the image. A tile's
+working memory is the tiles in flight, the pixels of the finished ones waiting their turn
+(`renderer.TILES_AHEAD`) and one partial row, not the image. A tile's
 memory grows with its rays (about 1 kB each, more for higher surface degrees) plus the
 skew-line distances of eq. (4): rays × tubes pairs of about 48 B, computed in chunks of
 at most `TUBE_ENTRIES_PER_CHUNK` pairs, so that part stops growing at about 50 MB.

@@ -141,15 +141,14 @@ class CurvatureMode(FaceRegions, Mode):
         return flat_floor(self.quantity, self.surfaces) if self.clipped is not None else 0.0
 
     def surface_rgb(self, p: SurfacePoints) -> np.ndarray:
-        return self.colors(self.phi(p))
+        """The map's colour of φ at the points. A φ within `region_floor` of 0 is 0 (rounding): on a signed map 0 lies
+        half-way between two table entries, and the rounding's sign picked one or the other, a blotch across
+        kink.step's κ1 = 0 region (R 0.832 or 0.841). (The legend's ramp, `colors` alone, keeps every entry.)"""
+        phi, floor = self.phi(p), self.region_floor
+        return self.colors(np.where(np.abs(phi) <= floor, 0.0, phi) if floor > 0.0 else phi)
 
     def colors(self, phi: np.ndarray) -> np.ndarray:
-        """Linear RGB of values φ on the map over [low, high] (clipped to the end colours). A value within the
-        `region_floor` of 0 is 0 (rounding): on a signed map 0 lies half-way between two table entries, and the
-        rounding's sign picked one or the other, a blotch across kink.step's κ1 = 0 region (R 0.832 or 0.841)."""
-        floor = self.region_floor
-        if floor > 0.0:
-            phi = np.where(np.abs(phi) <= floor, 0.0, phi)
+        """Linear RGB of values φ on the map over [low, high] (clipped to the end colours)."""
         t = (np.clip(np.where(np.isposinf(phi), self.high, phi), self.low, self.high) - self.low) / (self.high - self.low)
         return linear_rgb(self.colormap, t)
 
