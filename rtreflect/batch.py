@@ -221,6 +221,11 @@ def _on_sigterm(signum, frame) -> None:
 def _worker_init(progress_queue) -> None:
     global _progress_queue
     _progress_queue = progress_queue
+    # A worker killed while its queue thread wrote a message holds the queue's write lock for good: every other
+    # worker's messages then wait in its buffer, and at exit it would wait for them (joining that thread) for ever,
+    # and the pool's shutdown with it (a -j 2 batch hung after a SIGKILL, its results printed). Messages still
+    # buffered at exit are dropped instead: they are progress, and the STARTED one went out long before.
+    progress_queue.cancel_join_thread()
     # One core per worker: without this each worker's OpenImageIO/OpenEXR pool would compress
     # on every core too, and the -j workers would crowd each other.
     import OpenImageIO as oiio
@@ -294,7 +299,6 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
     per_worker = (max_memory or default_max_memory()) // workers
     # Spawned, not forked: workers start clean (no inherited threads or Embree state) and behave alike on all systems.
     context = multiprocessing.get_context("spawn")
-    progress_queue = context.Queue()
     waiting = list(reversed(jobs))  # popped from the end: scenes start in the given order
     attempts: dict[int, int] = {}
     started: dict[str, int] = {}  # scene path → PID of the worker that took it
@@ -338,6 +342,8 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
             return True
 
     while waiting:
+        # A queue per pool: one whose write lock a killed worker took along (`_worker_init`) passes no more messages.
+        progress_queue = context.Queue()
         pool = cf.ProcessPoolExecutor(workers, mp_context=context, initializer=_worker_init, initargs=(progress_queue,))
         running: dict[cf.Future, Job] = {}
         broken = False
@@ -365,7 +371,7 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
             pool.shutdown(wait=True, cancel_futures=True)
             raise
         pool.shutdown(wait=True)
-    _drain(progress_queue, on_progress, started)
+        _drain(progress_queue, on_progress, started)
 
 
 def _drain(progress_queue, on_progress: Callable[[int], None], started: dict[str, int]) -> None:

@@ -447,6 +447,45 @@ def test_worker_killed_by_sigkill_fails_its_scene_and_leaves_no_temporaries(tmp_
     assert sorted(p.name for p in out.iterdir()) == ["small.exr", "small.png"]
 
 
+def _hold_write_lock(queue, holding) -> None:
+    """A worker's queue thread caught writing a message when the worker is killed: the write lock, held for good."""
+    queue._wlock.acquire()
+    holding.set()
+    time.sleep(120)
+
+
+def _report_and_exit(queue) -> None:
+    """A batch worker (`_worker_init`) that sends a message and exits, as after its scene."""
+    batching._worker_init(queue)
+    queue.put(("progress", 1))
+
+
+def test_a_worker_exits_though_a_killed_sibling_held_the_progress_queues_lock():
+    """A -j 2 batch hung after the SIGKILL test's kill, its results printed (once in a CI run): the killed worker
+    may die while its queue thread holds the progress queue's write lock (a semaphore shared by the workers), and
+    a worker with a message still buffered then waited for it at exit for ever, the pool's shutdown with it. A
+    worker drops its buffered messages at exit (`_worker_init`): it exits."""
+    import multiprocessing
+
+    context = multiprocessing.get_context("spawn")
+    queue, holding = context.Queue(), context.Event()
+    holder = context.Process(target=_hold_write_lock, args=(queue, holding))
+    holder.start()
+    assert holding.wait(60)
+    os.kill(holder.pid, signal.SIGKILL)
+    holder.join()
+    worker = context.Process(target=_report_and_exit, args=(queue,))
+    worker.start()
+    worker.join(timeout=60)
+    try:
+        assert not worker.is_alive(), "the worker hangs at exit on the dead sibling's lock"
+        assert worker.exitcode == 0
+    finally:
+        if worker.is_alive():
+            worker.kill()
+            worker.join()
+
+
 def test_a_killed_workers_exit_code_is_read_when_another_thread_reaped_it_first():
     """The race behind a SIGKILLed worker's scene being retried: the executor's thread reaps the dead worker
     (waitpid) and stores its code a moment later; a waitpid of ours in between fails (ECHILD) and
