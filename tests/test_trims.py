@@ -231,3 +231,50 @@ def test_points_the_tracer_asks_about(monkeypatch):
     assert len(patch) > 10_000
     got = assert_as_the_curves(trims, patch, u, v)
     np.testing.assert_array_equal(on_face(renderer.surfaces, patch, u, v), got)
+
+
+
+#: One face with many segments and a hole, 64 points and 64 small triangles about it.
+A_FACE = """
+import numpy as np, shapely
+from rtreflect.geometry.trims import Trim
+t = np.linspace(0.0, 2.0 * np.pi, 4000, endpoint=False)
+r = 1.0 + 0.05 * np.sin(37.0 * t)
+outer = np.column_stack([r * np.cos(t), r * np.sin(t)])
+u, v = np.random.default_rng(0).uniform(-1.2, 1.2, (2, 64))
+triangles = shapely.polygons(np.stack([np.column_stack([u, v]), np.column_stack([u + 0.1, v]),
+                                       np.column_stack([u, v + 0.1]), np.column_stack([u, v])], axis=1))
+new_face = lambda: Trim(outer, (0.3 * outer[::10],))
+"""
+#: Two threads ask GEOS about each of 200 new faces at once, as two render threads do (`GEOS_LOCK`), in a subprocess
+#: whose crash the test reports. Without the lock the heap broke in every run (5 of 5, within the first rounds).
+CONCURRENT_ASKS = A_FACE + """
+import threading
+answers = set()
+for _ in range(200):
+    trim = new_face()  # GEOS builds a face's index on first use
+    start = threading.Barrier(2)
+    def ask():
+        start.wait()
+        for k in range(50):
+            answers.add(int(trim.contains(u, v).sum() if k < 25 else trim.overlaps(triangles).sum()))
+    threads = [threading.Thread(target=ask) for _ in range(2)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+print(sorted(answers))
+"""
+
+
+def test_geos_is_asked_about_a_face_from_two_threads_at_once_without_a_crash():
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", CONCURRENT_ASKS], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    alone = {}
+    exec(A_FACE, alone)  # the answers one thread gets
+    trim = alone["new_face"]()
+    expected = sorted({int(trim.contains(alone["u"], alone["v"]).sum()), int(trim.overlaps(alone["triangles"]).sum())})
+    assert done.stdout.strip() == str(expected)

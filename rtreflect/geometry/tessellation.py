@@ -640,7 +640,7 @@ def _clip_to_trim(uv: np.ndarray, faces: np.ndarray, trim) -> tuple[np.ndarray, 
         wu, wv = trim.wrap(corners[..., 0], corners[..., 1])
         corners = np.stack([wu, wv], axis=-1)
     triangles = shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
-    keep[ask] = shapely.intersects(triangles, trim._polygon)
+    keep[ask] = trim.overlaps(triangles)
     if trim.u_period or trim.v_period:  # a wrapped triangle may straddle the period's cut: keep it too
         span = np.ptp(corners, axis=1)
         keep[ask] |= (span[:, 0] > 0.5 * (trim.u_period or np.inf)) | (span[:, 1] > 0.5 * (trim.v_period or np.inf))

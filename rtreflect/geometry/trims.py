@@ -21,6 +21,7 @@ GEOS had to repair.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,6 +35,12 @@ SEGMENTS_PER_BAND = 2
 #: length (`segment_table`): a reader's pcurve along a domain side is straight to OCCT's tolerances (~1e-9), a curve
 #: whose chord happens to run along u (a circle's top between two samples) bends off by the chord error (1e-3 here).
 ALIGNED_BEND = 1e-6
+#: Held around every GEOS query of a `Trim`'s polygon. GEOS's prepared geometries are not thread-safe (libgeos/geos
+#: issue 825: their indexes are built on first use, and queries keep state) and shapely lets go of the GIL inside
+#: them: two render threads asking about one face at once corrupted the heap (build123d's M6 countersunk screw,
+#: 2 of 12 renders of a curvature map crashed). The tracer asks GEOS only about the few points its kernel cannot
+#: prove, so one lock costs nothing measurable.
+GEOS_LOCK = threading.Lock()
 
 
 def into_period(x: np.ndarray, x0, period) -> np.ndarray:
@@ -91,7 +98,15 @@ class Trim:
         import shapely
 
         u, v = self.wrap(u, v)
-        return shapely.intersects_xy(self._polygon, u, v)
+        with GEOS_LOCK:
+            return shapely.intersects_xy(self._polygon, u, v)
+
+    def overlaps(self, polygons: np.ndarray) -> np.ndarray:
+        """Per shapely polygon (in the loops' period), whether it meets the face: boundary contact counts."""
+        import shapely
+
+        with GEOS_LOCK:
+            return shapely.intersects(polygons, self._polygon)
 
 
 class TrimTable:
