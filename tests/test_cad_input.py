@@ -195,6 +195,20 @@ def test_step_read_through_the_child_keeps_the_geometry(tmp_path, monkeypatch):
     assert_same_surfaces(model, direct, 6)
 
 
+@pytest.mark.parametrize("name, rewrite", [
+    # Part 21 allows comments before the header (OCCT's data/step/bug25169_box-openshell.stp begins with one).
+    ("filleted_block.step", lambda data: b"/* written by hand\n   for a test */\n" + data),
+    # 80-column records with no line breaks between them (OCCT's data/iges/Disc.igs, from HP ME's translator).
+    ("filleted_block.igs", lambda data: data.replace(b"\r", b"").replace(b"\n", b"")),
+])
+def test_a_file_open_cascade_reads_is_read_whatever_comes_before_its_first_record(tmp_path, name, rewrite):
+    path = tmp_path / name
+    path.write_bytes(rewrite((PARTS / name).read_bytes()))
+    assert path.read_bytes() != (PARTS / name).read_bytes()
+    model, direct = read_cad(path), read_cad(PARTS / name)
+    assert_same_surfaces(model, direct, len(direct.surfaces))
+
+
 def test_step_with_only_curves_says_so(tmp_path):
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
     from OCP.gp import gp_Pnt

@@ -34,9 +34,16 @@ def sniff(data: bytes) -> str | None:
     if data.startswith(b"3D Geometry File Format "):
         return "3DM"
     text = data.removeprefix(b"\xef\xbb\xbf").lstrip()
+    while text.startswith(b"/*"):  # comments may come before the header (OCCT's bug25169_box-openshell.stp)
+        end = text.find(b"*/")
+        if end < 0:
+            return None
+        text = text[end + 2:].lstrip()
     if text.startswith(b"ISO-10303-21"):
         return "STEP"
-    first = data.split(b"\n", 1)[0].rstrip(b"\r")
+    # The first record: a line, or the first 80 columns of a file written without line breaks (HP ME's 2D
+    # translator, OCCT's Disc.igs, which Open CASCADE reads).
+    first = data.split(b"\n", 1)[0].rstrip(b"\r")[:IGES_LINE]
     if len(first) >= IGES_LINE - 7 and first[IGES_LINE - 8:IGES_LINE - 7] in (b"S", b"C") and first[IGES_LINE - 7:].strip().isdigit():
         return "IGES"
     return None
