@@ -219,6 +219,45 @@ def test_step_with_only_curves_says_so(tmp_path):
     assert "only curves or points" in line
 
 
+#: STEP AP242 tessellated geometry: one square as two triangles, no surface (Open CASCADE reads a face without one).
+MESH_ONLY_STEP = """ISO-10303-21;
+HEADER;
+FILE_DESCRIPTION(('a mesh only'),'2;1');
+FILE_NAME('mesh_only.step','2026-12-03T00:00:00',(''),(''),'','','');
+FILE_SCHEMA(('AP242_MANAGED_MODEL_BASED_3D_ENGINEERING_MIM_LF { 1 0 10303 442 1 1 4 }'));
+ENDSEC;
+DATA;
+#1=APPLICATION_CONTEXT('managed model based 3d engineering');
+#2=APPLICATION_PROTOCOL_DEFINITION('international standard','ap242_managed_model_based_3d_engineering',2014,#1);
+#3=PRODUCT_CONTEXT('',#1,'mechanical');
+#4=PRODUCT_DEFINITION_CONTEXT('part definition',#1,'design');
+#5=PRODUCT('mesh','mesh','',(#3));
+#6=PRODUCT_DEFINITION_FORMATION('','',#5);
+#7=PRODUCT_DEFINITION('design','',#6,#4);
+#8=PRODUCT_DEFINITION_SHAPE('','',#7);
+#9=SHAPE_DEFINITION_REPRESENTATION(#8,#10);
+#10=TESSELLATED_SHAPE_REPRESENTATION('',(#11),#20);
+#11=TESSELLATED_SHELL('',(#12),$);
+#12=TRIANGULATED_FACE('',#13,4,((0.,0.,1.)),$,(1,2,3,4),((1,2,3),(1,3,4)));
+#13=COORDINATES_LIST('',4,((0.,0.,0.),(1.,0.,0.),(1.,1.,0.),(0.,1.,0.)));
+#14=(LENGTH_UNIT()NAMED_UNIT(*)SI_UNIT(.MILLI.,.METRE.));
+#15=(NAMED_UNIT(*)PLANE_ANGLE_UNIT()SI_UNIT($,.RADIAN.));
+#16=(NAMED_UNIT(*)SI_UNIT($,.STERADIAN.)SOLID_ANGLE_UNIT());
+#17=UNCERTAINTY_MEASURE_WITH_UNIT(LENGTH_MEASURE(1.E-07),#14,'distance_accuracy_value','');
+#20=(GEOMETRIC_REPRESENTATION_CONTEXT(3)GLOBAL_UNCERTAINTY_ASSIGNED_CONTEXT((#17))GLOBAL_UNIT_ASSIGNED_CONTEXT((#14,#15,#16))REPRESENTATION_CONTEXT('',''));
+ENDSEC;
+END-ISO-10303-21;
+"""
+
+
+def test_step_with_only_meshes_says_so(tmp_path):
+    path = tmp_path / "mesh_only.step"
+    path.write_text(MESH_ONLY_STEP)
+    code, output, _ = run("render", path, "-o", tmp_path / "out", *TINY)
+    line = assert_bad_input(code, output, str(path), tmp_path / "out")
+    assert "only meshes (1 face without a surface" in line
+
+
 def test_3dm_with_only_curves_points_and_meshes_says_so(tmp_path):
     rhino3dm = pytest.importorskip("rhino3dm")
     model = rhino3dm.File3dm()

@@ -187,9 +187,27 @@ def count_entities(shape) -> dict[str, int]:
     return counts
 
 
+def surfaceless_faces(shape) -> int:
+    """Faces with no surface (STEP AP242 tessellated geometry: a triangulation only, as OCCT reads it)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    n, explorer = 0, TopExp_Explorer(shape, TopAbs_FACE)
+    while explorer.More():
+        n += BRep_Tool.Surface_s(TopoDS.Face(explorer.Current())) is None
+        explorer.Next()
+    return n
+
+
 def no_surfaces_error(path: Path, shape, what: str) -> SceneError:
     counts = count_entities(shape) if shape is not None and not shape.IsNull() else {"edges": 0, "vertices": 0}
-    if counts.get("edges") or counts.get("vertices"):
+    if counts.get("faces"):  # faces, none with a surface
+        faces = f"{counts['faces']} face{'s' if counts['faces'] != 1 else ''}"
+        held = (f"only meshes ({faces} without a surface: tessellated geometry); export the part's exact surfaces "
+                "(a B-rep: STEP AP203/AP214, or AP242 with its B-rep)")
+    elif counts.get("edges") or counts.get("vertices"):
         held = f"only curves or points ({counts['edges']} edges, {counts['vertices']} vertices)"
     else:
         held = "no surface Open CASCADE can transfer (the file is corrupt, or its entities are not supported)"
@@ -294,6 +312,8 @@ def bspline_of_face(face) -> NurbsSurface:
     from OCP.Geom import Geom_BSplineSurface
 
     surface = BRep_Tool.Surface_s(face)
+    if surface is None:
+        raise FaceError("it has no surface, only a mesh (tessellated geometry): rtreflect needs the exact surface")
     if not isinstance(surface, Geom_BSplineSurface):
         raise FaceError(f"Open CASCADE did not convert its {type(surface).__name__.removeprefix('Geom_')} surface to a B-spline")
     u_first, u_last, v_first, v_last = surface.Bounds()
@@ -1120,7 +1140,7 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     if shape is None or shape.IsNull():
         raise no_surfaces_error(path, shape, what)
     original_faces = count_entities(shape)["faces"]
-    if original_faces == 0:
+    if original_faces == 0 or surfaceless_faces(shape) == original_faces:
         raise no_surfaces_error(path, shape, what)
     converted = convert_shape(shape)
     lo, hi = shape_bounds(shape if converted is None else converted)
