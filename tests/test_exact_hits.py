@@ -150,6 +150,43 @@ def test_coincident_triangle_of_the_face_across_the_edge_is_not_skipped():
     assert_same_hits(hits, np.zeros(len(origins), dtype=int), t_a, tessellation.extent)
 
 
+def test_a_face_resting_in_another_faces_plane_does_not_hide_it_past_its_trim():
+    """A part resting on another (OCCT's data/step/trj2_as1-tc-214.stp: an L-bracket's foot on a plate's top): F, a
+    disc trimmed from a square domain, lies in the plane of A, a big plate's top, with B the plate's bottom 0.2 below.
+    F's mesh covers its domain's square a hair above A's (so Embree meets it first at A's distance, to float32
+    rounding); off the disc F's candidate misses, and the next query started past A's triangle at that distance: the
+    ray went on to B (5 pixels at 320×180 there). F and A share no edge, so no rim neighbour is tried. Every ray
+    must keep the plane z = 0: F's hit inside the disc, A's elsewhere (the closed forms)."""
+    from rtreflect.geometry.surfaces import SurfaceSet
+    from rtreflect.geometry.tessellation import tessellate
+    from rtreflect.trace.accelerator import Accelerator
+    from rtreflect.trace.tracing import trace
+
+    a = plane_patch([-2.0, -2.0, 0.0], [5.0, 0.0, 0.0], [0.0, 5.0, 0.0], name="A")
+    b = plane_patch([-2.0, -2.0, -0.2], [5.0, 0.0, 0.0], [0.0, 5.0, 0.0], name="B")
+    angle = np.linspace(0.0, 2.0 * np.pi, 256, endpoint=False)
+    disc = Trim(np.column_stack([0.5 + 0.35 * np.cos(angle), 0.5 + 0.35 * np.sin(angle)]))
+    f = replace(plane_patch([0.3, 0.3, 0.0], [0.4, 0.0, 0.0], [0.0, 0.4, 0.0], name="F"), trim=disc)
+    tessellation = tessellate([a, b, f], 2)
+    vertices = tessellation.vertices.copy()
+    vertices[tessellation.vertex_patch == 2, 2] = 1e-6  # F's mesh: in A's plane, a hair nearer the eye
+    chord = tessellation.chord_error.copy()
+    chord[2] = 1e-5  # so its mesh lies within its chord error of F, as a mesh must
+    tessellation = replace(tessellation, vertices=vertices, chord_error=chord)
+    x, y = np.meshgrid(np.linspace(0.31, 0.69, 39), np.linspace(0.31, 0.69, 39))
+    origins = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)])
+    directions = np.tile([0.0, 0.0, -1.0], (len(origins), 1))
+    hits = trace(Accelerator(tessellation), tessellation, SurfaceSet([a, b, f]), origins, directions)
+    on_disc = np.hypot(x.ravel() - 0.5, y.ravel() - 0.5) < 0.4 * 0.35
+    off_disc = np.hypot(x.ravel() - 0.5, y.ravel() - 0.5) > 0.4 * 0.35 + 1e-3  # clear of the disc's polygon
+    assert off_disc.sum() > 300
+    rows = on_disc | off_disc
+    expected = np.where(on_disc, 2, 0)[rows]
+    t_a, _ = plane_hits(a, origins, directions)
+    assert_same_hits(replace(hits, patch=hits.patch[rows], t=hits.t[rows], fallback=hits.fallback[rows]), expected,
+                     t_a[rows], tessellation.extent)
+
+
 def test_hit_replaced_across_the_rim_is_no_longer_a_crossing_hit(monkeypatch):
     """`_candidates`' ``crossed`` (the kept hit is `_crossing_on_face`'s, which `trace` lets win only nearer by float32
     rounding) must describe the hit it returns: where `_rim_neighbours` replaced that hit by another face's, the row is

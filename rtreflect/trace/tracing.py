@@ -81,6 +81,8 @@ GRAZING_ALLOWANCE = 10.0
 #: mesh hits of the ribs behind it within the band (2 pixels at 480×270; decided, the same hits, after 24).
 #: Only rays still open pay for the extra rounds.
 MAX_CANDIDATES = 24
+#: Planar faces per block of `_coplanar_faces`' box tests (a block × all planar faces booleans, ×3 axes).
+COPLANAR_CHUNK = 512
 #: A mesh lies within its chord error of the surface along the normal (measured at edge midpoints,
 #: which can fall a little short of the true maximum): twice it bounds the mesh-to-surface gap.
 BAND_CHORDS = 2.0
@@ -505,6 +507,8 @@ def _candidates(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, b1
     _other_root(tessellation, surfaces, O, D, status, pk, ur, vr, tr, derivs, normal, cosine, aside, curvature)
     beside, beside_crossed = _rim_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr, tr, derivs, band,
                                              aside)
+    beside = np.concatenate([beside, _coplanar_neighbours(tessellation, surfaces, O, D, prim, tm, status, pk, ur, vr,
+                                                          tr, derivs, band, aside)])
     moved = np.flatnonzero(aside)
     _normals(surfaces, pk, derivs, D, moved, normal, cosine, degenerate)
     curvature[moved] = np.nan  # found beside: not the point the curvatures were taken at
@@ -1291,6 +1295,97 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     status[won] = VALID
     aside[won] = True
     return won, won[predicted[pick]]
+
+
+def _coplanar_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
+    """Per face (P, k ≥ 1) the other planar faces lying in its plane where their meshes' boxes overlap (−1 padded; a
+    face that is not planar has none): parts of an assembly resting on each other, a face and the coplanar one it was
+    split from. Both control nets lie in each other's plane within float32 rounding of the scene and their deviations
+    (`_net_planes`), so where both meshes cover a point Embree meets them at one distance, to rounding. Built once per
+    tessellation, on first use (kept in its ``__dict__``, as `_net_planes` is)."""
+    cached = tessellation.__dict__.get("_coplanar_faces")
+    if cached is not None:
+        return cached
+    faces = len(surfaces.patches)
+    centre, normal, deviation, planar = _net_planes(tessellation, surfaces)
+    skip = float32_rounding(tessellation)
+    lo, hi = np.full((faces, 3), np.inf), np.full((faces, 3), -np.inf)
+    np.minimum.at(lo, tessellation.vertex_patch, tessellation.vertices)
+    np.maximum.at(hi, tessellation.vertex_patch, tessellation.vertices)
+    flat = np.flatnonzero(planar & np.isfinite(lo).all(axis=1))
+    pairs = []
+    for first in range(0, len(flat), COPLANAR_CHUNK):  # box overlaps, a block of faces × all planar faces at a time
+        rows = flat[first:first + COPLANAR_CHUNK]
+        meet = np.all((lo[rows, None] - skip <= hi[None, flat]) & (lo[None, flat] <= hi[rows, None] + skip), axis=2)
+        a, b = np.nonzero(meet)
+        pairs.append(np.stack([rows[a], flat[b]], axis=1))
+    pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    # B's net in A's plane: its points' distances (along A's normal) within the rounding and both deviations.
+    nets = [np.asarray(surfaces.patches[k].points, dtype=np.float64).reshape(-1, 3) for k in range(faces)]
+    sizes = np.array([len(x) for x in nets])
+    a, b = pairs[:, 0], pairs[:, 1]
+    point = np.concatenate([nets[k] for k in b]) if len(b) else np.zeros((0, 3))
+    owner = np.repeat(np.arange(len(pairs)), sizes[b])
+    distance = np.abs(np.einsum("ij,ij->i", point - centre[a][owner], normal[a][owner]))
+    farthest = np.zeros(len(pairs))
+    np.maximum.at(farthest, owner, distance)
+    pairs = pairs[farthest <= skip + deviation[a] + deviation[b]]
+    table = np.full((faces, max(int(np.bincount(pairs[:, 0], minlength=1).max(initial=0)), 1)), -1, dtype=np.int64)
+    order = np.argsort(pairs[:, 0], kind="stable")
+    pairs = pairs[order]
+    slot = np.arange(len(pairs)) - np.searchsorted(pairs[:, 0], pairs[:, 0])
+    table[pairs[:, 0], slot] = pairs[:, 1]
+    tessellation.__dict__["_coplanar_faces"] = table
+    return table
+
+
+def _coplanar_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim, tm, status, pk, ur, vr, tr, derivs,
+                         band, aside) -> np.ndarray:
+    """Candidates left unresolved or missed on a planar face's triangle: the faces lying in its plane
+    (`_coplanar_faces`) refined where the ray crosses it, in place (VALID where one is met on its face, the nearest;
+    ``aside``). Returns the rows whose candidate it replaced.
+
+    Where two faces' meshes overlap in one plane, Embree returns one of them and the next query starts past float32
+    rounding (`trace`): the other is never examined. Where the one returned is off its face (its mesh's skirt, its
+    untrimmed domain), the ray went on through the other (OCCT's data/step/trj2_as1-tc-214.stp, the CAx-IF as1
+    assembly: the L-brackets' feet rest on the plate's top, z = 20; rays past a foot's edge met its skirt there and
+    went on to the plate's bottom face 20 below, 5 pixels at 320×180). `_rim_neighbours` finds such a face only
+    across a shared edge; a part resting on another shares none. Newton on the plane converges from the middle of
+    its domain; its crossing must lie within the face's reach of the mesh hit (`_rim_reach`), as the skipped
+    triangle's does.
+    """
+    partners = _coplanar_faces(tessellation, surfaces)
+    face = tessellation.face_patch[prim]
+    rays = np.flatnonzero((status != VALID) & (partners[face, 0] >= 0))
+    if len(rays) == 0:
+        return rays
+    row, col = np.nonzero(partners[face[rays]] >= 0)
+    rays, pn = rays[row], partners[face[rays[row]], col]
+    centre, normal = _net_planes(tessellation, surfaces)[:2]
+    skip = float32_rounding(tessellation)
+    nd = np.einsum("ij,ij->i", normal[pn], D[rays])
+    with np.errstate(divide="ignore", invalid="ignore"):  # a ray along the plane: NaN, dropped
+        tp = np.einsum("ij,ij->i", normal[pn], centre[pn] - O[rays]) / nd
+        allowance = np.clip(1.0 / np.abs(nd), 1.0, GRAZING_ALLOWANCE)
+    reach = _rim_reach(band[pn], allowance, skip)
+    close = (tp > 0) & (np.abs(tp - tm[rays]) <= reach)
+    rays, pn, reach = rays[close], pn[close], reach[close]
+    if len(rays) == 0:
+        return rays
+    (u0, u1, v0, v1) = surfaces.domains(pn)
+    u3, v3, d3, ok3 = refine(surfaces, pn, 0.5 * (u0 + u1), 0.5 * (v0 + v1), O[rays], D[rays], tm[rays],
+                             tessellation.extent)
+    t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
+    ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3)
+    pick = np.flatnonzero(ok3)
+    pick = pick[np.lexsort((t3[pick], rays[pick]))]
+    pick = pick[np.r_[True, rays[pick][1:] != rays[pick][:-1]]] if len(pick) else pick
+    won = rays[pick]
+    _store(won, pick, pn, u3, v3, t3, d3, pk, ur, vr, tr, derivs)
+    status[won] = VALID
+    aside[won] = True
+    return won
 
 
 def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, reach, slack) -> np.ndarray:
