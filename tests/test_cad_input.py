@@ -209,6 +209,42 @@ def test_a_file_open_cascade_reads_is_read_whatever_comes_before_its_first_recor
     assert_same_surfaces(model, direct, len(direct.surfaces))
 
 
+def test_a_closed_face_the_conversion_refuses_is_read_in_pieces(tmp_path):
+    """A torus face over a whole turn each way from an offset, its v range 2π and one unit in the last place (as in
+    OCCT's data/step/trj4_k1_geo-tu-214.stp, face 37): Open CASCADE's conversion refuses it (checked), and the face
+    was a bad face. It is read cut across both closed directions: four pieces of face 0, on the torus (its implicit
+    equation), together as large as the torus (4π²Rr)."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace, BRepBuilderAPI_NurbsConvert
+    from OCP.Geom import Geom_ToroidalSurface
+    from OCP.gp import gp_Ax3
+
+    R, r = 5.8, 1.27
+    u0, v0 = 4.71238898038469, 1.776554749823208
+    u1, v1 = 10.995574287564276, 8.059740057002795  # v1 − v0 = 2π + 8.9e-16
+    face = BRepBuilderAPI_MakeFace(Geom_ToroidalSurface(gp_Ax3(), R, r), u0, u1, v0, v1, 1e-7).Face()
+    with pytest.raises(Exception):
+        BRepBuilderAPI_NurbsConvert(face, True)
+    model = occt.read_faces(tmp_path / "torus.step", face, "torus", unit="mm", unit_note="", what="STEP file")
+    assert model.faces == 1 and not model.skipped
+    assert [s.name for s in model.surfaces] == [f"torus[0.{k}]" for k in range(4)]
+    nodes, weights = np.polynomial.legendre.leggauss(24)
+    area = 0.0
+    for surface in model.surfaces:
+        breaks_u, breaks_v = surface.span_breaks()
+        for a, b in zip(breaks_u[:-1], breaks_u[1:]):  # Gauss–Legendre per knot span (the integrand is smooth there)
+            for c, d in zip(breaks_v[:-1], breaks_v[1:]):
+                u = 0.5 * (a + b) + 0.5 * (b - a) * nodes
+                v = 0.5 * (c + d) + 0.5 * (d - c) * nodes
+                uu, vv = np.meshgrid(u, v, indexing="ij")
+                derivs = surface.evaluate(uu.ravel(), vv.ravel())
+                x, y, z = derivs.S.T
+                assert np.abs((np.hypot(x, y) - R) ** 2 + z ** 2 - r ** 2).max() < 1e-9 * R * R
+                assert surface.trim.contains(uu.ravel(), vv.ravel()).all()  # each piece is its whole domain
+                jacobian = np.linalg.norm(np.cross(derivs.Su, derivs.Sv), axis=1)
+                area += 0.25 * (b - a) * (d - c) * np.sum(np.outer(weights, weights).ravel() * jacobian)
+    assert area == pytest.approx(4.0 * np.pi ** 2 * R * r, rel=1e-9)
+
+
 def test_step_with_only_curves_says_so(tmp_path):
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
     from OCP.gp import gp_Pnt
@@ -256,6 +292,19 @@ def test_step_with_only_meshes_says_so(tmp_path):
     code, output, _ = run("render", path, "-o", tmp_path / "out", *TINY)
     line = assert_bad_input(code, output, str(path), tmp_path / "out")
     assert "only meshes (1 face without a surface" in line
+
+
+def test_step_assembly_of_external_parts_names_them(tmp_path):
+    """A STEP assembly whose parts lie in other files (CAx-IF external references: OCCT's data/step/trj4_xr1-tc-214.stp)
+    transfers no face: the error names the part files."""
+    text = MESH_ONLY_STEP.replace("#11=TESSELLATED_SHELL('',(#12),$);", "#11=EXTERNAL_SOURCE('bracket.stp');\n"
+                                  "#30=EXTERNAL_SOURCE('nut.stp');\n#31=EXTERNAL_SOURCE('bracket.stp');")
+    text = text.replace("#10=TESSELLATED_SHAPE_REPRESENTATION('',(#11),#20);", "#10=SHAPE_REPRESENTATION('',(),#20);")
+    path = tmp_path / "assembly.step"
+    path.write_text(text.replace("#12=TRIANGULATED_FACE('',#13,4,((0.,0.,1.)),$,(1,2,3,4),((1,2,3),(1,3,4)));\n", ""))
+    code, output, _ = run("render", path, "-o", tmp_path / "out", *TINY)
+    line = assert_bad_input(code, output, str(path), tmp_path / "out")
+    assert "an assembly whose parts lie in other files (bracket.stp, nut.stp)" in line
 
 
 def test_3dm_with_only_curves_points_and_meshes_says_so(tmp_path):

@@ -999,10 +999,11 @@ class _Unconvertible:
         self.reason = reason
 
 
-def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list]:
+def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list, list]:
     """Where the whole shape does not convert: each face of ``originals`` converted on its own, with its edges' key
     maker (keys of the edges of ``shape``, the unconverted model, so faces sharing an edge still share its key:
-    `_keyed_by_order`; each converts its copy of a shared edge alike).
+    `_keyed_by_order`; each converts its copy of a shared edge alike), and per face the index of its original.
+    A closed face whose conversion fails is converted in pieces (`_divided_converted`): several faces, one original.
 
     A face that fails alone but already lies on a B-spline surface is kept as it is: the conversion would only have
     rewritten its curves, which the trims sample through adaptors whatever their type (the sweep's
@@ -1016,7 +1017,7 @@ def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list
     from OCP.TopoDS import TopoDS
 
     _, original_key = edge_keys(shape, key_prefix)
-    faces, key_makers = [], []
+    faces, key_makers, origin = [], [], []
     for index, original in enumerate(originals):
         keyed = None
         try:
@@ -1030,15 +1031,55 @@ def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list
             else:
                 face = _unwrapped_converted(original)
                 if face is None:
-                    faces.append(_Unconvertible(f"Open CASCADE cannot convert it to NURBS ({exc})"))
-                    key_makers.append(None)
+                    pieces = _divided_converted(original, f"{key_prefix}|face {index}")
+                    if pieces is None:
+                        pieces = [(_Unconvertible(f"Open CASCADE cannot convert it to NURBS ({exc})"), None)]
+                    for piece, piece_key_of in pieces:
+                        faces.append(piece)
+                        key_makers.append(piece_key_of)
+                        origin.append(index)
                     continue
         faces.append(face)
+        origin.append(index)
         # A face kept unconverted (or converted with its edges segmented) has edges whose parameter t may differ from
         # a converted neighbour's along the same edge (the conversion reparametrises conics): sharing their keys would
         # pair points by t that are not the same point (false gaps). Keys of its own: those edges are no seam.
         key_makers.append(keyed or edge_keys(face, f"{key_prefix}|face {index}")[1])
-    return faces, key_makers
+    return faces, key_makers, origin
+
+
+def _divided_converted(original, key_prefix: str) -> list | None:
+    """A closed face the conversion refuses, cut in two across each closed direction (``ShapeUpgrade_ShapeDivideClosed``)
+    and each piece converted: [(piece, its edges' key maker)], or None where that fails too. The pieces share the
+    edges they were cut along (keys of the divided face's edges).
+
+    A face spanning a whole period from an offset may span it by a rounding more: OCCT's data/step/trj4_k1_geo-tu-214.stp
+    (CAx-IF, a key's ring), face 37, a torus over v 1.7766..8.0597, 2π and one unit in the last place, which
+    Convert_TorusToBSplineSurface refuses; its halves convert."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+    from OCP.ShapeUpgrade import ShapeUpgrade_ShapeDivideClosed
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    try:
+        with quiet_stdout():
+            divide = ShapeUpgrade_ShapeDivideClosed(original)
+            divide.SetNbSplitPoints(1)
+            if not divide.Perform():
+                return None
+            divided = divide.Result()
+            _, key_of = edge_keys(divided, key_prefix)
+            pieces, explorer = [], TopExp_Explorer(divided, TopAbs_FACE)
+            while explorer.More():
+                piece = TopoDS.Face(explorer.Current())
+                converted = BRepBuilderAPI_NurbsConvert(piece, True).Shape()
+                face = TopoDS.Face(TopExp_Explorer(converted, TopAbs_FACE).Current())
+                pieces.append((face, _keyed_by_order(face, piece, key_of) or edge_keys(face, f"{key_prefix}|{len(pieces)}")[1]))
+                explorer.Next()
+    except Exception:  # OCCT's Standard_Failure: the face stays unconvertible
+        return None
+    return pieces if len(pieces) > 1 else None
 
 
 #: `_unwrapped_converted` keeps a converted face only where its pcurves lie within this fraction of the face's
@@ -1158,19 +1199,21 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     # Keys unique per read: a scene that reads one file twice must not join the two copies' faces.
     key_prefix = f"{path}|{stem}|{next(_READS)}"
     if converted is None:  # face by face, each with its own key maker
-        faces, key_makers = converted_faces(originals, shape, key_prefix)
+        faces, key_makers, origin = converted_faces(originals, shape, key_prefix)
     else:
         _, key_of = edge_keys(converted, key_prefix)
-        key_makers = [key_of] * len(faces)
+        key_makers, origin = [key_of] * len(faces), list(range(len(faces)))
+    pieces = np.bincount(origin, minlength=len(originals)) if origin else np.zeros(0, dtype=int)
     surfaces, skipped, reversed_flags, meshed, indices, warnings = [], [], [], [], [], []
     with tqdm(faces, desc=f"reading {path.name}", unit="face", leave=False, file=sys.stderr,
               disable=None if len(faces) > PROGRESS_FACES else True) as bar:
-        for index, face in enumerate(bar):
+        for position, face in enumerate(bar):
+            index = origin[position]  # the face's number in the file (a face converted in pieces: each piece's)
             try:
                 if isinstance(face, _Unconvertible):
                     raise FaceError(face.reason)
                 reversed_face = (face.Orientation() == TopAbs_REVERSED) if reversed_faces is None else reversed_faces[index]
-                face_key_of = key_makers[index]
+                face_key_of = key_makers[position]
                 if converted is not None and len(originals) == len(faces) and seam_lost(face):
                     face, face_key_of = converted_alone(originals[index], face, face_key_of)
                 surface = bspline_of_face(face)
@@ -1195,14 +1238,16 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
                 continue
             # The surface was built before its trim (sampling the trim needs its evaluator); setting the
             # remaining fields in place spares rebuilding its per-span power form.
-            for key, value in (("name", f"{stem}[{index}]"), ("trim", trim), ("mesh_uv", mesh)):
+            name = f"{stem}[{index}]" if pieces[index] == 1 else f"{stem}[{index}.{position - origin.index(index)}]"
+            for key, value in (("name", name), ("trim", trim), ("mesh_uv", mesh)):
                 object.__setattr__(surface, key, value)
             surfaces.append(surface)
             reversed_flags.append(reversed_face)
             meshed.append(face)
             indices.append(index)
     if not surfaces:
-        raise SceneError(path, "", f"no face of the {len(faces)} could be read (first: face {skipped[0][0]}: {skipped[0][1]})")
+        raise SceneError(path, "", f"no face of the {len(originals)} could be read (first: face {skipped[0][0]}: "
+                                   f"{skipped[0][1]})")
     bounds = faces_bounds(surfaces)
     tight = float(np.linalg.norm(bounds[1] - bounds[0]))
     if np.isfinite(tight) and 0 < tight and REMESH_RATIO * tight < diagonal:
@@ -1229,7 +1274,7 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
                 continue
             object.__setattr__(surface, "trim", trim)
         bounds = faces_bounds(surfaces)
-    return CadModel(surfaces, unit, unit_note, bounds, len(faces), skipped, reversed_flags, warnings)
+    return CadModel(surfaces, unit, unit_note, bounds, len(originals), skipped, reversed_flags, warnings)
 
 
 def faces_bounds(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray]:
