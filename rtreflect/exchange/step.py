@@ -8,11 +8,13 @@ model summary says so.
 
 from __future__ import annotations
 
+import re
 from functools import partial
 from pathlib import Path
 
+from ..errors import SceneError
 from .isolation import read_isolated
-from .occt import CadModel, import_ocp, read_faces, read_xstep, transferred_shape
+from .occt import CadModel, count_entities, import_ocp, read_faces, read_xstep, transferred_shape
 
 #: What Open CASCADE converts every STEP length to.
 READ_UNIT = "mm"
@@ -27,7 +29,20 @@ def read_step(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMo
     note = ""
     if file_units and file_units != ["millimetre"]:
         note = f"file in {', '.join(file_units)}, read in {READ_UNIT}"
+    if shape is None or shape.IsNull() or count_entities(shape)["faces"] == 0:
+        others = external_parts(path)
+        if others:
+            listed = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+            raise SceneError(path, "", f"no surfaces to render: the STEP file is an assembly whose parts lie in other "
+                                       f"files ({listed}): render those files, or export the assembly with its parts")
     return read_faces(path, shape, name, unit=READ_UNIT, unit_note=note, what="STEP file", skip_bad_faces=skip_bad_faces)
+
+
+def external_parts(path: Path) -> list[str]:
+    """The files a STEP assembly names for its parts (EXTERNAL_SOURCE entities: the CAx-IF's external references),
+    in order of first mention, or none."""
+    text = Path(path).read_bytes().decode("latin-1")
+    return list(dict.fromkeys(re.findall(r"EXTERNAL_SOURCE\s*\(\s*'([^']*)'", text, flags=re.IGNORECASE)))
 
 
 def transfer(path: Path) -> tuple[object, dict]:
