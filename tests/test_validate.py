@@ -568,3 +568,24 @@ def test_colour_bound_reaches_the_corner_samples_a_diagonal_neighbour_shows():
     aovs.line_id[y - 1, x + 1] = aovs.line_id[y, x] + 1
     checked, wrong = colour_mismatches(renderer, aovs)
     assert not checked[y, x] and not wrong[y, x]
+
+
+def test_a_crease_with_a_sliver_beside_it_is_no_line_of_its_own():
+    """A sheet folded across a sliver: degree 1 in v, knots 0.45 and 0.55 (creases: the normal jumps there), the
+    middle span 0.006 wide and rising 0.01, so the normal turns by ~60° across it (OCCT's data/iges/PRO20359-L2.igs:
+    a degree-5 face's v knots, multiplicity 5, turn it by up to 7° about a sliver 0.018 wide). The pixels either side
+    of the sliver hit different spans of f; pairs across it counted as smooth, and their cubic put traced centres
+    2.99 px from any analytic line (a false FAIL). Pairs across a knot where the normal is not C¹ are no smooth pair
+    (`normal_breaks`): validate passes, with the lines either side compared."""
+    from rtreflect.analysis.validate import validate_scene
+    from rtreflect.geometry.surfaces import NurbsSurface
+
+    scene = load_scene(SCENES / "hood.toml").with_image(320, 180, 1)
+    ys, zs = [-1.0, -0.003, 0.003, 1.0], [0.0, 0.12, 0.13, 0.0]
+    points = np.array([[[x, y, z + 0.1 * x * x] for y, z in zip(ys, zs)] for x in np.linspace(-1.0, 1.0, 4)])
+    fold = NurbsSurface(3, 1, np.array([0, 0, 0, 0, 1, 1, 1, 1.0]), np.array([0, 0, 0.45, 0.55, 1, 1.0]), points,
+                        np.ones((4, 4)), name="fold")
+    renderer = Renderer(replace(scene, surfaces=(fold,)))
+    report = validate_scene(renderer.scene, renderer=renderer).to_json()
+    assert report["reasons"] == [] and report["misses"] == 0
+    assert report["points"] > 400 and report["max_px"] <= 0.01

@@ -219,9 +219,10 @@ class PixelAOVs:
     # A map mode's surface colour varies within a pixel, and a sampled pixel shows its samples' mean, not the centre's
     # colour the line share is read against: the share L this may move, (H, W) (`map_bend`); None for one colour.
     map_bend: np.ndarray | None = None
-    # Where φ is only as smooth as the surface's second derivatives (a curvature map), the knot span (u, v) of each
-    # pixel's hit as one key, (H, W) (`knot_spans`): φ creases or jumps across a knot line, so pixels in different
-    # spans are no smooth pair (`_smooth_pairs`). None where φ is smooth across knots.
+    # The knot span (u, v) of each pixel's hit as one key, (H, W) (`knot_spans`), between the knot lines where f (or
+    # φ) is not C¹: every knot for a curvature map (φ of second derivatives), those where the normal is not C¹ for
+    # the others (`normal_breaks`). φ creases or jumps across such a line, so pixels in different spans are no smooth
+    # pair (`_smooth_pairs`). None: no knot line counts.
     span: np.ndarray | None = None
 
 
@@ -301,13 +302,27 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
         line_coverage=line_coverage(film.pixels[..., :4], surface.reshape(height, width, 3), render.line_color,
                                     render.background),
         incidence=incidence.reshape(height, width), normal_error=normal_error.reshape(height, width),
-        nearer=nearer.reshape(height, width), line_offset=line_offset,
+        nearer=nearer.reshape(height, width), line_offset=line_offset, span=knot_spans(renderer, film, normal_breaks),
     )
 
 
-def knot_spans(renderer: Renderer, film: Film) -> np.ndarray:
+def normal_breaks(surface) -> tuple[np.ndarray, np.ndarray]:
+    """A patch's domain ends and the knots inside it where its unit normal is not C¹, in u and in v: multiplicity
+    m ≥ p − 1 (the normal is C^(p − 1 − m) there, P&T section 2.5), so neither are f and the other modes' φ of it.
+
+    At m = p the normal may jump (a crease): f jumps, and the cubic through four pixels (`_crossing`) across it finds
+    a line where none is drawn. OCCT's data/iges/PRO20359-L1.igs, a degree-5 face whose v knots 1 and 2 (m = 5) turn
+    the normal by up to 7° each side of a sliver 0.018 wide: the pairs across the sliver counted as smooth, and the
+    analytic lines squeezed into it as 345 misses at 320×180."""
+    (u0, u1), (v0, v1) = surface.domain
+    lines_u, lines_v = surface.knot_lines(1)
+    return np.concatenate([[u0], lines_u, [u1]]), np.concatenate([[v0], lines_v, [v1]])
+
+
+def knot_spans(renderer: Renderer, film: Film, breaks=lambda surface: surface.span_breaks()) -> np.ndarray:
     """(H, W) key of each pixel's knot span: (span of u, span of v) as one integer, unique within its patch (pairs
-    compare the patch too, `_smooth_pairs`), −1 off the surface.
+    compare the patch too, `_smooth_pairs`), −1 off the surface. ``breaks``: a patch's span limits (all its knots;
+    `normal_breaks` for a field of the normal alone).
 
     Curvature is C^(p − 2 − m) across a knot of multiplicity m: C⁰ (a crease) on a bicubic's simple knots, a jump
     where a knot is doubled. The cubic through four pixels (`_crossing`) across such a knot line put the traced
@@ -319,7 +334,7 @@ def knot_spans(renderer: Renderer, film: Film) -> np.ndarray:
     key = np.full(patch.shape, -1, dtype=np.int64)
     for k in np.unique(patch[patch >= 0]):
         on = patch == k
-        breaks_u, breaks_v = renderer.surfaces.patches[int(k)].span_breaks()
+        breaks_u, breaks_v = breaks(renderer.surfaces.patches[int(k)])
         su = np.searchsorted(breaks_u[1:-1], u[on], side="right")
         sv = np.searchsorted(breaks_v[1:-1], v[on], side="right")
         key[on] = (int(k) * (len(breaks_u) + 1) + su) * (len(breaks_v) + 1) + sv
@@ -362,8 +377,9 @@ def mode_aovs(renderer: Renderer, film: Film, aovs: PixelAOVs) -> PixelAOVs:
     else:
         bend = None
     phi = film.channel("phi").astype(np.float64)
-    span = knot_spans(renderer, film) if renderer.mode.name == "curvature" else None
-    if span is not None and len(renderer.mode.levels):
+    curvature = renderer.mode.name == "curvature"
+    span = knot_spans(renderer, film) if curvature else knot_spans(renderer, film, normal_breaks)
+    if curvature and len(renderer.mode.levels):
         # A region inside a face (φ at a level to rounding, no stripe: `modes.regions`) is a piece of its own: along
         # its edge φ leaves the level without crossing it, no line the pixels can trace (the sweep's kink.step, κ1 ≡ 0
         # where the face bends one way: the analytic contour runs along that edge).
