@@ -467,3 +467,44 @@ points = [[[-1.0, -1.0, -1.0], [-1.0, 1.0, -1.0]], [[1.0, -1.0, 1.0], [1.0, 1.0,
     assert not report.passed and "no traced line centre was compared" in report.reasons[0]
     assert "tube" not in report.reasons[0] and "whole faces" not in report.reasons[0], report.reasons[0]
     assert "none of the mode's lines" in report.reasons[0], report.reasons[0]
+
+
+@pytest.mark.parametrize("inward", [False, True])
+def test_a_face_whose_map_is_constant_from_the_side_seen_is_a_region_whichever_way_its_normal_points(inward):
+    """κ2 on a torus seen from outside is its tube's curvature −1/r all over; from inside, −κ1, which varies. With the
+    range [−1, 0] in 5 bands the level −0.8 lies within a stripe of −1/1.27 = −0.787: the face is a region of the map
+    (no line, the map's colour) seen from outside, whichever way its own normal points (the sides of `constant_faces`:
+    with the normals pointing in, as OCCT's data/step/trj4_k1_geo-tc-214.stp's ring had them, it was painted in the
+    line colour, every pixel)."""
+    from dataclasses import replace
+
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeTorus
+
+    from rtreflect.exchange import occt
+
+    torus = occt.read_faces(Path("torus.step"), BRepPrimAPI_MakeTorus(5.8, 1.27).Shape(), "torus", unit="mm",
+                            unit_note="", what="STEP file").surfaces[0]
+    torus = replace(torus, trim=None, mesh_uv=None)  # the whole torus: its domain
+    if inward:  # u reversed: the same surface, its normal the other way
+        (u0, u1), _ = torus.domain
+        torus = replace(torus, knots_u=(u0 + u1) - torus.knots_u[::-1], points=torus.points[::-1],
+                        weights=torus.weights[::-1])
+    # The own normal at a point against the way out of the tube there (S − C, C on the centre circle): one case each.
+    u, v = np.linspace(*torus.domain[0], 7)[1:-1], np.linspace(*torus.domain[1], 7)[1:-1]
+    uu, vv = (x.ravel() for x in np.meshgrid(u, v))
+    S = torus.evaluate(uu, vv).S
+    centre = 5.8 * S[:, :2] / np.linalg.norm(S[:, :2], axis=1, keepdims=True)
+    out = np.einsum("ij,ij->i", torus.normals(uu, vv), S - np.column_stack([centre, np.zeros(len(S))]))
+    assert np.all(out > 0) or np.all(out < 0)
+    scene = resolve(load_scene(SCENES / "hood.toml").replace(
+        image={"width": 160, "height": 90}, camera={"eye": [0.0, -16.0, 12.0], "look_at": [0.0, 0.0, 0.0]},
+        render={"mode": "curvature", "quantity": "k2", "range": [-1.0, 0.0], "bands": 5}, surfaces=[torus]))
+    renderer = Renderer(scene)
+    result = renderer.render(threads=1)
+    seen = (result.aov("patch") >= 0) & (result.film.channel("A") == 1.0)
+    assert seen.sum() > 1000
+    assert np.allclose(result.aov("k2")[seen], -1.0 / 1.27, atol=1e-6)  # the closed form: κ2 = −1/r
+    rgb = np.stack([result.film.channel(c) for c in "RGB"], axis=-1)[seen]
+    region = renderer.mode.colors(np.array([-1.0 / 1.27]))[0]
+    assert np.mean(np.abs(rgb - region).max(axis=1) < 1e-3) > 0.99
+    assert validate_scene(scene, threads=1, renderer=renderer).passed

@@ -220,9 +220,8 @@ class PixelAOVs:
     # colour the line share is read against: the share L this may move, (H, W) (`map_bend`); None for one colour.
     map_bend: np.ndarray | None = None
     # The knot span (u, v) of each pixel's hit as one key, (H, W) (`knot_spans`), between the knot lines where f (or
-    # φ) is not C¹: every knot for a curvature map (φ of second derivatives), those where the normal is not C¹ for
-    # the others (`normal_breaks`). φ creases or jumps across such a line, so pixels in different spans are no smooth
-    # pair (`_smooth_pairs`). None: no knot line counts.
+    # φ) creases or jumps: every knot for a curvature map (φ of second derivatives), the surface's creases for the
+    # others (`normal_breaks`). Pixels in different spans are no smooth pair (`_smooth_pairs`). None: no line counts.
     span: np.ndarray | None = None
 
 
@@ -306,23 +305,45 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
     )
 
 
-def normal_breaks(surface) -> tuple[np.ndarray, np.ndarray]:
-    """A patch's domain ends and the knots inside it where its unit normal is not C¹, in u and in v: multiplicity
-    m ≥ p − 1 (the normal is C^(p − 1 − m) there, P&T section 2.5), so neither are f and the other modes' φ of it.
+#: A knot line is a crease (`normal_breaks`) where the normals either side of it differ by more than this angle
+#: (radians) at one of `CREASE_SAMPLES` points along it: far above the rounding of a G1 join (a rational circle's
+#: arcs, 1e-9), far below a modelled crease.
+CREASE_ANGLE = 1e-6
+CREASE_SAMPLES = 9
 
-    At m = p the normal may jump (a crease): f jumps, and the cubic through four pixels (`_crossing`) across it finds
-    a line where none is drawn. OCCT's data/iges/PRO20359-L1.igs, a degree-5 face whose v knots 1 and 2 (m = 5) turn
-    the normal by up to 7° each side of a sliver 0.018 wide: the pairs across the sliver counted as smooth, and the
-    analytic lines squeezed into it as 345 misses at 320×180."""
+
+def normal_breaks(surface) -> tuple[np.ndarray, np.ndarray]:
+    """A patch's domain ends and its creases, in u and in v: the knot lines inside the domain where the normal jumps
+    (multiplicity m ≥ p, so the surface is only C⁰ there, and its normals either side differ by more than
+    `CREASE_ANGLE`; a rational circle's arcs meet at double knots with one normal).
+
+    f, and the other modes' φ of the normal, jump there too, and the cubic through four pixels (`_crossing`) across
+    a crease finds a line where none is drawn. OCCT's data/iges/PRO20359-L2.igs, a degree-5 face whose v knots 1 and
+    2 (m = 5) turn the normal by up to 7° either side of a sliver 0.018 wide: pairs across the sliver counted as
+    smooth, 31 misses and 5 colour mismatches at 320×180."""
     (u0, u1), (v0, v1) = surface.domain
-    lines_u, lines_v = surface.knot_lines(1)
-    return np.concatenate([[u0], lines_u, [u1]]), np.concatenate([[v0], lines_v, [v1]])
+    lines_u, lines_v = surface.knot_lines()
+    out = []
+    for lines, along, lo, hi, other in ((lines_u, 0, u0, u1, (v0, v1)), (lines_v, 1, v0, v1, (u0, u1))):
+        creases = []
+        across = np.linspace(*other, CREASE_SAMPLES + 2)[1:-1]
+        for knot in lines:
+            step = 1e-9 * (hi - lo)
+            sides = []
+            for at in (knot - step, knot + step):
+                at = np.full(CREASE_SAMPLES, at)
+                sides.append(surface.normals(at, across) if along == 0 else surface.normals(across, at))
+            cosine = np.clip(np.einsum("ij,ij->i", *sides), -1.0, 1.0)
+            if np.any(np.arccos(cosine) > CREASE_ANGLE):
+                creases.append(knot)
+        out.append(np.concatenate([[lo], creases, [hi]]))
+    return out[0], out[1]
 
 
 def knot_spans(renderer: Renderer, film: Film, breaks=lambda surface: surface.span_breaks()) -> np.ndarray:
     """(H, W) key of each pixel's knot span: (span of u, span of v) as one integer, unique within its patch (pairs
     compare the patch too, `_smooth_pairs`), −1 off the surface. ``breaks``: a patch's span limits (all its knots;
-    `normal_breaks` for a field of the normal alone).
+    its creases, `normal_breaks`, for a field of the normal alone).
 
     Curvature is C^(p − 2 − m) across a knot of multiplicity m: C⁰ (a crease) on a bicubic's simple knots, a jump
     where a knot is doubled. The cubic through four pixels (`_crossing`) across such a knot line put the traced
@@ -384,7 +405,7 @@ def mode_aovs(renderer: Renderer, film: Film, aovs: PixelAOVs) -> PixelAOVs:
         # its edge φ leaves the level without crossing it, no line the pixels can trace (the sweep's kink.step, κ1 ≡ 0
         # where the face bends one way: the analytic contour runs along that edge).
         region = np.zeros(size, dtype=bool)
-        lined = ~np.asarray(renderer.mode.constant_faces)[points.patch]
+        lined = renderer.mode.lined_at(points)
         region[hit] = lined & np.isfinite(phi.ravel()[hit]) & (stripes.level_id < 0)
         span = np.where(span >= 0, 2 * span + region.reshape(height, width), span)
     return replace(aovs, f=phi, line_id=line_id.reshape(height, width),

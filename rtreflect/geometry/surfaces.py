@@ -224,15 +224,14 @@ class NurbsSurface:
         ku, kv = self.knots_u, self.knots_v
         return np.unique(ku[(ku >= u0) & (ku <= u1)]), np.unique(kv[(kv >= v0) & (kv <= v1)])
 
-    def knot_lines(self, below_degree: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """Knot values strictly inside the domain repeated at least (degree − ``below_degree``) times, in u and in v.
-        The unit normal is C^(p − 1 − m) across a knot of multiplicity m (P&T section 2.5): with 0 the lines where it
-        may jump (a crease), with 1 also those where it is only C⁰."""
+    def knot_lines(self) -> tuple[np.ndarray, np.ndarray]:
+        """Knot values strictly inside the domain repeated at least the degree's times, in u and in v: the surface is
+        only C⁰ there (P&T section 2.5), and its normal may jump (a crease)."""
         (u0, u1), (v0, v1) = self.domain
         out = []
         for knots, degree, lo, hi in ((self.knots_u, self.degree_u, u0, u1), (self.knots_v, self.degree_v, v0, v1)):
             values, counts = np.unique(knots[(knots > lo) & (knots < hi)], return_counts=True)
-            out.append(values[counts >= degree - below_degree])
+            out.append(values[counts >= degree])
         return out[0], out[1]
 
     def evaluate(self, u: np.ndarray, v: np.ndarray, order: int = 1) -> SurfaceDerivatives:

@@ -57,9 +57,14 @@ def _side(lo: float, hi: float, breaks: np.ndarray) -> np.ndarray:
 
 def constant_faces(surfaces, phi: Callable[[SurfacePoints], np.ndarray], half_width: float,
                    floor: float = 0.0) -> np.ndarray:
-    """Per face of a `SurfaceSet`: True where φ (``phi`` of `SurfacePoints`) is constant over it (module doc): varies
-    by at most `CONSTANT_SHARE` of ``half_width``, or by at most ``floor`` (the map's rounding of a φ that is 0).
+    """Per face of a `SurfaceSet`, (P, 2): True where φ (``phi`` of `SurfacePoints`) is constant over it (module doc),
+    seen from the side its own normal points to (column 0) and from the other (column 1): varies by at most
+    `CONSTANT_SHARE` of ``half_width``, or by at most ``floor`` (the map's rounding of a φ that is 0).
 
+    The sides differ where φ depends on the normal's sign beyond a sign of its own: κ2 on a torus is its tube's
+    curvature −1/r all over seen from outside, and −κ1 seen from inside (OCCT's data/step/trj4_k1_geo-tc-214.stp, a
+    key's ring whose own normals point inside, seen from outside: κ2 ≡ −0.3937 lay on a level and the face was
+    taken for one whose κ2 varies).
     Points where φ is NaN (a degenerate normal at a pole) are passed over; a face with none left is not constant.
     """
     patch, u, v = [], [], []
@@ -71,23 +76,24 @@ def constant_faces(surfaces, phi: Callable[[SurfacePoints], np.ndarray], half_wi
         u.append(uu.ravel())
         v.append(vv.ravel())
     faces = len(surfaces.patches)
-    lo, hi = np.full(faces, np.inf), np.full(faces, -np.inf)
-    count = np.zeros(faces, dtype=np.int64)
+    lo, hi = np.full((2, faces), np.inf), np.full((2, faces), -np.inf)
+    count = np.zeros((2, faces), dtype=np.int64)
     if faces == 0:
-        return np.zeros(0, dtype=bool)
+        return np.zeros((0, 2), dtype=bool)
     patch, u, v = np.concatenate(patch), np.concatenate(u), np.concatenate(v)
     for start in range(0, len(patch), CHUNK):
         rows = slice(start, start + CHUNK)
         pk, pu, pv = patch[rows], u[rows], v[rows]
         derivs = surfaces.evaluate(pk, pu, pv)
         n = surfaces.normals(pk, pu, pv, derivs)
-        values = phi(SurfacePoints(derivs.S, n, np.zeros_like(n), pk, pu, pv))
-        known = ~np.isnan(values)
-        np.minimum.at(lo, pk[known], values[known])
-        np.maximum.at(hi, pk[known], values[known])
-        count += np.bincount(pk[known], minlength=faces)
+        for side, normal in enumerate((n, -n)):
+            values = phi(SurfacePoints(derivs.S, normal, np.zeros_like(n), pk, pu, pv))
+            known = ~np.isnan(values)
+            np.minimum.at(lo[side], pk[known], values[known])
+            np.maximum.at(hi[side], pk[known], values[known])
+            count[side] += np.bincount(pk[known], minlength=faces)
     with np.errstate(invalid="ignore"):  # inf − inf: a radius of curvature infinite all over (a plane), lo == hi
-        return (count > 0) & ((hi == lo) | (hi - lo <= max(CONSTANT_SHARE * half_width, floor)))
+        return ((count > 0) & ((hi == lo) | (hi - lo <= max(CONSTANT_SHARE * half_width, floor)))).T
 
 
 class FaceRegions:
@@ -100,12 +106,29 @@ class FaceRegions:
         return 0.0
 
     @cached_property
-    def constant_faces(self) -> np.ndarray:
-        """Per face: φ constant over it, a region where no line is drawn (a plane in a Gaussian map or facing the
-        isophotes' light, a 0° wall in a draft map)."""
+    def constant_sides(self) -> np.ndarray:
+        """Per face (P, 2): φ constant over it seen from its own normal's side, from the other (`constant_faces`): a
+        region where no line is drawn (a plane in a Gaussian map or facing the isophotes' light, a 0° wall in a draft
+        map, a torus's tube curvature in a κ2 map seen from outside)."""
         if len(self.levels) == 0:
-            return np.zeros(len(self.surfaces.patches), dtype=bool)
+            return np.zeros((len(self.surfaces.patches), 2), dtype=bool)
         return constant_faces(self.surfaces, self.phi, self.half_width, self.region_floor)
 
+    @property
+    def constant_faces(self) -> np.ndarray:
+        """Per face: φ constant over it from either side (a region wherever it is seen)."""
+        return self.constant_sides.all(axis=1)
+
+    def lined_at(self, p: SurfacePoints) -> np.ndarray:
+        """Per point: its face draws lines where it is seen from (not a region: `constant_sides`, the side its
+        facing normal ``p.n`` is on)."""
+        sides = self.constant_sides[p.patch]
+        constant = sides[:, 0].copy()
+        one = np.flatnonzero(sides[:, 0] != sides[:, 1])  # a face constant from one side only: which side is seen
+        if len(one):
+            own = self.surfaces.normals(p.patch[one], p.u[one], p.v[one])
+            constant[one] = np.where(np.einsum("ij,ij->i", own, p.n[one]) >= 0, sides[one, 0], sides[one, 1])
+        return ~constant
+
     def stripes(self, p: SurfacePoints) -> Stripes:
-        return even_stripes(self.phi(p), self.levels, self.half_width, ~self.constant_faces[p.patch], self.region_floor)
+        return even_stripes(self.phi(p), self.levels, self.half_width, self.lined_at(p), self.region_floor)
