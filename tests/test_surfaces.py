@@ -500,3 +500,29 @@ def test_knot_multiplicities_are_accepted_exactly_where_rhino_accepts_them(degre
     problem = knot_vector_problem(knots, degree, n_ctrl)
     assert (problem is None) == rh.IsValid, (knots, problem)
     assert (problem is None) == all(m <= degree for m in multiplicities)
+
+
+def test_creases_are_the_knot_lines_where_the_normal_jumps():
+    """A full circle as four rational quadratic arcs joined at double knots (C⁰ in its parameter, one tangent: a
+    cylinder's arcs meet with one normal) has no crease; a roof, degree 1 across its ridge, has one there, at the
+    ridge's knot, and none along it. A reader's triangulation of a face with a crease is not used (`reader_mesh`):
+    nothing puts its vertices on the crease."""
+    from rtreflect.geometry.tessellation import reader_mesh
+
+    w = math.sqrt(0.5)
+    ring = np.array([[1, 0], [1, 1], [0, 1], [-1, 1], [-1, 0], [-1, -1], [0, -1], [1, -1], [1, 0]], dtype=float)
+    weights_u = np.array([1, w, 1, w, 1, w, 1, w, 1])
+    points = np.array([[[x, y, z] for z in (0.0, 1.0)] for x, y in ring])
+    knots_u = np.array([0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1])
+    cylinder = NurbsSurface(2, 1, knots_u, np.array([0, 0, 1, 1.0]), points, np.repeat(weights_u[:, None], 2, axis=1))
+    assert [len(c) for c in cylinder.creases] == [0, 0]
+    roof_points = np.array([[[x, y, 0.3 * (x == 0)] for y in (0.0, 1.0)] for x in (-1.0, 0.0, 1.0)])
+    roof = NurbsSurface(1, 1, np.array([0, 0, 0.5, 1, 1.0]), np.array([0, 0, 1, 1.0]), roof_points, np.ones((3, 2)))
+    creases_u, creases_v = roof.creases
+    assert creases_u.tolist() == [0.5] and len(creases_v) == 0
+    mesh = (np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]), np.array([[0, 1, 2], [0, 2, 3]]))
+    assert reader_mesh(NurbsSurface(1, 1, roof.knots_u, roof.knots_v, roof.points, roof.weights, mesh_uv=mesh)) is None
+    flat = roof_points.copy()
+    flat[1, :, 2] = 0.0  # no ridge: the same knots, one plane
+    kept = reader_mesh(NurbsSurface(1, 1, roof.knots_u, roof.knots_v, flat, roof.weights, mesh_uv=mesh))
+    assert kept is not None and len(kept[1]) == 2

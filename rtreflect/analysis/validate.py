@@ -305,39 +305,17 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
     )
 
 
-#: A knot line is a crease (`normal_breaks`) where the normals either side of it differ by more than this angle
-#: (radians) at one of `CREASE_SAMPLES` points along it: far above the rounding of a G1 join (a rational circle's
-#: arcs, 1e-9), far below a modelled crease.
-CREASE_ANGLE = 1e-6
-CREASE_SAMPLES = 9
-
-
 def normal_breaks(surface) -> tuple[np.ndarray, np.ndarray]:
-    """A patch's domain ends and its creases, in u and in v: the knot lines inside the domain where the normal jumps
-    (multiplicity m ≥ p, so the surface is only C⁰ there, and its normals either side differ by more than
-    `CREASE_ANGLE`; a rational circle's arcs meet at double knots with one normal).
+    """A patch's domain ends and its creases (`NurbsSurface.creases`: knot lines where the normal jumps), in u and
+    in v.
 
     f, and the other modes' φ of the normal, jump there too, and the cubic through four pixels (`_crossing`) across
     a crease finds a line where none is drawn. OCCT's data/iges/PRO20359-L2.igs, a degree-5 face whose v knots 1 and
     2 (m = 5) turn the normal by up to 7° either side of a sliver 0.018 wide: pairs across the sliver counted as
     smooth, 31 misses and 5 colour mismatches at 320×180."""
     (u0, u1), (v0, v1) = surface.domain
-    lines_u, lines_v = surface.knot_lines()
-    out = []
-    for lines, along, lo, hi, other in ((lines_u, 0, u0, u1, (v0, v1)), (lines_v, 1, v0, v1, (u0, u1))):
-        creases = []
-        across = np.linspace(*other, CREASE_SAMPLES + 2)[1:-1]
-        for knot in lines:
-            step = 1e-9 * (hi - lo)
-            sides = []
-            for at in (knot - step, knot + step):
-                at = np.full(CREASE_SAMPLES, at)
-                sides.append(surface.normals(at, across) if along == 0 else surface.normals(across, at))
-            cosine = np.clip(np.einsum("ij,ij->i", *sides), -1.0, 1.0)
-            if np.any(np.arccos(cosine) > CREASE_ANGLE):
-                creases.append(knot)
-        out.append(np.concatenate([[lo], creases, [hi]]))
-    return out[0], out[1]
+    creases_u, creases_v = surface.creases
+    return np.concatenate([[u0], creases_u, [u1]]), np.concatenate([[v0], creases_v, [v1]])
 
 
 def knot_spans(renderer: Renderer, film: Film, breaks=lambda surface: surface.span_breaks()) -> np.ndarray:
@@ -399,7 +377,7 @@ def mode_aovs(renderer: Renderer, film: Film, aovs: PixelAOVs) -> PixelAOVs:
         bend = None
     phi = film.channel("phi").astype(np.float64)
     curvature = renderer.mode.name == "curvature"
-    span = knot_spans(renderer, film) if curvature else knot_spans(renderer, film, normal_breaks)
+    span = knot_spans(renderer, film) if curvature else aovs.span  # the others': film_aovs's, by the creases
     if curvature and len(renderer.mode.levels):
         # A region inside a face (φ at a level to rounding, no stripe: `modes.regions`) is a piece of its own: along
         # its edge φ leaves the level without crossing it, no line the pixels can trace (the sweep's kink.step, κ1 ≡ 0

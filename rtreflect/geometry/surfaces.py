@@ -34,6 +34,12 @@ DEGENERATE_SINE = 1e-10
 #: used instead is off by about x: the bound balances the two (√ε, times √(reach/size) far from the origin).
 #: Also unchanged by rescaling u or v.
 VANISHING_PARTIAL = 1e-8
+#: A knot line is a crease (`NurbsSurface.creases`) where the normals either side of it differ by more than this angle
+#: (radians) at one of `CREASE_SAMPLES` points along it, each `CREASE_STEP` of the domain off the knot: far above the
+#: rounding of a G1 join (a rational circle's arcs, ~1e-9), far below a modelled crease.
+CREASE_ANGLE = 1e-6
+CREASE_SAMPLES = 9
+CREASE_STEP = 1e-9
 #: A patch is closed in u (v) where its edges u = u₀ and u = u₁ (v₀, v₁) coincide to this fraction of its reach: a
 #: periodic face's seam, whose two sides' control rows agree to float64 rounding (~1e-15 of the reach) when Open
 #: CASCADE made it, but only to the exporter's tolerance from other CAD systems (pythonocc-demos' surf114.igs, an
@@ -224,14 +230,27 @@ class NurbsSurface:
         ku, kv = self.knots_u, self.knots_v
         return np.unique(ku[(ku >= u0) & (ku <= u1)]), np.unique(kv[(kv >= v0) & (kv <= v1)])
 
-    def knot_lines(self) -> tuple[np.ndarray, np.ndarray]:
-        """Knot values strictly inside the domain repeated at least the degree's times, in u and in v: the surface is
-        only C⁰ there (P&T section 2.5), and its normal may jump (a crease)."""
+    @cached_property
+    def creases(self) -> tuple[np.ndarray, np.ndarray]:
+        """The knot lines inside the domain where the normal jumps, in u and in v: knots repeated at least the degree's
+        times (the surface is only C⁰ there, P&T section 2.5) whose normals either side differ by more than
+        `CREASE_ANGLE` at one of `CREASE_SAMPLES` points along the line (a rational circle's arcs meet at double knots
+        with one normal: no crease)."""
         (u0, u1), (v0, v1) = self.domain
         out = []
-        for knots, degree, lo, hi in ((self.knots_u, self.degree_u, u0, u1), (self.knots_v, self.degree_v, v0, v1)):
+        for knots, degree, lo, hi, other, along in ((self.knots_u, self.degree_u, u0, u1, (v0, v1), 0),
+                                                    (self.knots_v, self.degree_v, v0, v1, (u0, u1), 1)):
             values, counts = np.unique(knots[(knots > lo) & (knots < hi)], return_counts=True)
-            out.append(values[counts >= degree])
+            across = np.linspace(*other, CREASE_SAMPLES + 2)[1:-1]
+            creases = []
+            for knot in values[counts >= degree]:
+                sides = []
+                for at in (knot - CREASE_STEP * (hi - lo), knot + CREASE_STEP * (hi - lo)):
+                    at = np.full(CREASE_SAMPLES, at)
+                    sides.append(self.normals(at, across) if along == 0 else self.normals(across, at))
+                if np.any(np.arccos(np.clip(np.einsum("ij,ij->i", *sides), -1.0, 1.0)) > CREASE_ANGLE):
+                    creases.append(knot)
+            out.append(np.array(creases, dtype=np.float64))
         return out[0], out[1]
 
     def evaluate(self, u: np.ndarray, v: np.ndarray, order: int = 1) -> SurfaceDerivatives:
