@@ -298,13 +298,29 @@ def test_step_assembly_of_external_parts_names_them(tmp_path):
     """A STEP assembly whose parts lie in other files (CAx-IF external references: OCCT's data/step/trj4_xr1-tc-214.stp)
     transfers no face: the error names the part files."""
     text = MESH_ONLY_STEP.replace("#11=TESSELLATED_SHELL('',(#12),$);", "#11=EXTERNAL_SOURCE('bracket.stp');\n"
-                                  "#30=EXTERNAL_SOURCE('nut.stp');\n#31=EXTERNAL_SOURCE('bracket.stp');")
+                                  "#30=EXTERNAL_SOURCE(IDENTIFIER('nut.stp'));\n#31=EXTERNAL_SOURCE('bracket.stp');\n"
+                                  "#32=EXTERNAL_SOURCE('CATIA');\n#33=EXTERNAL_SOURCE('/NULL');\n"
+                                  "#34=DOCUMENT_FILE('','','bolt_prt.stp','BOLT',#33);")
     text = text.replace("#10=TESSELLATED_SHAPE_REPRESENTATION('',(#11),#20);", "#10=SHAPE_REPRESENTATION('',(),#20);")
     path = tmp_path / "assembly.step"
     path.write_text(text.replace("#12=TRIANGULATED_FACE('',#13,4,((0.,0.,1.)),$,(1,2,3,4),((1,2,3),(1,3,4)));\n", ""))
     code, output, _ = run("render", path, "-o", tmp_path / "out", *TINY)
     line = assert_bad_input(code, output, str(path), tmp_path / "out")
-    assert "an assembly whose parts lie in other files (bracket.stp, nut.stp)" in line
+    assert "an assembly whose parts lie in other files (bracket.stp, nut.stp, bolt_prt.stp)" in line
+
+
+def test_step_of_curves_naming_its_cad_system_is_no_assembly(tmp_path):
+    """An EXTERNAL_SOURCE that names no part file (a font, the CAD system: OCCT's data/step/tr9_asd-db.stp, its
+    12 edges' text in CATIA's font) makes no assembly of a file of curves."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.gp import gp_Pnt
+
+    path = _write_step(BRepBuilderAPI_MakeEdge(gp_Pnt(0, 0, 0), gp_Pnt(1, 2, 3)).Edge(), tmp_path / "curve.step")
+    text = path.read_text().replace("ENDSEC;\nEND-ISO", "#9999=EXTERNAL_SOURCE(IDENTIFIER('CATIA'));\nENDSEC;\nEND-ISO")
+    assert "#9999" in text
+    path.write_text(text)
+    code, output, _ = run("render", path, "-o", tmp_path / "out", *TINY)
+    assert "only curves or points" in assert_bad_input(code, output, str(path), tmp_path / "out")
 
 
 def test_3dm_with_only_curves_points_and_meshes_says_so(tmp_path):

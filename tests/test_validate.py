@@ -575,8 +575,8 @@ def test_a_crease_with_a_sliver_beside_it_is_no_line_of_its_own():
     middle span 0.006 wide and rising 0.01, so the normal turns by ~60° across it (OCCT's data/iges/PRO20359-L2.igs:
     a degree-5 face's v knots, multiplicity 5, turn it by up to 7° about a sliver 0.018 wide). The pixels either side
     of the sliver hit different spans of f; pairs across it counted as smooth, and their cubic put traced centres
-    2.99 px from any analytic line (a false FAIL). Pairs across a knot where the normal is not C¹ are no smooth pair
-    (`normal_breaks`): validate passes, with the lines either side compared."""
+    2.99 px from any analytic line (a false FAIL). Pairs across a crease (a knot line where the normal jumps:
+    `NurbsSurface.creases`, `normal_breaks`) are no smooth pair: validate passes, with the lines either side compared."""
     from rtreflect.analysis.validate import validate_scene
     from rtreflect.geometry.surfaces import NurbsSurface
 

@@ -15,6 +15,8 @@ from .occt import CadModel
 CAD_SUFFIXES = {".step": "STEP", ".stp": "STEP", ".igs": "IGES", ".iges": "IGES", ".3dm": "3DM"}
 #: Bytes read to recognise a format: a STEP header or the first 80-column IGES line fit easily.
 SNIFF_BYTES = 4096
+#: Bytes read to look past comments before a STEP file's header (a licence block).
+COMMENT_BYTES = 1 << 20
 #: IGES: every line is 80 columns, column 73 the section letter; the first section is Start (S),
 #: or C for the compressed form.
 IGES_LINE = 80
@@ -69,6 +71,9 @@ def read_cad(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
         raise SceneError(path, "", f"cannot read geometry file ({exc})") from None
     if not head:
         raise SceneError(path, "", f"empty file: {ARTICLES[expected]} file was expected")
+    if head.removeprefix(b"\xef\xbb\xbf").lstrip().startswith(b"/*"):  # a comment before a STEP header: read past it
+        with open(path, "rb") as stream:
+            head = stream.read(COMMENT_BYTES)
     found = sniff(head)
     if found is None:
         raise SceneError(path, "", f"not {ARTICLES[expected]} file: its content is not in that format "

@@ -1051,7 +1051,8 @@ def converted_faces(originals: list, shape, key_prefix: str) -> tuple[list, list
 def _divided_converted(original, key_prefix: str) -> list | None:
     """A closed face the conversion refuses, cut in two across each closed direction (``ShapeUpgrade_ShapeDivideClosed``)
     and each piece converted: [(piece, its edges' key maker)], or None where that fails too. The pieces share the
-    edges they were cut along (keys of the divided face's edges).
+    edges they were cut along (keys of the divided face's edges); their other edges have keys of their own, as a face
+    kept unconverted has (`converted_faces`): no seam with the neighbouring faces is checked there.
 
     A face spanning a whole period from an offset may span it by a rounding more: OCCT's data/step/trj4_k1_geo-tu-214.stp
     (CAx-IF, a key's ring), face 37, a torus over v 1.7766..8.0597, 2π and one unit in the last place, which

@@ -38,11 +38,16 @@ def read_step(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMo
     return read_faces(path, shape, name, unit=READ_UNIT, unit_note=note, what="STEP file", skip_bad_faces=skip_bad_faces)
 
 
+#: The entities of a STEP assembly that name its parts' files (the CAx-IF's external references), and such a name.
+_REFERENCE = re.compile(r"(?:EXTERNAL_SOURCE|DOCUMENT_FILE)\s*\(([^;]*)", re.IGNORECASE)
+_PART_FILE = re.compile(r"'([^']*\.(?:stp|step|p21|stpz))'", re.IGNORECASE)
+
+
 def external_parts(path: Path) -> list[str]:
-    """The files a STEP assembly names for its parts (EXTERNAL_SOURCE entities: the CAx-IF's external references),
-    in order of first mention, or none."""
+    """The STEP files an assembly names for its parts (EXTERNAL_SOURCE, also as IDENTIFIER('...'), and DOCUMENT_FILE
+    entities), in order of first mention, or none. Other names there (a font, the CAD system, '/NULL') are no part."""
     text = Path(path).read_bytes().decode("latin-1")
-    return list(dict.fromkeys(re.findall(r"EXTERNAL_SOURCE\s*\(\s*'([^']*)'", text, flags=re.IGNORECASE)))
+    return list(dict.fromkeys(name for entity in _REFERENCE.finditer(text) for name in _PART_FILE.findall(entity[1])))
 
 
 def transfer(path: Path) -> tuple[object, dict]:

@@ -13,7 +13,8 @@ renderer's stripes (`base.even_stripes`) and the analytic contours (`analysis.co
 
 A face is constant where φ, sampled on a grid over its whole domain (the centres of `CONSTANT_GRID` cells a
 side and every knot span's midpoint, at most `CONSTANT_MAX_SIDE` a side: interior points, as a pole on a
-domain edge leaves the curvatures there to rounding) with its own normals, varies by
+domain edge leaves the curvatures there to rounding), seen from each side in turn (its own normals, then turned:
+κ1 and κ2 trade places with the normal's sign), varies by
 at most `CONSTANT_SHARE` of a line's half width: its whole visible part lies within a stripe then,
 or outside every one, never crossed by a level with room for a line.
 
@@ -114,9 +115,11 @@ class FaceRegions:
             return np.zeros((len(self.surfaces.patches), 2), dtype=bool)
         return constant_faces(self.surfaces, self.phi, self.half_width, self.region_floor)
 
-    @property
+    @cached_property
     def constant_faces(self) -> np.ndarray:
-        """Per face: φ constant over it from either side (a region wherever it is seen)."""
+        """Per face: φ constant over it from both sides (a region wherever it is seen). The analytic contours skip
+        these faces; on a face constant from the side seen only, φ on their grid is that constant, and no level
+        crosses it (within Newton's tolerance of a level it is snapped onto it, `contours._snapped`: no crossing)."""
         return self.constant_sides.all(axis=1)
 
     def lined_at(self, p: SurfacePoints) -> np.ndarray:

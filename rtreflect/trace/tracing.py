@@ -1287,14 +1287,22 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     reach = _rim_reach(band[pn], allowance, skip)
     ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3) & (t3 < kept[rays] - slack)
     # A ray with several faces refined (a corner): its nearest valid hit wins.
-    pick = np.flatnonzero(ok3)
-    pick = pick[np.lexsort((t3[pick], rays[pick]))]
+    won, pick = _keep_nearest(rays, ok3, pn, u3, v3, t3, d3, status, pk, ur, vr, tr, derivs, aside)
+    return won, won[predicted[pick]]
+
+
+def _keep_nearest(rays, ok, pn, u, v, t, derivatives, status, pk, ur, vr, tr, derivs, aside):
+    """Of refinements on other faces (rows: ray ``rays[i]`` on face ``pn[i]``, (u, v), t and derivatives), the
+    nearest valid one (``ok``) per ray stored as its candidate, VALID and ``aside`` (found beside its mesh hit), in
+    place. Returns the rays that took one and the rows taken."""
+    pick = np.flatnonzero(ok)
+    pick = pick[np.lexsort((t[pick], rays[pick]))]
     pick = pick[np.r_[True, rays[pick][1:] != rays[pick][:-1]]] if len(pick) else pick
     won = rays[pick]
-    _store(won, pick, pn, u3, v3, t3, d3, pk, ur, vr, tr, derivs)
+    _store(won, pick, pn, u, v, t, derivatives, pk, ur, vr, tr, derivs)
     status[won] = VALID
     aside[won] = True
-    return won, won[predicted[pick]]
+    return won, pick
 
 
 def _coplanar_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
@@ -1323,7 +1331,7 @@ def _coplanar_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndar
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
     # B's net in A's plane: its points' distances (along A's normal) within the rounding and both deviations.
     nets = [np.asarray(surfaces.patches[k].points, dtype=np.float64).reshape(-1, 3) for k in range(faces)]
-    sizes = np.array([len(x) for x in nets])
+    sizes = np.array([len(x) for x in nets], dtype=np.int64)
     a, b = pairs[:, 0], pairs[:, 1]
     point = np.concatenate([nets[k] for k in b]) if len(b) else np.zeros((0, 3))
     owner = np.repeat(np.arange(len(pairs)), sizes[b])
@@ -1378,14 +1386,7 @@ def _coplanar_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D,
                              tessellation.extent)
     t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
     ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3)
-    pick = np.flatnonzero(ok3)
-    pick = pick[np.lexsort((t3[pick], rays[pick]))]
-    pick = pick[np.r_[True, rays[pick][1:] != rays[pick][:-1]]] if len(pick) else pick
-    won = rays[pick]
-    _store(won, pick, pn, u3, v3, t3, d3, pk, ur, vr, tr, derivs)
-    status[won] = VALID
-    aside[won] = True
-    return won
+    return _keep_nearest(rays, ok3, pn, u3, v3, t3, d3, status, pk, ur, vr, tr, derivs, aside)[0]
 
 
 def _may_win_on_plane(tessellation: Tessellation, surfaces: SurfaceSet, pn, O, D, tm, tr, reach, slack) -> np.ndarray:
