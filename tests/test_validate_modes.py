@@ -508,3 +508,28 @@ def test_a_face_whose_map_is_constant_from_the_side_seen_is_a_region_whichever_w
     region = renderer.mode.colors(np.array([-1.0 / 1.27]))[0]
     assert np.mean(np.abs(rgb - region).max(axis=1) < 1e-3) > 0.99
     assert validate_scene(scene, threads=1, renderer=renderer).passed
+
+
+def test_highlight_lines_skip_a_wall_whose_normals_lie_along_the_light_plane():
+    """Highlight lines with the light plane z = 3: a wall y = 0.5 whose net leans 1e-13 (a converted plane's
+    rounding) has normal lines parallel to the light plane, meeting it nowhere, and the renderer draws no band there
+    (the skew-line distance). φ is NaN there (`TubeLights.normal_line_f`): it was the rounding times the distance,
+    noise across the part's size, and the analytic lines drawn across the wall were misses (OCCT's
+    data/step/bug32596_abc_0_13.step: 42 at 320×180). No analytic point lies on the wall; validate passes."""
+    from dataclasses import replace
+
+    from rtreflect.geometry.surfaces import NurbsSurface
+
+    scene = load_scene(SCENES / "hood.toml")
+    hood = scene.surfaces[0]
+    lean = 1e-13
+    wall = NurbsSurface.bezier(np.array([[[-1.0, 0.5, 0.0], [-1.0, 0.5 + lean, 1.2]],
+                                         [[1.0, 0.5, 0.0], [1.0, 0.5 + lean, 1.2]]]), name="wall")
+    scene = resolve(replace(scene, surfaces=(hood, wall)).replace(image={"width": 320, "height": 180},
+                                                                   render={"mode": "highlight"}))
+    renderer = Renderer(scene)
+    report = validate_scene(scene, threads=1, renderer=renderer)
+    on_wall = sum(len(p.uv) for line in report.contours.lines for p in line.polylines if p.patch == 1)
+    assert on_wall == 0
+    assert report.passed, report.reasons
+    assert sum(line.points for line in report.lines) > 200  # the hood's lines are compared

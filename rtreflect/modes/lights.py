@@ -43,6 +43,11 @@ def reflect_rays(directions: np.ndarray, rows: np.ndarray, n: np.ndarray, s: np.
     return out
 
 
+#: |m·n| at or below which a normal line counts as parallel to the light plane (`TubeLights.normal_line_f`): it would
+#: cross it more than 10⁹ times its distance away, and a unit normal's rounding (~1e-13 on a converted plane) would
+#: decide where.
+PARALLEL_COS = 1e-9
+
 @dataclass(frozen=True)
 class TubeDistances:
     """Per point and tube (N, K): skew-line distance d, ray parameter t of closest approach, and reach."""
@@ -122,11 +127,16 @@ class TubeLights:
 
     def normal_line_f(self, R: np.ndarray, n: np.ndarray) -> np.ndarray:
         """The highlight's field (Beier and Chen): the e-coordinate where the normal line R + λn, λ of either sign,
-        meets the light plane; NaN where n is parallel to it."""
+        meets the light plane; NaN where n is parallel to it, to `PARALLEL_COS`.
+
+        On a face whose normals lie in the light plane's direction to rounding, λ n carries that rounding times a
+        distance over it: φ was noise of the part's size, and `validate`'s analytic lines crossed the face where the
+        renderer's stripes (the skew-line distance, `reach`) rightly draw none (OCCT's data/step/bug32596_abc_0_13.step,
+        a wall at |m·n| 1.3e-13 under lights straight above: 42 misses at 320×180)."""
         lam = self.plane_t(R, n)  # either sign: the whole normal line
         with np.errstate(invalid="ignore"):
             f = _dot(R + lam[:, None] * n - self.Q, self.e)
-        return np.where(np.isfinite(lam), f, np.nan)
+        return np.where(np.isfinite(lam) & (np.abs(_dot(n, self.m)) > PARALLEL_COS), f, np.nan)
 
     def ulmet_f(self, R: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Ulmet's function, general form of paper eq. (5): the e-coordinate where the reflected ray meets the light plane.
