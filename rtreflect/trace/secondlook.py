@@ -288,10 +288,8 @@ def isolated(shell_mesh: Tessellation, reach: float) -> np.ndarray:
     longest mesh edge (where its own shell far from the hit may lie in it, `SecondLook._elsewhere_on_face`).
     A `flat` face has no shell: its box (its mesh's, where its hits lie) counts as its own, not as another's.
     """
-    faces = int(shell_mesh.vertex_patch.max(initial=-1)) + 1
-    lo, hi = np.full((faces, 3), np.inf), np.full((faces, 3), -np.inf)
-    np.minimum.at(lo, shell_mesh.vertex_patch, shell_mesh.vertices)
-    np.maximum.at(hi, shell_mesh.vertex_patch, shell_mesh.vertices)
+    lo, hi = shell_mesh.patch_bounds(shell_mesh.vertices)
+    faces = len(lo)
     shelled = np.bincount(shell_mesh.face_patch, minlength=faces) > 0
     alone = np.ones(faces, dtype=bool)
     for first in range(0, faces, ISOLATION_CHUNK):  # faces × faces box tests, in bounded memory

@@ -1317,9 +1317,7 @@ def _coplanar_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndar
     faces = len(surfaces.patches)
     centre, normal, deviation, planar = _net_planes(tessellation, surfaces)
     skip = float32_rounding(tessellation)
-    lo, hi = np.full((faces, 3), np.inf), np.full((faces, 3), -np.inf)
-    np.minimum.at(lo, tessellation.vertex_patch, tessellation.vertices)
-    np.maximum.at(hi, tessellation.vertex_patch, tessellation.vertices)
+    lo, hi = tessellation.patch_bounds(tessellation.vertices, faces)
     flat = np.flatnonzero(planar & np.isfinite(lo).all(axis=1))
     pairs = []
     for first in range(0, len(flat), COPLANAR_CHUNK):  # box overlaps, a block of faces × all planar faces at a time
