@@ -4,7 +4,7 @@
 
 Per scene (default: the teapot): a small warm-up render (kernels compiled or loaded), then, back to
 back, the scene's default render and its analytic contours (`contours.field_of`, as `--overlay` and
-`validate` compute them), each the best of ``--repeat``, and the ratio contours/render (goal: ≤ 0.6);
+`validate` compute them), each the best of ``--repeat``, and the ratio contours/render (issue 14 goal 4: under 1);
 then `--overlay`'s drawing of them (`overlay.coverage`) and (contours + drawing)/render.
 Also the contour point count, so a speed-up that drops points shows. A shared machine makes seconds
 noisy: read the ratio.

@@ -45,6 +45,9 @@ LOOP_GRID = 17
 PROBE = 33
 #: ... narrowed at most this many times (each round ~10× for a close-up: a window 10⁻⁸ of the domain).
 ZOOM_ROUNDS = 8
+#: Times the grid's cells next to a blow-up of f are halved (`_refined_at_blowups`): one recovered every level of
+#: xr1-tu-rod.stp at 160×90 to 640×360, and adds 6 % to the teapot's grid (more halvings: 12 %, 16 %, ...).
+BLOWUP_ROUNDS = 1
 #: Seed rays across the image's larger side (`UlmetField.seed_uv`): a close-up's face shows between probe points.
 SEED_RAYS = 64
 MIN_GRID = 16
@@ -61,6 +64,8 @@ IMAGE_MARGIN_PX = 8.0
 #: Bisection steps that locate where a contour is cut (visibility, tube end): 2^-10 of a ≤ 1 px segment.
 BISECTION_STEPS = 10
 NEWTON_STEPS = 8
+#: Steps of the bracketed search along a grid edge (`UlmetField.bracket`), where Newton fails from contourpy's vertex.
+BRACKET_STEPS = 60
 #: Newton is done when |f − c_k| is below this fraction of the tube spacing (or of 1 when there is one tube).
 NEWTON_TOLERANCE = 1e-11
 #: A surface point is hidden from the eye by a hit this fraction of the part's size (bounding-box diagonal) or more
@@ -231,6 +236,43 @@ class UlmetField:
         ok &= np.hypot((u - start_u) / (u1 - u0), (v - start_v) / (v1 - v0)) <= max_move
         return u, v, ok
 
+    def bracket(self, patch: np.ndarray, edge: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """f(u, v) = c on the grid edges ``edge`` ((n, 6): the ends (u, v) and f there, on either side of c) by the
+        Illinois method (regula falsi that halves a stuck end's value): returns u, v, converged.
+
+        Where Newton along ∇f fails from contourpy's interpolated crossing: f far from linear within the cell
+        (near a blow-up, f ~ 1/d, Newton's step from half a cell out lands where t ≤ 0), the bracket still closes.
+        """
+        ua, va, ub, vb, fa, fb = (edge[:, i].copy() for i in range(6))
+        ra, rb = fa - c, fb - c
+        tolerance = NEWTON_TOLERANCE * self.newton_scale()
+        s_a, s_b = np.zeros(len(c)), np.ones(len(c))
+        s = np.full(len(c), 0.5)
+        ok = np.zeros(len(c), dtype=bool)
+        active = np.flatnonzero(np.isfinite(ra) & np.isfinite(rb) & (ra * rb <= 0))
+        for _ in range(BRACKET_STEPS):
+            if len(active) == 0:
+                break
+            a, b = s_a[active], s_b[active]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = np.where(rb[active] != ra[active], a - ra[active] * (b - a) / (rb[active] - ra[active]), 0.5 * (a + b))
+            t = np.where(np.isfinite(t) & (t > np.minimum(a, b)) & (t < np.maximum(a, b)), t, 0.5 * (a + b))
+            s[active] = t
+            r = self.f(patch[active], ua[active] + t * (ub[active] - ua[active]),
+                       va[active] + t * (vb[active] - va[active])) - c[active]
+            done = np.abs(r) <= tolerance
+            ok[active[done]] = True
+            # Keep the bracket: the new point replaces the end whose residual has its sign; the other end's residual
+            # is halved when it stays (Illinois), so the bracket shrinks from both sides.
+            same_a = np.sign(r) == np.sign(ra[active])
+            rows_a, rows_b = active[same_a & ~done], active[~same_a & ~done]
+            s_a[rows_a], ra[rows_a] = t[same_a & ~done], r[same_a & ~done]
+            rb[rows_a] *= 0.5
+            s_b[rows_b], rb[rows_b] = t[~same_a & ~done], r[~same_a & ~done]
+            ra[rows_b] *= 0.5
+            active = active[~done & np.isfinite(r)]
+        return ua + s * (ub - ua), va + s * (vb - va), ok
+
     # -- where a contour is seen --------------------------------------------------------------
     def project(self, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Image positions (n, 2) and depth along the view direction of S(u, v)."""
@@ -372,6 +414,8 @@ class _Chains:
     v: np.ndarray
     chain: np.ndarray
     ok: np.ndarray  # vertex polished onto its level set
+    # Per vertex contourpy put on a grid edge: the edge's ends (u, v) and f there, (n, 6) (`_grid_edges`); NaN else.
+    edge: np.ndarray | None = None
 
     def segments(self) -> np.ndarray:
         """Index i of segments (i, i + 1) within one chain."""
@@ -383,6 +427,8 @@ class _Chains:
         self.v = np.insert(self.v, at, v)
         self.chain = np.insert(self.chain, at, self.chain[after])
         self.ok = np.insert(self.ok, at, ok)
+        if self.edge is not None:  # a midpoint lies on no grid edge
+            self.edge = np.insert(self.edge, at, np.nan, axis=0)
 
 
 def _seam_split(field: UlmetField, k: int) -> list[tuple[float, float, float, float]]:
@@ -483,7 +529,7 @@ def _grid_window(field: UlmetField, k: int, window: tuple[float, float, float, f
 def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float]:
     """contourpy's level sets f = c_j on patch k's grid, as chains, with each chain's tube index."""
     (u0, u1), (v0, v1) = field.surfaces.patches[k].domain
-    lines_u, lines_v, chain_light, cell = [], [], [], 0.0
+    lines_u, lines_v, chain_light, edges, cell = [], [], [], [], 0.0
     for side in _seam_split(field, k):  # one grid per side of a seam the image shows both sides of
         (wu0, wu1, wv0, wv1), n_u, n_v = _grid_window(field, k, side)
         # The knots are grid lines too: f is only as smooth as the surface across a knot, and a cell straddling one
@@ -493,7 +539,7 @@ def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float
         breaks_u, breaks_v = field.surfaces.patches[k].span_breaks()
         us = np.union1d(np.linspace(wu0, wu1, n_u), breaks_u[(breaks_u > wu0) & (breaks_u < wu1)])
         vs = np.union1d(np.linspace(wv0, wv1, n_v), breaks_v[(breaks_v > wv0) & (breaks_v < wv1)])
-        f = field.f_grid(k, us, vs)
+        us, vs, f = _refined_at_blowups(field, k, us, vs, field.f_grid(k, us, vs))
         generator = contourpy.contour_generator(vs, us, f, line_type="Separate", corner_mask=True)
         finite = f[np.isfinite(f)]
         lo, hi = (finite.min(), finite.max()) if finite.size else (np.inf, -np.inf)
@@ -518,10 +564,12 @@ def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float
                     lines_v.append(line[:, 0])
                     lines_u.append(line[:, 1])
                     chain_light.append(j)
+                    edges.append(_grid_edges(us, vs, f, line[:, 1], line[:, 0]))
         for line_u, line_v, j in _small_loops(field, k, us, vs, f):
             lines_u.append(line_u)
             lines_v.append(line_v)
             chain_light.append(j)
+            edges.append(np.full((len(line_u), 6), np.nan))
         # In the domain's unit square, like `UlmetField.polish`: the coarser side's, where there are two.
         cell = max(cell, math.hypot((wu1 - wu0) / (u1 - u0) / (n_u - 1), (wv1 - wv0) / (v1 - v0) / (n_v - 1)))
     if not lines_u:
@@ -529,8 +577,24 @@ def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float
         return _Chains(empty, empty, np.zeros(0, int), np.zeros(0, bool)), np.zeros(0, int), 0.0
     lengths = [len(a) for a in lines_u]
     chains = _Chains(np.concatenate(lines_u), np.concatenate(lines_v), np.repeat(np.arange(len(lengths)), lengths),
-                     np.ones(sum(lengths), dtype=bool))
+                     np.ones(sum(lengths), dtype=bool), np.concatenate(edges))
     return chains, np.asarray(chain_light), cell
+
+
+def _grid_edges(us: np.ndarray, vs: np.ndarray, f: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Per contourpy vertex (u, v) on a grid line strictly between two grid points, the grid edge it lies on: its
+    ends (u, v) and f there, (n, 6); NaN for a vertex on no grid edge (at a grid point, or on a masked cell's
+    diagonal). contourpy interpolates along an edge, so a vertex there has the grid line's coordinate in its bits."""
+    out = np.full((len(u), 6), np.nan)
+    i = np.clip(np.searchsorted(us, u), 0, len(us) - 1)
+    j = np.clip(np.searchsorted(vs, v), 0, len(vs) - 1)
+    on_u, on_v = us[i] == u, vs[j] == v
+    along_v = np.flatnonzero(on_u & ~on_v & (j > 0))  # on the line u = us[i], between vs[j − 1] and vs[j]
+    along_u = np.flatnonzero(on_v & ~on_u & (i > 0))
+    for rows, a, b in ((along_v, (i[along_v], j[along_v] - 1), (i[along_v], j[along_v])),
+                       (along_u, (i[along_u] - 1, j[along_u]), (i[along_u], j[along_u]))):
+        out[rows] = np.column_stack([us[a[0]], vs[a[1]], us[b[0]], vs[b[1]], f[a], f[b]])
+    return out
 
 
 def _snapped(f: np.ndarray, level: float, tolerance: float) -> np.ndarray | None:
@@ -567,6 +631,63 @@ def _unwrapped(f: np.ndarray, level: float, period: float) -> np.ndarray:
         return np.where(np.abs(shifted - level) <= 3.0 / 8.0 * period, shifted, np.nan)
 
 
+def _levels_beyond(levels: np.ndarray, f0: np.ndarray, sign: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """How many of the (sorted) ``levels`` lie beyond the grid value f₀ within ``reach`` of it, the way f heads:
+    f₀ < c ≤ f₀ + reach upwards (sign +1), f₀ − reach ≤ c < f₀ downwards (sign −1)."""
+    return (np.searchsorted(levels, np.where(sign > 0, f0 + reach, f0), side="right")
+            - np.searchsorted(levels, np.where(sign > 0, f0, f0 - reach), side="left") - np.isin(f0, levels))
+
+
+def _blowup_edges(levels: np.ndarray, f: np.ndarray, axis: int) -> np.ndarray:
+    """Per edge of the grid along ``axis`` ((n − 1, m) for n values along it), whether it runs from a finite value
+    into NaN (t ≤ 0) with a level beyond the finite value in the direction f heads there (from its other neighbour).
+
+    As the reflected ray turns parallel to the light plane t → ∞ and f → ±∞, so each such level is crossed in the cell
+    that the NaN corner masks: contourpy draws none of them.
+    """
+    a = np.moveaxis(f, axis, 0)
+    finite = np.isfinite(a)
+    edges = np.zeros((len(a) - 1,) + a.shape[1:], dtype=bool)
+    centre = np.nan_to_num(a[1:-1])
+    # The finite end at i + 1 with NaN at i + 2 (heading on from i), or with NaN at i (heading on from i + 2).
+    for end, before, edge in ((finite[1:-1] & finite[:-2] & ~finite[2:], a[:-2], edges[1:]),
+                              (finite[1:-1] & finite[2:] & ~finite[:-2], a[2:], edges[:-1])):
+        heading = np.where(end, np.sign(centre - np.nan_to_num(before)), 0.0)
+        edge |= (heading != 0) & (_levels_beyond(levels, centre, heading, np.inf) > 0)
+    return edges
+
+
+def _refined_at_blowups(field: UlmetField, k: int, us: np.ndarray, vs: np.ndarray,
+                        f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Patch k's grid (us × vs, values f) with grid lines added where levels crowd into a masked cell unseen.
+
+    Where f runs off to ±∞ (`_blowup_edges`) the levels beyond the last finite grid value lie in the masked cell,
+    a band of lines along its NaN side, which converge on the side where f's numerator changes sign: the tip of a
+    sharp V in the image (OCCT's xr1-tu-rod.stp, a rod 200 × 10: each reflection line's V lay in such a band by the
+    rod's side, its analytic contour up to 15 px short of the traced one, at every image size). The grid intervals
+    with such an edge are halved and f evaluated on the new lines, `BLOWUP_ROUNDS` times: f ~ 1/d there, so each
+    halving doubles the last finite value and brings the levels up to it into unmasked cells.
+    """
+    levels = np.sort(field.levels)
+    for _ in range(BLOWUP_ROUNDS):
+        new = []
+        for axis, grid in enumerate((us, vs)):
+            split = _blowup_edges(levels, f, axis).any(axis=1)
+            new.append(0.5 * (grid[:-1] + grid[1:])[split])
+        new_u, new_v = new
+        if len(new_u) == 0 and len(new_v) == 0:
+            break
+        if len(new_u):
+            order = np.argsort(np.concatenate([us, new_u]), kind="stable")
+            us = np.concatenate([us, new_u])[order]
+            f = np.concatenate([f, field.f_grid(k, new_u, vs)], axis=0)[order]
+        if len(new_v):
+            order = np.argsort(np.concatenate([vs, new_v]), kind="stable")
+            vs = np.concatenate([vs, new_v])[order]
+            f = np.concatenate([f, field.f_grid(k, us, new_v)], axis=1)[:, order]
+    return us, vs, f
+
+
 def _small_loops(field: UlmetField, k: int, us: np.ndarray, vs: np.ndarray,
                  f: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, int]]:
     """Level sets f = c_j closing round an extremum of f that no grid point lies inside: (u, v) chains and their j.
@@ -594,12 +715,8 @@ def _small_loops(field: UlmetField, k: int, us: np.ndarray, vs: np.ndarray,
         overshoot = sum((f[i + di, j + dj] - f[i - di, j - dj]) ** 2
                         / (8.0 * np.abs(f[i + di, j + dj] - 2.0 * f0 + f[i - di, j - dj])) for di, dj in ((1, 0), (0, 1)))
     reach = np.nan_to_num(2.0 * overshoot, nan=0.0, posinf=0.0)
-    levels = np.sort(field.levels)
-    # Levels beyond f₀ towards the extremum, within reach: f₀ < c ≤ f₀ + reach at a peak, f₀ − reach ≤ c < f₀ at a pit.
-    beyond = (np.searchsorted(levels, np.where(sign > 0, f0 + reach, f0), side="right")
-              - np.searchsorted(levels, np.where(sign > 0, f0, f0 - reach), side="left"))
-    beyond -= np.isin(f0, levels)  # f₀ on a level: contourpy has that one
-    keep = np.flatnonzero(beyond > 0)
+    # Levels beyond f₀ towards the extremum, within reach (f₀ on a level: contourpy has that one).
+    keep = np.flatnonzero(_levels_beyond(np.sort(field.levels), f0, sign, reach) > 0)
     if len(keep) == 0:
         return []
     i, j, f0, sign = i[keep], j[keep], f0[keep], sign[keep]
@@ -691,6 +808,12 @@ def _classify(field: UlmetField, k: int) -> _Classified | None:
     every = np.arange(len(chains.u))
     pk = np.full(len(chains.u), k)
     chains.u, chains.v, chains.ok = field.polish(pk, chains.u, chains.v, c_of(every), np.full(len(pk), cell))
+    # Where Newton failed from a vertex on a grid edge, the search along that edge, whose ends bracket c.
+    failed = np.flatnonzero(~chains.ok & np.isfinite(chains.edge[:, 0]))
+    if len(failed):
+        u, v, ok = field.bracket(pk[failed], chains.edge[failed], c_of(failed))
+        rows = failed[ok]
+        chains.u[rows], chains.v[rows], chains.ok[rows] = u[ok], v[ok], True
 
     # Subdivide until every segment is short and straight in the image.
     px, depth = field.project(np.full(len(chains.u), k), chains.u, chains.v)
