@@ -187,6 +187,65 @@ def test_a_face_resting_in_another_faces_plane_does_not_hide_it_past_its_trim():
                      t_a[rows], tessellation.extent)
 
 
+def test_a_face_in_another_faces_plane_is_not_hidden_by_a_neighbour_across_the_trim_edge():
+    """F, trimmed to x ≤ 0.5 of its square domain, lies in the plane of A (a plate's top, z = 0), its mesh a hair
+    above A's; N leaves F's trim edge downwards. Past F's edge the ray meets F's mesh (its cells overhang the trim),
+    Newton leaves F's trim there and the restart across the edge takes N's crossing, behind A's: A's triangle at the
+    same distance was passed (OCCT's data/step/bug33569.stp: two faces in one plane, the kept hit 2.05 behind,
+    one pixel at 160×90; here every one of the 90 rays kept N's). Every ray must keep A's plane z = 0 (the closed form)."""
+    from rtreflect.geometry.surfaces import SurfaceSet
+    from rtreflect.geometry.tessellation import tessellate
+    from rtreflect.trace.accelerator import Accelerator
+    from rtreflect.trace.tracing import trace
+
+    a = plane_patch([-2.0, -2.0, 0.0], [5.0, 0.0, 0.0], [0.0, 5.0, 0.0], name="A")
+    f = replace(plane_patch([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], name="F"),
+                trim=Trim(np.array([[0.0, 0.0], [0.5, 0.0], [0.5, 1.0], [0.0, 1.0]])))
+    n = plane_patch([0.5, 0.0, 0.0], [0.5, 0.0, -0.005], [0.0, 1.0, 0.0], name="N")  # within the restart's reach
+    tessellation = tessellate([a, f, n], 2)
+    vertices = tessellation.vertices.copy()
+    vertices[tessellation.vertex_patch == 1, 2] = 1e-6  # F's mesh: in A's plane, a hair nearer the eye
+    tessellation = replace(tessellation, vertices=vertices)
+    x, y = np.meshgrid(np.linspace(0.505, 0.55, 10), np.linspace(0.1, 0.9, 9))
+    origins = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)])
+    directions = np.tile([0.0, 0.0, -1.0], (len(origins), 1))
+    assert np.all(tessellation.face_patch[Accelerator(tessellation).intersect(origins, directions).prim] == 1)
+    hits = trace(Accelerator(tessellation), tessellation, SurfaceSet([a, f, n]), origins, directions)
+    t_a, _ = plane_hits(a, origins, directions)
+    assert_same_hits(hits, np.zeros(len(origins), dtype=int), t_a, tessellation.extent)
+
+
+def test_a_reader_triangulation_that_leaves_part_of_its_face_out_is_not_used():
+    """A trimmed plane (the square [0.1, 0.9]² of its domain) whose reader triangulation (a 4 × 4 grid of the trim)
+    misses the cell [0.3, 0.5]²: rays there passed through the face (OCCT's data/step/trj10_b2-oc-214.stp: BRepMesh left
+    a region 3 × 3.5 of a 16 × 13 planar face out, 11 pixels at 320×180 kept faces up to 67 behind). Such a
+    triangulation's boundary edges run across the face, not along its trim: the span grid meshes the face instead
+    (`tessellation.reader_mesh`), and every ray hits the plane (the closed form). A whole one is used as it is."""
+    from rtreflect.geometry.surfaces import SurfaceSet
+    from rtreflect.geometry.tessellation import grid_faces, reader_mesh, tessellate
+    from rtreflect.trace.accelerator import Accelerator
+    from rtreflect.trace.tracing import trace
+
+    g = np.linspace(0.1, 0.9, 5)
+    nodes = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    triangles = grid_faces(5, 5)
+    corner = np.isin(nodes, g[1:3]).all(axis=1)  # the corners of the cell [0.3, 0.5]²
+    middle = corner[triangles].all(axis=1)
+    assert middle.sum() == 2
+    square = Trim(np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9]]))
+    plane = replace(plane_patch([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], name="F"), trim=square)
+    whole = replace(plane, mesh_uv=(nodes, triangles))
+    torn = replace(plane, mesh_uv=(nodes, triangles[~middle]))
+    assert reader_mesh(whole) is not None and reader_mesh(torn) is None
+    tessellation = tessellate([torn], 2)
+    x, y = np.meshgrid(np.linspace(0.32, 0.48, 9), np.linspace(0.32, 0.48, 9))
+    origins = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)])
+    directions = np.tile([0.0, 0.0, -1.0], (len(origins), 1))
+    hits = trace(Accelerator(tessellation), tessellation, SurfaceSet([torn]), origins, directions)
+    t, _ = plane_hits(plane, origins, directions)
+    assert_same_hits(hits, np.zeros(len(origins), dtype=int), t, tessellation.extent)
+
+
 def test_hit_replaced_across_the_rim_is_no_longer_a_crossing_hit(monkeypatch):
     """`_candidates`' ``crossed`` (the kept hit is `_crossing_on_face`'s, which `trace` lets win only nearer by float32
     rounding) must describe the hit it returns: where `_rim_neighbours` replaced that hit by another face's, the row is

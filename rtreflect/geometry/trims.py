@@ -101,6 +101,13 @@ class Trim:
         with GEOS_LOCK:
             return shapely.intersects_xy(self._polygon, u, v)
 
+    def boundary_distance(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Per point (u, v) (in the loops' period), its distance in (u, v) to the nearest of the face's loops."""
+        import shapely
+
+        with GEOS_LOCK:
+            return shapely.distance(self._polygon.boundary, shapely.points(np.column_stack([u, v])))
+
     def overlaps(self, polygons: np.ndarray) -> np.ndarray:
         """Per shapely polygon (in the loops' period), whether it meets the face: boundary contact counts."""
         import shapely

@@ -1359,11 +1359,14 @@ def _coplanar_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D,
     went on to the plate's bottom face 20 below, 5 pixels at 320×180). `_rim_neighbours` finds such a face only
     across a shared edge; a part resting on another shares none. Newton on the plane converges from the middle of
     its domain; its crossing must lie within the face's reach of the mesh hit (`_rim_reach`), as the skipped
-    triangle's does.
+    triangle's does. Likewise where the candidate went across an edge to a neighbour (`_candidates`' seam restarts):
+    a coplanar face's crossing nearer than the neighbour's hit (by float32 rounding) replaces it (OCCT's
+    data/step/bug33569.stp: two faces in one plane; the ray met one's skirt and went on to its neighbour, 2.05
+    behind the other face's crossing, one pixel at 160×90).
     """
     partners = _coplanar_faces(tessellation, surfaces)
     face = tessellation.face_patch[prim]
-    rays = np.flatnonzero((status != VALID) & (partners[face, 0] >= 0))
+    rays = np.flatnonzero(((status != VALID) | (pk != face)) & (partners[face, 0] >= 0))
     if len(rays) == 0:
         return rays
     row, col = np.nonzero(partners[face[rays]] >= 0)
@@ -1384,6 +1387,7 @@ def _coplanar_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D,
                              tessellation.extent)
     t3 = np.einsum("ij,ij->i", d3.S - O[rays], D[rays])
     ok3 &= (t3 > 0) & (np.abs(t3 - tm[rays]) <= reach) & surfaces.on_face(pn, u3, v3)
+    ok3 &= (status[rays] != VALID) | (t3 < tr[rays] - FLOAT32_SLACK * tessellation.extent)
     return _keep_nearest(rays, ok3, pn, u3, v3, t3, d3, status, pk, ur, vr, tr, derivs, aside)[0]
 
 
