@@ -589,6 +589,36 @@ def test_real_degenerate_face_is_named_and_skippable(tmp_path):
     assert (outdir / "degenerate.png").is_file()
 
 
+def test_a_face_whose_loop_encloses_nothing_is_left_out_with_a_note(tmp_path):
+    """A box (faces 0–5) and a planar face whose loop runs out along an arc and back (face 6): its region is no area
+    (`Trim.roundness` 0; OCCT's data/step/trj6_b1-ec-214.stp has two at 1.1e-6, on patches reaching 45× the part's
+    size inside their domains, and its default view was a dot). Such a face once stopped the read as a bad face; it
+    is left out, the summary says so, and the box renders, framed by the box alone."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.GC import GC_MakeArcOfCircle
+    from OCP.TopoDS import TopoDS, TopoDS_Compound
+    from OCP.gp import gp_Pln, gp_Pnt
+
+    arc = GC_MakeArcOfCircle(gp_Pnt(0, 0, 0), gp_Pnt(5, 2, 0), gp_Pnt(10, 0, 0)).Value()
+    there, back = BRepBuilderAPI_MakeEdge(arc).Edge(), TopoDS.Edge(BRepBuilderAPI_MakeEdge(arc).Edge().Reversed())
+    sliver = BRepBuilderAPI_MakeFace(gp_Pln(), BRepBuilderAPI_MakeWire(there, back).Wire(), True).Face()
+    compound, builder = TopoDS_Compound(), BRep_Builder()
+    builder.MakeCompound(compound)
+    builder.Add(compound, BRepPrimAPI_MakeBox(gp_Pnt(0, 5, 0), 10, 10, 10).Shape())
+    builder.Add(compound, sliver)
+    path = _write_step(compound, tmp_path / "sliver.step")
+    model = occt.read_faces(path, compound, "sliver", unit="mm", unit_note="", what="STEP file")
+    assert len(model.surfaces) == 6 and model.faces == 7 and not model.skipped
+    assert model.notes == ["left out 1 face enclosing no area (each loop runs out along a curve and back): 6"]
+    outdir = tmp_path / "out"
+    code, output, _ = run("render", path, "-o", outdir, *TINY)
+    assert code == 0, output
+    assert "6 faces" in output and "left out 1 face enclosing no area" in output
+    assert (outdir / "sliver.png").is_file()
+
+
 def test_batch_skip_bad_faces_lists_them(tmp_path, monkeypatch):
     """batch --skip-bad-faces renders a part with a failing face and lists the face it left out."""
     original = occt.bspline_of_face

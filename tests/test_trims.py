@@ -278,3 +278,20 @@ def test_geos_is_asked_about_a_face_from_two_threads_at_once_without_a_crash():
     trim = alone["new_face"]()
     expected = sorted({int(trim.contains(alone["u"], alone["v"]).sum()), int(trim.overlaps(alone["triangles"]).sum())})
     assert done.stdout.strip() == str(expected)
+
+
+def test_roundness_is_the_isoperimetric_ratio_in_the_domains_unit_square():
+    """4πA/P² of the trim in its domain's unit square: 1 for a circle (a 4096-gon: to 1e-6), π/4 for a square, whatever
+    the domain's scale, 4πw/(2(1 + w))² for a strip w × 1; a loop out along an arc and back encloses nothing."""
+    angle = np.linspace(0.0, 2.0 * np.pi, 4096, endpoint=False)
+    circle = Trim(np.column_stack([0.5 + 0.5 * np.cos(angle), 0.5 + 0.5 * np.sin(angle)]))
+    assert circle.roundness(((0.0, 1.0), (0.0, 1.0))) == pytest.approx(1.0, abs=1e-6)
+    square = Trim(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]))
+    assert square.roundness(((0.0, 1.0), (0.0, 1.0))) == pytest.approx(np.pi / 4)
+    stretched = Trim(np.array([[0.0, 0.0], [1000.0, 0.0], [1000.0, 1e-3], [0.0, 1e-3]]))
+    assert stretched.roundness(((0.0, 1000.0), (0.0, 1e-3))) == pytest.approx(np.pi / 4)  # the unit square again
+    strip = Trim(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1e-3], [0.0, 1e-3]]))
+    assert strip.roundness(((0.0, 1.0), (0.0, 1.0))) == pytest.approx(4 * np.pi * 1e-3 / (2 * 1.001) ** 2)
+    arc = np.column_stack([np.linspace(0.0, 1.0, 50), 0.5 * np.sin(np.linspace(0.0, np.pi, 50))])
+    there_and_back = Trim(np.concatenate([arc, arc[-2:0:-1]]))
+    assert there_and_back.roundness(((0.0, 1.0), (0.0, 1.0))) < 1e-12

@@ -224,7 +224,7 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
         model_read.skipped = sorted(failed + _renumber(model_read.skipped, [f for f, _ in failed]))
         model_read.warnings = _renumber(model_read.warnings, [f for f, _ in failed])
         model_read.faces = index
-    model_read.notes = placed.notes()
+    model_read.notes = model_read.notes + placed.notes()
     return model_read
 
 

@@ -101,6 +101,17 @@ class Trim:
         with GEOS_LOCK:
             return shapely.intersects_xy(self._polygon, u, v)
 
+    def roundness(self, domain) -> float:
+        """4πA/P² of the face's region in its domain's unit square ((u − u0)/(u1 − u0), (v − v0)/(v1 − v0)): 1 for a
+        disc, about 0.8 for a square, the strip's width over its length times π for a long strip; 0 where the loops
+        enclose nothing (a loop that runs out along a curve and back)."""
+        import shapely
+
+        (u0, u1), (v0, v1) = domain
+        unit = shapely.affinity.affine_transform(self._polygon, [1.0 / (u1 - u0), 0.0, 0.0, 1.0 / (v1 - v0),
+                                                                 -u0 / (u1 - u0), -v0 / (v1 - v0)])
+        return 4.0 * np.pi * unit.area / unit.length ** 2 if unit.length > 0 else 0.0
+
     def boundary_distance(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Per point (u, v) (in the loops' period), its distance in (u, v) to the nearest of the face's loops."""
         import shapely
