@@ -448,3 +448,25 @@ def test_a_ray_leaving_a_bowl_just_below_its_rim_stops_there(tessellation, eye, 
         expected = np.where(on & (t < expected), t, expected)
     assert np.array_equal(hits.hit, np.isfinite(expected)) and not hits.fallback.any()
     assert np.abs(hits.t[hits.hit] - expected[hits.hit]).max() < 1e-6
+
+
+def test_the_finer_mesh_splits_only_faces_coarser_than_its_own_level():
+    """`fine_factors`: each face's coarse chord error δ (∝ segments⁻²) is brought down to the finer mesh's level,
+    max δ / 16, by the fewest whole multiples of the segments up to 4: δ = max → 4, max/3 → ⌈√(16/3)⌉ = 3, max/8 → 2,
+    max/16 and below (a plane's 0) → 1. On a scene of a curved patch and a plane beside it, the plane's finer mesh is
+    its coarse mesh, and the patch's is 4 × 4 times as many triangles."""
+    from rtreflect.trace.secondlook import fine_factors
+
+    grid = NurbsSurface.bezier(np.array([[[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]]))
+    chord = np.array([2.0, 2.0 / 3.0, 2.0 / 8.0, 2.0 / 16.0, 0.0])
+    assert fine_factors([grid] * 5, chord, 4).tolist() == [4, 3, 2, 1, 1]
+    scene = load_scene(Path(__file__).resolve().parent.parent / "scenes" / "hood.toml")
+    curved = scene.surfaces[0]
+    plane = NurbsSurface.bezier(np.array([[[-1.0, -1.0, -0.5], [-1.0, 1.0, -0.5]], [[1.0, -1.0, -0.5], [1.0, 1.0, -0.5]]]))
+    renderer = Renderer(replace(scene, surfaces=(curved, plane)))
+    coarse = renderer.tessellation
+    fine, _ = renderer.second_look.fine()
+    assert coarse.chord_error[1] == 0.0 < coarse.chord_error[0]
+    per_face = lambda t: np.bincount(t.face_patch, minlength=2)  # noqa: E731
+    assert per_face(fine)[1] == per_face(coarse)[1]
+    assert per_face(fine)[0] == 16 * per_face(coarse)[0]
