@@ -80,6 +80,14 @@ BAD_FILES = {
     "step_content.igs": (lambda: (PARTS / "filleted_block.step").read_bytes(), "the extension says IGES but the content is STEP"),
     "iges_content.3dm": (lambda: (PARTS / "filleted_block.igs").read_bytes(), "the content is IGES"),
     "rhino_content.STEP": (lambda: (PARTS / "trimmed.3dm").read_bytes(), "the content is Rhino .3dm"),
+    # Given as a scene, under an extension that is no CAD format's: the content says what it is.
+    "step_content.txt": (lambda: (PARTS / "filleted_block.step").read_bytes(),
+                         "holds a STEP file, but its extension is not a CAD file's: rename it to .step or .stp"),
+    "rhino_content.dat": (lambda: (PARTS / "trimmed.3dm").read_bytes(), "holds a Rhino .3dm file"),
+    "iges_content": (lambda: (PARTS / "filleted_block.igs").read_bytes(), "holds an IGES file"),
+    # Open CASCADE's own BRep text (OCCT's data/step/OCC889.rle): no scene, no CAD format rtreflect reads.
+    "part.brep": (lambda: b"DBRep_DrawableShape\n\nCASCADE Topology V1, (c) Matra-Datavision\n",
+                  "TOML syntax error: Expected '=' after a key in a key/value pair (rtreflect reads TOML scenes"),
 }
 
 

@@ -71,10 +71,7 @@ def read_cad(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
         raise SceneError(path, "", f"cannot read geometry file ({exc})") from None
     if not head:
         raise SceneError(path, "", f"empty file: {ARTICLES[expected]} file was expected")
-    if head.removeprefix(b"\xef\xbb\xbf").lstrip().startswith(b"/*"):  # a comment before a STEP header: read past it
-        with open(path, "rb") as stream:
-            head = stream.read(COMMENT_BYTES)
-    found = sniff(head)
+    found = sniff(_past_comments(path, head))
     if found is None:
         raise SceneError(path, "", f"not {ARTICLES[expected]} file: its content is not in that format "
                                    "(corrupt, binary garbage, or another kind of file)")
@@ -92,6 +89,25 @@ def read_cad(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
     from .rhino import read_3dm
 
     return read_3dm(path, name, skip_bad_faces)
+
+
+def _past_comments(path: Path, head: bytes) -> bytes:
+    """A file's first bytes, read on past comments where it starts with one (a STEP file's licence block)."""
+    if head.removeprefix(b"\xef\xbb\xbf").lstrip().startswith(b"/*"):
+        with open(path, "rb") as stream:
+            return stream.read(COMMENT_BYTES)
+    return head
+
+
+def misnamed_cad_file(path: Path) -> str | None:
+    """The CAD format (`sniff`) of a file whose extension names no CAD format, or None (not one, or unreadable: the
+    scene reader says why)."""
+    try:
+        with open(path, "rb") as stream:
+            head = stream.read(SNIFF_BYTES)
+        return sniff(_past_comments(path, head))
+    except (OSError, ValueError):
+        return None
 
 
 def read_part(path: Path, name: str = "", skip_bad_faces: bool = False) -> tuple[list, list[str], bool]:

@@ -947,14 +947,17 @@ def load_scene(path: str | Path, skip_bad_faces: bool = False) -> Scene:
         raise SceneError(path, "", "is a folder, not a scene file: render every scene in it with "
                                    f"`rtreflect batch {quote(str(path))[1:-1]}`")
     text = read_text(path, "scene file")
+    # A file not named .toml that is no TOML either is most likely no scene at all (an Open CASCADE .brep, a mesh).
+    kinds = "" if path.suffix.lower() == ".toml" else \
+        " (rtreflect reads TOML scenes, .toml, and STEP, IGES and Rhino .3dm files)"
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         # tomllib puts the position at the end ("... (at line 3, column 7)"); lead with it instead.
         where = re.fullmatch(r"(.*) \((at line \d+, column \d+|at end of document)\)", str(exc), re.S)
         if where:
-            raise SceneError(path, where[2].removeprefix("at "), f"TOML syntax error: {where[1]}") from None
-        raise SceneError(path, "", f"TOML syntax error: {exc}") from None
+            raise SceneError(path, where[2].removeprefix("at "), f"TOML syntax error: {where[1]}{kinds}") from None
+        raise SceneError(path, "", f"TOML syntax error: {exc}{kinds}") from None
     except RecursionError:  # tomllib reads nested arrays and inline tables recursively
         raise SceneError(path, "", "TOML syntax error: arrays or inline tables nested too deeply to read") from None
     except ValueError as exc:
