@@ -597,6 +597,36 @@ def test_real_degenerate_face_is_named_and_skippable(tmp_path):
     assert (outdir / "degenerate.png").is_file()
 
 
+def test_a_piece_of_a_face_read_in_pieces_that_fails_is_named(tmp_path, monkeypatch):
+    """The whole-turn torus face of `test_a_closed_face_the_conversion_refuses_is_read_in_pieces`, its third piece
+    failing: the error names face 0 and that piece, [0.2] of 4, as the surviving pieces' names do; with
+    --skip-bad-faces the other three are read and the skipped one is listed so."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_ToroidalSurface
+    from OCP.gp import gp_Ax3
+
+    from rtreflect.errors import SceneError
+
+    face = BRepBuilderAPI_MakeFace(Geom_ToroidalSurface(gp_Ax3(), 5.8, 1.27), 4.71238898038469, 10.995574287564276,
+                                   1.776554749823208, 8.059740057002795, 1e-7).Face()
+    original, calls = occt.bspline_of_face, {"n": 0}
+
+    def third_fails(piece):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise occt.FaceError("its surface cannot be converted (test)")
+        return original(piece)
+
+    monkeypatch.setattr(occt, "bspline_of_face", third_fails)
+    with pytest.raises(SceneError, match=r"face 0: its piece \[0\.2\] of 4: its surface cannot be converted \(test\)"):
+        occt.read_faces(tmp_path / "torus.step", face, "torus", unit="mm", unit_note="", what="STEP file")
+    calls["n"] = 0
+    model = occt.read_faces(tmp_path / "torus.step", face, "torus", unit="mm", unit_note="", what="STEP file",
+                            skip_bad_faces=True)
+    assert [s.name for s in model.surfaces] == ["torus[0.0]", "torus[0.1]", "torus[0.3]"]
+    assert model.skipped == [(0, "its piece [0.2] of 4: its surface cannot be converted (test)")]
+
+
 def test_a_face_whose_loop_encloses_nothing_is_left_out_with_a_note(tmp_path):
     """A box (faces 0–5) and a planar face whose loop runs out along an arc and back (face 6): its region is no area
     (`Trim.roundness` 0; OCCT's data/step/trj6_b1-ec-214.stp has two at 1.1e-6, on patches reaching 45× the part's

@@ -1233,16 +1233,16 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
                 BRepMesh_IncrementalMesh(face, MESH_DEFLECTION * diagonal, False, MESH_ANGLE, False)
                 mesh = mesh_of_face(face, reversed_face)
                 BRepTools.Clean_s(face)
-            except FaceError as exc:
+            except Exception as exc:  # a face that cannot be read (an OCCT exception too): name it, never a traceback
+                reason = str(exc) if isinstance(exc, FaceError) else \
+                    f"Open CASCADE failed on it ({type(exc).__name__}: {exc})"
+                # A face read in pieces (`_divided_converted`): which piece failed.
+                piece = f"its piece [{index}.{position - origin.index(index)}] of {pieces[index]}: " \
+                    if pieces[index] > 1 else ""
                 if not skip_bad_faces:
-                    raise SceneError(path, f"face {index}", f"{exc} (--skip-bad-faces renders the other faces)") from None
-                skipped.append((index, str(exc)))
-                continue
-            except Exception as exc:  # an OCCT exception on a broken face: name it, never a traceback
-                reason = f"Open CASCADE failed on it ({type(exc).__name__}: {exc})"
-                if not skip_bad_faces:
-                    raise SceneError(path, f"face {index}", f"{reason} (--skip-bad-faces renders the other faces)") from None
-                skipped.append((index, reason))
+                    raise SceneError(path, f"face {index}", f"{piece}{reason} (--skip-bad-faces renders the other "
+                                                            f"faces)") from None
+                skipped.append((index, piece + reason))
                 continue
             # The surface was built before its trim (sampling the trim needs its evaluator); setting the
             # remaining fields in place spares rebuilding its per-span power form.
