@@ -597,6 +597,20 @@ def test_real_degenerate_face_is_named_and_skippable(tmp_path):
     assert (outdir / "degenerate.png").is_file()
 
 
+def fail_nth_conversion(monkeypatch, n: int) -> dict:
+    """Makes the n-th call of `occt.bspline_of_face` (counted in the returned dict's "n") raise a FaceError."""
+    original, calls = occt.bspline_of_face, {"n": 0}
+
+    def failing(face):
+        calls["n"] += 1
+        if calls["n"] == n:
+            raise occt.FaceError("its surface cannot be converted (test)")
+        return original(face)
+
+    monkeypatch.setattr(occt, "bspline_of_face", failing)
+    return calls
+
+
 def test_a_piece_of_a_face_read_in_pieces_that_fails_is_named(tmp_path, monkeypatch):
     """The whole-turn torus face of `test_a_closed_face_the_conversion_refuses_is_read_in_pieces`, its third piece
     failing: the error names face 0 and that piece, [0.2] of 4, as the surviving pieces' names do; with
@@ -609,15 +623,7 @@ def test_a_piece_of_a_face_read_in_pieces_that_fails_is_named(tmp_path, monkeypa
 
     face = BRepBuilderAPI_MakeFace(Geom_ToroidalSurface(gp_Ax3(), 5.8, 1.27), 4.71238898038469, 10.995574287564276,
                                    1.776554749823208, 8.059740057002795, 1e-7).Face()
-    original, calls = occt.bspline_of_face, {"n": 0}
-
-    def third_fails(piece):
-        calls["n"] += 1
-        if calls["n"] == 3:
-            raise occt.FaceError("its surface cannot be converted (test)")
-        return original(piece)
-
-    monkeypatch.setattr(occt, "bspline_of_face", third_fails)
+    calls = fail_nth_conversion(monkeypatch, 3)
     with pytest.raises(SceneError, match=r"face 0: its piece \[0\.2\] of 4: its surface cannot be converted \(test\)"):
         occt.read_faces(tmp_path / "torus.step", face, "torus", unit="mm", unit_note="", what="STEP file")
     calls["n"] = 0
@@ -659,16 +665,7 @@ def test_a_face_whose_loop_encloses_nothing_is_left_out_with_a_note(tmp_path):
 
 def test_batch_skip_bad_faces_lists_them(tmp_path, monkeypatch):
     """batch --skip-bad-faces renders a part with a failing face and lists the face it left out."""
-    original = occt.bspline_of_face
-    calls = {"n": 0}
-
-    def failing(face):
-        calls["n"] += 1
-        if calls["n"] == 2:
-            raise occt.FaceError("its surface cannot be converted (test)")
-        return original(face)
-
-    monkeypatch.setattr(occt, "bspline_of_face", failing)
+    fail_nth_conversion(monkeypatch, 2)
     folder = tmp_path / "in"
     folder.mkdir()
     shutil.copy(PARTS / "filleted_block.step", folder / "block.step")
