@@ -82,7 +82,7 @@ BAD_FILES = {
     "rhino_content.STEP": (lambda: (PARTS / "trimmed.3dm").read_bytes(), "the content is Rhino .3dm"),
     # Given as a scene, under an extension that is no CAD format's: the content says what it is.
     "step_content.txt": (lambda: (PARTS / "filleted_block.step").read_bytes(),
-                         "holds a STEP file, but its extension is not a CAD file's: rename it to .step or .stp"),
+                         "holds a STEP file, but its extension is not a CAD file's: rename it to .step or .stp to read it as a part"),
     "rhino_content.dat": (lambda: (PARTS / "trimmed.3dm").read_bytes(), "holds a Rhino .3dm file"),
     "iges_content": (lambda: (PARTS / "filleted_block.igs").read_bytes(), "holds an IGES file"),
     # Open CASCADE's own BRep text (OCCT's data/step/OCC889.rle): no scene, no CAD format rtreflect reads.
@@ -109,6 +109,18 @@ def test_bad_cad_file_is_one_line_exit_2_nothing_written(tmp_path, name):
     code, output, _ = run("render", path, "-o", outdir, *TINY)
     line = assert_bad_input(code, output, str(path), outdir)
     assert reason in line
+
+
+def test_a_scenes_surface_file_holding_a_cad_file_under_another_extension_is_named_so(tmp_path):
+    """[[surface]] file = "part.txt" holding a STEP file was read as a .bpt: 'expected the patch count, got
+    ISO-10303-21;' (the first complaint of the issue on CAD input). Now: what it holds and how to name it."""
+    (tmp_path / "part.txt").write_bytes((PARTS / "filleted_block.step").read_bytes())
+    scene = tmp_path / "scene.toml"
+    scene.write_text(SCENE.format(file="part.txt"))
+    code, output, _ = run("render", scene, "-o", tmp_path / "out", *TINY)
+    line = assert_bad_input(code, output, "part.txt", tmp_path / "out")
+    assert "holds a STEP file, but its extension is not a CAD file's: rename it to .step or .stp" in line
+    assert "surface[0].file" in line and "patch count" not in line
 
 
 def test_bad_cad_file_named_by_a_scene_names_the_file_and_the_scene(tmp_path):

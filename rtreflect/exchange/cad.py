@@ -99,15 +99,18 @@ def _past_comments(path: Path, head: bytes) -> bytes:
     return head
 
 
-def misnamed_cad_file(path: Path) -> str | None:
-    """The CAD format (`sniff`) of a file whose extension names no CAD format, or None (not one, or unreadable: the
-    scene reader says why)."""
+def refuse_misnamed_cad_file(path: Path) -> None:
+    """A `SceneError` where a file read as a scene or a .bpt (its extension names no CAD format) holds a CAD file
+    (`sniff`): 'expected the patch count, got ISO-10303-21;' told nothing. Unreadable: the reader says why."""
     try:
         with open(path, "rb") as stream:
-            head = stream.read(SNIFF_BYTES)
-        return sniff(_past_comments(path, head))
+            found = sniff(_past_comments(path, stream.read(SNIFF_BYTES)))
     except (OSError, ValueError):
-        return None
+        return
+    if found is not None:
+        names = " or ".join(suffix for suffix, kind in CAD_SUFFIXES.items() if kind == found)
+        raise SceneError(path, "", f"holds {ARTICLES[found]} file, but its extension is not a CAD file's: rename it "
+                                   f"to {names} to read it as a part")
 
 
 def read_part(path: Path, name: str = "", skip_bad_faces: bool = False) -> tuple[list, list[str], bool]:

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import SceneError
-from .cad import ARTICLES, CAD_SUFFIXES, is_cad_path, misnamed_cad_file
+from .cad import is_cad_path, refuse_misnamed_cad_file
 from .partscene import load_part_scene
 from .scene import Scene
 from .scene import load_scene as load_scene_file
@@ -25,8 +24,6 @@ def load_scene(path: str | Path, skip_bad_faces: bool = False) -> Scene:
     path = Path(path)
     if is_cad_path(path) and not path.is_dir():
         return load_part_scene(path, skip_bad_faces)
-    if path.suffix.lower() != ".toml" and path.is_file() and (found := misnamed_cad_file(path)):
-        names = " or ".join(suffix for suffix, kind in CAD_SUFFIXES.items() if kind == found)
-        raise SceneError(path, "", f"holds {ARTICLES[found]} file, but its extension is not a CAD file's: rename it "
-                                   f"to {names} to render it as a part")
+    if path.suffix.lower() != ".toml" and path.is_file():
+        refuse_misnamed_cad_file(path)
     return load_scene_file(path, skip_bad_faces)

@@ -26,7 +26,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from .bpt import read_bpt
-from .cad import CAD_SUFFIXES, is_cad_path, read_part
+from .cad import CAD_SUFFIXES, is_cad_path, read_part, refuse_misnamed_cad_file
 from ..errors import SceneError, SceneErrors, quote, read_text
 from ..geometry.knots import knot_vector_problem
 from ..geometry.patches import MAX_MAGNITUDE, ZERO_AREA, has_area, patch_problem
@@ -893,6 +893,7 @@ def _parse_surfaces(path: Path, entries: Any, errors: _Errors, skip_bad_faces: b
                     geometry.notes.extend(summary)
                     geometry.faces_skipped = geometry.faces_skipped or skipped
                 else:
+                    refuse_misnamed_cad_file(file)
                     patches = read_bpt(file, name)
                     for k, patch in enumerate(patches):
                         _check_geometry_patch(file, k, patch)
