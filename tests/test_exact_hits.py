@@ -220,7 +220,8 @@ def test_a_reader_triangulation_that_leaves_part_of_its_face_out_is_not_used():
     misses the cell [0.3, 0.5]²: rays there passed through the face (OCCT's data/step/trj10_b2-oc-214.stp: BRepMesh left
     a region 3 × 3.5 of a 16 × 13 planar face out, 11 pixels at 320×180 kept faces up to 67 behind). Such a
     triangulation's boundary edges run across the face, not along its trim: the span grid meshes the face instead
-    (`tessellation.reader_mesh`), and every ray hits the plane (the closed form). A whole one is used as it is."""
+    (`tessellation.reader_mesh`), and every ray hits the plane (the closed form). A whole one is used as it is, and so
+    is one that overhangs its trim."""
     from rtreflect.geometry.surfaces import SurfaceSet
     from rtreflect.geometry.tessellation import grid_faces, reader_mesh, tessellate
     from rtreflect.trace.accelerator import Accelerator
@@ -237,6 +238,9 @@ def test_a_reader_triangulation_that_leaves_part_of_its_face_out_is_not_used():
     whole = replace(plane, mesh_uv=(nodes, triangles))
     torn = replace(plane, mesh_uv=(nodes, triangles[~middle]))
     assert reader_mesh(whole) is not None and reader_mesh(torn) is None
+    # A triangulation overhanging its trim leaves nothing out (the sweep's bottle.step: a thread's tip 0.03 past it).
+    inset = replace(whole, trim=Trim(np.array([[0.16, 0.16], [0.84, 0.16], [0.84, 0.84], [0.16, 0.84]])))  # 0.3 of a side
+    assert reader_mesh(inset) is not None
     tessellation = tessellate([torn], 2)
     x, y = np.meshgrid(np.linspace(0.32, 0.48, 9), np.linspace(0.32, 0.48, 9))
     origins = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 2.0)])

@@ -451,15 +451,15 @@ def test_a_ray_leaving_a_bowl_just_below_its_rim_stops_there(tessellation, eye, 
 
 
 def test_the_finer_mesh_splits_only_faces_coarser_than_its_own_level():
-    """`fine_factors`: each face's coarse chord error δ (∝ segments⁻²) is brought down to the finer mesh's level,
-    max δ / 16, by the fewest whole multiples of the segments up to 4: δ = max → 4, max/3 → ⌈√(16/3)⌉ = 3, max/8 → 2,
-    max/16 and below (a plane's 0) → 1. On a scene of a curved patch and a plane beside it, the plane's finer mesh is
-    its coarse mesh, and the patch's is 4 × 4 times as many triangles."""
+    """`fine_factors`: each curved face's coarse chord error δ (∝ segments⁻²) is brought down to the finer mesh's
+    level, max δ / 16, by the fewest whole multiples of the segments from 2 to 4: δ = max → 4, max/3 → ⌈√(16/3)⌉ = 3,
+    max/8 and below → 2; a face meshed exactly (δ = 0, a plane) → 1. On a scene of a curved patch and a plane beside
+    it, the plane's finer mesh is its coarse mesh, and the patch's is 4 × 4 times as many triangles."""
     from rtreflect.trace.secondlook import fine_factors
 
     grid = NurbsSurface.bezier(np.array([[[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]]))
-    chord = np.array([2.0, 2.0 / 3.0, 2.0 / 8.0, 2.0 / 16.0, 0.0])
-    assert fine_factors([grid] * 5, chord, 4).tolist() == [4, 3, 2, 1, 1]
+    chord = np.array([2.0, 2.0 / 3.0, 2.0 / 8.0, 2.0 / 100.0, 0.0])
+    assert fine_factors([grid] * 5, chord, 4).tolist() == [4, 3, 2, 2, 1]
     scene = load_scene(Path(__file__).resolve().parent.parent / "scenes" / "hood.toml")
     curved = scene.surfaces[0]
     plane = NurbsSurface.bezier(np.array([[[-1.0, -1.0, -0.5], [-1.0, 1.0, -0.5]], [[1.0, -1.0, -0.5], [1.0, 1.0, -0.5]]]))

@@ -295,3 +295,14 @@ def test_roundness_is_the_isoperimetric_ratio_in_the_domains_unit_square():
     arc = np.column_stack([np.linspace(0.0, 1.0, 50), 0.5 * np.sin(np.linspace(0.0, np.pi, 50))])
     there_and_back = Trim(np.concatenate([arc, arc[-2:0:-1]]))
     assert there_and_back.roundness(((0.0, 1.0), (0.0, 1.0))) < 1e-12
+
+
+def test_boundary_distance_is_to_the_loops_even_where_geos_repaired_the_polygon():
+    """A square whose loop runs out along a spike and back (a dangling piece, as the sweep's periodic_trimmed.step's
+    6e-9 one): GEOS repairs it into a collection of the square and a line, which has no boundary to measure from
+    (the distances were NaN, and the face's reader mesh was refused). The distances are to the loops: the spike
+    counts, a point on it is at 0."""
+    spiked = Trim(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [2.0, 1.0], [1.0, 1.0], [0.0, 1.0]]))
+    assert type(spiked._polygon).__name__ == "GeometryCollection" and spiked._polygon.boundary is None
+    distance = spiked.boundary_distance(np.array([0.5, 0.5, 1.5, 1.5]), np.array([0.5, 0.9, 1.2, 1.0]))
+    assert np.allclose(distance, [0.5, 0.1, 0.2, 0.0], rtol=0, atol=1e-15)

@@ -113,11 +113,13 @@ class Trim:
         return 4.0 * np.pi * unit.area / unit.length ** 2 if unit.length > 0 else 0.0
 
     def boundary_distance(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Per point (u, v) (in the loops' period), its distance in (u, v) to the nearest of the face's loops."""
+        """Per point (u, v) (in the loops' period), its distance in (u, v) to the nearest of the face's loops: the
+        loops themselves (a polygon GEOS repaired may be a collection, which has no boundary to measure from)."""
         import shapely
 
+        loops = shapely.MultiLineString([np.concatenate([loop, loop[:1]]) for loop in (self.outer, *self.holes)])
         with GEOS_LOCK:
-            return shapely.distance(self._polygon.boundary, shapely.points(np.column_stack([u, v])))
+            return shapely.distance(loops, shapely.points(np.column_stack([u, v])))
 
     def overlaps(self, polygons: np.ndarray) -> np.ndarray:
         """Per shapely polygon (in the loops' period), whether it meets the face: boundary contact counts."""

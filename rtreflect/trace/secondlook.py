@@ -106,19 +106,21 @@ FINE_MAX_VERTICES = 1 << 21
 
 
 def fine_factors(surfaces, chord: np.ndarray, per_span: int) -> np.ndarray:
-    """Per face, the finer mesh's multiple of the scene's segments per knot span (1 to `FINE_FACTOR`): the fewest that
-    bring its chord error (``chord``, the coarse mesh's, ∝ segments⁻²) down to the finer mesh's level, 1/`FINE_FACTOR`²
-    of the largest; capped where the span grids would exceed `FINE_MAX_VERTICES` (`largest_factor`).
+    """Per face, the finer mesh's multiple of the scene's segments per knot span: 1 on a face its coarse mesh follows
+    exactly (chord error 0: a plane), else the fewest from 2 (its own chord error, ∝ segments⁻², at least 4× smaller)
+    to `FINE_FACTOR` that bring its chord error (``chord``, the coarse mesh's) down to the finer mesh's level,
+    1/`FINE_FACTOR`² of the largest; capped where the span grids would exceed `FINE_MAX_VERTICES` (`largest_factor`).
+    A reader's triangulation is subdivided (`FINE_LEVELS`) where the factor is over 1.
 
-    A face whose coarse chord error is already below that level is not split: its coarse mesh is as fine as the finer
-    mesh anywhere. Split by the largest face's factor (OCCT's data/step/trj3_s1-al-214.stp: 94 faces, chord errors
-    from 0 to 2.87), the finer mesh held 1.8M triangles and took 5.6 s to build on the first suspect, its biggest faces
-    split 16× at 3 % of the largest chord error.
+    Split by the coarsest face's factor, every face's mesh grew 16×, the finest ones' too (OCCT's
+    data/step/trj3_s1-al-214.stp: 94 faces, chord errors from 0 to 2.87, its biggest faces at 3 % of that: 1.8M
+    triangles, built in 5.6 s on the first suspect).
     """
+    chord = np.asarray(chord, dtype=np.float64)
     target = float(np.max(chord, initial=0.0)) / FINE_FACTOR ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
-        want = np.ceil(np.sqrt(np.asarray(chord, dtype=np.float64) / target)) if target > 0 else np.ones(len(chord))
-    want = np.clip(np.nan_to_num(want, nan=1.0), 1, FINE_FACTOR).astype(np.int64)
+        want = np.clip(np.nan_to_num(np.ceil(np.sqrt(chord / target)), nan=2.0), 2, FINE_FACTOR)
+    want = np.where(chord > 0, want, 1).astype(np.int64)
     grid = [s for s in surfaces if s.mesh_uv is None]  # the others: a reader's triangulation, subdivided
     return np.minimum(want, largest_factor(grid, per_span, FINE_FACTOR, FINE_MAX_VERTICES))
 
@@ -335,14 +337,11 @@ class SecondLook:
             if self._fine is None:
                 # A reader's triangulation is subdivided in (u, v) (clipping a span grid to the trim costs ~10×).
                 # One too coarse to follow its face (`reader_mesh`) is dropped: the span grid meshes that face.
-                # Faces already as fine as the finer mesh anywhere are kept as they are (`fine_factors`).
-                chord = self.tessellation.chord_error
-                fine_enough = chord <= float(np.max(chord, initial=0.0)) / FINE_FACTOR ** 2
-                finer = [s if s.mesh_uv is None or fine_enough[k] else
+                factors = fine_factors(self._scene_surfaces, self.tessellation.chord_error, self._per_span)
+                finer = [s if s.mesh_uv is None or factor == 1 else
                          replace(s, mesh_uv=None if (m := reader_mesh(s)) is None else subdivided(*m, FINE_LEVELS))
-                         for k, s in enumerate(self._scene_surfaces)]
-                fine = tessellate(finer, fine_factors(finer, chord, self._per_span) * self._per_span, enclose=True,
-                                  widen=True)
+                         for s, factor in zip(self._scene_surfaces, factors)]
+                fine = tessellate(finer, factors * self._per_span, enclose=True, widen=True)
                 self._fine = fine, Accelerator(fine)
             return self._fine
 
