@@ -303,7 +303,8 @@ def test_a_level_set_looping_between_grid_points_round_an_extremum_is_found():
 def test_level_sets_crowding_where_the_reflected_ray_turns_parallel_to_the_light_plane_are_found(tmp_path, size):
     """A rod 200 long and 10 across (Open CASCADE's cylinder) in its default scene: across the rod, f runs off to ±∞
     where the reflected ray turns parallel to the light plane (t → ∞), and a grid cell there spans several levels,
-    which contourpy placed far from their crossings or lost with the masked cell beyond (`_refined_at_folds`). Each
+    which contourpy placed far from their crossings (`UlmetField.bracket`) or lost in the masked cell beyond
+    (`_refined_at_blowups`). Each
     reflection line's analytic contour ended up to 15 px short of the traced line along the rod, and validate failed
     at every size (OCCT's data/step/xr1-tu-rod.stp: max 14.4 px and 2 misses at 320×180, 3.0 px at 160×90, 15.0 px
     and 16 misses at 640×360); now within 0.05 px."""
@@ -352,3 +353,78 @@ def test_a_crossing_newton_cannot_reach_from_the_grid_is_found_on_its_grid_edge(
     assert ok.all() and np.all(u == 0.5)
     assert np.allclose(v, 0.2 + 1.0 / c, rtol=0, atol=1e-12)
     assert np.all(np.abs(field.f(None, u, v) - c) <= NEWTON_TOLERANCE)
+
+
+def test_contourpys_vertices_on_grid_edges_are_found_with_ends_that_bracket_the_level():
+    """`_grid_edges` on an uneven grid: every vertex contourpy puts strictly inside a grid edge (its other coordinate a
+    grid line's, in its bits) gets that edge, whose ends' f (the grid's) bracket the level, and the vertex lies between
+    the ends; the bracketed search (`UlmetField.bracket`, as `_classify` uses it) moves each onto f = c."""
+    import contourpy
+
+    from rtreflect.analysis.contours import NEWTON_TOLERANCE, _grid_edges
+
+    rng = np.random.default_rng(7)
+    us, vs = np.sort(rng.uniform(0.0, 1.0, 23)), np.sort(rng.uniform(0.0, 1.0, 19))
+
+    class Waves(UlmetField):
+        def __init__(self):
+            pass
+
+        def newton_scale(self) -> float:
+            return 1.0
+
+        def f(self, patch, u, v):
+            return np.sin(5.0 * u) * np.cos(4.0 * v) + u * v
+
+    field, c = Waves(), 0.3
+    f = field.f(None, *np.meshgrid(us, vs, indexing="ij"))
+    lines = contourpy.contour_generator(vs, us, f, line_type="Separate", corner_mask=True).lines(c)
+    vertices = np.concatenate(lines)
+    edges = _grid_edges(us, vs, f, vertices[:, 1], vertices[:, 0])
+    on_edge = np.isfinite(edges[:, 0])
+    assert on_edge.mean() > 0.9  # all but those at grid points
+    e = edges[on_edge]
+    assert np.all((e[:, 4] - c) * (e[:, 5] - c) <= 0)
+    assert np.all((np.minimum(e[:, 0], e[:, 2]) <= vertices[on_edge, 1]) & (vertices[on_edge, 1] <= np.maximum(e[:, 0], e[:, 2])))
+    assert np.all((np.minimum(e[:, 1], e[:, 3]) <= vertices[on_edge, 0]) & (vertices[on_edge, 0] <= np.maximum(e[:, 1], e[:, 3])))
+    u, v, ok = field.bracket(np.zeros(len(e), int), e, np.full(len(e), c))
+    assert ok.all() and np.all(np.abs(field.f(None, u, v) - c) <= NEWTON_TOLERANCE)
+
+
+def test_blowup_edges_are_where_f_runs_off_past_a_level_into_nan():
+    """`_blowup_edges` along u on f = 1/(u − 0.5), NaN for u ≤ 0.5 (t ≤ 0 past the blow-up), levels 3 and 100: the
+    edge into the NaN from the last finite value (f = 1/0.05 = 20 at u = 0.55, heading up) has level 100 beyond it;
+    with levels 3 and 10 only, none (every level is crossed in the cells contourpy sees)."""
+    from rtreflect.analysis.contours import _blowup_edges
+
+    us = np.linspace(0.0, 1.0, 21)  # 0.05 apart: u = 0.5 is a grid point, NaN there
+    with np.errstate(divide="ignore"):
+        f = np.where(us > 0.5, 1.0 / (us - 0.5), np.nan)[:, None] * np.ones((1, 3))
+    edges = _blowup_edges(np.array([3.0, 100.0]), f, 0)
+    assert edges.shape == (20, 3)
+    assert np.flatnonzero(edges.any(axis=1)).tolist() == [10]  # between u = 0.5 (NaN) and 0.55
+    assert not _blowup_edges(np.array([3.0, 10.0]), f, 0).any()
+
+
+def test_a_loop_between_grid_points_is_found_on_an_uneven_grid():
+    """`_small_loops` where `_refined_at_blowups` halved the interval on one side of the grid's extremum: the crest
+    f = −(u + 0.49)² − v² sampled at u = −1, 0, 0.5 and v = −1, 0, 1, the level −0.04 between the grid's top value
+    −0.2401 and the crest's 0. The parabola through the three values along u, spaced as they are, puts the crest
+    0.2401 past the grid's top (exactly: f is a parabola); spaced evenly it put it 0.085 past, twice that short of the
+    level, and the loop was missed (the review's counter-example)."""
+    from rtreflect.analysis.contours import _small_loops
+
+    class Crest:
+        levels = np.array([-0.04])
+
+        @staticmethod
+        def f(patch, u, v):
+            return -((u + 0.49) ** 2) - v ** 2
+
+    us, vs = np.array([-1.0, 0.0, 0.5]), np.array([-1.0, 0.0, 1.0])
+    f = Crest.f(None, *np.meshgrid(us, vs, indexing="ij"))
+    assert f.max() == f[1, 1] < -0.04
+    loops = _small_loops(Crest, 0, us, vs, f)
+    assert [light for *_, light in loops] == [0]
+    u, v, _ = loops[0]
+    assert len(u) >= 6 and abs(u.mean() + 0.49) < 0.05 and abs(v.mean()) < 0.05

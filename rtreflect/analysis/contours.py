@@ -237,8 +237,9 @@ class UlmetField:
         return u, v, ok
 
     def bracket(self, patch: np.ndarray, edge: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """f(u, v) = c on the grid edges ``edge`` ((n, 6): the ends (u, v) and f there, on either side of c) by the
-        Illinois method (regula falsi that halves a stuck end's value): returns u, v, converged.
+        """f(u, v) = c on the grid edges ``edge`` ((n, 6): the ends (u, v) and f there, on either side of c) by regula
+        falsi whose end kept by a step has its residual halved (a variant of the Illinois method: the bracket closes
+        from both sides): returns u, v, converged.
 
         Where Newton along ∇f fails from contourpy's interpolated crossing: f far from linear within the cell
         (near a blow-up, f ~ 1/d, Newton's step from half a cell out lands where t ≤ 0), the bracket still closes.
@@ -564,7 +565,9 @@ def _patch_chains(field: UlmetField, k: int) -> tuple[_Chains, np.ndarray, float
                     lines_v.append(line[:, 0])
                     lines_u.append(line[:, 1])
                     chain_light.append(j)
-                    edges.append(_grid_edges(us, vs, f, line[:, 1], line[:, 0]))
+                    # A wrapping φ is contoured unwrapped about each level: its raw values bracket nothing there.
+                    edges.append(_grid_edges(us, vs, f, line[:, 1], line[:, 0]) if field.period is None
+                                 else np.full((len(line), 6), np.nan))
         for line_u, line_v, j in _small_loops(field, k, us, vs, f):
             lines_u.append(line_u)
             lines_v.append(line_v)
@@ -694,10 +697,10 @@ def _small_loops(field: UlmetField, k: int, us: np.ndarray, vs: np.ndarray,
 
     A level between a strict local extremum of the grid's values f₀ and the extremum of f itself is a loop between
     grid points, which contourpy cannot see. Where the parabolas through the grid extremum's neighbours along u and v
-    put f's extremum past a level (by twice their overshoot (f₊ − f₋)² / 8|f₊ − 2f₀ + f₋|, for margin), the 2 × 2
-    cells round it are sampled `LOOP_GRID` points a side and contoured for the levels beyond f₀ (the sweep's
-    dense_net.step at 320×180: a loop f = 87.5 round a crest 88.2 between grid values below it, its traced line
-    4.1 px from every analytic one).
+    put f's extremum past a level (by twice their overshoot, (f₊ − f₋)² / 8|f₊ − 2f₀ + f₋| on an even grid, for
+    margin), the 2 × 2 cells round it are sampled `LOOP_GRID` points a side and contoured for the levels beyond f₀
+    (the sweep's dense_net.step at 320×180: a loop f = 87.5 round a crest 88.2 between grid values below it, its
+    traced line 4.1 px from every analytic one).
     """
     centre = f[1:-1, 1:-1]
     rows, cols = f.shape
@@ -711,9 +714,17 @@ def _small_loops(field: UlmetField, k: int, us: np.ndarray, vs: np.ndarray,
     sign = np.where(peak[i, j], 1.0, -1.0)
     i, j = i + 1, j + 1
     f0 = f[i, j]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        overshoot = sum((f[i + di, j + dj] - f[i - di, j - dj]) ** 2
-                        / (8.0 * np.abs(f[i + di, j + dj] - 2.0 * f0 + f[i - di, j - dj])) for di, dj in ((1, 0), (0, 1)))
+    # The parabola p(x) = f₀ + bx + ax² through the three values at x = −h₋, 0, h₊ along each direction (the grid
+    # is uneven where `_refined_at_blowups` added lines): its extremum lies b²/4|a| past f₀ ((f₊ − f₋)²/8|f₊ − 2f₀ + f₋|
+    # where h₋ = h₊).
+    overshoot = 0.0
+    for grid, k, di, dj in ((us, i, 1, 0), (vs, j, 0, 1)):
+        below, above = f[i - di, j - dj] - f0, f[i + di, j + dj] - f0
+        h_below, h_above = grid[k] - grid[k - 1], grid[k + 1] - grid[k]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            b = (above * h_below ** 2 - below * h_above ** 2) / (h_below * h_above * (h_below + h_above))
+            a = (above * h_below + below * h_above) / (h_below * h_above * (h_below + h_above))
+            overshoot = overshoot + b * b / (4.0 * np.abs(a))
     reach = np.nan_to_num(2.0 * overshoot, nan=0.0, posinf=0.0)
     # Levels beyond f₀ towards the extremum, within reach (f₀ on a level: contourpy has that one).
     keep = np.flatnonzero(_levels_beyond(np.sort(field.levels), f0, sign, reach) > 0)

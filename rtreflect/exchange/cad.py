@@ -130,6 +130,10 @@ def model_summary(path: Path, model: CadModel) -> list[str]:
     if model.skipped:
         lines.append(f"{path}: skipped {len(model.skipped)} of {model.faces} faces (--skip-bad-faces): "
                      + "; ".join(f"face {index}: {reason}" for index, reason in model.skipped))
+    if model.no_area:
+        faces = f"{len(model.no_area)} face{'s' if len(model.no_area) > 1 else ''}"
+        lines.append(f"{path}: left out {faces} enclosing no area (each loop runs out along a curve and back): "
+                     + ", ".join(map(str, model.no_area)))
     lines.extend(f"{path}: {note}" for note in model.notes)
     lines.extend(f"{WARNING}{path}: face {index}: {one_line(reason)}" for index, reason in model.warnings)
     return lines

@@ -158,6 +158,8 @@ class CadModel:
     #: What the reader left out of the file or placed, one summary line each without the file name (the .3dm reader:
     #: block instances placed, objects that are not surfaces by kind, hidden objects).
     notes: list[str] = field(default_factory=list)
+    #: Faces left out as enclosing no area (`NO_AREA_ROUNDNESS`), by index; the summary lists them.
+    no_area: list[int] = field(default_factory=list)
 
     @property
     def diagonal(self) -> float:
@@ -1254,13 +1256,11 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
             meshed.append(face)
             indices.append(index)
     if not surfaces and not skipped:
-        raise SceneError(path, "", f"its {len(no_area)} faces enclose no area (each loop runs out along a curve and "
-                                   f"back): nothing to render")
+        faces = "its only face encloses" if len(no_area) == 1 else f"its {len(no_area)} faces enclose"
+        raise SceneError(path, "", f"{faces} no area (each loop runs out along a curve and back): nothing to render")
     if not surfaces:
         raise SceneError(path, "", f"no face of the {len(originals)} could be read (first: face {skipped[0][0]}: "
                                    f"{skipped[0][1]})")
-    notes = [f"left out {len(no_area)} face{'s' if len(no_area) > 1 else ''} enclosing no area (each loop runs out "
-             f"along a curve and back): {', '.join(map(str, no_area))}"] if no_area else []
     bounds = faces_bounds(surfaces)
     tight = float(np.linalg.norm(bounds[1] - bounds[0]))
     if np.isfinite(tight) and 0 < tight and REMESH_RATIO * tight < diagonal:
@@ -1276,6 +1276,8 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
             # The trims too were sampled to the loose box's tolerance (19× the true one on revolved_seam.step).
             try:
                 trim = trim_of_face(face, surface, TRIM_TOLERANCE * tight, trims_onto_edges, surface.trim.edges)
+                if trim.roundness(surface.domain) < NO_AREA_ROUNDNESS:  # sampled again into nothing: keep the first
+                    raise FaceError("its trim loops sampled again enclose no area")
             except Exception as exc:
                 # The face read at the loose tolerance: its first trim stands, a valid loop of its edges, but its trim
                 # edges are coarser than the reader promises: the user is told which face, and by how much.
@@ -1287,7 +1289,8 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
                 continue
             object.__setattr__(surface, "trim", trim)
         bounds = faces_bounds(surfaces)
-    return CadModel(surfaces, unit, unit_note, bounds, len(originals), skipped, reversed_flags, warnings, notes)
+    return CadModel(surfaces, unit, unit_note, bounds, len(originals), skipped, reversed_flags, warnings,
+                    no_area=no_area)
 
 
 def faces_bounds(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray]:

@@ -223,8 +223,9 @@ def read_3dm(path: Path, name: str = "", skip_bad_faces: bool = False) -> CadMod
     if failed:
         model_read.skipped = sorted(failed + _renumber(model_read.skipped, [f for f, _ in failed]))
         model_read.warnings = _renumber(model_read.warnings, [f for f, _ in failed])
+        model_read.no_area = [k for k, _ in _renumber([(k, "") for k in model_read.no_area], [f for f, _ in failed])]
         model_read.faces = index
-    model_read.notes = model_read.notes + placed.notes()
+    model_read.notes = placed.notes()
     return model_read
 
 
