@@ -718,9 +718,9 @@ def _small_loops(field: UlmetField, k: int, us: np.ndarray, vs: np.ndarray,
     # is uneven where `_refined_at_blowups` added lines): its extremum lies b²/4|a| past f₀ ((f₊ − f₋)²/8|f₊ − 2f₀ + f₋|
     # where h₋ = h₊).
     overshoot = 0.0
-    for grid, k, di, dj in ((us, i, 1, 0), (vs, j, 0, 1)):
+    for grid, at, di, dj in ((us, i, 1, 0), (vs, j, 0, 1)):  # (not k: that is the patch)
         below, above = f[i - di, j - dj] - f0, f[i + di, j + dj] - f0
-        h_below, h_above = grid[k] - grid[k - 1], grid[k + 1] - grid[k]
+        h_below, h_above = grid[at] - grid[at - 1], grid[at + 1] - grid[at]
         with np.errstate(divide="ignore", invalid="ignore"):
             b = (above * h_below ** 2 - below * h_above ** 2) / (h_below * h_above * (h_below + h_above))
             a = (above * h_below + below * h_above) / (h_below * h_above * (h_below + h_above))
