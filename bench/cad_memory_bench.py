@@ -53,7 +53,8 @@ def main() -> None:
                                lights=LightSpec(np.zeros(3), np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]),
                                                 np.zeros(1), 1.0)))
     mark(f"preview renderer ({len(preview.tessellation.vertices)} vertices)")
-    camera, _ = autorig.best_iso(preview, scene.camera, scene.image.width / scene.image.height)
+    camera, _ = autorig.best_iso(preview, scene.camera, autorig.part_points(preview.tessellation, preview.surfaces),
+                                 scene.image.width / scene.image.height)
     preview.camera = Camera(camera, width, height)
     rows, cols = np.divmod(np.arange(width * height), width)
     preview.trace(*preview.camera.rays(rows, cols))

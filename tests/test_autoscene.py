@@ -108,6 +108,35 @@ def test_explicit_keys_win(tmp_path: Path) -> None:
     assert resolve(explicit) is explicit
 
 
+def test_a_trimmed_face_meshed_by_whole_cells_is_framed_by_its_trim() -> None:
+    """A disc trimmed from a bicubic patch, meshed by its span grid (no reader's triangulation): the cells reach past
+    the disc (at tessellation 3 the mesh's box was 2.2× the disc's, the disc 41 % of the frame). The top view is
+    fitted to the disc itself: its diameter 0.6 (x = −1 + 2u, the loop's radius 0.15 in u and v) × `FRAME_MARGIN`."""
+    import dataclasses
+
+    from rtreflect import Scene, render
+    from rtreflect.geometry.trims import Trim
+    from rtreflect.trace.framing import FRAME_MARGIN
+
+    t = np.linspace(-1.0, 1.0, 4)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    bezier = [0, 0, 0, 0, 1, 1, 1, 1]
+    scene = Scene(surfaces=[{"degree": 3, "points": np.stack([x, y, 0.3 * x * y], axis=-1), "knots_u": bezier,
+                             "knots_v": bezier}],
+                  camera={"view": "top", "projection": "orthographic"}, image={"width": 160, "height": 160,
+                                                                                "samples": 1},
+                  render={"tessellation": 3})
+    angle = np.linspace(0.0, 2.0 * np.pi, 200, endpoint=False)
+    disc = Trim(np.column_stack([0.2 + 0.15 * np.cos(angle), 0.25 + 0.15 * np.sin(angle)]))
+    scene = resolve(scene.replace(surfaces=[dataclasses.replace(scene.surfaces[0], trim=disc)]))
+    assert scene.camera.view_height == pytest.approx(0.6 * FRAME_MARGIN, rel=1e-3)
+    assert np.allclose(scene.camera.look_at[:2], [-1.0 + 2 * 0.2, -1.0 + 2 * 0.25])
+    seen = render(scene).rgba[..., 3] > 0
+    rows, cols = np.flatnonzero(seen.any(axis=1)), np.flatnonzero(seen.any(axis=0))
+    assert rows.min() > 0 and cols.min() > 0 and rows.max() < 159 and cols.max() < 159  # the whole disc in view
+    assert min(np.ptp(rows), np.ptp(cols)) + 1 >= 160 / FRAME_MARGIN - 2  # and filling it
+
+
 # -- warnings ------------------------------------------------------------------------------------
 HOOD = ROOT / "scenes" / "hood.toml"
 WARNING_CASES = {

@@ -28,6 +28,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..exchange.scene import CameraSpec, ImageSpec, LightSpec, Scene
+from ..geometry.surfaces import SurfaceSet
+from ..geometry.tessellation import Tessellation
+from ..geometry.trims import into_period
 from ..modes.lights import TubeLights, reaches_light_plane, reflect
 from ..trace.camera import Camera
 from ..trace.framing import ISO_NAMES, fit_camera, iso_directions, view_frame
@@ -74,6 +77,37 @@ def preview_size(image: ImageSpec) -> tuple[int, int]:
     return max(1, round(image.width * scale)), max(1, round(image.height * scale))
 
 
+def part_points(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
+    """Points of the part as its faces bound it, which the camera and the bank are fitted to: the mesh vertices that lie
+    on their faces, and every trim loop's points on its surface.
+
+    A trimmed face without its reader's triangulation is meshed by whole cells of its span grid: cells reach up to one
+    past its trim, and a face trimmed from a large surface has large cells (Open CASCADE's OCC26308-Face.stp: its mesh's
+    box 19 % over the face's on the diagonal, the part that much smaller in the picture). The loops bound the face
+    where no vertex of it lies inside (a face smaller than a cell)."""
+    on = surfaces.on_face(tessellation.vertex_patch, tessellation.vertex_uv[:, 0], tessellation.vertex_uv[:, 1])
+    patch, uv = [], []
+    for k, surface in enumerate(surfaces.patches):
+        if surface.trim is None:
+            continue
+        loops = np.concatenate([np.asarray(loop, dtype=np.float64).reshape(-1, 2)
+                                for loop in (surface.trim.outer, *surface.trim.holes)])
+        (u0, _), (v0, _) = surface.domain
+        # A periodic face's loops lie in the period they were sampled in; the surface's domain may start elsewhere.
+        for axis, start, period in ((0, u0, surface.trim.u_period), (1, v0, surface.trim.v_period)):
+            if period:
+                loops[:, axis] = into_period(loops[:, axis], start, period)
+        patch.append(np.full(len(loops), k))
+        uv.append(loops)
+    points = [tessellation.vertices[on]]
+    if patch:
+        uv = np.concatenate(uv)
+        points.append(surfaces.evaluate(np.concatenate(patch), uv[:, 0], uv[:, 1]).S)
+    points = np.concatenate(points)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    return points if len(points) else tessellation.vertices
+
+
 def resolve(scene: Scene) -> Scene:
     """``scene`` with its automatic camera and tubes chosen (itself if nothing is automatic).
 
@@ -88,14 +122,14 @@ def resolve(scene: Scene) -> Scene:
     placeholder_lights = LightSpec(np.zeros(3), np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), np.zeros(1), 1.0)
     preview = Renderer(replace(scene, image=ImageSpec(width, height, 1), camera=placeholder_camera,
                                lights=placeholder_lights))
-    vertices = preview.tessellation.vertices
+    vertices = part_points(preview.tessellation, preview.surfaces)
     notes = []
     camera = scene.camera
     if camera.automatic:
         aspect = scene.image.width / scene.image.height
         how = f"{camera.view} view" if isinstance(camera.view, str) else f"view {_vec(camera.view)}"
         if camera.view == "iso" and camera.eye is None:
-            camera, quadrant = best_iso(preview, camera, aspect)
+            camera, quadrant = best_iso(preview, camera, vertices, aspect)
             how = f"iso view from the {quadrant}"
         else:
             camera = fit_camera(camera, vertices, aspect)
@@ -106,7 +140,7 @@ def resolve(scene: Scene) -> Scene:
     lights = scene.lights
     if lights.auto:
         preview.camera = Camera(camera, width, height)
-        lights, note = light_rig(preview, scene.camera.up, lights)
+        lights, note = light_rig(preview, vertices, scene.camera.up, lights)
         notes.append(f"automatic lights: {note}")
     return replace(scene, camera=camera, lights=lights, rig=tuple(notes))
 
@@ -115,7 +149,7 @@ def resolve(scene: Scene) -> Scene:
 ISO_PREFERENCE = 0.1
 
 
-def best_iso(preview: Renderer, camera: CameraSpec, aspect: float) -> tuple[CameraSpec, str]:
+def best_iso(preview: Renderer, camera: CameraSpec, points: np.ndarray, aspect: float) -> tuple[CameraSpec, str]:
     """The fitted 3/4 view (of the four turned about the up axis) whose preview sees most surface pixels.
 
     A quarter cylinder seen along its axis, or a plate seen along its long side, shows a
@@ -126,7 +160,7 @@ def best_iso(preview: Renderer, camera: CameraSpec, aspect: float) -> tuple[Came
     rows, cols = np.divmod(np.arange(width * height), width)
     best, best_seen, best_name = None, -1.0, ""
     for direction, name in zip(iso_directions(camera.up), ISO_NAMES):
-        fitted = replace(fit_camera(replace(camera, view=direction), preview.tessellation.vertices, aspect), view="iso")
+        fitted = replace(fit_camera(replace(camera, view=direction), points, aspect), view="iso")
         seen = float(np.count_nonzero(_seen(preview, Camera(fitted, width, height), rows, cols)))
         if best is None or seen > best_seen * (1 + ISO_PREFERENCE):
             best, best_seen, best_name = fitted, seen, name
@@ -187,9 +221,9 @@ def light_plane(vertices: np.ndarray, eye: np.ndarray, model_up: np.ndarray, spe
     return np.asarray(Q, dtype=np.float64), np.asarray(m, dtype=np.float64), c
 
 
-def light_rig(preview: Renderer, model_up: np.ndarray, spec: LightSpec) -> tuple[LightSpec, str]:
-    """The tubes of an automatic ``spec`` from the preview's visible f range, and the line saying what was chosen."""
-    vertices = preview.tessellation.vertices
+def light_rig(preview: Renderer, vertices: np.ndarray, model_up: np.ndarray, spec: LightSpec) -> tuple[LightSpec, str]:
+    """The tubes of an automatic ``spec`` from the preview's visible f range (``vertices``: the part's points,
+    `part_points`), and the line saying what was chosen."""
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
     radius_part = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-12)
     eye = preview.camera.spec.eye
