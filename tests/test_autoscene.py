@@ -137,6 +137,34 @@ def test_a_trimmed_face_meshed_by_whole_cells_is_framed_by_its_trim() -> None:
     assert min(np.ptp(rows), np.ptp(cols)) + 1 >= 160 / FRAME_MARGIN - 2  # and filling it
 
 
+def test_the_part_keeps_its_faces_inside_where_they_bulge_past_their_loops() -> None:
+    """`part_points` of a dome trimmed to a disc round its top: seen from the side the part reaches up to the dome's
+    top, inside the disc, where only the mesh vertices on the face are (its loop lies 0.08 lower); the highest point
+    is the dome's highest over the disc (sampled densely on the surface itself) to within the mesh's chord error."""
+    import dataclasses
+
+    from rtreflect.geometry.surfaces import NurbsSurface, SurfaceSet
+    from rtreflect.geometry.tessellation import tessellate
+    from rtreflect.geometry.trims import Trim
+    from rtreflect.integrator.autorig import part_points
+
+    t = np.linspace(-1.0, 1.0, 4)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    dome = NurbsSurface.bezier(np.stack([x, y, 0.4 * (1 - x ** 2) * (1 - y ** 2)], axis=-1))
+    angle = np.linspace(0.0, 2.0 * np.pi, 100, endpoint=False)
+    face = dataclasses.replace(dome, trim=Trim(np.column_stack([0.5 + 0.3 * np.cos(angle), 0.5 + 0.3 * np.sin(angle)])))
+    mesh = tessellate([face], 12, enclose=True)
+    points = part_points(mesh, SurfaceSet([face]))
+    radius, theta = np.meshgrid(np.linspace(0.0, 0.3, 60), angle, indexing="ij")
+    top = face.evaluate(0.5 + (radius * np.cos(theta)).ravel(), 0.5 + (radius * np.sin(theta)).ravel()).S[:, 2].max()
+    rim = face.evaluate(*face.loop_uv().T).S[:, 2].max()
+    assert top - rim > 0.05  # the loop alone would miss the top
+    assert points[:, 2].max() == pytest.approx(top, abs=2.0 * mesh.chord_error.max())
+    assert face.trim.contains(*mesh.vertex_uv.T).sum() < len(mesh.vertices)  # some vertices lie past the disc: left out
+    uv_of_points_inside = mesh.vertex_uv[face.trim.contains(*mesh.vertex_uv.T)]
+    assert len(points) == len(uv_of_points_inside) + len(face.loop_uv())
+
+
 # -- warnings ------------------------------------------------------------------------------------
 HOOD = ROOT / "scenes" / "hood.toml"
 WARNING_CASES = {

@@ -306,3 +306,22 @@ def test_boundary_distance_is_to_the_loops_even_where_geos_repaired_the_polygon(
     assert type(spiked._polygon).__name__ == "GeometryCollection" and spiked._polygon.boundary is None
     distance = spiked.boundary_distance(np.array([0.5, 0.5, 1.5, 1.5]), np.array([0.5, 0.9, 1.2, 1.0]))
     assert np.allclose(distance, [0.5, 0.1, 0.2, 0.0], rtol=0, atol=1e-15)
+
+
+def test_loop_points_of_a_periodic_trim_are_moved_into_the_surfaces_domain():
+    """`NurbsSurface.loop_uv`: a trim sampled in the period from u0 = 0.5 (u 0.5 … 1.45) on a surface whose domain is
+    [0, 1]: its points past 1 are those one period back (u − 1), where the surface is, not clamped onto u = 1; the
+    points are on the face as `Trim.contains` reads them (from the trim's own period)."""
+    from rtreflect.geometry.surfaces import NurbsSurface
+
+    t = np.linspace(0.0, 1.0, 4)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    patch = NurbsSurface.bezier(np.stack([x, y, x * (1 - x)], axis=-1))
+    u = np.linspace(0.5, 1.45, 20)
+    loop = np.concatenate([np.column_stack([u, np.full(20, 0.2)]), np.column_stack([u[::-1], np.full(20, 0.8)])])
+    surface = dataclasses.replace(patch, trim=Trim(loop, u_period=1.0, u0=0.5))
+    uv = surface.loop_uv()
+    assert np.allclose(uv[:, 0], np.where(loop[:, 0] >= 1.0, loop[:, 0] - 1.0, loop[:, 0]))
+    assert np.array_equal(uv[:, 1], loop[:, 1])
+    assert surface.trim.contains(uv[:, 0], uv[:, 1]).all()
+    assert len(dataclasses.replace(patch, trim=None).loop_uv()) == 0

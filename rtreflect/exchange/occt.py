@@ -1300,7 +1300,7 @@ def faces_bounds(surfaces: list[NurbsSurface]) -> tuple[np.ndarray, np.ndarray]:
     """
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for surface in surfaces:
-        uv = [surface.trim.outer, *surface.trim.holes] if surface.trim is not None else []
+        uv = [surface.loop_uv()] if surface.trim is not None else []
         if surface.mesh_uv is not None:
             uv.append(surface.mesh_uv[0])
         if not uv:

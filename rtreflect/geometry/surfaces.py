@@ -253,6 +253,17 @@ class NurbsSurface:
             out.append(np.array(creases, dtype=np.float64))
         return out[0], out[1]
 
+    def loop_uv(self) -> np.ndarray:
+        """(n, 2) the points of every trim loop (outer, then holes) in the surface's own parameters: a periodic trim's
+        moved from the period its loops were sampled in into the domain (`Trim.wrap`); none when untrimmed. With the
+        mesh vertices on the face, what bounds the face (`exchange.occt.faces_bounds`, `integrator.autorig.part_points`)."""
+        if self.trim is None:
+            return np.zeros((0, 2))
+        uv = np.concatenate([np.asarray(loop, dtype=np.float64).reshape(-1, 2)
+                             for loop in (self.trim.outer, *self.trim.holes)])
+        (u0, _), (v0, _) = self.domain
+        return np.column_stack(self.trim.wrap(uv[:, 0], uv[:, 1], start=(u0, v0)))
+
     def evaluate(self, u: np.ndarray, v: np.ndarray, order: int = 1) -> SurfaceDerivatives:
         """S and its partial derivatives up to ``order`` (1 or 2) at arrays u, v (clamped to the domain)."""
         u = np.asarray(u, dtype=np.float64).ravel()

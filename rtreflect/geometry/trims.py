@@ -83,14 +83,17 @@ class Trim:
         shapely.prepare(polygon)
         object.__setattr__(self, "_polygon", polygon)
 
-    def wrap(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Periodic parameters moved into the period the loops were sampled in."""
+    def wrap(self, u: np.ndarray, v: np.ndarray, start: tuple[float, float] | None = None
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """Periodic parameters moved into the period the loops were sampled in (from (u0, v0)), or into the one from
+        ``start`` (a surface's domain start: the loops' points in the surface's own parameters, `NurbsSurface.loop_uv`)."""
         u = np.asarray(u, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
+        u_start, v_start = (self.u0, self.v0) if start is None else start
         if self.u_period:
-            u = into_period(u, self.u0, self.u_period)
+            u = into_period(u, u_start, self.u_period)
         if self.v_period:
-            v = into_period(v, self.v0, self.v_period)
+            v = into_period(v, v_start, self.v_period)
         return u, v
 
     def contains(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -30,7 +30,6 @@ import numpy as np
 from ..exchange.scene import CameraSpec, ImageSpec, LightSpec, Scene
 from ..geometry.surfaces import SurfaceSet
 from ..geometry.tessellation import Tessellation
-from ..geometry.trims import into_period
 from ..modes.lights import TubeLights, reaches_light_plane, reflect
 from ..trace.camera import Camera
 from ..trace.framing import ISO_NAMES, fit_camera, iso_directions, view_frame
@@ -79,31 +78,20 @@ def preview_size(image: ImageSpec) -> tuple[int, int]:
 
 def part_points(tessellation: Tessellation, surfaces: SurfaceSet) -> np.ndarray:
     """Points of the part as its faces bound it, which the camera and the bank are fitted to: the mesh vertices that lie
-    on their faces, and every trim loop's points on its surface.
+    on their faces, and every trim loop's points on its surface (`NurbsSurface.loop_uv`); all the vertices where no
+    face is trimmed.
 
-    A trimmed face without its reader's triangulation is meshed by whole cells of its span grid: cells reach up to one
-    past its trim, and a face trimmed from a large surface has large cells (Open CASCADE's OCC26308-Face.stp: its mesh's
-    box 19 % over the face's on the diagonal, the part that much smaller in the picture). The loops bound the face
-    where no vertex of it lies inside (a face smaller than a cell)."""
+    A trimmed face's mesh reaches past its trim: a reader's triangulation by its skirt (a quarter of a boundary edge
+    out, `tessellation.SKIRT_EDGES`: Open CASCADE's xr1-tc-nut.stp, a 20 × 15 plate, had its top and bottom meshes 2.5
+    past it on two sides, and the camera stood 13 % farther than the part needs), a span grid by whole cells. The
+    loops bound the face where no vertex of it lies inside (a face smaller than a cell)."""
+    if not surfaces.trimmed:
+        return tessellation.vertices
     on = surfaces.on_face(tessellation.vertex_patch, tessellation.vertex_uv[:, 0], tessellation.vertex_uv[:, 1])
-    patch, uv = [], []
-    for k, surface in enumerate(surfaces.patches):
-        if surface.trim is None:
-            continue
-        loops = np.concatenate([np.asarray(loop, dtype=np.float64).reshape(-1, 2)
-                                for loop in (surface.trim.outer, *surface.trim.holes)])
-        (u0, _), (v0, _) = surface.domain
-        # A periodic face's loops lie in the period they were sampled in; the surface's domain may start elsewhere.
-        for axis, start, period in ((0, u0, surface.trim.u_period), (1, v0, surface.trim.v_period)):
-            if period:
-                loops[:, axis] = into_period(loops[:, axis], start, period)
-        patch.append(np.full(len(loops), k))
-        uv.append(loops)
-    points = [tessellation.vertices[on]]
-    if patch:
-        uv = np.concatenate(uv)
-        points.append(surfaces.evaluate(np.concatenate(patch), uv[:, 0], uv[:, 1]).S)
-    points = np.concatenate(points)
+    loops = [surface.loop_uv() for surface in surfaces.patches]
+    uv = np.concatenate(loops)
+    patch = np.repeat(np.arange(len(loops)), [len(loop) for loop in loops])
+    points = np.concatenate([tessellation.vertices[on], surfaces.evaluate(patch, uv[:, 0], uv[:, 1]).S])
     points = points[np.all(np.isfinite(points), axis=1)]
     return points if len(points) else tessellation.vertices
 

@@ -33,7 +33,7 @@ VIEW_FROM = {
 FRAME_MARGIN = 1.1
 #: Fits of the distance, each after aiming at the middle of the previous fit's image of the part (converges in a few).
 CENTRING_STEPS = 4
-#: Most points the fit looks at: evenly strided mesh vertices (the margin absorbs what the stride skips).
+#: Most points the fit looks at: evenly strided points of the part (the margin absorbs what the stride skips).
 MAX_FIT_POINTS = 200_000
 
 
@@ -83,7 +83,8 @@ def image_up(spec: CameraSpec, from_dir: np.ndarray) -> np.ndarray:
 
 
 def fit_camera(spec: CameraSpec, points: np.ndarray, aspect: float) -> CameraSpec:
-    """``spec`` with its automatic values chosen so that ``points`` (the part's mesh vertices) fill the frame.
+    """``spec`` with its automatic values chosen so that ``points`` (the part's, `integrator.autorig.part_points`) fill
+    the frame.
 
     Explicit values win: an explicit eye keeps its place (only look_at and an orthographic
     view height are chosen); an explicit look_at is what the eye looks at.
