@@ -533,3 +533,58 @@ def test_highlight_lines_skip_a_wall_whose_normals_lie_along_the_light_plane():
     assert on_wall == 0
     assert report.passed, report.reasons
     assert sum(line.points for line in report.lines) > 200  # the hood's lines are compared
+
+
+def _wall_scene(tmp_path: Path, profile: list[float]) -> Path:
+    """A wall x ∈ [−1, 1], z ∈ [−1, 1] whose depth y is a cubic in z (control values ``profile``), seen level from the
+    front with z = 0 on the middle pixel row's centres (91 rows), as isophotes of the light +z every 1°."""
+    thirds = [-1.0, -1 / 3, 1 / 3, 1.0]
+    points = [[[x, y, z] for y, z in zip(profile, thirds)] for x in thirds]
+    path = tmp_path / "wall.toml"
+    path.write_text(f"""
+[image]
+width = 121
+height = 91
+samples = "analytic"
+[camera]
+eye = [0.0, -6.0, 0.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 0.0, 1.0]
+fov = 30.0
+[lights]
+point = [0.0, 0.0, 5.0]
+normal = [0.0, 0.0, 1.0]
+direction = [0.0, 1.0, 0.0]
+spacing = 0.5
+count = 9
+[render]
+mode = "isophote"
+light = [0.0, 0.0, 1.0]
+step = 1.0
+[[surface]]
+degree = 3
+knots_u = [0, 0, 0, 0, 1, 1, 1, 1]
+knots_v = [0, 0, 0, 0, 1, 1, 1, 1]
+points = {points}
+""")
+    return path
+
+
+@pytest.mark.parametrize("kind", ["touch", "cross"])
+def test_a_level_met_on_pixel_centres_is_traced_only_where_it_is_crossed(kind, tmp_path):
+    """y = 0.1 z³ (control values ±0.1 alternating): the normal (0, −1, 0.3 z²)/|·| turns vertical at z = 0 and back, so
+    φ = 90° − ~17° z² touches the 90° level there without crossing it: on the middle row φ is 90° to float32 rounding,
+    above and below it less. That row is no line (no analytic contour: φ < 90° off it), so before `validate._touches`
+    its pixels made 114 traced "crossings" (two a column) with no analytic line near, each a miss. y = −0.03 z² ((−0.03, 0.01, 0.01,
+    −0.03)): φ = 90° + ~3.4° z crosses 90° at z = 0, on the same row of pixel centres; that crossing is traced (once per
+    column) and compared with the contour z = 0."""
+    profile = [-0.1, 0.1, -0.1, 0.1] if kind == "touch" else [-0.03, 0.01, 0.01, -0.03]
+    scene = load_scene(_wall_scene(tmp_path, profile))
+    report = validate_scene(scene, threads=1)
+    ninety = [line for line in report.lines if line.position == 90.0][0]
+    assert report.passed, (report.reasons, [(line.position, line.points, line.misses) for line in report.lines])
+    if kind == "touch":
+        assert ninety.points == 0 and ninety.misses == 0
+    else:
+        assert ninety.max_px <= 0.01
+        assert 50 <= ninety.points <= 60  # one a column of the 57 the wall spans (the touch made two)

@@ -674,6 +674,42 @@ def _crossing(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, jump_n
     return delta, ok
 
 
+#: Pixels `_touches` walks past along a run of pixels whose f lies on the level exactly.
+LEVEL_RUN = 8
+
+
+def _touches(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, jump_next: np.ndarray,
+             step: int) -> np.ndarray:
+    """True where the pair (a, b) meets the level c without crossing it: one end's f lies on it exactly, and the
+    first pixel past the run of pixels on it (along the pair's axis, over smooth pairs: ``jump_next`` as `_crossing`'s)
+    lies on the other end's side, or none does within `LEVEL_RUN`. A film's float32 f rounds onto a level that its
+    extremum reaches to ~1e-5 of it: a draft or isophote angle of 90° where a face turns vertical and back (Open
+    CASCADE's ec_turbine-A.stp at 160×90: two "crossings" of 90° by a fillet whose angle peaks at 90° − 4e-12°, 13 px
+    from any contour, as φ never crosses 90°). Its stripe is drawn; the level set there is no line to trace.
+    A crossing through a pixel on the level (its neighbours on either side) stays, counted once as before."""
+    touch = np.zeros(len(a), dtype=bool)
+    for end, other, forward in ((b, a, True), (a, b, False)):
+        rows = np.flatnonzero(f[end] == c)
+        if len(rows) == 0:
+            continue
+        level, p = c[rows], end[rows]
+        known = np.ones(len(rows), dtype=bool)
+        for _ in range(LEVEL_RUN):
+            on = known & (f[p] == level)
+            if not on.any():
+                break
+            beyond = p + step if forward else p - step
+            if forward:
+                smooth = jump_next[p] < math.inf
+            else:
+                smooth = (beyond >= 0) & (jump_next[np.maximum(beyond, 0)] < math.inf)
+            known &= ~on | smooth
+            p = np.where(on & smooth, beyond, p)
+        past = f[p]
+        touch[rows] = ~known | (past == level) | (np.sign(past - level) == np.sign(f[other[rows]] - level))
+    return touch
+
+
 def traced_centres(renderer: Renderer, aovs: PixelAOVs,
                    pairs: dict[int, tuple[np.ndarray, np.ndarray]] | None = None,
                    levels: np.ndarray | None = None) -> TracedCentres:
@@ -708,7 +744,10 @@ def traced_centres(renderer: Renderer, aovs: PixelAOVs,
         pos_b = np.where(line_id[b] >= 0, c_k[np.maximum(line_id[b], 0).astype(int)], np.nan)
         keep = (pos_a == c_k[k]) & (pos_b == c_k[k])
         a, b, k = a[keep], b[keep], k[keep]
-        delta, resolved = _crossing(f, a, b, c_k[k], jump_next, limits[k], step=1 if axis == 1 else width)
+        step = 1 if axis == 1 else width
+        crossed = ~_touches(f, a, b, c_k[k], jump_next, step)
+        a, b, k = a[crossed], b[crossed], k[crossed]
+        delta, resolved = _crossing(f, a, b, c_k[k], jump_next, limits[k], step=step)
         a, b, k, delta = a[resolved], b[resolved], k[resolved], delta[resolved]
         row, col = np.divmod(a, width)
         x = col + 0.5 + (delta if axis == 1 else 0.0)
