@@ -588,3 +588,17 @@ def test_a_level_met_on_pixel_centres_is_traced_only_where_it_is_crossed(kind, t
     else:
         assert ninety.max_px <= 0.01
         assert 50 <= ninety.points <= 60  # one a column of the 57 the wall spans (the touch made two)
+
+
+def test_a_strip_narrower_than_the_contour_grid_is_compared_with_the_exact_level_set(tmp_path):
+    """y = 0.1 z³ − 1.5e-4 z: the isophote angle rises just past 90° (by ~0.03°) in a strip |z| < 0.022, about 2 pixels
+    across the middle rows, and falls back. The analytic contours' grid (cells ~2 px) steps over it: before
+    `validate.exact_crossings` its 114 traced crossings (two a column, at the strip's edges) met no contour, each a miss
+    (OCCT's linkrods.step: κ1 = 0 beside a knot line, 1.24 px off the contour on the strip's near side). The exact
+    roots of φ = 90° between the same pixels' hits agree with the traced centres."""
+    b = 1.5e-4
+    profile = [0.1 * cube - b * z for cube, z in zip([-1.0, 1.0, -1.0, 1.0], [-1.0, -1 / 3, 1 / 3, 1.0])]
+    report = validate_scene(load_scene(_wall_scene(tmp_path, profile)), threads=1)
+    ninety = [line for line in report.lines if line.position == 90.0][0]
+    assert report.passed, (report.reasons, [(line.position, line.points, line.misses) for line in report.lines])
+    assert ninety.points == 114 and ninety.max_px <= 0.01

@@ -223,6 +223,7 @@ class PixelAOVs:
     # φ) creases or jumps: every knot for a curvature map (φ of second derivatives), the surface's creases for the
     # others (`normal_breaks`). Pixels in different spans are no smooth pair (`_smooth_pairs`). None: no line counts.
     span: np.ndarray | None = None
+    uv: np.ndarray | None = None  # (H, W, 2) the hit's (u, v) (float32 storage)
 
 
 def line_offsets(renderer: Renderer, points: SurfacePoints, level: np.ndarray, size: int,
@@ -302,6 +303,7 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
                                     render.background),
         incidence=incidence.reshape(height, width), normal_error=normal_error.reshape(height, width),
         nearer=nearer.reshape(height, width), line_offset=line_offset, span=knot_spans(renderer, film, normal_breaks),
+        uv=np.stack([channel("u"), channel("v")], axis=-1),
     )
 
 
@@ -1083,6 +1085,34 @@ class SceneReport:
                 **({"parallax": self.parallax} if self.parallax is not None else {})}
 
 
+def exact_crossings(renderer: Renderer, aovs: PixelAOVs, first: np.ndarray, second: np.ndarray,
+                    c: np.ndarray) -> np.ndarray:
+    """(n, 2) image positions of the level set f = c (the mode's φ) between the hits of the pixel pairs (first,
+    second) (flat indices; one smooth piece of one face): the root on the (u, v) segment joining their hits, exactly
+    (`contours.UlmetField.bracket` on the exact field, not the film's values), where it is seen (`UlmetField.seen`);
+    NaN where there is none (f not across c at both ends, or a periodic φ, whose wrap no bracket spans).
+
+    The analytic contours are found on a grid of cells ~`contours.GRID_CELL_PX` across: a strip narrower than a cell
+    where f dips across a level and back can lie between its points, and a traced centre on its far side then meets
+    only the contour on its near side (OCCT's linkrods.step, κ1 = 0 beside a C1 knot line of a degree-10 face at
+    320×180: a strip 1.3 px wide where κ1 dips to −0.004 of a level gap of 2, its far edge 1.24 px from the contour).
+    The exact root between the very pixels is a point of the analytic level set too: a traced centre off it is off.
+    """
+    out = np.full((len(first), 2), np.nan)
+    field = field_of(renderer)
+    if len(first) == 0 or getattr(field, "period", None):
+        return out
+    patch = aovs.patch.ravel()[first].astype(int)
+    uv = aovs.uv.reshape(-1, 2)
+    ua, va, ub, vb = uv[first, 0], uv[first, 1], uv[second, 0], uv[second, 1]
+    edge = np.column_stack([ua, va, ub, vb, field.f(patch, ua, va), field.f(patch, ub, vb)])
+    u, v, ok = field.bracket(patch, edge, np.asarray(c, dtype=np.float64))
+    rows = np.flatnonzero(ok)
+    rows = rows[field.seen(patch[rows], u[rows], v[rows])]
+    out[rows] = field.project(patch[rows], u[rows], v[rows])[0]
+    return out
+
+
 def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, tolerance: float) -> SceneReport:
     """Deviation of traced centres from the analytic contours, misses both ways and colour mismatches, per line."""
     spec = line_spec(renderer)
@@ -1107,17 +1137,27 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
     for line in contours.lines:
         k = line.light
         segs = _segments(contours, k)
-        pts = centres.px[centres.light == k]
+        mine = centres.light == k
+        pts = centres.px[mine]
         dist, seg = nearest_segment(pts, segs.a, segs.b, SEARCH_RADIUS_PX)
-        unmatched = ~np.isfinite(dist)
         # Beyond an open end of the analytic polyline: the traced line runs on where the contour was cut.
-        found = np.flatnonzero(~unmatched)
+        found = np.flatnonzero(np.isfinite(dist))
         at_end = np.zeros(len(pts), dtype=bool)
         if len(found):
             sa, sb = segs.a[seg[found]], segs.b[seg[found]]
             near_start = segs.open_start[seg[found]] & (np.linalg.norm(pts[found] - sa, axis=1) <= dist[found] + 1e-9)
             near_end = segs.open_end[seg[found]] & (np.linalg.norm(pts[found] - sb, axis=1) <= dist[found] + 1e-9)
             at_end[found] = (near_start | near_end) & (dist[found] <= END_MARGIN_PX)
+        # Off every contour found on the grid by more than the tolerance: the level set's exact root between the
+        # centre's own two pixels counts as well (`exact_crossings`).
+        off = np.flatnonzero(~(dist <= tolerance) & ~at_end)
+        if len(off):
+            exact = exact_crossings(renderer, aovs, centres.pixel_a[mine][off], centres.pixel_b[mine][off],
+                                    np.full(len(off), c_k[k]))
+            between = np.linalg.norm(pts[off] - exact, axis=1)
+            nearer = between < np.where(np.isfinite(dist[off]), dist[off], np.inf)
+            dist[off[nearer]] = between[nearer]
+        unmatched = ~np.isfinite(dist)
         dev = dist[~unmatched & ~at_end]
         # Analytic points with no traced centre nearby, where this line and its neighbour are resolved.
         check = _checkable_points(contours, k, clean_for(gaps[k]))
