@@ -1177,3 +1177,23 @@ def test_model_open_cascade_cannot_convert_whole_reads_face_by_face(tmp_path):
     assert len(model.surfaces) == 7 and not model.skipped
     faces_per_edge = Counter(edge.key for surface in model.surfaces for edge in surface.trim.edges)
     assert sorted(Counter(faces_per_edge.values()).items()) == [(1, 4), (2, 12)]
+
+
+def test_a_whole_turn_whose_pcurves_start_off_the_surfaces_parameter_is_whole(tmp_path):
+    """turned_band.step: a cylinder r 10 trimmed to u ∈ [π/2, 5π/2], converted by Open CASCADE to a B-spline over that
+    range with the edges' pcurves at 1.5332..7.8164 (the rational circle's parameter). Cut to the domain, 2.2° of the
+    band were missing (OCCT's trj1_io1-ms.stp: rays there met the face behind, 3.7 past OCCT's first hit). Rays aimed
+    at the axis from outside at 720 angles, at mid height, all meet the band at radius 10 (closed form)."""
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+
+    path = tmp_path / "turned_band.step"
+    sweep.PARTS[path.name](path)
+    renderer = Renderer(resolve(load_scene(path).with_image(16, 9, 1)))
+    angle = np.linspace(0.0, 2.0 * np.pi, 720, endpoint=False)
+    outward = np.column_stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)])
+    origins = 30.0 * outward + np.array([0.0, 0.0, 3.0])
+    hits = renderer.trace(origins, -outward)
+    assert hits.hit.all(), np.degrees(angle[~hits.hit])
+    np.testing.assert_allclose(hits.t, 20.0, atol=1e-6)

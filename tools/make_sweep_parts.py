@@ -1607,6 +1607,18 @@ def thin_wide():
     return BRepAlgoAPI_Fuse(BRepPrimAPI_MakeBox(20.0, 20.0, 2.0).Shape(), wall).Shape()
 
 
+def turned_band():
+    """A whole turn of a cylinder (r 10, 6 high, axis z) as one face whose surface is trimmed to [π/2, 5π/2]: Open
+    CASCADE's conversion keeps that range for its B-spline but puts the edges' pcurves at u 1.5332 to 7.8164, the
+    rational circle's own parameter (as OCCT's data/step/trj1_io1-ms.stp, face 13)."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.Geom import Geom_CylindricalSurface, Geom_RectangularTrimmedSurface
+    from OCP.gp import gp_Ax3
+
+    band = Geom_RectangularTrimmedSurface(Geom_CylindricalSurface(gp_Ax3(), 10.0), math.pi / 2, 2.5 * math.pi, 0.0, 6.0)
+    return BRepBuilderAPI_MakeFace(band, 1e-7).Face()
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -1690,6 +1702,7 @@ PARTS = {
     "revolution_window.step": lambda p: write_step(revolution_window(), p),
     "touching_holes.step": lambda p: write_step(touching_holes(), p),
     "thin_wide.step": lambda p: write_step(thin_wide(), p),
+    "turned_band.step": lambda p: write_step(turned_band(), p),
 }
 
 

@@ -335,8 +335,8 @@ def bspline_of_face(face) -> NurbsSurface:
     def cut(lo, hi, first, last, periodic, period, knots, closed, pcurves_lo, pcurves_hi):
         if periodic:
             hi = min(hi, lo + period)
-        elif closed and _past(pcurves_lo, pcurves_hi, first, last):  # winds round more than once: `_over_periods`
-            lo, hi = first, last
+        elif closed and (_past(pcurves_lo, pcurves_hi, first, last) or _turns_past(pcurves_lo, pcurves_hi, first, last)):
+            lo, hi = first, last  # winds round more than once, or once from elsewhere: `_over_periods`
         else:  # the pcurves' bounds may pass the surface's by their tolerance
             lo, hi = max(lo, first), min(hi, last)
         return _cut_at_knots(lo, hi, knots, period if periodic else 0.0, first, last)
@@ -417,6 +417,22 @@ def _past(lo: float, hi: float, first: float, last: float) -> bool:
     return bool(np.isfinite(lo) and np.isfinite(hi) and (lo < first - reach or hi > last + reach))
 
 
+def _turns_past(lo: float, hi: float, first: float, last: float) -> bool:
+    """Whether the pcurves' range ``lo``..``hi`` spans a whole turn of the closed domain ``first``..``last`` and starts
+    before it or ends after it (by more than `PERIOD_SHIFT_SLACK` of its width): a face round the whole closed surface
+    whose turn starts elsewhere than the surface's parameters do (`_over_periods`).
+
+    Open CASCADE's conversion of a cylinder trimmed to [π/2, π/2 + 2π] (OCCT's data/step/trj1_io1-ms.stp, face 13) keeps
+    that range but re-computes the pcurves for the rational circle's own parameter: the edges ran from u = 1.5332 to
+    7.8164, a whole turn 0.0376 before the domain. Cut to the domain, 2.2° of the cylinder along its seam were missing:
+    rays there met the face behind it, 3.7 past Open CASCADE's first hit.
+    """
+    width = last - first
+    slack = PERIOD_SHIFT_SLACK * width
+    return bool(np.isfinite(lo) and np.isfinite(hi) and hi - lo >= width - slack
+                and (lo < first - slack or hi > last + slack))
+
+
 def _over_periods(knots: np.ndarray, degree: int, poles: np.ndarray, weights: np.ndarray, axis: int, lo: float,
                   hi: float):
     """A closed direction's surface repeated over the whole periods its pcurves ``lo``..``hi`` run through, where they
@@ -429,12 +445,13 @@ def _over_periods(knots: np.ndarray, degree: int, poles: np.ndarray, weights: np
     at it went on to the neck behind (a close-up of the thread: every pixel 0.33 behind OCCT's first hit). On a closed
     direction (its first and last control rows equal, weights too) the surface is periodic with its domain's width:
     copies shifted by whole periods, joined at knots of multiplicity ``degree`` (the shared row once), are the same
-    surface on the pcurves' whole range (`bspline_of_face` leaves such a closed direction uncut for it). A domain
-    the pcurves pass by no more than `WINDING_PAST` of its width (`_past`) is kept.
+    surface on the pcurves' whole range (`bspline_of_face` leaves such a closed direction uncut for it). So is
+    one they go round once from elsewhere (`_turns_past`). A domain the pcurves pass by no more than `WINDING_PAST` of
+    its width (`_past`), not going round it, is kept.
     """
     a, b = float(knots[0]), float(knots[-1])
     width = b - a
-    if not _past(lo, hi, a, b):
+    if not (_past(lo, hi, a, b) or _turns_past(lo, hi, a, b)):
         return knots, poles, weights
     clamped = np.count_nonzero(knots == a) == degree + 1 and np.count_nonzero(knots == b) == degree + 1
     first, last = np.take(poles, 0, axis=axis), np.take(poles, -1, axis=axis)
