@@ -1197,3 +1197,22 @@ def test_a_whole_turn_whose_pcurves_start_off_the_surfaces_parameter_is_whole(tm
     hits = renderer.trace(origins, -outward)
     assert hits.hit.all(), np.degrees(angle[~hits.hit])
     np.testing.assert_allclose(hits.t, 20.0, atol=1e-6)
+
+
+def test_a_face_narrower_than_its_pcurves_drift_is_not_taken_for_a_turn(tmp_path):
+    """thin_wide.step's wall, 1e-5 thick: its top face's pcurves pass its 1e-5 width by ~1e-7 and its first and last
+    control rows lie within `_over_periods`' closedness slack, but Open CASCADE does not call the direction closed. Taken
+    for a whole turn (`occt._turns_past` before it asked Open CASCADE), the face was repeated into a line: 7 of 9 rays
+    straight down onto the wall's top missed it. All meet it at z = 12 (closed form)."""
+    from rtreflect.exchange.load import load_scene
+    from rtreflect.integrator.autorig import resolve
+    from rtreflect.integrator.renderer import Renderer
+
+    path = tmp_path / "thin_wide.step"
+    sweep.PARTS[path.name](path)
+    renderer = Renderer(resolve(load_scene(path).with_image(16, 9, 1)))
+    x = np.linspace(-35.0, 55.0, 9)
+    origins = np.column_stack([x, np.full(9, 10.0 + 5e-6), np.full(9, 20.0)])
+    hits = renderer.trace(origins, np.tile([0.0, 0.0, -1.0], (9, 1)))
+    assert hits.hit.all()
+    np.testing.assert_allclose(hits.t, 8.0, atol=1e-6)

@@ -591,8 +591,8 @@ def test_a_level_met_on_pixel_centres_is_traced_only_where_it_is_crossed(kind, t
 
 
 def test_a_strip_narrower_than_the_contour_grid_is_compared_with_the_exact_level_set(tmp_path):
-    """y = 0.1 z³ − 1.5e-4 z: the isophote angle rises just past 90° (by ~0.03°) in a strip |z| < 0.022, about 2 pixels
-    across the middle rows, and falls back. The analytic contours' grid (cells ~2 px) steps over it: before
+    """y = 0.1 z³ − 1.5e-4 z: the isophote angle rises just past 90° (by ~0.009°) in a strip |z| < 0.022, about 1.3
+    pixels across the middle rows, and falls back. The analytic contours' grid (cells ~2 px) steps over it: before
     `validate.exact_crossings` its 114 traced crossings (two a column, at the strip's edges) met no contour, each a miss
     (OCCT's linkrods.step: κ1 = 0 beside a knot line, 1.24 px off the contour on the strip's near side). The exact
     roots of φ = 90° between the same pixels' hits agree with the traced centres."""
@@ -602,3 +602,28 @@ def test_a_strip_narrower_than_the_contour_grid_is_compared_with_the_exact_level
     ninety = [line for line in report.lines if line.position == 90.0][0]
     assert report.passed, (report.reasons, [(line.position, line.points, line.misses) for line in report.lines])
     assert ninety.points == 114 and ninety.max_px <= 0.01
+
+
+@pytest.mark.parametrize("row, expected", [
+    ([88.0, 90.0, 90.0, 90.0, 88.5], [True, True]),  # a run of three on the level, the same side past it: a touch
+    ([88.0, 90.0, 90.0, 90.0, 91.0], [False]),  # ... the other side past it: crossed once (the pair into the run)
+    ([91.0, 90.0, 90.0, 88.0], [False]),  # crossed downwards: the pair out of the run, found walking back
+    ([90.0, 90.0, 88.0, 87.0], [True]),  # the run reaches the row's start: undecided, no line
+    ([89.7, 89.8, 89.7, 89.6], [True, True]),  # 89.8 as float32 stores it (above 89.8): met, not crossed
+    ([89.7, 89.8, 89.9, 90.0], [False]),  # ... and crossed
+])
+def test_a_level_touched_on_pixels_is_told_from_one_crossed(row, expected):
+    """`validate._touches` on one row of float32 film values against the level (90°, or 89.8°, which float32 rounds up):
+    the pairs `traced_centres` keeps (f from below c to at least c) are crossings only where the values past the run
+    on the level lie on the other side."""
+    from rtreflect.analysis.validate import _touches
+
+    c = 89.8 if 89.8 in row else 90.0
+    f = np.asarray(row, dtype=np.float32).astype(np.float64)
+    jump_next = np.full(len(f), np.inf)
+    jump_next[:-1] = np.abs(np.diff(f))  # every neighbouring pair smooth (the last pixel has none after it)
+    a = np.arange(len(f) - 1)
+    b = a + 1
+    counted = (np.fmin(f[a], f[b]) < c) & (c <= np.fmax(f[a], f[b]))  # as traced_centres selects them
+    a, b = a[counted], b[counted]
+    assert _touches(f, a, b, np.full(len(a), c), jump_next, 1).tolist() == expected

@@ -100,6 +100,8 @@ Tenth sweep:
                        curve's period end (Open CASCADE's NURBS conversion refuses it), beside a box
   revolution_window.step a face on a surface of revolution of a periodic B-spline profile, its v window across the
                        profile's period end (refused by the conversion likewise)
+Sixteenth round (a first-hit sweep of Open CASCADE's test files against its intersector):
+  turned_band.step     a whole turn of a cylinder trimmed to [π/2, 5π/2]: its converted pcurves start 0.0376 before it
 """
 
 from __future__ import annotations

@@ -17,10 +17,14 @@ neighbour gap per pixel (the nearest tube at another position is at least that m
 away there: resolvability is decided per line and locally, so one tube close to another does
 not blind the check for the rest), both pixels have
 ``line.id == k`` (tube k, or one at the same position, is the nearest tube ahead, within
-its length) and neither pixel's reflected ray is blocked before the light plane.
+its length) and neither pixel's reflected ray is blocked before the light plane. A pixel whose
+f lies on c_k exactly (as float32 stores it) makes a crossing only where the pixels past it lie
+on the other side: a level f only touches is no line (`_touches`).
 
 **Deviation.** Each traced centre's distance in pixels to the nearest segment of tube
-k's projected analytic polylines. A centre whose nearest contour point is the open end
+k's projected analytic polylines, or, where that is beyond the tolerance, to the exact root
+of f = c_k between its own two pixels' hits if nearer (`exact_crossings`: the contours' grid
+can step over a strip narrower than a cell). A centre whose nearest contour point is the open end
 of a polyline (where visibility, a patch edge or the tube's end cuts the contour), and
 lies within `END_MARGIN_PX` of it, sits beyond the analytic line's end and is left out.
 
@@ -30,7 +34,8 @@ boundaries, pixels whose reflected ray is blocked (lines seen along a ray) and t
 (the pixel is `CLEAN_MARGIN_PX` from any such pixel, and
 the point is `END_MARGIN_PX` along the contour from a polyline end), and not on a closed contour
 round no pixel centre (`encloses_a_pixel_centre`: no two centres lie on either side of it); plus
-traced centres with no analytic contour of their tube within `SEARCH_RADIUS_PX`.
+traced centres with no analytic contour of their tube within `SEARCH_RADIUS_PX` and no exact root
+between their pixels.
 
 **Colour.** The lines that are drawn (the `lit` flags of eq. 4 with occlusion, weighted by
 the stripe profile and blended into RGB over the shaded surface) are checked against the
@@ -682,22 +687,24 @@ LEVEL_RUN = 8
 
 def _touches(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, jump_next: np.ndarray,
              step: int) -> np.ndarray:
-    """True where the pair (a, b) meets the level c without crossing it: one end's f lies on it exactly, and the
-    first pixel past the run of pixels on it (along the pair's axis, over smooth pairs: ``jump_next`` as `_crossing`'s)
-    lies on the other end's side, or none does within `LEVEL_RUN`. A film's float32 f rounds onto a level that its
+    """True where the pair (a, b) meets the level c without crossing it: one end's f lies on it exactly (as float32
+    stores c), and the first pixel past the run of pixels on it (along the pair's axis, over smooth pairs:
+    ``jump_next`` as `_crossing`'s) lies on the other end's side, or none does within `LEVEL_RUN`. A film's float32 f rounds onto a level that its
     extremum reaches to ~1e-5 of it: a draft or isophote angle of 90° where a face turns vertical and back (Open
     CASCADE's ec_turbine-A.stp at 160×90: two "crossings" of 90° by a fillet whose angle peaks at 90° − 4e-12°, 13 px
     from any contour, as φ never crosses 90°). Its stripe is drawn; the level set there is no line to trace.
     A crossing through a pixel on the level (its neighbours on either side) stays, counted once as before."""
     touch = np.zeros(len(a), dtype=bool)
+    # On the level as the film stores it: a level float32 cannot hold (89.8°) is met at its float32 rounding.
+    stored = np.asarray(c, dtype=np.float64).astype(np.float32).astype(np.float64)
     for end, other, forward in ((b, a, True), (a, b, False)):
-        rows = np.flatnonzero(f[end] == c)
+        rows = np.flatnonzero(f[end] == stored)
         if len(rows) == 0:
             continue
-        level, p = c[rows], end[rows]
+        level, on_level, p = c[rows], stored[rows], end[rows]
         known = np.ones(len(rows), dtype=bool)
         for _ in range(LEVEL_RUN):
-            on = known & (f[p] == level)
+            on = known & (f[p] == on_level)
             if not on.any():
                 break
             beyond = p + step if forward else p - step
@@ -708,7 +715,7 @@ def _touches(f: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, jump_ne
             known &= ~on | smooth
             p = np.where(on & smooth, beyond, p)
         past = f[p]
-        touch[rows] = ~known | (past == level) | (np.sign(past - level) == np.sign(f[other[rows]] - level))
+        touch[rows] = ~known | (past == on_level) | (np.sign(past - level) == np.sign(f[other[rows]] - level))
     return touch
 
 
@@ -1086,11 +1093,12 @@ class SceneReport:
 
 
 def exact_crossings(renderer: Renderer, aovs: PixelAOVs, first: np.ndarray, second: np.ndarray,
-                    c: np.ndarray) -> np.ndarray:
+                    c: np.ndarray, field: UlmetField | None = None) -> np.ndarray:
     """(n, 2) image positions of the level set f = c (the mode's φ) between the hits of the pixel pairs (first,
     second) (flat indices; one smooth piece of one face): the root on the (u, v) segment joining their hits, exactly
     (`contours.UlmetField.bracket` on the exact field, not the film's values), where it is seen (`UlmetField.seen`);
-    NaN where there is none (f not across c at both ends, or a periodic φ, whose wrap no bracket spans).
+    NaN where there is none (f not across c at both ends, or a periodic φ, whose wrap no bracket spans). ``field``: the
+    renderer's (`contours.field_of`), when the caller has it.
 
     The analytic contours are found on a grid of cells ~`contours.GRID_CELL_PX` across: a strip narrower than a cell
     where f dips across a level and back can lie between its points, and a traced centre on its far side then meets
@@ -1099,10 +1107,12 @@ def exact_crossings(renderer: Renderer, aovs: PixelAOVs, first: np.ndarray, seco
     The exact root between the very pixels is a point of the analytic level set too: a traced centre off it is off.
     """
     out = np.full((len(first), 2), np.nan)
-    field = field_of(renderer)
+    field = field or field_of(renderer)
     if len(first) == 0 or getattr(field, "period", None):
         return out
     patch = aovs.patch.ravel()[first].astype(int)
+    if aovs.uv is None:  # AOVs made without the film's (u, v)
+        return out
     uv = aovs.uv.reshape(-1, 2)
     ua, va, ub, vb = uv[first, 0], uv[first, 1], uv[second, 0], uv[second, 1]
     edge = np.column_stack([ua, va, ub, vb, field.f(patch, ua, va), field.f(patch, ub, vb)])
@@ -1134,6 +1144,7 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
         return clean_by_gap[gap]
 
     reports, all_dev, counted, reasons, notes = [], [], [], [], []
+    field = None  # `exact_crossings`' field, made on first use
     for line in contours.lines:
         k = line.light
         segs = _segments(contours, k)
@@ -1152,8 +1163,9 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
         # centre's own two pixels counts as well (`exact_crossings`).
         off = np.flatnonzero(~(dist <= tolerance) & ~at_end)
         if len(off):
+            field = field or field_of(renderer)
             exact = exact_crossings(renderer, aovs, centres.pixel_a[mine][off], centres.pixel_b[mine][off],
-                                    np.full(len(off), c_k[k]))
+                                    np.full(len(off), c_k[k]), field)
             between = np.linalg.norm(pts[off] - exact, axis=1)
             nearer = between < np.where(np.isfinite(dist[off]), dist[off], np.inf)
             dist[off[nearer]] = between[nearer]

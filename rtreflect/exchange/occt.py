@@ -335,7 +335,7 @@ def bspline_of_face(face) -> NurbsSurface:
     def cut(lo, hi, first, last, periodic, period, knots, closed, pcurves_lo, pcurves_hi):
         if periodic:
             hi = min(hi, lo + period)
-        elif closed and (_past(pcurves_lo, pcurves_hi, first, last) or _turns_past(pcurves_lo, pcurves_hi, first, last)):
+        elif closed and _beyond(pcurves_lo, pcurves_hi, first, last, closed):
             lo, hi = first, last  # winds round more than once, or once from elsewhere: `_over_periods`
         else:  # the pcurves' bounds may pass the surface's by their tolerance
             lo, hi = max(lo, first), min(hi, last)
@@ -345,8 +345,10 @@ def bspline_of_face(face) -> NurbsSurface:
     vk = np.fromiter(surface.VKnots(), float)
     u_period = surface.UPeriod() if surface.IsUPeriodic() else 0.0
     v_period = surface.VPeriod() if surface.IsVPeriodic() else 0.0
-    u0, u1 = cut(umin, umax, u_first, u_last, surface.IsUPeriodic(), u_period, uk, surface.IsUClosed(), u_lo, u_hi)
-    v0, v1 = cut(vmin, vmax, v_first, v_last, surface.IsVPeriodic(), v_period, vk, surface.IsVClosed(), v_lo, v_hi)
+    # Closed as Open CASCADE judges it (to its own tolerance): only such a direction goes round from elsewhere (`_beyond`).
+    u_closed, v_closed = surface.IsUClosed() or surface.IsUPeriodic(), surface.IsVClosed() or surface.IsVPeriodic()
+    u0, u1 = cut(umin, umax, u_first, u_last, surface.IsUPeriodic(), u_period, uk, u_closed, u_lo, u_hi)
+    v0, v1 = cut(vmin, vmax, v_first, v_last, surface.IsVPeriodic(), v_period, vk, v_closed, v_lo, v_hi)
     whole = (u0, u1, v0, v1) == (u_first, u_last, v_first, v_last)
     clamped = (surface.UMultiplicity(1) == surface.UDegree() + 1 and surface.UMultiplicity(len(uk)) == surface.UDegree() + 1
                and surface.VMultiplicity(1) == surface.VDegree() + 1 and surface.VMultiplicity(len(vk)) == surface.VDegree() + 1)
@@ -374,8 +376,8 @@ def bspline_of_face(face) -> NurbsSurface:
     knots_v = _into_pcurves_period(np.fromiter(surface.VKnotSequence(), float), v0, v_period)
     knots_u, poles, weights = clean_knots(knots_u, p, poles, weights, 0)
     knots_v, poles, weights = clean_knots(knots_v, q, poles, weights, 1)
-    knots_u, poles, weights = _over_periods(knots_u, p, poles, weights, 0, u_lo, u_hi)
-    knots_v, poles, weights = _over_periods(knots_v, q, poles, weights, 1, v_lo, v_hi)
+    knots_u, poles, weights = _over_periods(knots_u, p, poles, weights, 0, u_lo, u_hi, u_closed)
+    knots_v, poles, weights = _over_periods(knots_v, q, poles, weights, 1, v_lo, v_hi, v_closed)
     for direction, knots, degree, count in (("u", knots_u, p, poles.shape[0]), ("v", knots_v, q, poles.shape[1])):
         problem = knot_vector_problem(knots, degree, count)  # the rules every reader applies
         if problem:
@@ -417,6 +419,15 @@ def _past(lo: float, hi: float, first: float, last: float) -> bool:
     return bool(np.isfinite(lo) and np.isfinite(hi) and (lo < first - reach or hi > last + reach))
 
 
+def _beyond(lo: float, hi: float, first: float, last: float, closed: bool) -> bool:
+    """Whether a closed direction's pcurves ``lo``..``hi`` need the surface beyond its domain ``first``..``last``: they
+    wind round it more than once (`_past`), or go round it once from elsewhere (`_turns_past`) where Open CASCADE
+    calls the direction closed or periodic (``closed``): the wall of the sweep's thin_wide.step, a face 1e-5 wide whose
+    pcurves pass it by 1e-7 with its first and last control rows within `_over_periods`' slack of each other, is not.
+    The one test of `bspline_of_face`'s cut and of `_over_periods`."""
+    return _past(lo, hi, first, last) or (closed and _turns_past(lo, hi, first, last))
+
+
 def _turns_past(lo: float, hi: float, first: float, last: float) -> bool:
     """Whether the pcurves' range ``lo``..``hi`` spans a whole turn of the closed domain ``first``..``last`` and starts
     before it or ends after it (by more than `PERIOD_SHIFT_SLACK` of its width): a face round the whole closed surface
@@ -434,7 +445,7 @@ def _turns_past(lo: float, hi: float, first: float, last: float) -> bool:
 
 
 def _over_periods(knots: np.ndarray, degree: int, poles: np.ndarray, weights: np.ndarray, axis: int, lo: float,
-                  hi: float):
+                  hi: float, closed: bool):
     """A closed direction's surface repeated over the whole periods its pcurves ``lo``..``hi`` run through, where they
     run past its domain: (knots, poles, weights), unchanged otherwise.
 
@@ -446,12 +457,13 @@ def _over_periods(knots: np.ndarray, degree: int, poles: np.ndarray, weights: np
     direction (its first and last control rows equal, weights too) the surface is periodic with its domain's width:
     copies shifted by whole periods, joined at knots of multiplicity ``degree`` (the shared row once), are the same
     surface on the pcurves' whole range (`bspline_of_face` leaves such a closed direction uncut for it). So is
-    one they go round once from elsewhere (`_turns_past`). A domain the pcurves pass by no more than `WINDING_PAST` of
-    its width (`_past`), not going round it, is kept.
+    one they go round once from elsewhere (`_turns_past`) on a direction Open CASCADE calls closed (``closed``,
+    `_beyond`). A domain the pcurves pass by no more than `WINDING_PAST` of its width (`_past`), not going round it, is
+    kept.
     """
     a, b = float(knots[0]), float(knots[-1])
     width = b - a
-    if not (_past(lo, hi, a, b) or _turns_past(lo, hi, a, b)):
+    if not _beyond(lo, hi, a, b, closed):
         return knots, poles, weights
     clamped = np.count_nonzero(knots == a) == degree + 1 and np.count_nonzero(knots == b) == degree + 1
     first, last = np.take(poles, 0, axis=axis), np.take(poles, -1, axis=axis)
