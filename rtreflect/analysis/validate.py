@@ -267,6 +267,8 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
     triple = lambda prefix: np.stack([channel(f"{prefix}.{c}") for c in "XYZ"], axis=-1)  # noqa: E731
     P, N = triple("P"), triple("N")
     N /= np.linalg.norm(N, axis=-1, keepdims=True)  # float32 storage: back to unit length
+    uv = np.stack([channel("u"), channel("v")], axis=-1)  # read once: the stored-hit check, σ and `PixelAOVs.uv`
+    u, v = uv[..., 0].ravel(), uv[..., 1].ravel()
     patch = channel("patch")
     hit = np.flatnonzero(patch.ravel() >= 0)
     rows, cols = np.divmod(hit, width)
@@ -280,7 +282,7 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
     nearer = np.zeros(height * width, dtype=bool)
     if renderer.vertex_normals is None:  # exact mode; mesh mode never falls back (and is never on S)
         fallback[hit], normal_error[hit], S = _stored_hit_errors(
-            renderer, patch.ravel()[hit].astype(int), channel("u").ravel()[hit], channel("v").ravel()[hit],
+            renderer, patch.ravel()[hit].astype(int), u[hit], v[hit],
             P.reshape(-1, 3)[hit], N.reshape(-1, 3)[hit], channel("Z").ravel()[hit], origins, directions)
         # Exact hits: P as S(u, v) in float64. Far from the origin float32 P is coarse (1/128 at 10⁵), and the
         # checks below (occlusion rays, neighbour distances) need the point as the renderer had it.
@@ -294,7 +296,7 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
     line_offset = None
     if isinstance(renderer.mode, ReflectionMode):  # another mode's σ is its own (`mode_aovs`)
         points = SurfacePoints(P.reshape(-1, 3)[hit], N.reshape(-1, 3)[hit], s[hit], patch.ravel()[hit].astype(int),
-                               channel("u").ravel()[hit], channel("v").ravel()[hit])
+                               u[hit], v[hit])
         line_offset = line_offsets(renderer, points, line_id.ravel()[hit], height * width, hit).reshape(height, width)
     render = renderer.scene.render
     # The surface colour as the renderer shaded it at the pixel centre (its samples' shade differs to second order).
@@ -308,7 +310,7 @@ def film_aovs(renderer: Renderer, film: Film) -> PixelAOVs:
                                     render.background),
         incidence=incidence.reshape(height, width), normal_error=normal_error.reshape(height, width),
         nearer=nearer.reshape(height, width), line_offset=line_offset, span=knot_spans(renderer, film, normal_breaks),
-        uv=np.stack([channel("u"), channel("v")], axis=-1),
+        uv=uv,
     )
 
 
