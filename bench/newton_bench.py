@@ -3,8 +3,10 @@
 On the primary mesh hits of `render_bench.py`'s scene (a 10×10 bicubic patch, 1920×1080): CPU
 seconds of one thread, best of ``--repeat``, per hit of
 
-* `kernels.nurbs.refine_mesh_hits` (start from the mesh hit, Newton, near test, t, unit normal);
-* `kernels.nurbs.curvatures_at` (the order-2 evaluation and K, H, κ1, κ2 of the K, H, k1, k2 AOVs);
+* `kernels.nurbs.refine_mesh_hits` (start from the mesh hit, Newton, near test, t, unit normal, and K, H, κ1, κ2
+  where Newton converged at an order-2 evaluation, `kernels.nurbs.CURVATURE_EVALUATION`);
+* `kernels.nurbs.curvatures_at` (the order-2 evaluation and K, H, κ1, κ2 of the K, H, k1, k2 AOVs: what the tracer
+  still computes for the hits where the Newton kernel had no curvature);
 * one evaluation of S, S_u, S_v (`point_at`, order 1, one point at a time: the scalar path, which the lane
   blocks of the two kernels above vectorise) at the same points,
 
@@ -14,7 +16,7 @@ other jobs still inflate CPU time through the shared caches):
 
     python bench/newton_bench.py [--width 1920 --height 1080 --repeat 5]
 
-``--save FILE.npz`` keeps every output of the Newton kernel and of the curvature kernel (``curvature``: K, H,
+``--save FILE.npz`` keeps every output of the Newton kernel and of the curvature kernel (``curvatures_at``: K, H,
 κ1, κ2), ``--compare FILE.npz`` says field by field whether they are the same bits as those saved (e.g. by
 another checkout).
 """
@@ -46,7 +48,7 @@ _NURBS = jit_namespace(nurbs.__name__)
 new_scratch, point_at = _NURBS["new_scratch"], _NURBS["point_at"]
 
 FIELDS = ("patch", "u_start", "v_start", "u", "v", "S", "Su", "Sv", "t", "normal", "cosine", "converged", "near",
-          "edge", "degenerate")
+          "edge", "degenerate", "curvature")
 
 
 @njit(nogil=True)
@@ -98,7 +100,7 @@ def main() -> None:
     def newton(max_steps: int = tracing.NEWTON_MAX_STEPS) -> dict[str, np.ndarray]:
         out = dict(patch=np.empty(n, dtype=np.int64), u_start=np.empty(n), v_start=np.empty(n), u=np.empty(n),
                    v=np.empty(n), S=np.empty((n, 3)), Su=np.empty((n, 3)), Sv=np.empty((n, 3)), t=np.empty(n),
-                   normal=np.empty((n, 3)), cosine=np.empty(n),
+                   normal=np.empty((n, 3)), cosine=np.empty(n), curvature=np.empty((n, 4)),
                    **{name: np.empty(n, dtype=bool) for name in ("converged", "near", "edge", "degenerate")})
         nurbs.refine_mesh_hits(*table.args, table.scale, *tess.start_arrays, band, prim, b1, b2, O, D, tm, tess.extent,
                                tracing.NEWTON_TOLERANCE, max_steps, tracing.JUMP_LIMIT, tracing.GRAZING_ALLOWANCE,
@@ -113,7 +115,8 @@ def main() -> None:
         steps[newton(s)["converged"]] = s
     newton_s = best_of(args.repeat, newton)
     curv = np.empty((4, n))
-    curvature = lambda: nurbs.curvatures_at(*table.args, hits["patch"], hits["u"], hits["v"], hits["normal"], curv)  # noqa: E731
+    turned = hits["normal"] * np.where(hits["cosine"] > 0, -1.0, 1.0)[:, None]  # facing the ray, as the tracer's
+    curvature = lambda: nurbs.curvatures_at(*table.args, hits["patch"], hits["u"], hits["v"], turned, curv)  # noqa: E731
     curvature()
     curvature_s = best_of(args.repeat, curvature)
     evaluate = lambda: evaluations(*table.args, hits["patch"], hits["u"], hits["v"])  # noqa: E731
@@ -130,14 +133,17 @@ def main() -> None:
     print(f"curvatures_at (AOVs):      {curvature_s:.3f} s, {1e6 * curvature_s / n:.3f} µs per hit")
     print(f"S, S_u, S_v (scalar):      {evaluation_s:.3f} s, {1e6 * evaluation_s / n:.3f} µs per evaluation; "
           f"Newton's evaluations at that cost: {100 * mean_evaluations * evaluation_s / newton_s:.0f} % of its kernel")
-    hits["curvature"] = curv
+    hits["curvatures_at"] = curv
+    fused = ~np.isnan(hits["curvature"][:, 0])
+    print(f"curvatures from Newton:    {100 * np.mean(fused):.2f} % of hits, the same bits as curvatures_at's: "
+          f"{np.array_equal(hits['curvature'][fused], curv.T[fused])}")
     if args.save:
         np.savez(args.save, **hits)
         print(f"saved {args.save}")
     if args.compare:
         saved = np.load(args.compare)
         same = {name: np.array_equal(hits[name].view(np.uint8), saved[name].view(np.uint8))
-                for name in FIELDS + ("curvature",) if name in saved}
+                for name in FIELDS + ("curvatures_at",) if name in saved}
         print("same bits as " + str(args.compare) + ": "
               + ("every field" if all(same.values()) else "NOT " + ", ".join(k for k, v in same.items() if not v)))
 

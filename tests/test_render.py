@@ -277,8 +277,8 @@ def test_fallback_count_includes_the_pixel_centre_rays(monkeypatch, samples):
     """
     original = Renderer.trace
 
-    def all_fallbacks(self, origins, directions):
-        hits = original(self, origins, directions)
+    def all_fallbacks(self, origins, directions, *args, **kwargs):
+        hits = original(self, origins, directions, *args, **kwargs)
         hits.fallback[:] = hits.hit
         return hits
 

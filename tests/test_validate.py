@@ -108,8 +108,8 @@ def wrong_renderer(monkeypatch):
     angle = np.radians(0.5)
     original = Renderer.trace
 
-    def turned(self, origins, directions):
-        hits = original(self, origins, directions)
+    def turned(self, origins, directions, *args, **kwargs):
+        hits = original(self, origins, directions, *args, **kwargs)
         n = hits.N
         axis = np.array([0.0, 1.0, 0.0])
         hits.N[:] = (n * np.cos(angle) + np.cross(axis, n) * np.sin(angle)
@@ -177,8 +177,8 @@ def shifted_lines(monkeypatch):
     """The reviewer's repro: the colour ('lit', eq. 4) uses tubes shifted by 30% of the spacing, AOVs untouched."""
     original = Renderer.shade
 
-    def shade(self, origins, directions):
-        shading = original(self, origins, directions)
+    def shade(self, origins, directions, *args, **kwargs):
+        shading = original(self, origins, directions, *args, **kwargs)
         lights = replace(self.lights, c_k=self.lights.c_k + 0.3 * self.lights.spacing)
         idx = np.flatnonzero(shading.hits.hit)
         shading.lit[:] = False
@@ -206,8 +206,8 @@ def no_occlusion(monkeypatch):
     """A renderer that forgets the occlusion test: tubes shine through the teapot's own body."""
     original = Renderer.shade
 
-    def shade(self, origins, directions):
-        shading = original(self, origins, directions)
+    def shade(self, origins, directions, *args, **kwargs):
+        shading = original(self, origins, directions, *args, **kwargs)
         idx = np.flatnonzero(shading.hits.hit)
         if len(idx):
             shading.lit[idx] = self.lights.candidates(self.lights.distances(shading.hits.P[idx], shading.s[idx]))[0]
@@ -456,8 +456,8 @@ def shifted_blurred_lines(monkeypatch):
     """Lines drawn 30% of a spacing off with soft edges: the colour's 'lit' and d from shifted tubes, AOVs untouched."""
     original_shade, original_aovs = Renderer.shade, Renderer.aovs
 
-    def shade(self, origins, directions):
-        shading = original_shade(self, origins, directions)
+    def shade(self, origins, directions, *args, **kwargs):
+        shading = original_shade(self, origins, directions, *args, **kwargs)
         shifted = replace(self.stripe_lights, c_k=self.lights.c_k + 0.3 * self.lights.spacing)
         idx = np.flatnonzero(shading.hits.hit)
         if len(idx):

@@ -635,8 +635,10 @@ LANE_E = 27  # e1, e2 (6 fields, `across_at`); the unit normal n for the curvatu
 LANE_O = 33  # the ray's origin (3 fields)
 LANE_DOMAIN = 36  # u0, u1, v0, v1 of the point's patch (4 fields)
 LANE_STATE = 40  # Newton's state after a step: `STEPPING`, `CONVERGED` or `STOPPED`
-LANE_CURVATURE = 41  # K, H, κ1, κ2 (4 fields)
-LANE_FIELDS = 45
+LANE_DIR = 41  # the ray's direction D (3 fields), which the normal for Newton's curvatures faces
+LANE_N = 44  # that unit normal (3 fields, `facing_normal_lanes`)
+LANE_CURVATURE = 47  # K, H, κ1, κ2 (4 fields)
+LANE_FIELDS = 51
 STEPPING, CONVERGED, STOPPED = 0.0, 1.0, 2.0
 
 
@@ -838,13 +840,24 @@ def on_domain_edge(domain, k, u, v):
     return u == domain[k, 0] or u == domain[k, 1] or v == domain[k, 2] or v == domain[k, 3]
 
 
+#: Newton's evaluation of this index (0: at the start) is of order 2 (`refine_mesh_hits`), so that where it converges
+#: the curvatures there come from the same pass: every hit needs them (the AOVs K, H, κ1, κ2, and
+#: `trace.tracing._other_root`'s prefilter), and the separate order-2 pass (`curvatures_at`) evaluated the patch again
+#: at the same (u, v). Most hits converge there, after two steps from the mesh hit (bench/newton_bench.py: 89 % of the
+#: full-HD bench scene's; 11 % after one); one evaluation only, so a ray that goes on pays for one order-2 evaluation at
+#: most. On that scene's hits the Newton kernel takes ~0.03 µs more a hit, and `curvatures_at` (0.064 µs a hit) is left
+#: with the 11 %.
+CURVATURE_EVALUATION = 2
+
+
 @njit(**JIT, aot=(f"void({TABLE}, {F2}, i8[:, ::1], {F2}, {I1}, {F1}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, "
                         f"f8, f8, i8, f8, f8, f8, f8, {I1}, {F1}, {F1}, {F1}, {F1}, {F2}, {F2}, {F2}, {F1}, {F2}, {F1}, "
-                        f"{B1}, {B1}, {B1}, {B1})",))
+                        f"{B1}, {B1}, {B1}, {B1}, {F2})",))
 def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, max_degree,
                      scale, faces, vertex_uv, face_patch, band, prim, b1, b2, O, D, t_mesh, extent, tolerance,
                      max_steps, jump_limit, grazing_allowance, sine, vanishing,
-                     patch, u_start, v_start, u, v, S, Su, Sv, t, normal, cosine, converged, near, edge, degenerate):
+                     patch, u_start, v_start, u, v, S, Su, Sv, t, normal, cosine, converged, near, edge, degenerate,
+                     curvature):
     """The common case of the exact hit, fused per ray (`trace.tracing._candidates`): no (N, 3) temporaries.
 
     For each mesh hit (triangle prim, Embree's barycentrics b1, b2, distance t_mesh): the start
@@ -855,7 +868,10 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
     rays at a time (`eval_lanes`, `newton_lanes`);
     whether the hit is ahead and near its mesh hit, and its t (`near_at`); whether an unconverged
     Newton stopped on the domain's edge (`on_domain_edge`); the unit normal n = (S_u × S_v)/|S_u × S_v|
-    (not yet turned to the ray), cosine = n·D, and whether n is degenerate (`normal_at`).
+    (not yet turned to the ray), cosine = n·D, and whether n is degenerate (`normal_at`); where Newton converged at
+    its evaluation of order 2 (`CURVATURE_EVALUATION`), K, H, κ1, κ2 there for n turned to face the ray
+    (`facing_normal_lanes`, `curvature_lanes`: `curvatures_at`'s values for that normal) into curvature (N, 4),
+    elsewhere NaN.
     """
     scratch = new_scratch(max_degree)
     d = np.empty((6, 3))
@@ -881,13 +897,22 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
             for c in range(3):
                 buf[(LANE_E + c) * LANES + j], buf[(LANE_E + 3 + c) * LANES + j] = e[0, c], e[1, c]
                 buf[(LANE_O + c) * LANES + j] = O[i, c]
+                buf[(LANE_DIR + c) * LANES + j] = D[i, c]
             for c in range(4):
                 buf[(LANE_DOMAIN + c) * LANES + j] = domain[k, c]
         active = m
         for step in range(max_steps + 1):  # Newton on the rays not yet done, which stay packed at the front
-            eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, lane_patch, base,
-                       span_u, span_v, buf, active, 1, d, scratch)
+            second = step == CURVATURE_EVALUATION
+            if second:  # two calls, each with its order a constant: the vector loops keep no branch on it
+                eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, lane_patch,
+                           base, span_u, span_v, buf, active, 2, d, scratch)
+            else:
+                eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, lane_patch,
+                           base, span_u, span_v, buf, active, 1, d, scratch)
             newton_lanes(buf, active, step == max_steps)
+            if second:  # for every point, as vector loops: cheaper than for the converged ones one by one
+                facing_normal_lanes(buf, active)
+                curvature_lanes(buf, active, LANE_N)
             kept = 0
             for j in range(active):
                 state = buf[LANE_STATE * LANES + j]
@@ -898,10 +923,13 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
                         S[i, c] = buf[(LANE_D + c) * LANES + j]
                         Su[i, c] = buf[(LANE_D + 3 + c) * LANES + j]
                         Sv[i, c] = buf[(LANE_D + 6 + c) * LANES + j]
+                    taken = second and state == CONVERGED
+                    for r in range(4):
+                        curvature[i, r] = buf[(LANE_CURVATURE + r) * LANES + j] if taken else np.nan
                     continue
                 if kept != j:
                     ray[kept], lane_patch[kept], span_u[kept], span_v[kept] = ray[j], lane_patch[j], span_u[j], span_v[j]
-                    for field in range(LANE_U, LANE_DOMAIN + 4):
+                    for field in range(LANE_U, LANE_DIR + 3):
                         buf[field * LANES + kept] = buf[field * LANES + j]
                 kept += 1
             active = kept
@@ -1216,16 +1244,33 @@ def normal_curvatures(Su, Sv, Suu, Suv, Svv, n, w, out):
 
 
 @njit(inline="always", **JIT)
-def curvature_lanes(buf, n):
+def curvature_lanes(buf, n, normal_field):
     """`fundamental_forms_at` and `curvature_of` at points 0..n−1 of a lane block (derivatives in `LANE_D`…, unit
-    normal in `LANE_E`) into `LANE_CURVATURE`…: the vector loop."""
+    normal in the three fields from ``normal_field``) into `LANE_CURVATURE`…: the vector loop."""
     for j in range(n):
         E, F, G, L, M, N = fundamental_forms_at(_field3(buf, LANE_D + 3, j), _field3(buf, LANE_D + 6, j),
                                                 _field3(buf, LANE_D + 9, j), _field3(buf, LANE_D + 12, j),
-                                                _field3(buf, LANE_D + 15, j), _field3(buf, LANE_E, j))
+                                                _field3(buf, LANE_D + 15, j), _field3(buf, normal_field, j))
         K, H, k1, k2 = curvature_of(E, F, G, L, M, N)
         buf[LANE_CURVATURE * LANES + j], buf[(LANE_CURVATURE + 1) * LANES + j] = K, H
         buf[(LANE_CURVATURE + 2) * LANES + j], buf[(LANE_CURVATURE + 3) * LANES + j] = k1, k2
+
+
+@njit(inline="always", **JIT)
+def facing_normal_lanes(buf, n):
+    """The unit normal (S_u × S_v)/|S_u × S_v| at points 0..n−1 of a lane block (`LANE_D`…), turned to face the ray
+    (`LANE_DIR`; where n·D > 0, −n, as `trace.tracing.facing` turns it), into `LANE_N`…: `normal_at`'s operations,
+    so its bits, as a vector loop."""
+    for j in range(n):
+        a0, a1, a2 = _field3(buf, LANE_D + 3, j)
+        b0, b1, b2 = _field3(buf, LANE_D + 6, j)
+        x0, x1, x2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+        norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+        n0, n1, n2 = x0 / norm, x1 / norm, x2 / norm
+        D0, D1, D2 = _field3(buf, LANE_DIR, j)
+        sign = -1.0 if dot3(n0, n1, n2, D0, D1, D2) > 0 else 1.0
+        buf[LANE_N * LANES + j], buf[(LANE_N + 1) * LANES + j] = sign * n0, sign * n1
+        buf[(LANE_N + 2) * LANES + j] = sign * n2
 
 
 @njit(**JIT, aot=(f"void({TABLE}, {I1}, {F1}, {F1}, {F2}, {F2})",))
@@ -1253,7 +1298,7 @@ def curvatures_at(degree, count, knot_offset, knots, pw_offset, pw, domain, powe
         span_v[:filled] = -1
         eval_lanes(degree, count, knot_offset, knots, pw_offset, pw, domain, power_offset, power, lane_patch, base,
                    span_u, span_v, buf, filled, 2, d, scratch)
-        curvature_lanes(buf, filled)
+        curvature_lanes(buf, filled, LANE_E)
         for j in range(filled):
             for r in range(4):
                 out[r, row[j]] = buf[(LANE_CURVATURE + r) * LANES + j]
