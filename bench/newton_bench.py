@@ -16,8 +16,8 @@ other jobs still inflate CPU time through the shared caches):
 
     python bench/newton_bench.py [--width 1920 --height 1080 --repeat 5]
 
-``--save FILE.npz`` keeps every output of the Newton kernel and of the curvature kernel (``curvatures_at``: K, H,
-κ1, κ2), ``--compare FILE.npz`` says field by field whether they are the same bits as those saved (e.g. by
+``--save FILE.npz`` keeps every output of the Newton kernel (``newton_curvature``: its K, H, κ1, κ2) and of the
+curvature kernel (``curvatures_at``, with the normal facing the ray), ``--compare FILE.npz`` says field by field whether they are the same bits as those saved (e.g. by
 another checkout).
 """
 
@@ -48,7 +48,7 @@ _NURBS = jit_namespace(nurbs.__name__)
 new_scratch, point_at = _NURBS["new_scratch"], _NURBS["point_at"]
 
 FIELDS = ("patch", "u_start", "v_start", "u", "v", "S", "Su", "Sv", "t", "normal", "cosine", "converged", "near",
-          "edge", "degenerate", "curvature")
+          "edge", "degenerate", "newton_curvature")
 
 
 @njit(nogil=True)
@@ -100,7 +100,7 @@ def main() -> None:
     def newton(max_steps: int = tracing.NEWTON_MAX_STEPS) -> dict[str, np.ndarray]:
         out = dict(patch=np.empty(n, dtype=np.int64), u_start=np.empty(n), v_start=np.empty(n), u=np.empty(n),
                    v=np.empty(n), S=np.empty((n, 3)), Su=np.empty((n, 3)), Sv=np.empty((n, 3)), t=np.empty(n),
-                   normal=np.empty((n, 3)), cosine=np.empty(n), curvature=np.empty((n, 4)),
+                   normal=np.empty((n, 3)), cosine=np.empty(n), newton_curvature=np.empty((n, 4)),
                    **{name: np.empty(n, dtype=bool) for name in ("converged", "near", "edge", "degenerate")})
         nurbs.refine_mesh_hits(*table.args, table.scale, *tess.start_arrays, band, prim, b1, b2, O, D, tm, tess.extent,
                                tracing.NEWTON_TOLERANCE, max_steps, tracing.JUMP_LIMIT, tracing.GRAZING_ALLOWANCE,
@@ -134,9 +134,9 @@ def main() -> None:
     print(f"S, S_u, S_v (scalar):      {evaluation_s:.3f} s, {1e6 * evaluation_s / n:.3f} µs per evaluation; "
           f"Newton's evaluations at that cost: {100 * mean_evaluations * evaluation_s / newton_s:.0f} % of its kernel")
     hits["curvatures_at"] = curv
-    fused = ~np.isnan(hits["curvature"][:, 0])
-    print(f"curvatures from Newton:    {100 * np.mean(fused):.2f} % of hits, the same bits as curvatures_at's: "
-          f"{np.array_equal(hits['curvature'][fused], curv.T[fused])}")
+    fused = ~np.isnan(hits["newton_curvature"][:, 0])
+    same = np.array_equal(hits["newton_curvature"][fused].view(np.uint64), curv.T[fused].view(np.uint64))
+    print(f"curvatures from Newton:    {100 * np.mean(fused):.2f} % of hits, the same bits as curvatures_at's: {same}")
     if args.save:
         np.savez(args.save, **hits)
         print(f"saved {args.save}")

@@ -64,9 +64,10 @@ def test_curvature_aovs_equal_one_fresh_kernel_pass_at_every_hit(name):
 
 @pytest.mark.parametrize("name", ["scenes/teapot.toml", "scenes/hood_curvature.toml"])
 def test_newton_kernel_gives_the_curvatures_of_its_order_2_evaluation_bit_for_bit(name):
-    """`kernels.nurbs.refine_mesh_hits` evaluates to order 2 at `CURVATURE_EVALUATION` and, where Newton converges
-    there, writes K, H, κ1, κ2 for the normal turned to face the ray: the same bits as `curvatures_at` at its (u, v)
-    with that normal, NaN at every other row; on these scenes most mesh hits converge there."""
+    """`kernels.nurbs.refine_mesh_hits` evaluates to order 2 at `CURVATURE_EVALUATION` and, exactly where Newton
+    converges there (not before, not after: found by re-running it with fewer steps allowed), writes K, H, κ1, κ2 for
+    the normal turned to face the ray: the same bits as `curvatures_at` at its (u, v) with that normal; NaN at every
+    other row."""
     from rtreflect.geometry import surfaces as surface_module
     from rtreflect.kernels import nurbs
     from rtreflect.trace import tracing
@@ -79,20 +80,27 @@ def test_newton_kernel_gives_the_curvatures_of_its_order_2_evaluation_bit_for_bi
     O, D = np.ascontiguousarray(O[found]), np.ascontiguousarray(D[found])
     prim, b1, b2, tm = mesh.prim[found], mesh.b1[found], mesh.b2[found], mesh.t[found]
     tess, table, n = renderer.tessellation, renderer.surfaces.table, len(prim)
-    out = dict(patch=np.empty(n, dtype=np.int64), u_start=np.empty(n), v_start=np.empty(n), u=np.empty(n),
-               v=np.empty(n), S=np.empty((n, 3)), Su=np.empty((n, 3)), Sv=np.empty((n, 3)), t=np.empty(n),
-               normal=np.empty((n, 3)), cosine=np.empty(n),
-               **{k: np.empty(n, dtype=bool) for k in ("converged", "near", "edge", "degenerate")},
-               curvature=np.full((n, 4), 7.0))
-    nurbs.refine_mesh_hits(*table.args, table.scale, *tess.start_arrays, tess.chord_error, prim, b1, b2, O, D, tm,
-                           tess.extent, tracing.NEWTON_TOLERANCE, tracing.NEWTON_MAX_STEPS, tracing.JUMP_LIMIT,
-                           tracing.GRAZING_ALLOWANCE, surface_module.DEGENERATE_SINE,
-                           surface_module.VANISHING_PARTIAL, *out.values())
+
+    def newton(max_steps):
+        out = dict(patch=np.empty(n, dtype=np.int64), u_start=np.empty(n), v_start=np.empty(n), u=np.empty(n),
+                   v=np.empty(n), S=np.empty((n, 3)), Su=np.empty((n, 3)), Sv=np.empty((n, 3)), t=np.empty(n),
+                   normal=np.empty((n, 3)), cosine=np.empty(n),
+                   **{k: np.empty(n, dtype=bool) for k in ("converged", "near", "edge", "degenerate")},
+                   curvature=np.full((n, 4), 7.0))
+        nurbs.refine_mesh_hits(*table.args, table.scale, *tess.start_arrays, tess.chord_error, prim, b1, b2, O, D,
+                               tm, tess.extent, tracing.NEWTON_TOLERANCE, max_steps, tracing.JUMP_LIMIT,
+                               tracing.GRAZING_ALLOWANCE, surface_module.DEGENERATE_SINE,
+                               surface_module.VANISHING_PARTIAL, *out.values())
+        return out
+
+    out = newton(tracing.NEWTON_MAX_STEPS)
+    # Converged at evaluation k: within k steps, not within k − 1.
+    at_second = newton(nurbs.CURVATURE_EVALUATION)["converged"] & ~newton(nurbs.CURVATURE_EVALUATION - 1)["converged"]
     curvature = out["curvature"]
     taken = ~np.isnan(curvature[:, 0])
     assert not np.any(curvature == 7.0)  # every row written
-    assert np.all(out["converged"][taken])
-    assert taken.mean() > 0.5  # teapot 0.60 (the rest converge after one step), hood 0.9
+    assert at_second.mean() > 0.5  # teapot 0.60 (the rest converge after one step), hood 0.9
+    assert np.array_equal(taken, at_second)
     turned = out["normal"] * np.where(out["cosine"] > 0, -1.0, 1.0)[:, None]
     fresh = curvatures_at(renderer.surfaces, out["patch"], out["u"], out["v"], turned)
     for k in range(4):

@@ -8,7 +8,9 @@ holding all of them; the slab test (Kay and Kajiya, "Ray tracing complex scenes"
 decides that in one compiled pass (`kernels.pixels.box_keep`), and the renderer gives such rays the miss values of
 `tracing.Hits.blank` (what the tracer itself leaves there: the same bits).
 Where the box keeps most of a batch (`renderer.TRACE_ALL`), the renderer traces the whole batch instead: the
-culled rays then miss at Embree's root, with the same values, and nothing has to be spread back.
+culled rays then miss at Embree's root, with the same values, and nothing has to be spread back. (A batch of
+camera rays whose pixels lie that much inside the box's picture, `RayBox.pixel_window`, is traced whole without
+asking the box ray by ray: `Renderer.supersample`.)
 
 The box is the meshes' bounding box grown by `BOX_MARGIN` of its diagonal, plus `ORIGIN_MARGIN` of the
 ray origins' distance to it, so Embree's float32 rounding (of the vertices and of the moved origins,

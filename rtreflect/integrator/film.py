@@ -39,7 +39,10 @@ def aov_planes(aovs: dict[str, np.ndarray], out: np.ndarray | None = None) -> np
     """
     if out is None:
         out = np.empty((len(aovs["u"]), len(AOV_CHANNELS)))
-    aov_columns(*(np.asarray(aovs[name], dtype=np.float64) for name, _ in AOV_ARRAYS), out)
+    # Strided inputs (the curvature columns are views, `Renderer.aovs`) have a compiled signature for a float32 block
+    # only: a float64 one takes contiguous copies.
+    arrays = (np.asarray(aovs[name], dtype=np.float64) for name, _ in AOV_ARRAYS)
+    aov_columns(*(arrays if out.dtype == np.float32 else map(np.ascontiguousarray, arrays)), out)
     return out
 
 

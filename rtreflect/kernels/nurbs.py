@@ -14,7 +14,8 @@ point by point, in registers, with no (N, …) temporaries:
 * the unit normal (S_u × S_v)/|S_u × S_v| and its degenerate test, and Newton's iteration onto
   the exact ray–surface hit (`newton_lanes`);
 * the exact hit's common case fused per ray (`refine_mesh_hits`: the start from a mesh hit's
-  barycentrics, Newton, the near-mesh-hit test, t, the unit normal), and the Levenberg–Marquardt
+  barycentrics, Newton, the near-mesh-hit test, t, the unit normal, and the curvatures where Newton
+  converges at its one order-2 evaluation, `CURVATURE_EVALUATION`), and the Levenberg–Marquardt
   search where Newton fails (`rescue`): `trace.tracing` keeps only the rare paths in numpy;
 * Newton and the curvature AOVs in lane blocks ("Lane blocks" below): LANES points per pass, the
   evaluation, the Newton step and the curvature as vector loops across points (AVX-512 or AVX2),
@@ -623,7 +624,7 @@ def start_parameters(faces, vertex_uv, prim, b1, b2, u, v):
 # (numba contracts no a·b + c into an FMA without fastmath), so the bits are the same; only where the work is
 # irregular (the knot span's binary search, non-bicubic patches) a scalar pass per point remains.
 
-#: Points per block: the fields of a block (`LANE_FIELDS` × LANES doubles, 40 KB) stay in the L1/L2 cache, and the
+#: Points per block: the fields of a block (`LANE_FIELDS` × LANES doubles, 52 KB) stay in the L2 cache, and the
 #: runs of points on one span (`eval_lanes`) are long enough for the vector loop (adjacent pixels share spans).
 LANES = 128
 #: Fields of a lane block, each LANES doubles at field·LANES in one flat buffer: constant offsets from one base,

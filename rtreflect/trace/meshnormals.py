@@ -42,4 +42,5 @@ def trace_mesh(accelerator: Accelerator, tessellation: Tessellation, normals_at_
             corners = normals_at_vertices[tessellation.faces[prim]]  # (N, 3, 3)
             nrm = (1.0 - b1 - b2)[:, None] * corners[:, 0] + b1[:, None] * corners[:, 1] + b2[:, None] * corners[:, 2]
             hits.N[idx] = facing(nrm / np.linalg.norm(nrm, axis=1, keepdims=True), directions[idx])
+            hits.cos[idx] = np.abs(np.einsum("ij,ij->i", hits.N[idx], directions[idx]))
     return hits

@@ -352,8 +352,7 @@ class SecondLook:
         (step 3; prim −1 where there is none, and for every ray not suspected or a fallback)."""
         n = len(origins)
         entry = MeshHits(np.full(n, -1), np.zeros(n), np.zeros(n), np.full(n, np.nan))
-        cos = np.abs(np.einsum("ij,ij->i", hits.N, directions))
-        cos[np.isnan(cos)] = 0.0  # no normal (a miss): as a zero N (not a copy of N with its NaN zeroed: 2% of a frame)
+        cos = np.nan_to_num(hits.cos)  # no normal (a miss): as a zero N
         slack = FLOAT32_SLACK * self.tessellation.extent
         with np.errstate(divide="ignore"):
             passage = np.where(hits.hit, hits.t - self._reach / np.maximum(cos, GRAZING_COS) - slack, far)
@@ -469,7 +468,7 @@ class SecondLook:
             slack = FLOAT32_SLACK * self.tessellation.extent
             nearer = again.hit & (again.t < kept - slack)
             rows = rays[nearer]
-            for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside", "Su", "Sv", "curvature"):
+            for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside", "Su", "Sv", "curvature", "cos"):
                 getattr(hits, name)[rows] = getattr(again, name)[nearer]
             hits.fallback[rays[again.fallback]] = True
             self._from_shell(hits, origins, directions, far, rays, entry)
@@ -567,5 +566,6 @@ class SecondLook:
         hits.P[rays], hits.aside[rays] = derivs.S, True
         hits.Su[rays], hits.Sv[rays] = derivs.Su, derivs.Sv
         hits.N[rays] = facing(self.surfaces.normals(patch, u, v, derivs), D)
+        hits.cos[rays] = np.abs(np.einsum("ij,ij->i", hits.N[rays], D))
         hits.curvature[rays] = np.nan  # not known at the new hits: the AOV stage computes them
         return led

@@ -216,6 +216,8 @@ class Hits:
     #: order-2 evaluation, `kernels.nurbs.CURVATURE_EVALUATION`, or `_other_root`'s prefilter: the same formulas at the
     #: same point and normal), else NaN: the AOV stage computes only the NaN rows.
     curvature: np.ndarray
+    #: |N·D| at the hit (the cosine of the incidence, as the tracer computed it with N), NaN on a miss
+    cos: np.ndarray
 
     #: The (N, 3) and (N, 4) fields, in the order the tracer stores them (`trace`).
     ROW_FIELDS = ("P", "Su", "Sv", "N", "curvature")
@@ -233,7 +235,7 @@ class Hits:
         new = (lambda shape: np.full(shape, np.nan)) if rows else np.empty  # noqa: E731
         return cls(hit, np.full(n, -1), np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan),
                    new((n, 3)), new((n, 3)), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool),
-                   new((n, 3)), new((n, 3)), new((n, 4)))
+                   new((n, 3)), new((n, 3)), new((n, 4)), np.full(n, np.nan))
 
 
 def facing(normals: np.ndarray, directions: np.ndarray, cosine: np.ndarray | None = None) -> np.ndarray:
@@ -258,7 +260,8 @@ def refine(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, toler
 
 def refine_all(surfaces: SurfaceSet, patch, u, v, origins, directions, t_mesh, tolerance_distance):
     """`refine`, with what the kernel also tells: (u, v, derivatives, converged, on the domain's edge (Newton
-    ran off it), unit normal n (not turned), n·D)."""
+    ran off it), unit normal n (not turned), n·D). The kernel's curvatures are not kept: these are the rare paths'
+    points, whose rows the callers reset (`_candidates`), and their few order-2 evaluations cost little."""
     n = len(u)
     table = surfaces.table
     f64 = lambda x: np.ascontiguousarray(x, dtype=np.float64)  # noqa: E731
@@ -940,7 +943,7 @@ def _largest_curvature(surfaces: SurfaceSet, rows, pk, ur, vr, normal, cosine, k
         largest = np.full(len(rows), np.nan)
     else:  # over every row, then taken: ~4× faster than gathering (n, 4) rows or columns by fancy indexing
         largest = np.take(np.maximum(np.abs(known[:, 2]), np.abs(known[:, 3])), rows)
-    missing = np.flatnonzero(np.isnan(largest))  # NaN in a row's κ1 or κ2: the whole row (`curvature_of`)
+    missing = np.flatnonzero(np.isnan(largest))  # no curvatures in the row (NaN), or NaN κ from rounding: recomputed
     if len(missing):
         at = rows[missing]
         turned = np.take(normal, at, axis=0)
@@ -1778,6 +1781,7 @@ def trace(accelerator: Accelerator, tessellation: Tessellation, surfaces: Surfac
     hits.fallback[open_rays] = True
     idx = np.flatnonzero(hits.hit)
     hits.t[idx] = best[idx]
+    hits.cos = cos  # set with each kept hit, NaN where none
     return hits
 
 
