@@ -558,18 +558,26 @@ def dot3(a0, a1, a2, b0, b1, b2):
 
 
 @njit(inline="always", **JIT)
+def unit_cross(a0, a1, a2, b0, b1, b2):
+    """(a × b)/|a × b| and |a × b|: the unit normal's one formula (`normal_at`, `facing_normal_lanes`); NaN where the
+    cross vanishes."""
+    x0, x1, x2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    return x0 / norm, x1 / norm, x2 / norm, norm
+
+
+@njit(inline="always", **JIT)
 def normal_at(domain, scale, k, Su, Sv, i, sine, vanishing):
     """(S_u × S_v)/|S_u × S_v| of row i as (n0, n1, n2, degenerate) (`unit_normals`); n is NaN where the cross vanishes."""
     a0, a1, a2 = Su[i, 0], Su[i, 1], Su[i, 2]
     b0, b1, b2 = Sv[i, 0], Sv[i, 1], Sv[i, 2]
-    x0, x1, x2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-    norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    n0, n1, n2, norm = unit_cross(a0, a1, a2, b0, b1, b2)
     len_u = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
     len_v = math.sqrt(b0 * b0 + b1 * b1 + b2 * b2)
     floor = vanishing * math.sqrt(scale[k, 0] * scale[k, 1])
     bad = not ((norm > sine * len_u * len_v) and (len_u * (domain[k, 1] - domain[k, 0]) > floor)
                and (len_v * (domain[k, 3] - domain[k, 2]) > floor))
-    return x0 / norm, x1 / norm, x2 / norm, bad
+    return n0, n1, n2, bad
 
 
 @njit(**JIT, aot=(f"void({F2}, {F2}, {I1}, {F2}, {F2}, f8, f8, {F2}, {B1})",))
@@ -1260,14 +1268,12 @@ def curvature_lanes(buf, n, normal_field):
 @njit(inline="always", **JIT)
 def facing_normal_lanes(buf, n):
     """The unit normal (S_u × S_v)/|S_u × S_v| at points 0..n−1 of a lane block (`LANE_D`…), turned to face the ray
-    (`LANE_DIR`; where n·D > 0, −n, as `trace.tracing.facing` turns it), into `LANE_N`…: `normal_at`'s operations,
-    so its bits, as a vector loop."""
+    (`LANE_DIR`; where n·D > 0, −n, as `trace.tracing.facing` turns it), into `LANE_N`…: `normal_at`'s formula
+    (`unit_cross`), so its bits, as a vector loop."""
     for j in range(n):
         a0, a1, a2 = _field3(buf, LANE_D + 3, j)
         b0, b1, b2 = _field3(buf, LANE_D + 6, j)
-        x0, x1, x2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-        norm = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
-        n0, n1, n2 = x0 / norm, x1 / norm, x2 / norm
+        n0, n1, n2, _ = unit_cross(a0, a1, a2, b0, b1, b2)
         D0, D1, D2 = _field3(buf, LANE_DIR, j)
         sign = -1.0 if dot3(n0, n1, n2, D0, D1, D2) > 0 else 1.0
         buf[LANE_N * LANES + j], buf[(LANE_N + 1) * LANES + j] = sign * n0, sign * n1
