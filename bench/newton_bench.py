@@ -4,13 +4,15 @@ On the primary mesh hits of `render_bench.py`'s scene (a 10×10 bicubic patch, 1
 seconds of one thread, best of ``--repeat``, per hit of
 
 * `kernels.nurbs.refine_mesh_hits` (start from the mesh hit, Newton, near test, t, unit normal, and K, H, κ1, κ2
-  where Newton converged at an order-2 evaluation, `kernels.nurbs.CURVATURE_EVALUATION`);
+  where Newton converged at its order-2 evaluation, `kernels.nurbs.CURVATURE_EVALUATION`, or its next step was
+  finished by that evaluation's Taylor polynomials, `taylor_finish_lanes`);
 * `kernels.nurbs.curvatures_at` (the order-2 evaluation and K, H, κ1, κ2 of the K, H, k1, k2 AOVs: what the tracer
   still computes for the hits where the Newton kernel had no curvature);
 * one evaluation of S, S_u, S_v (`point_at`, order 1, one point at a time: the scalar path, which the lane
   blocks of the two kernels above vectorise) at the same points,
 
-and how many evaluations Newton made per hit (steps + 1, counted by re-running it step-capped). Per-hit
+and how many evaluations Newton made per hit (steps + 1, less a step finished by Taylor; counted by re-running it
+step-capped). Per-hit
 figures compare between checkouts in the same minute (run both back to back; on a loaded machine
 other jobs still inflate CPU time through the shared caches):
 
@@ -125,7 +127,10 @@ def main() -> None:
 
     print(f"{n} primary mesh hits of render_bench's scene at {args.width}×{args.height}; CPU of one thread, best of "
           f"{args.repeat}")
-    mean_evaluations = np.mean(np.minimum(steps, tracing.NEWTON_MAX_STEPS) + 1)
+    # A last step the order-2 evaluation's Taylor polynomials finished (`taylor_finish_lanes`) took no evaluation.
+    fused = ~np.isnan(hits["newton_curvature"][:, 0])
+    finished = fused & (steps == nurbs.CURVATURE_EVALUATION + 1)
+    mean_evaluations = np.mean(np.minimum(steps, tracing.NEWTON_MAX_STEPS) + 1 - finished)
     label = lambda s: str(s) if s <= tracing.NEWTON_MAX_STEPS else "not converged"  # noqa: E731
     print("Newton steps to converge: " + ", ".join(f"{label(s)}: {100 * np.mean(steps == s):.3g} %" for s in np.unique(steps))
           + f" (mean evaluations per hit {mean_evaluations:.2f})")
@@ -134,9 +139,14 @@ def main() -> None:
     print(f"S, S_u, S_v (scalar):      {evaluation_s:.3f} s, {1e6 * evaluation_s / n:.3f} µs per evaluation; "
           f"Newton's evaluations at that cost: {100 * mean_evaluations * evaluation_s / newton_s:.0f} % of its kernel")
     hits["curvatures_at"] = curv
-    fused = ~np.isnan(hits["newton_curvature"][:, 0])
-    same = np.array_equal(hits["newton_curvature"][fused].view(np.uint64), curv.T[fused].view(np.uint64))
-    print(f"curvatures from Newton:    {100 * np.mean(fused):.2f} % of hits, the same bits as curvatures_at's: {same}")
+    # Newton's curvatures are those of its order-2 evaluation's point: Newton stopped there, the reference's.
+    at = newton(nurbs.CURVATURE_EVALUATION)
+    at_turned = at["normal"] * np.where(at["cosine"] > 0, -1.0, 1.0)[:, None]
+    there = np.empty((4, n))
+    nurbs.curvatures_at(*table.args, at["patch"], at["u"], at["v"], at_turned, there)
+    same = np.array_equal(hits["newton_curvature"][fused].view(np.uint64), there.T[fused].view(np.uint64))
+    print(f"curvatures from Newton:    {100 * np.mean(fused):.2f} % of hits (last step finished by Taylor: "
+          f"{100 * np.mean(finished):.2f} %), the same bits as curvatures_at's at its evaluation: {same}")
     if args.save:
         np.savez(args.save, **hits)
         print(f"saved {args.save}")

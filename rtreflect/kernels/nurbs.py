@@ -15,7 +15,8 @@ point by point, in registers, with no (N, …) temporaries:
   the exact ray–surface hit (`newton_lanes`);
 * the exact hit's common case fused per ray (`refine_mesh_hits`: the start from a mesh hit's
   barycentrics, Newton, the near-mesh-hit test, t, the unit normal, and the curvatures where Newton
-  converges at its one order-2 evaluation, `CURVATURE_EVALUATION`), and the Levenberg–Marquardt
+  converges at its one order-2 evaluation, `CURVATURE_EVALUATION`, or one last short step after it, which
+  that evaluation's Taylor polynomials finish, `taylor_finish_lanes`), and the Levenberg–Marquardt
   search where Newton fails (`rescue`): `trace.tracing` keeps only the rare paths in numpy;
 * Newton and the curvature AOVs in lane blocks ("Lane blocks" below): LANES points per pass, the
   evaluation, the Newton step and the curvature as vector loops across points (AVX-512 or AVX2),
@@ -792,6 +793,62 @@ def newton_lanes(buf, n, last):
 
 
 @njit(inline="always", **JIT)
+def taylor_finish_lanes(buf, base, n):
+    """Newton's step just taken (`newton_lanes`) finished without another evaluation, at points 0..n−1 of a lane block
+    evaluated to order 2 on a bicubic span (base[j] ≥ 0; `LANE_SPAN` holds the evaluated (u, v) and the spans): with
+    (δu, δv) = the new (u, v) − the evaluated one, the second-order Taylor polynomials
+
+        S' = S + S_u δu + S_v δv + ½ (S_uu δu² + 2 S_uv δu δv + S_vv δv²),
+        S_u' = S_u + S_uu δu + S_uv δv,    S_v' = S_v + S_uv δu + S_vv δv
+
+    replace S, S_u, S_v, and the point is `CONVERGED` where its residual |(e1·(S' − O), e2·(S' − O))| is within the
+    tolerance (`newton_lanes`' test), the step at most `TAYLOR_SPAN_SHARE` of its span along u and v and strictly
+    inside the span and the domain (no clamp, no knot crossed: the span's one polynomial), and |n·D| above
+    `TAYLOR_MIN_COSINE`. Elsewhere nothing changes (the next evaluation at the new (u, v) follows). The curvatures
+    (`curvature_lanes`) stay those of the evaluated point, ≤ 1e-6 of a span away. The vector loop, branch-free."""
+    for j in range(n):
+        u0, start_u, len_u = _field3(buf, LANE_SPAN, j)
+        v0, start_v, len_v = _field3(buf, LANE_SPAN + 3, j)
+        un, vn = buf[LANE_U * LANES + j], buf[LANE_V * LANES + j]
+        du, dv = un - u0, vn - v0
+        S0, S1, S2 = _field3(buf, LANE_D, j)
+        Su0, Su1, Su2 = _field3(buf, LANE_D + 3, j)
+        Sv0, Sv1, Sv2 = _field3(buf, LANE_D + 6, j)
+        Suu0, Suu1, Suu2 = _field3(buf, LANE_D + 9, j)
+        Suv0, Suv1, Suv2 = _field3(buf, LANE_D + 12, j)
+        Svv0, Svv1, Svv2 = _field3(buf, LANE_D + 15, j)
+        uu, uv, vv = 0.5 * du * du, du * dv, 0.5 * dv * dv
+        P0 = S0 + Su0 * du + Sv0 * dv + (Suu0 * uu + Suv0 * uv + Svv0 * vv)
+        P1 = S1 + Su1 * du + Sv1 * dv + (Suu1 * uu + Suv1 * uv + Svv1 * vv)
+        P2 = S2 + Su2 * du + Sv2 * dv + (Suu2 * uu + Suv2 * uv + Svv2 * vv)
+        O0, O1, O2 = _field3(buf, LANE_O, j)
+        e00, e01, e02 = _field3(buf, LANE_E, j)
+        e10, e11, e12 = _field3(buf, LANE_E + 3, j)
+        f1 = e00 * (P0 - O0) + e01 * (P1 - O1) + e02 * (P2 - O2)
+        f2 = e10 * (P0 - O0) + e11 * (P1 - O1) + e12 * (P2 - O2)
+        tol = buf[LANE_TOL * LANES + j]
+        n0, n1, n2 = _field3(buf, LANE_N, j)
+        D0, D1, D2 = _field3(buf, LANE_DIR, j)
+        lo_u, hi_u = buf[LANE_DOMAIN * LANES + j], buf[(LANE_DOMAIN + 1) * LANES + j]
+        lo_v, hi_v = buf[(LANE_DOMAIN + 2) * LANES + j], buf[(LANE_DOMAIN + 3) * LANES + j]
+        inside = ((max(start_u, lo_u) < un) & (un < min(start_u + len_u, hi_u))
+                  & (max(start_v, lo_v) < vn) & (vn < min(start_v + len_v, hi_v)))
+        short = (abs(du) <= TAYLOR_SPAN_SHARE * len_u) & (abs(dv) <= TAYLOR_SPAN_SHARE * len_v)
+        done = ((buf[LANE_STATE * LANES + j] == STEPPING) & (base[j] >= 0) & inside & short
+                & (f1 * f1 + f2 * f2 <= tol * tol) & (abs(dot3(n0, n1, n2, D0, D1, D2)) > TAYLOR_MIN_COSINE))
+        buf[LANE_D * LANES + j] = P0 if done else S0
+        buf[(LANE_D + 1) * LANES + j] = P1 if done else S1
+        buf[(LANE_D + 2) * LANES + j] = P2 if done else S2
+        buf[(LANE_D + 3) * LANES + j] = (Su0 + Suu0 * du + Suv0 * dv) if done else Su0
+        buf[(LANE_D + 4) * LANES + j] = (Su1 + Suu1 * du + Suv1 * dv) if done else Su1
+        buf[(LANE_D + 5) * LANES + j] = (Su2 + Suu2 * du + Suv2 * dv) if done else Su2
+        buf[(LANE_D + 6) * LANES + j] = (Sv0 + Suv0 * du + Svv0 * dv) if done else Sv0
+        buf[(LANE_D + 7) * LANES + j] = (Sv1 + Suv1 * du + Svv1 * dv) if done else Sv1
+        buf[(LANE_D + 8) * LANES + j] = (Sv2 + Suv2 * du + Svv2 * dv) if done else Sv2
+        buf[LANE_STATE * LANES + j] = CONVERGED if done else buf[LANE_STATE * LANES + j]
+
+
+@njit(inline="always", **JIT)
 def jump_reach(chord, cos, jump_limit, grazing_allowance):
     """How far a refined hit may lie from its mesh hit and still be that mesh hit's (`near_at`), the one formula.
 
@@ -852,11 +909,20 @@ def on_domain_edge(domain, k, u, v):
 #: Newton's evaluation of this index (0: at the start) is of order 2 (`refine_mesh_hits`), so that where it converges
 #: the curvatures there come from the same pass: every hit needs them (the AOVs K, H, κ1, κ2, and
 #: `trace.tracing._other_root`'s prefilter), and the separate order-2 pass (`curvatures_at`) evaluated the patch again
-#: at the same (u, v). Most hits converge there, after two steps from the mesh hit (bench/newton_bench.py: 89 % of the
-#: full-HD bench scene's; 11 % after one); one evaluation only, so a ray that goes on pays for one order-2 evaluation at
-#: most. On that scene's hits the Newton kernel takes ~0.03 µs more a hit, and `curvatures_at` (0.064 µs a hit) is left
-#: with the 11 %.
-CURVATURE_EVALUATION = 2
+#: at the same (u, v). The second evaluation (after one step from the mesh hit): there 11 % of the full-HD bench
+#: scene's hits have converged, and nearly all others take their last step, which the order-2 derivatives finish
+#: without evaluating again (`taylor_finish_lanes`). One evaluation only, so a ray that goes on pays for one order-2
+#: evaluation at most.
+CURVATURE_EVALUATION = 1
+#: `taylor_finish_lanes` takes a step of at most this share of the knot span it lies in, along u and along v: the
+#: Taylor remainders are then those of the span's polynomial at |δ|/h ≤ 1e-6, (|δ|/h)³ ~ 1e-18 of S's coefficients
+#: for S and (|δ|/h)² ~ 1e-12 for S_u, S_v: S to rounding, the unit normal to 1e-12 rad, as Newton's tolerance
+#: places the point. On the bench scene the last step is ~1e-8 of a span (the residual it cancels ~1e-9 of the
+#: scene's size).
+TAYLOR_SPAN_SHARE = 1e-6
+#: ... where the ray meets the surface at |n·D| above this: the curvatures taken before the step keep the sign of
+#: the normal facing the ray after it (which turns by ≤ ~1e-6 rad).
+TAYLOR_MIN_COSINE = 1e-3
 
 
 @njit(**JIT, aot=(f"void({TABLE}, {F2}, i8[:, ::1], {F2}, {I1}, {F1}, {I1}, {F1}, {F1}, {F2}, {F2}, {F1}, "
@@ -874,13 +940,14 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
     prim < 0, the start is read from them instead (`trace.tracing.refine`: Newton from a given
     (u, v), the one compiled copy of Newton). Then Newton (`newton_lanes`) to the tolerance
     tolerance · max(t_mesh, extent, |mesh point|_∞) (S's coordinates are not computed more finely), LANES
-    rays at a time (`eval_lanes`, `newton_lanes`);
+    rays at a time (`eval_lanes`, `newton_lanes`; the step after the order-2 evaluation, `CURVATURE_EVALUATION`,
+    finished by its Taylor polynomials where it is short, `taylor_finish_lanes`);
     whether the hit is ahead and near its mesh hit, and its t (`near_at`); whether an unconverged
     Newton stopped on the domain's edge (`on_domain_edge`); the unit normal n = (S_u × S_v)/|S_u × S_v|
     (not yet turned to the ray), cosine = n·D, and whether n is degenerate (`normal_at`); where Newton converged at
-    its evaluation of order 2 (`CURVATURE_EVALUATION`), K, H, κ1, κ2 there for n turned to face the ray
-    (`facing_normal_lanes`, `curvature_lanes`: `curvatures_at`'s values for that normal) into curvature (N, 4),
-    elsewhere NaN.
+    its evaluation of order 2 (`CURVATURE_EVALUATION`) or Taylor finished the step after it, K, H, κ1, κ2 at that
+    evaluation for its n turned to face the ray (`facing_normal_lanes`, `curvature_lanes`: `curvatures_at`'s values
+    there for that normal) into curvature (N, 4), elsewhere NaN.
     """
     scratch = new_scratch(max_degree)
     d = np.empty((6, 3))
@@ -922,6 +989,7 @@ def refine_mesh_hits(degree, count, knot_offset, knots, pw_offset, pw, domain, p
             if second:  # for every point, as vector loops: cheaper than for the converged ones one by one
                 facing_normal_lanes(buf, active)
                 curvature_lanes(buf, active, LANE_N)
+                taylor_finish_lanes(buf, base, active)
             kept = 0
             for j in range(active):
                 state = buf[LANE_STATE * LANES + j]

@@ -147,6 +147,10 @@ OTHER_ROOT_COS = 0.2
 #: 0.35: entries at |N·D| 0.22 and 0.32, caps 0.10 and 0.21 deep, were stored at their exits). ×2 as the second
 #: look's shell (`secondlook.SHELL_CHORDS`): the chord error is sampled, a triangle's interior may stray farther.
 OTHER_ROOT_CHORDS = 2.0
+#: The prefilter of `_nearer_on_parabola` grows the largest |κ| it reads by this share: the Newton kernel's curvatures
+#: may be those of a point one last short step before the hit (`kernels.nurbs.taylor_finish_lanes`; within 4e-5 of
+#: the largest |κ| on the shipped scenes and parts), and a bound must not drop a ray the hit's own would keep.
+CURVATURE_SLACK = 1e-3
 #: Where Newton from the predicted other crossing fails, leaves the face or goes back to the kept hit, the search for
 #: the ray's distance (`_rescue`) from the same start, at most this many steps: the sheet is no parabola along the
 #: ray (a wave), and the descent from the predicted start runs down into the dip that prediction stood for
@@ -213,8 +217,9 @@ class Hits:
     Su: np.ndarray
     Sv: np.ndarray
     #: (N, 4) K, H, κ1, κ2 at the hit, signed with N as stored, where the tracer already had them (the Newton kernel's
-    #: order-2 evaluation, `kernels.nurbs.CURVATURE_EVALUATION`, or `_other_root`'s prefilter: the same formulas at the
-    #: same point and normal), else NaN: the AOV stage computes only the NaN rows.
+    #: order-2 evaluation, `kernels.nurbs.CURVATURE_EVALUATION`: at the hit or one last step of ≤ 1e-6 of a knot span
+    #: before it, `kernels.nurbs.taylor_finish_lanes`; or `_other_root`'s prefilter: the same formulas), else NaN: the
+    #: AOV stage computes only the NaN rows.
     curvature: np.ndarray
     #: |N·D| at the hit (the cosine of the incidence, as the tracer computed it with N), NaN on a miss
     cos: np.ndarray
@@ -893,7 +898,7 @@ def _nearer_on_parabola(tessellation: Tessellation, surfaces: SurfaceSet, O, D, 
         # symmetric, but for the sign of a zero), so max(|κ1|, |κ2|) is the same either way: the normal facing the ray.
         largest = _largest_curvature(surfaces, rest, pk, ur, vr, normal, cosine, curvature)
         c2 = cosine[rest] ** 2
-        bound = cap[pk[rest]] * (1.0 - c2)
+        bound = cap[pk[rest]] * (1.0 - c2) * (1.0 + CURVATURE_SLACK)
         with np.errstate(invalid="ignore"):
             far = c2 > bound * largest
         keep[~keep] = ~far
