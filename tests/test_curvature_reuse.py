@@ -63,8 +63,9 @@ def test_curvature_aovs_are_the_tracers_or_one_fresh_kernel_pass(name):
     for power, got, want in zip((2, 1, 1, 1), (aovs["K"], aovs["H"], aovs["k1"], aovs["k2"]), fresh):
         assert np.array_equal(bits(got[~from_tracer]), bits(want[~from_tracer]))
         assert np.all(np.abs(got - want)[from_tracer] <= 1e-4 * scale[from_tracer] ** power + 1e-300)
-    if name != "parts/plate.step":  # curved faces: Newton's order-2 evaluation serves most hits (the plate: planes)
-        assert np.mean(from_tracer[hits.hit]) > 0.75
+    # Newton's order-2 evaluation (or `_other_root`'s prefilter) serves most hits: plate 0.99, teapot 0.96, hood 1.0
+    # (the plate's planes converge there since it is Newton's second evaluation)
+    assert np.mean(from_tracer[hits.hit]) > 0.9
 
 
 @pytest.mark.parametrize("name", ["scenes/teapot.toml", "scenes/hood_curvature.toml"])

@@ -455,17 +455,54 @@ def across_numpy(D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([c0, c1, c2], axis=1), np.stack([y * c2 - z * c1, z * c0 - x * c2, x * c1 - y * c0], axis=1)
 
 
+def span_numpy(knots: np.ndarray, degree: int, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start and length of the knot span `kernels.nurbs.find_span_at` gives t (the last non-empty one at the end)."""
+    n_ctrl = len(knots) - degree - 1
+    span = np.clip(np.searchsorted(knots, t, side="right") - 1, degree, n_ctrl - 1)
+    return knots[span], knots[span + 1] - knots[span]
+
+
+def taylor_finish_numpy(surfaces, k, d, u, v, un, vn, O, D, e1, e2, tol):
+    """`kernels.nurbs.taylor_finish_lanes` in numpy: which of the points (patch k, evaluated to order 2 at (u, v) as
+    d, Newton's step to (un, vn)) it finishes, and their S, S_u, S_v from the Taylor polynomials (the same
+    operations in the same order, so the same bits)."""
+    dot = lambda a, b: a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]  # noqa: E731 (coordinate order)
+    du, dv = (un - u)[:, None], (vn - v)[:, None]
+    uu, uv, vv = 0.5 * du * du, du * dv, 0.5 * dv * dv
+    P = d.S + d.Su * du + d.Sv * dv + (d.Suu * uu + d.Suv * uv + d.Svv * vv)
+    f1, f2 = dot(e1, P - O), dot(e2, P - O)
+    cross = np.cross(d.Su, d.Sv)
+    cosine = np.abs(dot(cross, D)) / np.sqrt(dot(cross, cross))
+    u0, u1, v0, v1 = surfaces.domains(k)
+    done = (f1 * f1 + f2 * f2 <= tol * tol) & (cosine > nurbs.TAYLOR_MIN_COSINE)
+    turn = nurbs.TAYLOR_TURN * nurbs.TAYLOR_TURN
+    done &= dot(d.Suu * du + d.Suv * dv, d.Suu * du + d.Suv * dv) <= turn * dot(d.Su, d.Su)
+    done &= dot(d.Suv * du + d.Svv * dv, d.Suv * du + d.Svv * dv) <= turn * dot(d.Sv, d.Sv)
+    for i in np.flatnonzero(done):
+        patch = surfaces.patches[k[i]]
+        if max(patch.degree_u, patch.degree_v) > nurbs.WRITTEN_OUT_DEGREE or nurbs.power_form(patch) is None:
+            done[i] = False  # the scalar path: no span in the lane block
+            continue
+        for t, tn, lo, hi, knots, degree in ((u[i], un[i], u0[i], u1[i], patch.knots_u, patch.degree_u),
+                                             (v[i], vn[i], v0[i], v1[i], patch.knots_v, patch.degree_v)):
+            start, length = (x[0] for x in span_numpy(np.asarray(knots, dtype=np.float64), degree, np.array([t])))
+            done[i] &= (max(start, lo) < tn < min(start + length, hi)) and abs(tn - t) <= nurbs.TAYLOR_SPAN_SHARE * length
+    return done, P, d.Su + (d.Suu * du + d.Suv * dv), d.Sv + (d.Suv * du + d.Svv * dv)
+
+
 def newton_numpy(surfaces, k, u, v, O, D, tol, max_steps):
     """Newton on the ray residual (DESIGN.md, "Exact hit") in numpy, all rays at once, one evaluation per step by
-    `SurfaceSet.evaluate`: (u, v, converged, S, S_u, S_v)."""
+    `SurfaceSet.evaluate`, the step after the order-2 one (`kernels.nurbs.CURVATURE_EVALUATION`) finished without
+    one where `taylor_finish_numpy` says so: (u, v, converged, S, S_u, S_v, finished)."""
     e1, e2 = across_numpy(D)
     u, v = u.copy(), v.copy()
     u0, u1, v0, v1 = surfaces.domains(k)
     S, Su, Sv = (np.empty((len(u), 3)) for _ in range(3))
     converged, live = np.zeros(len(u), dtype=bool), np.arange(len(u))
+    finished = np.zeros(len(u), dtype=bool)
     dot = lambda a, b: a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]  # noqa: E731 (coordinate order)
     for step in range(max_steps + 1):
-        d = surfaces.evaluate(k[live], u[live], v[live])
+        d = surfaces.evaluate(k[live], u[live], v[live], order=2 if step == nurbs.CURVATURE_EVALUATION else 1)
         S[live], Su[live], Sv[live] = d.S, d.Su, d.Sv
         r = d.S - O[live]
         f1, f2 = dot(e1[live], r), dot(e2[live], r)
@@ -478,16 +515,26 @@ def newton_numpy(surfaces, k, u, v, O, D, tol, max_steps):
         go = ~ok & (step < max_steps) & regular & np.isfinite(du) & np.isfinite(dv)
         converged[live] = ok
         moving = live[go]
+        u_at, v_at = u[moving], v[moving]
         u[moving] = np.minimum(np.maximum(u[moving] - du[go], u0[moving]), u1[moving])
         v[moving] = np.minimum(np.maximum(v[moving] - dv[go], v0[moving]), v1[moving])
+        if step == nurbs.CURVATURE_EVALUATION and len(moving):
+            done, P, Pu, Pv = taylor_finish_numpy(surfaces, k[moving], type(d)(*(x[go] for x in d)), u_at, v_at,
+                                                  u[moving], v[moving], O[moving], D[moving], e1[moving], e2[moving],
+                                                  tol[moving])
+            rows = moving[done]
+            S[rows], Su[rows], Sv[rows] = P[done], Pu[done], Pv[done]
+            converged[rows] = finished[rows] = True
+            moving = moving[~done]
         live = moving
-    return u, v, converged, S, Su, Sv
+    return u, v, converged, S, Su, Sv, finished
 
 
 def test_newton_in_lane_blocks_is_bit_for_bit_the_iteration_in_numpy():
     """`refine_mesh_hits` runs Newton LANES rays at a time, vector loops over the rays of a block (`kernels.nurbs`,
     "Lane blocks"): each ray's (u, v), verdict and S, S_u, S_v are the bits of the same iteration written in numpy
-    (one `SurfaceSet.evaluate` per step), on a mix of bicubic spans (runs of rays on one span, spans left between
+    (one `SurfaceSet.evaluate` per step, the step after the order-2 one finished by Taylor polynomials where
+    `taylor_finish_lanes` finishes it: `taylor_finish_numpy`), on a mix of bicubic spans (runs of rays on one span, spans left between
     steps, an empty span), a rational biquadratic patch (the scalar evaluation) and Bézier patches, over several
     blocks and a partial one, in sorted and in shuffled order."""
     from test_curvature import SQRT_HALF, revolve  # a rational biquadratic (the scalar path of a lane block)
@@ -505,11 +552,14 @@ def test_newton_in_lane_blocks_is_bit_for_bit_the_iteration_in_numpy():
     D /= np.linalg.norm(D, axis=1, keepdims=True)
     O = target - 5.0 * D
     us, vs = u0 + rng.uniform(-0.08, 0.08, n), v0 + rng.uniform(-0.08, 0.08, n)  # some across a span's edge
+    near = rng.random(n) < 0.3  # started close: their step after the order-2 evaluation is short (Taylor's)
+    us[near], vs[near] = u0[near] + rng.uniform(-1e-4, 1e-4, near.sum()), v0[near] + rng.uniform(-1e-4, 1e-4, near.sum())
     t_mesh = np.full(n, 5.0)
     magnitude = np.abs(O + t_mesh[:, None] * D).max(axis=1)
     tol = tracing.NEWTON_TOLERANCE * np.maximum(np.maximum(t_mesh, 1.0), magnitude)
     want = newton_numpy(surfaces, k, us, vs, O, D, tol, tracing.NEWTON_MAX_STEPS)
     assert 0.5 * n < want[2].sum() < n, "both verdicts must be exercised"
+    assert 0 < want[6].sum() < want[2].sum(), "Taylor's finish and the evaluations after it must be exercised"
     shuffled = rng.permutation(n)
     for rows in (np.arange(n), shuffled):
         u, v, d, converged, *_ = tracing.refine_all(surfaces, k[rows], us[rows], vs[rows], O[rows], D[rows],

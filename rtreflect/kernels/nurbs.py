@@ -799,12 +799,12 @@ def taylor_finish_lanes(buf, base, n):
     (δu, δv) = the new (u, v) − the evaluated one, the second-order Taylor polynomials
 
         S' = S + S_u δu + S_v δv + ½ (S_uu δu² + 2 S_uv δu δv + S_vv δv²),
-        S_u' = S_u + S_uu δu + S_uv δv,    S_v' = S_v + S_uv δu + S_vv δv
+        S_u' = S_u + (S_uu δu + S_uv δv),    S_v' = S_v + (S_uv δu + S_vv δv)
 
     replace S, S_u, S_v, and the point is `CONVERGED` where its residual |(e1·(S' − O), e2·(S' − O))| is within the
     tolerance (`newton_lanes`' test), the step at most `TAYLOR_SPAN_SHARE` of its span along u and v and strictly
-    inside the span and the domain (no clamp, no knot crossed: the span's one polynomial), and |n·D| above
-    `TAYLOR_MIN_COSINE`. Elsewhere nothing changes (the next evaluation at the new (u, v) follows). The curvatures
+    inside the span and the domain (no clamp, no knot crossed: the span's one polynomial), S_u and S_v turn by at
+    most `TAYLOR_TURN` of their length (not by a pole), and |n·D| is above `TAYLOR_MIN_COSINE`. Elsewhere nothing changes (the next evaluation at the new (u, v) follows). The curvatures
     (`curvature_lanes`) stay those of the evaluated point, ≤ 1e-6 of a span away. The vector loop, branch-free."""
     for j in range(n):
         u0, start_u, len_u = _field3(buf, LANE_SPAN, j)
@@ -834,17 +834,22 @@ def taylor_finish_lanes(buf, base, n):
         inside = ((max(start_u, lo_u) < un) & (un < min(start_u + len_u, hi_u))
                   & (max(start_v, lo_v) < vn) & (vn < min(start_v + len_v, hi_v)))
         short = (abs(du) <= TAYLOR_SPAN_SHARE * len_u) & (abs(dv) <= TAYLOR_SPAN_SHARE * len_v)
-        done = ((buf[LANE_STATE * LANES + j] == STEPPING) & (base[j] >= 0) & inside & short
+        cu0, cu1, cu2 = Suu0 * du + Suv0 * dv, Suu1 * du + Suv1 * dv, Suu2 * du + Suv2 * dv  # S_u's turn
+        cv0, cv1, cv2 = Suv0 * du + Svv0 * dv, Suv1 * du + Svv1 * dv, Suv2 * du + Svv2 * dv
+        turn = TAYLOR_TURN * TAYLOR_TURN
+        steady = ((dot3(cu0, cu1, cu2, cu0, cu1, cu2) <= turn * dot3(Su0, Su1, Su2, Su0, Su1, Su2))
+                  & (dot3(cv0, cv1, cv2, cv0, cv1, cv2) <= turn * dot3(Sv0, Sv1, Sv2, Sv0, Sv1, Sv2)))
+        done = ((buf[LANE_STATE * LANES + j] == STEPPING) & (base[j] >= 0) & inside & short & steady
                 & (f1 * f1 + f2 * f2 <= tol * tol) & (abs(dot3(n0, n1, n2, D0, D1, D2)) > TAYLOR_MIN_COSINE))
         buf[LANE_D * LANES + j] = P0 if done else S0
         buf[(LANE_D + 1) * LANES + j] = P1 if done else S1
         buf[(LANE_D + 2) * LANES + j] = P2 if done else S2
-        buf[(LANE_D + 3) * LANES + j] = (Su0 + Suu0 * du + Suv0 * dv) if done else Su0
-        buf[(LANE_D + 4) * LANES + j] = (Su1 + Suu1 * du + Suv1 * dv) if done else Su1
-        buf[(LANE_D + 5) * LANES + j] = (Su2 + Suu2 * du + Suv2 * dv) if done else Su2
-        buf[(LANE_D + 6) * LANES + j] = (Sv0 + Suv0 * du + Svv0 * dv) if done else Sv0
-        buf[(LANE_D + 7) * LANES + j] = (Sv1 + Suv1 * du + Svv1 * dv) if done else Sv1
-        buf[(LANE_D + 8) * LANES + j] = (Sv2 + Suv2 * du + Svv2 * dv) if done else Sv2
+        buf[(LANE_D + 3) * LANES + j] = (Su0 + cu0) if done else Su0
+        buf[(LANE_D + 4) * LANES + j] = (Su1 + cu1) if done else Su1
+        buf[(LANE_D + 5) * LANES + j] = (Su2 + cu2) if done else Su2
+        buf[(LANE_D + 6) * LANES + j] = (Sv0 + cv0) if done else Sv0
+        buf[(LANE_D + 7) * LANES + j] = (Sv1 + cv1) if done else Sv1
+        buf[(LANE_D + 8) * LANES + j] = (Sv2 + cv2) if done else Sv2
         buf[LANE_STATE * LANES + j] = CONVERGED if done else buf[LANE_STATE * LANES + j]
 
 
@@ -920,6 +925,10 @@ CURVATURE_EVALUATION = 1
 #: places the point. On the bench scene the last step is ~1e-8 of a span (the residual it cancels ~1e-9 of the
 #: scene's size).
 TAYLOR_SPAN_SHARE = 1e-6
+#: ... where S_u and S_v turn over the step by at most this share of their length (|S_uu δu + S_uv δv| ≤ this · |S_u|,
+#: likewise S_v): the remainder's bound above is of the span's coefficients, and near a pole or a collapsed edge S_u
+#: or S_v is far shorter than they are.
+TAYLOR_TURN = 1e-6
 #: ... where the ray meets the surface at |n·D| above this: the curvatures taken before the step keep the sign of
 #: the normal facing the ray after it (which turns by ≤ ~1e-6 rad).
 TAYLOR_MIN_COSINE = 1e-3

@@ -468,8 +468,7 @@ class SecondLook:
             slack = FLOAT32_SLACK * self.tessellation.extent
             nearer = again.hit & (again.t < kept - slack)
             rows = rays[nearer]
-            for name in ("hit", "patch", "u", "v", "t", "P", "N", "aside", "Su", "Sv", "curvature", "cos"):
-                getattr(hits, name)[rows] = getattr(again, name)[nearer]
+            hits.replace_rows(rows, again, nearer)
             hits.fallback[rays[again.fallback]] = True
             self._from_shell(hits, origins, directions, far, rays, entry)
         return hits

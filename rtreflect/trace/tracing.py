@@ -231,6 +231,13 @@ class Hits:
         """The `ROW_FIELDS` arrays, in that order."""
         return tuple(getattr(self, name) for name in self.ROW_FIELDS)
 
+    def replace_rows(self, rows: np.ndarray, other: "Hits", pick: np.ndarray) -> None:
+        """Rows ``rows`` become ``other``'s rows ``pick`` (an index array or mask of its rows), in place: every field
+        but `fallback`, which says how the search went, not what it found (the second look's nearer hits)."""
+        for name in self.__dataclass_fields__:
+            if name != "fallback":
+                getattr(self, name)[rows] = getattr(other, name)[pick]
+
     @classmethod
     def blank(cls, n: int, hit: np.ndarray, rows: bool = True) -> "Hits":
         """Rows for n rays flagged ``hit``, every value still that of a miss: to be filled in where hit.
