@@ -388,8 +388,8 @@ class Renderer:
                                                        hits.u[idx], hits.v[idx]))
             # K, H, κ1, κ2 from the fundamental forms at the exact hit, signed with N as written (facing the ray):
             # the tracer's where it had them (`Hits.curvature`, the same kernels' values at the hit or ≤ 1e-6 of a
-            # knot span before it), one kernel pass over the other hits (NaN where none hit), stored in its rows. Its columns are the AOVs (strided views: a
-            # transposed copy cost 1 % of a full-HD render).
+            # knot span before it), one kernel pass over the other hits (NaN where none hit), stored in its rows. Its
+            # columns are the AOVs (strided views: a transposed copy cost 1 % of a full-HD render).
             curv = hits.curvature
             rest = np.flatnonzero(hits.hit & np.isnan(curv[:, 0]))
             if len(rest):

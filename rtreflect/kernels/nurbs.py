@@ -804,8 +804,9 @@ def taylor_finish_lanes(buf, base, n):
     replace S, S_u, S_v, and the point is `CONVERGED` where its residual |(e1·(S' − O), e2·(S' − O))| is within the
     tolerance (`newton_lanes`' test), the step at most `TAYLOR_SPAN_SHARE` of its span along u and v and strictly
     inside the span and the domain (no clamp, no knot crossed: the span's one polynomial), S_u and S_v turn by at
-    most `TAYLOR_TURN` of their length (not by a pole), and |n·D| is above `TAYLOR_MIN_COSINE`. Elsewhere nothing changes (the next evaluation at the new (u, v) follows). The curvatures
-    (`curvature_lanes`) stay those of the evaluated point, ≤ 1e-6 of a span away. The vector loop, branch-free."""
+    most `TAYLOR_TURN` of their length (not by a pole), and |n·D| is above `TAYLOR_MIN_COSINE`. Elsewhere nothing
+    changes (the next evaluation at the new (u, v) follows). The curvatures (`curvature_lanes`) stay those of the
+    evaluated point, ≤ 1e-6 of a span away. The vector loop, branch-free."""
     for j in range(n):
         u0, start_u, len_u = _field3(buf, LANE_SPAN, j)
         v0, start_v, len_v = _field3(buf, LANE_SPAN + 3, j)
