@@ -549,7 +549,7 @@ def test_colour_bound_reaches_the_corner_samples_a_diagonal_neighbour_shows():
 
     The hood's film with one pixel inside a line drawn as bare surface: flagged where σ is smooth all round, not once a
     diagonal neighbour's σ lies 6 radii off, nor where a diagonal neighbour sees another tube."""
-    from rtreflect.analysis.validate import colour_mismatches
+    from rtreflect.analysis.validate import colour_mismatches, neighbour_gaps
 
     renderer = Renderer(load_scene(SCENES / "hood.toml").with_image(WIDTH, HEIGHT, 1))
     aovs = film_aovs(renderer, renderer.render().film)
@@ -568,6 +568,16 @@ def test_colour_bound_reaches_the_corner_samples_a_diagonal_neighbour_shows():
     aovs.line_id[y - 1, x + 1] = aovs.line_id[y, x] + 1
     checked, wrong = colour_mismatches(renderer, aovs)
     assert not checked[y, x] and not wrong[y, x]
+    # Nor where f moves by over half the spacing to the next level to an axis neighbour on the same tube: another tube
+    # may be nearest between them (the sweep's dense_net.step at 160×90: f 35 apart, levels 25 apart).
+    aovs.line_id[y - 1, x + 1] = aovs.line_id[y, x]
+    assert colour_mismatches(renderer, aovs)[1][y, x]
+    gap = neighbour_gaps(renderer.lights.c_k)[int(aovs.line_id[y, x])]
+    aovs.f[y, x + 1] = aovs.f[y, x] + 0.51 * gap
+    checked, wrong = colour_mismatches(renderer, aovs)
+    assert not checked[y, x] and not wrong[y, x]
+    aovs.f[y, x + 1] = aovs.f[y, x] + 0.49 * gap
+    assert colour_mismatches(renderer, aovs)[1][y, x]
 
 
 def test_a_crease_with_a_sliver_beside_it_is_no_line_of_its_own():

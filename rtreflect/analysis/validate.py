@@ -54,7 +54,9 @@ Overall figures count each tube position once (tubes sharing a position draw one
 pixels, the pixel grid cannot tell the two apart and that stretch of the line is not
 checked. Each line reports how many of its analytic points in clean view were left out for
 this (``unresolved_points``), and a line left out mostly or wholly is named in the report's
-notes: unchecked, not failed, and not silently dropped.
+notes: unchecked, not failed, and not silently dropped. Likewise a pixel's colour is not checked where φ moves
+to a neighbouring pixel by more than half the spacing to the next level near the bank (`_unresolved`): σ may
+bend through a stripe between two pixel centres that both lie off it.
 """
 
 from __future__ import annotations
@@ -794,7 +796,8 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
     """(H, W) masks of the pixels whose colour was checked, and of those whose colour is wrong (module doc).
 
     A pixel is checked where it and its four neighbours hit one smooth piece of one patch
-    (`_smooth_pairs`), all with the same nearest tube ahead (line.id), every sample hits
+    (`_smooth_pairs`), all with the same nearest tube ahead (line.id), φ resolved by the pixel grid near the
+    levels (`_unresolved`), every sample hits
     (A = 1), and the colours tell lines from surface. With d = |σ| the pixel-centre line.dist (σ the
     signed offset, `line_offset`) and g = |∇σ| from one-sided differences to those neighbours (the
     larger per axis; differences of d would understate g where σ changes sign), d moves by at
@@ -822,10 +825,14 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
     # dense_net.step at 320×180: σ 1.2 at a pixel, within 1.4 at its four neighbours, −4.7 and another tube's at
     # two diagonal ones; 4 of its 16 samples off the stripe a first-order bound from the axes kept them on).
     slope = np.zeros((len(STEPS), size))
+    f = aovs.f.ravel()
+    f_step = np.zeros(size)  # the largest |Δφ| to a neighbour of the pairs below (`_unresolved`)
     for i, axis in enumerate(STEPS):
         a, b = _smooth_pairs(renderer, aovs, axis)
         same = line_id[a] == line_id[b]
         a, b = a[same], b[same]
+        np.maximum.at(f_step, a, np.abs(f[b] - f[a]))
+        np.maximum.at(f_step, b, np.abs(f[b] - f[a]))
         step = np.zeros(size)
         with np.errstate(invalid="ignore"):
             diff = np.abs(sigma[b] - sigma[a])
@@ -838,6 +845,7 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
         has_next[a] = True
         has_prev[b] = True
         checked &= has_next & has_prev
+    checked &= ~_unresolved(f, f_step, line_id, spec.levels)
     g = np.hypot(slope[0], slope[1])
     radius, blur = spec.radius, spec.blur
     # How far d may move to a sample in the pixel: 0.71·g to first order, or half the step to a diagonal neighbour
@@ -883,6 +891,22 @@ def colour_mismatches(renderer: Renderer, aovs: PixelAOVs, spec: LineSpec | None
     L = aovs.line_coverage.ravel()
     wrong = checked & ~((L >= low - tolerance) & (L <= high + tolerance))
     return checked.reshape(height, width), wrong.reshape(height, width)
+
+
+def _unresolved(f: np.ndarray, step: np.ndarray, line_id: np.ndarray, levels: np.ndarray) -> np.ndarray:
+    """True where the pixel grid does not resolve φ near the levels: φ moves to a neighbouring pixel by more than half
+    the spacing from the pixel's level to the next (``step``), and φ ± that step comes within a spacing of the bank
+    of levels. There σ may bend through a stripe between two pixel centres that both lie off it, on the same level or
+    not, and the colour bounds of one smooth line say nothing (the sweep's dense_net.step at 160×90: σ 33 at a pixel,
+    −2 at its neighbour on the same line, φ 35 apart where the levels are 25 apart; 2 of its 16 samples on the
+    stripe). Far from the bank (a cylinder's reflected rays running off along the light plane, φ ~1e5) the step
+    can be large with no stripe within reach: those pixels stay checked."""
+    if len(levels) == 0:
+        return np.zeros(len(f), dtype=bool)
+    gap = np.where(line_id >= 0, neighbour_gaps(levels)[np.maximum(line_id, 0).astype(int)], np.inf)
+    with np.errstate(invalid="ignore"):
+        near_bank = (f + step >= np.min(levels) - gap) & (f - step <= np.max(levels) + gap)
+        return (step > 0.5 * gap) & near_bank
 
 
 # -- nearest distances ------------------------------------------------------------------------
