@@ -389,7 +389,7 @@ def test_search_stops_crawling_by_the_pole_views_silhouette(tmp_path, monkeypatc
 
 
 def test_revolved_seam_contours_are_seen_from_the_eye(tmp_path):
-    """revolved_seam.step: its mesh's chord error is 6.3 on a part 140 across (the parameterisation, see README), and
+    """revolved_seam.step: its mesh's chord error is 6.3 on a part 140 across (the parameterisation, see docs/cad-reading.md), and
     the analytic contours judged a point seen by a shadow ray from S(u, v) towards the eye, started 2× that off the
     surface: every wall within 12.7 in front of the point was missed, and 5,981 contour points 1.2–24 behind the
     surface the pixel shows were drawn and checked (validate at 480×270: 6,201 misses, traced centres up to 16 px

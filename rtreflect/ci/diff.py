@@ -423,7 +423,7 @@ def compare_images(a_path: Path, b_path: Path, channels: tuple[str, ...] | None 
 
     if first_mismatch is not None:
         max_error = first_mismatch  # non-finite errors trump finite ones, as in OpenImageIO
-    # Mean and RMS over the pairs where both values are finite (the README's contract).
+    # Mean and RMS over the pairs where both values are finite (the contract in docs/ci.md, "How `diff` compares").
     mean_error = error_sum / finite_values if finite_values else 0.0
     rms_error = math.sqrt(error_squares / finite_values) if finite_values else 0.0
     psnr = 20.0 * math.log10(1.0 / rms_error) if rms_error > 0 else math.inf  # OpenImageIO's definition (peak 1)

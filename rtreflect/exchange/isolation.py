@@ -23,7 +23,7 @@ fork-and-exec, safe with threads) with Open CASCADE and the readers imported onc
 process closes its pipe. It gets the read by name (``read`` must pickle: `step.transfer` with the path),
 with this process's ``sys.path``, working directory and ignored stop signals, and answers the child's PID,
 then its wait status; reads through it run one at a time. Its own stop signals stay blocked: a Ctrl-C
-ends its child, which the parent reports, not the server. Measured (README, CAD parts;
+ends its child, which the parent reports, not the server. Measured (docs/cad-reading.md, "Bad CAD input and the reading child process";
 bench/isolation_bench.py): ~2 s of CPU to start the server once, then a read costs what a fork costs. (multiprocessing's forkserver would fork from a
 clean process too, but a Dask worker is a daemonic process, which may not start one.)
 

@@ -73,7 +73,7 @@ SHELL_CHORDS = 2.0
 #: hit's (u, v) is another part of the face (`SecondLook._elsewhere_on_face`): on a mesh that follows its face the
 #: passage spans a triangle or two of the sheet around the hit (2δ/|N·D| ≤ 10 shell half-widths, a triangle's chord
 #: error far less than its size). On a coarse one (a sphere in 4 × 2 cells) it can span the face: no (u, v) test
-#: tells a fold there (README, "Real exports").
+#: tells a fold there (docs/cad-reading.md, "Real exports").
 FOLD_TRIANGLES = 4.0
 #: A rim box's inner corners start at most this share of the domain across its edge inside it (`_inside_the_edge`).
 INSIDE_SHARE = 0.25
