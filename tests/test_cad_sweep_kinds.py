@@ -1216,3 +1216,40 @@ def test_a_face_narrower_than_its_pcurves_drift_is_not_taken_for_a_turn(tmp_path
     hits = renderer.trace(origins, np.tile([0.0, 0.0, -1.0], (9, 1)))
     assert hits.hit.all()
     np.testing.assert_allclose(hits.t, 8.0, atol=1e-6)
+
+
+def test_instance_located_at_a_scale_has_its_faces_where_its_edges_are(tmp_path):
+    """scaled_assembly.step: the filleted block, and an instance located at scale 0.5. Open CASCADE's NURBS conversion
+    of the whole shape halved that instance's planes' domains, their edges 4–11 off them: a quarter of each flat face
+    rendered, the block seen through, and nothing said (validate checks the image against the faces as read). The
+    scaling location is baked into the geometry first (`occt.rigid_locations`): every trim sample of every face, on our
+    surface, lies on an edge of Open CASCADE's face as read from the file (unconverted; its edges' 3D curves, under
+    the scaled location, sampled at 400 points: `BRepExtrema_DistShapeShape` measures them 1.5 off), to 1e-6 of the
+    model."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    path = tmp_path / "scaled_assembly.step"
+    sweep.PARTS["scaled_assembly.step"](path)
+    model = read_cad(path)
+    _, originals, _, _ = occt_faces(path)
+    assert len(originals) == len(model.surfaces) == 52
+    worst = 0.0
+    for surface, face in zip(model.surfaces, originals):
+        polylines = []
+        explorer = TopExp_Explorer(face, TopAbs_EDGE)
+        while explorer.More():
+            curve = BRepAdaptor_Curve(TopoDS.Edge(explorer.Current()))
+            explorer.Next()
+            points = [curve.Value(float(t)) for t in np.linspace(curve.FirstParameter(), curve.LastParameter(), 400)]
+            polylines.append(np.array([[p.X(), p.Y(), p.Z()] for p in points]))
+        a = np.concatenate([line[:-1] for line in polylines])
+        b = np.concatenate([line[1:] for line in polylines])
+        loop = np.concatenate([surface.trim.outer, *surface.trim.holes])
+        for point in surface.evaluate(*loop[::max(1, len(loop) // 12)].T).S:
+            along = np.clip(np.einsum("ij,ij->i", point - a, b - a) / np.maximum(np.einsum("ij,ij->i", b - a, b - a),
+                                                                                 1e-300), 0.0, 1.0)
+            worst = max(worst, float(np.min(np.linalg.norm(a + along[:, None] * (b - a) - point, axis=1))))
+    assert worst <= 1e-6 * model.diagonal, worst

@@ -102,6 +102,8 @@ Tenth sweep:
                        profile's period end (refused by the conversion likewise)
 Sixteenth round (a first-hit sweep of Open CASCADE's test files against its intersector):
   turned_band.step     a whole turn of a cylinder trimmed to [π/2, 5π/2]: its converted pcurves start 0.0376 before it
+Seventeenth round (a sweep of new kinds: high degrees, lofted skins, nested and scaled assemblies):
+  scaled_assembly.step the filleted block and an instance LOCATED at scale 0.5 and moved (an XCAF assembly)
 """
 
 from __future__ import annotations
@@ -1621,6 +1623,18 @@ def turned_band():
     return BRepBuilderAPI_MakeFace(band, 1e-7).Face()
 
 
+def write_scaled_assembly(path: Path) -> None:
+    """The filleted block as a STEP assembly (XCAF) of two instances, the second LOCATED at scale 0.5 and moved
+    (-60, 0, 0): Open CASCADE's NURBS conversion of the whole shape halves that instance's planes' domains, their edges
+    4–11 off them, unless the reader bakes the scaling location into the geometry first (`occt.rigid_locations`)."""
+    from OCP.gp import gp_Trsf, gp_Vec
+
+    scaled = gp_Trsf()
+    scaled.SetScaleFactor(0.5)
+    scaled.SetTranslationPart(gp_Vec(-60.0, 0.0, 0.0))
+    write_assembly(filleted_block(), path, (gp_Trsf(), scaled))
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -1705,6 +1719,7 @@ PARTS = {
     "touching_holes.step": lambda p: write_step(touching_holes(), p),
     "thin_wide.step": lambda p: write_step(thin_wide(), p),
     "turned_band.step": lambda p: write_step(turned_band(), p),
+    "scaled_assembly.step": write_scaled_assembly,
 }
 
 

@@ -1015,6 +1015,52 @@ def _keyed_by_order(face, counterpart, key_of):
     return lambda edge: next(key for e, key in zip(mine, keys) if e.IsSame(edge))
 
 
+#: A location whose gp_Trsf scales by more than this relative amount (|scale factor| ≠ 1) is baked into the geometry
+#: before the NURBS conversion (`rigid_locations`).
+SCALE_TOLERANCE = 1e-12
+
+
+def _scales(location) -> bool:
+    """True where a TopLoc_Location scales (a mirror's −1 does not: its geometry is only turned over)."""
+    return abs(abs(location.Transformation().ScaleFactor()) - 1.0) > SCALE_TOLERANCE
+
+
+def rigid_locations(shape):
+    """``shape`` with every location that scales (an assembly instance placed at scale 0.5) baked into its
+    geometry (``BRepBuilderAPI_Transform`` with a copy), the rest of the tree and its rigid locations as they were.
+
+    ``BRepBuilderAPI_NurbsConvert`` converts a plane under a scaling location wrongly: a STEP instance of the filleted
+    block at scale 0.5 came out with its flat faces' domains halved, their edges 4–11 mm off them (a quarter of each
+    face shown, the block seen through), silently: its fillets were right. Baked, the faces are plain geometry and
+    convert as any other. A shape with no such location is returned as it is."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.TopAbs import TopAbs_COMPOUND
+    from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS_Compound, TopoDS_Iterator
+
+    if _scales(shape.Location()):
+        with quiet_stdout():
+            baked = BRepBuilderAPI_Transform(shape.Located(TopLoc_Location()), shape.Location().Transformation(),
+                                             True).Shape()
+        return rigid_locations(baked)
+    if shape.ShapeType() != TopAbs_COMPOUND:
+        return shape
+    children = []
+    iterator = TopoDS_Iterator(shape, False, False)  # each child with its own location and orientation
+    while iterator.More():
+        children.append(iterator.Value())
+        iterator.Next()
+    rigid = [rigid_locations(child) for child in children]
+    if all(new is old for new, old in zip(rigid, children)):
+        return shape
+    builder, compound = BRep_Builder(), TopoDS_Compound()
+    builder.MakeCompound(compound)
+    for child in rigid:
+        builder.Add(compound, child)
+    return compound.Located(shape.Location()).Oriented(shape.Orientation())
+
+
 def convert_shape(shape):
     """Every face as a B-spline face (``BRepBuilderAPI_NurbsConvert``), or None where Open CASCADE cannot convert the
     shape as a whole (then `converted_faces` converts it face by face)."""
@@ -1219,6 +1265,7 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     original_faces = count_entities(shape)["faces"]
     if original_faces == 0 or surfaceless_faces(shape) == original_faces:
         raise no_surfaces_error(path, shape, what)
+    shape = rigid_locations(shape)
     converted = convert_shape(shape)
     lo, hi = shape_bounds(shape if converted is None else converted)
     diagonal = float(np.linalg.norm(hi - lo))
