@@ -1119,12 +1119,13 @@ class SceneReport:
 
 
 def exact_crossings(renderer: Renderer, aovs: PixelAOVs, first: np.ndarray, second: np.ndarray,
-                    c: np.ndarray, field: UlmetField | None = None) -> np.ndarray:
+                    c: np.ndarray, field: UlmetField | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(n, 2) image positions of the level set f = c (the mode's φ) between the hits of the pixel pairs (first,
     second) (flat indices; one smooth piece of one face): the root on the (u, v) segment joining their hits, exactly
     (`contours.UlmetField.bracket` on the exact field, not the film's values), where it is seen (`UlmetField.seen`);
-    NaN where there is none (f not across c at both ends, or a periodic φ, whose wrap no bracket spans). ``field``: the
-    renderer's (`contours.field_of`), when the caller has it.
+    NaN where there is none (f not across c at both ends, or a periodic φ, whose wrap no bracket spans); and (n, 2)
+    the level set's unit normal in the image there (`level_set_normals`). ``field``: the renderer's
+    (`contours.field_of`), when the caller has it.
 
     The analytic contours are found on a grid of cells ~`contours.GRID_CELL_PX` across: a strip narrower than a cell
     where f dips across a level and back can lie between its points, and a traced centre on its far side then meets
@@ -1132,13 +1133,13 @@ def exact_crossings(renderer: Renderer, aovs: PixelAOVs, first: np.ndarray, seco
     320×180: a strip 1.3 px wide where κ1 dips to −0.004 of a level gap of 2, its far edge 1.24 px from the contour).
     The exact root between the very pixels is a point of the analytic level set too: a traced centre off it is off.
     """
-    out = np.full((len(first), 2), np.nan)
+    out, normal = np.full((len(first), 2), np.nan), np.full((len(first), 2), np.nan)
     field = field or field_of(renderer)
     if len(first) == 0 or getattr(field, "period", None):
-        return out
+        return out, normal
     patch = aovs.patch.ravel()[first].astype(int)
     if aovs.uv is None:  # AOVs made without the film's (u, v)
-        return out
+        return out, normal
     uv = aovs.uv.reshape(-1, 2)
     ua, va, ub, vb = uv[first, 0], uv[first, 1], uv[second, 0], uv[second, 1]
     edge = np.column_stack([ua, va, ub, vb, field.f(patch, ua, va), field.f(patch, ub, vb)])
@@ -1146,7 +1147,35 @@ def exact_crossings(renderer: Renderer, aovs: PixelAOVs, first: np.ndarray, seco
     rows = np.flatnonzero(ok)
     rows = rows[field.seen(patch[rows], u[rows], v[rows])]
     out[rows] = field.project(patch[rows], u[rows], v[rows])[0]
-    return out
+    normal[rows] = level_set_normals(field, patch[rows], u[rows], v[rows])
+    return out, normal
+
+
+#: (u, v) step of `level_set_normals`' central differences, as a share of the face's domain.
+NORMAL_STEP = 1e-6
+
+
+def level_set_normals(field: UlmetField, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(n, 2) unit normals in the image of the level set of φ through S(u, v): the image gradient g of φ, from
+    φ_u = g·x_u and φ_v = g·x_v (x the point's image position), each differenced over (u, v) ± `NORMAL_STEP` of the
+    domain (kept inside it); NaN where the projection is singular (an edge-on face) or φ is stationary."""
+    u0, u1, v0, v1 = field.surfaces.domains(patch)
+    hu, hv = NORMAL_STEP * (u1 - u0), NORMAL_STEP * (v1 - v0)
+    ends_u = np.clip(np.stack([u + hu, u - hu, u, u]), u0, u1)
+    ends_v = np.clip(np.stack([v, v, v + hv, v - hv]), v0, v1)
+    n = len(u)
+    at = (np.tile(patch, 4), ends_u.ravel(), ends_v.ravel())
+    phi = field.f(*at).reshape(4, n)
+    x = field.project(*at)[0].reshape(4, n, 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d_phi = np.stack([(phi[0] - phi[1]) / (ends_u[0] - ends_u[1]), (phi[2] - phi[3]) / (ends_v[2] - ends_v[3])], 1)
+        jacobian = np.stack([(x[0] - x[1]) / (ends_u[0] - ends_u[1])[:, None],
+                             (x[2] - x[3]) / (ends_v[2] - ends_v[3])[:, None]], 1)  # rows x_u, x_v
+        det = jacobian[:, 0, 0] * jacobian[:, 1, 1] - jacobian[:, 0, 1] * jacobian[:, 1, 0]
+        # g from J g = (φ_u, φ_v), by Cramer's rule
+        g = np.stack([d_phi[:, 0] * jacobian[:, 1, 1] - d_phi[:, 1] * jacobian[:, 0, 1],
+                      jacobian[:, 0, 0] * d_phi[:, 1] - jacobian[:, 1, 0] * d_phi[:, 0]], 1) / det[:, None]
+        return g / np.linalg.norm(g, axis=1, keepdims=True)
 
 
 def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, tolerance: float) -> SceneReport:
@@ -1190,9 +1219,12 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
         off = np.flatnonzero(~(dist <= tolerance) & ~at_end)
         if len(off):
             field = field or field_of(renderer)
-            exact = exact_crossings(renderer, aovs, centres.pixel_a[mine][off], centres.pixel_b[mine][off],
-                                    np.full(len(off), c_k[k]), field)
-            between = np.linalg.norm(pts[off] - exact, axis=1)
+            exact, normal = exact_crossings(renderer, aovs, centres.pixel_a[mine][off], centres.pixel_b[mine][off],
+                                            np.full(len(off), c_k[k]), field)
+            # Across the level set, as the grid's contours are measured: the centre and the root lie on one pixel
+            # axis, which the level set may cross at a slant (then the centre is nearer it than to the root).
+            across = np.abs(np.einsum("ij,ij->i", pts[off] - exact, normal))
+            between = np.where(np.isfinite(across), across, np.linalg.norm(pts[off] - exact, axis=1))
             nearer = between < np.where(np.isfinite(dist[off]), dist[off], np.inf)
             dist[off[nearer]] = between[nearer]
         unmatched = ~np.isfinite(dist)
