@@ -104,6 +104,8 @@ Sixteenth round (a first-hit sweep of Open CASCADE's test files against its inte
   turned_band.step     a whole turn of a cylinder trimmed to [π/2, 5π/2]: its converted pcurves start 0.0376 before it
 Seventeenth round (a sweep of new kinds: high degrees, lofted skins, nested and scaled assemblies):
   scaled_assembly.step the filleted block and an instance LOCATED at scale 0.5 and moved (an XCAF assembly)
+  wing_skin.step       a tapered, swept, twisted wing's skin lofted as ONE face through closed NACA 2412 sections: closed
+                       in u, its seam on the sharp trailing edge (a crease, a wedge of ~9°)
 """
 
 from __future__ import annotations
@@ -1635,6 +1637,47 @@ def write_scaled_assembly(path: Path) -> None:
     write_assembly(filleted_block(), path, (gp_Trsf(), scaled))
 
 
+def _naca_section(m: float = 0.02, p: float = 0.4, t: float = 0.12, n: int = 40) -> list[tuple[float, float]]:
+    """A NACA 4-digit section (x in [0, 1]) with a sharp trailing edge (closed-TE coefficient −0.1036): from the
+    trailing edge over the upper side to the leading edge and back along the lower side."""
+    beta = np.linspace(0.0, math.pi, n)
+    x = 0.5 * (1 - np.cos(beta))
+    thickness = 5 * t * (0.2969 * np.sqrt(x) - 0.1260 * x - 0.3516 * x ** 2 + 0.2843 * x ** 3 - 0.1036 * x ** 4)
+    camber = np.where(x < p, m / p ** 2 * (2 * p * x - x ** 2), m / (1 - p) ** 2 * ((1 - 2 * p) + 2 * p * x - x ** 2))
+    theta = np.arctan(np.where(x < p, 2 * m / p ** 2 * (p - x), 2 * m / (1 - p) ** 2 * (p - x)))
+    upper = list(zip(x - thickness * np.sin(theta), camber + thickness * np.cos(theta)))[::-1]
+    lower = list(zip(x + thickness * np.sin(theta), camber - thickness * np.cos(theta)))[1:]
+    points = upper + lower
+    points[0] = points[-1] = (1.0, float(camber[-1]))
+    return points
+
+
+def wing_skin():
+    """A wing (span 300, chord 120 tapering to 54, swept 60, twisted −4°, dihedral 15) lofted through five NACA 2412
+    sections, each one closed non-periodic B-spline from the trailing edge round to it (an open sheet): one face
+    closed in u, its seam on the sharp trailing edge, where the two sheets meet at ~9°."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeWire
+    from OCP.BRepOffsetAPI import BRepOffsetAPI_ThruSections
+    from OCP.collections import Array1_gp_Pnt
+    from OCP.GeomAbs import GeomAbs_C2
+    from OCP.GeomAPI import GeomAPI_PointsToBSpline
+    from OCP.gp import gp_Pnt
+
+    loft = BRepOffsetAPI_ThruSections(False, False, 1e-6)
+    for s in np.linspace(0.0, 1.0, 5):
+        chord, sweep_by, twist, dihedral = 120.0 * (1 - 0.55 * s), 60.0 * s, math.radians(-4.0 * s), 15.0 * s ** 2
+        section = _naca_section()
+        points = Array1_gp_Pnt(1, len(section))
+        for k, (x, y) in enumerate(section):
+            xx, yy = (x - 0.25) * chord, y * chord
+            points.SetValue(k + 1, gp_Pnt(xx * math.cos(twist) - yy * math.sin(twist) + 30.0 + sweep_by, 300.0 * s,
+                                          xx * math.sin(twist) + yy * math.cos(twist) + dihedral))
+        curve = GeomAPI_PointsToBSpline(points, 3, 8, GeomAbs_C2, 1e-4).Curve()
+        loft.AddWire(BRepBuilderAPI_MakeWire(BRepBuilderAPI_MakeEdge(curve).Edge()).Wire())
+    loft.Build()
+    return loft.Shape()
+
+
 PARTS = {
     "sphere_hole.step": lambda p: write_step(sphere_hole(), p),
     "torus.step": lambda p: write_step(torus(), p),
@@ -1720,6 +1763,7 @@ PARTS = {
     "thin_wide.step": lambda p: write_step(thin_wide(), p),
     "turned_band.step": lambda p: write_step(turned_band(), p),
     "scaled_assembly.step": write_scaled_assembly,
+    "wing_skin.step": lambda p: write_step(wing_skin(), p),
 }
 
 

@@ -134,6 +134,13 @@ SEAM_CORNER_TRIES = 16
 #: chord errors of a rim edge: each mesh lies within its chord error of the shared edge, ×2 as `BAND_CHORDS`
 #: (the measured chord error can fall short).
 RIM_REACH_CHORDS = 2.0
+#: A closed face's seam is a crease where its normals either side differ by more than this angle (radians,
+#: `_seam_twins`): two sheets meet there at an edge, and `_rim_neighbours` refines the sheet across it as a face across
+#: a rim (a wing skin lofted as one face through closed sections, its seam on the sharp trailing edge, a wedge of
+#: ~9°: rays met the mesh on one side, Newton settled on that sheet, the nearer crossing 0.04 before it lay across).
+SEAM_CREASE = 1e-3
+#: A boundary vertex lies on its face's seam where its u (or v) is within this share of the domain of the domain's end.
+SEAM_MATCH = 1e-9
 #: Boundary vertices `_corner_faces` asks the k-d tree for around each boundary vertex: the faces meeting at a
 #: B-rep vertex (3 at a box's corner, 4–6 at a fillet's setback or a cone's apex) with room for a pole's coincident
 #: vertices of one face.
@@ -1245,7 +1252,8 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     than the kept one by more than float32 rounding replaces it (the same point on the shared edge does
     not: pixels there keep their face).
     """
-    if not tessellation.has_rim_neighbours:  # no face has a neighbour (a single patch): nothing across any rim
+    twins, creased = _seam_twins(tessellation, surfaces)
+    if not tessellation.has_rim_neighbours and not creased:  # no face has a neighbour, nor a creased seam
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     patch_of, uv_of, gap_of = tessellation.rim_neighbour
     # Not only under a valid hit: the next query skips the coincident triangle past a miss or an unresolved candidate
@@ -1284,8 +1292,18 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     passes = _within(cX[at[row], col], cn[at[row], col], ckappa[at[row], col], points[near[row]], reach_more[row, col])
     row, col = row[passes], col[passes]
     cuv = cuv[at[row], col]
-    rays, pn = np.concatenate([rays[close], rays[near[row]]]), np.concatenate([pn[close], cp[row, col]])
-    un, vn = np.concatenate([un[close], cuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1]])
+    # Across a creased seam of the hit's own face (`_seam_twins`): that face again, from the candidate's (u, v) taken
+    # across the seam (its other coordinate kept: the vertex's may lie far along a sliver at the seam), else the twin's.
+    seam = np.flatnonzero(corner >= 0)
+    seam = seam[twins[corner[seam], 2] >= 0]
+    seam = seam[edge_dist[seam] <= 2.0 * RIM_REACH_CHORDS * chord[pk[rays[seam]]] + skip]
+    twin = twins[corner[seam]]
+    across_u = twin[:, 2] == 0
+    tuv = np.stack([np.where(across_u, twin[:, 0], ur[rays[seam]]), np.where(across_u, vr[rays[seam]], twin[:, 1])], 1)
+    tuv = np.where(np.isfinite(tuv), tuv, twin[:, :2])
+    rays, pn = (np.concatenate([rays[close], rays[near[row]], rays[seam]]),
+                np.concatenate([pn[close], cp[row, col], pk[rays[seam]]]))
+    un, vn = np.concatenate([un[close], cuv[:, 0], tuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1], tuv[:, 1]])
     # A planar neighbour is met where the ray crosses its plane: rows whose crossing cannot win below are not refined.
     win_reach = _rim_reach(band, GRAZING_ALLOWANCE, skip)  # the reach test below at its largest allowance
     may = _may_win_on_plane(tessellation, surfaces, pn, O[rays], D[rays], tm[rays], kept[rays], win_reach, slack)
@@ -1516,6 +1534,41 @@ def _net_planes(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.nd
         centre, normal, deviation, positive = surfaces.net_planes
         planar = (deviation <= float32_rounding(tessellation)) & positive
         cached = tessellation.__dict__["_net_planes"] = (centre, normal, deviation, planar)
+    return cached
+
+
+def _seam_twins(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.ndarray, bool]:
+    """Per vertex (V, 3), for a boundary vertex on a closed face's seam where the seam is a crease (its normals either
+    side differ by more than `SEAM_CREASE`): the (u, v) of the same point across the seam (u₀ ↔ u₁ or v₀ ↔ v₁, the
+    other coordinate kept) and the axis crossed (0: u, 1: v); NaN, NaN, −1 elsewhere. And whether any vertex has one.
+    Built once per tessellation, on first use (kept in its ``__dict__``, as `_corner_faces` is)."""
+    cached = tessellation.__dict__.get("_seam_twins")
+    if cached is not None:
+        return cached
+    twins = np.full((len(tessellation.vertices), 3), np.nan)
+    twins[:, 2] = -1
+    rows = tessellation.boundary
+    patch = tessellation.vertex_patch[rows]
+    closed = surfaces.closed[patch] if len(rows) else np.zeros((0, 2), dtype=bool)
+    if closed.any():
+        uv = tessellation.vertex_uv[rows].astype(np.float64)
+        here, there, axes = uv.copy(), np.full_like(uv, np.nan), np.full(len(rows), -1.0)
+        u0, u1, v0, v1 = surfaces.domains(patch)
+        for axis, (lo, hi) in enumerate(((u0, u1), (v0, v1))):
+            match = SEAM_MATCH * (hi - lo)
+            for end, other in ((lo, hi), (hi, lo)):
+                on = closed[:, axis] & (np.abs(uv[:, axis] - end) <= match)
+                here[on, axis] = end[on]
+                there[on] = uv[on]
+                there[on, axis] = other[on]
+                axes[on] = axis
+        seam = np.flatnonzero(axes >= 0)
+        if len(seam):
+            n_here = surfaces.normals(patch[seam], here[seam, 0], here[seam, 1])
+            n_there = surfaces.normals(patch[seam], there[seam, 0], there[seam, 1])
+            crease = seam[np.einsum("ij,ij->i", n_here, n_there) < np.cos(SEAM_CREASE)]
+            twins[rows[crease], :2], twins[rows[crease], 2] = there[crease], axes[crease]
+    cached = tessellation.__dict__["_seam_twins"] = twins, bool((twins[:, 2] >= 0).any())
     return cached
 
 
