@@ -369,6 +369,11 @@ def run_local(jobs: list[Job], outdir: Path, *, workers: int, max_memory: int | 
             # Joined, not left running (the workers are gone, so it ends at once): a manager thread still alive at
             # exit made the interpreter's shutdown write to its closed wake-up pipe ("Bad file descriptor" traceback).
             pool.shutdown(wait=True, cancel_futures=True)
+            # A worker that SIGTERM found inside a C call (an image being written) may not unwind before it is killed:
+            # its temporaries are removed here, now that it is dead (a full test run left a worker's .exr and .png).
+            processes.update(getattr(pool, "_processes", None) or {})
+            for pid in processes:
+                remove_dead_temporaries(outdir, pid)
             raise
         pool.shutdown(wait=True)
         _drain(progress_queue, on_progress, started)

@@ -936,3 +936,22 @@ def test_a_reader_child_dies_with_its_reading_server():
     else:
         os.kill(reader, signal.SIGKILL)
     assert state == "gone" or "zombie" in state, state
+
+
+def test_a_model_too_small_for_the_mesher_is_one_line_saying_so(tmp_path):
+    """The filleted block scaled to 1e-5 mm (the seventeenth sweep round): the mesh deflection the reader asks for,
+    2e-3 of the model, falls below what Open CASCADE's mesher accepts (1e-7), and every face failed "invalid parameter
+    value", the error naming face 0 and suggesting --skip-bad-faces, which then failed on all 26. Now one line says
+    the model is too small, exit 2, nothing written; at 1e-4 mm it renders."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+    import make_sweep_parts as sweep
+
+    tiny, small = tmp_path / "tiny.step", tmp_path / "small.step"
+    sweep.write_step(sweep.scaled_block(1e-5), tiny)
+    sweep.write_step(sweep.scaled_block(1e-4), small)
+    line = assert_bad_input(*run("render", tiny, "-o", tmp_path / "out", *TINY)[:2], "tiny.step", tmp_path / "out")
+    assert "too small for Open CASCADE's mesher" in line and "face" not in line.split("across")[0]
+    code, output, _ = run("render", small, "-o", tmp_path / "out2", *TINY)
+    assert code == 0, output

@@ -1273,6 +1273,46 @@ def test_wing_skin_closed_across_its_sharp_trailing_edge_is_hit_on_the_nearer_sh
     rows, cols = np.divmod(np.arange(320 * 180), 320)
     origins, directions = renderer.camera.rays(rows, cols)
     hits = renderer.trace(origins, directions)
-    by_seam = np.flatnonzero(hits.hit & (np.minimum(hits.u, 1.0 - hits.u) < 2e-3))
+    u0, u1 = renderer.surfaces.domains(np.zeros(1, dtype=int))[:2]
+    by_seam = np.flatnonzero(hits.hit & (np.minimum(hits.u - u0, u1 - hits.u) < 2e-3 * (u1 - u0)))
     assert len(by_seam) >= 80
     assert_first_hits_are_occt(path, renderer, origins[by_seam], directions[by_seam])
+
+
+def test_a_scaling_location_inside_a_solid_is_baked_too():
+    """A box's shell placed in its solid at scale 0.5 (not an assembly's compound child): Open CASCADE's NURBS
+    conversion of the solid as it is gives each face a quarter of its area; after `occt.rigid_locations` the converted
+    faces' areas are those Open CASCADE measures on the shape as built, in the same order."""
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+    from OCP.BRepGProp import BRepGProp
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeBox
+    from OCP.GProp import GProp_GProps
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS_Iterator, TopoDS_Solid
+    from OCP.gp import gp_Trsf
+
+    from rtreflect.exchange.occt import rigid_locations
+
+    def areas(shape):
+        found, explorer = [], TopExp_Explorer(shape, TopAbs_FACE)
+        while explorer.More():
+            props = GProp_GProps()
+            BRepGProp.SurfaceProperties_s(explorer.Current(), props)
+            found.append(props.Mass())
+            explorer.Next()
+        return np.array(found)
+
+    half = gp_Trsf()
+    half.SetScaleFactor(0.5)
+    shell = TopoDS_Iterator(BRepPrimAPI_MakeBox(10.0, 15.0, 5.0).Shape()).Value()
+    solid = TopoDS_Solid()
+    builder = BRep_Builder()
+    builder.MakeSolid(solid)
+    builder.Add(solid, shell.Located(TopLoc_Location(half), False))
+    built = areas(solid)
+    assert np.allclose(areas(BRepBuilderAPI_NurbsConvert(solid, True).Shape()), built / 4)  # the fault, as it is
+    np.testing.assert_allclose(areas(BRepBuilderAPI_NurbsConvert(rigid_locations(solid), True).Shape()), built,
+                               rtol=1e-9)

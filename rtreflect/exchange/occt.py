@@ -57,6 +57,9 @@ MESH_DEFLECTION = 2e-3
 #: The trims are sampled again then too, to `TRIM_TOLERANCE` × the true diagonal.
 #: The shipped parts' boxes are within 1.5× of their faces' (the vase's), so their meshes and trims are unchanged.
 REMESH_RATIO = 2.0
+#: The least chord deflection Open CASCADE's BRepMesh accepts (Precision::Confusion): a model under 5e-5 across
+#: (the seventeenth round's filleted block at 1e-5 mm) asks for less, and every face failed "invalid parameter value".
+SMALLEST_DEFLECTION = 1e-7
 #: A face whose trim's `Trim.roundness` in its domain is below this encloses no area: its loop runs out along a curve
 #: and back (OCCT's data/step/trj6_b1-ec-214.stp, faces 54 and 71: 1.1e-6, a degree-8 patch reaching 12,000 mm off
 #: the 270 mm part inside its domain). It is left out with a note (as one whose loops enclose exactly nothing, once a
@@ -1032,33 +1035,43 @@ def rigid_locations(shape):
     ``BRepBuilderAPI_NurbsConvert`` converts a plane under a scaling location wrongly: a STEP instance of the filleted
     block at scale 0.5 came out with its flat faces' domains halved, their edges 4–11 mm off them (a quarter of each
     face shown, the block seen through), silently: its fillets were right. Baked, the faces are plain geometry and
-    convert as any other. A shape with no such location is returned as it is."""
+    convert as any other. Any container may carry such a location (a compound's child, a solid's shell, a face); the
+    containers above a baked one are copied empty (same type, location and orientation) and refilled in order, so the
+    faces keep their explorer order. A shape with no such location is returned as it is, and so is one whose baking
+    fails (Open CASCADE's exception: the conversion then proceeds as before)."""
+    try:
+        return _baked(shape)
+    except Exception:  # OCCT's Standard_Failure: keep the shape as read
+        return shape
+
+
+def _baked(shape):
+    """`rigid_locations`' walk: the shape itself, or a copy with its scaling locations baked."""
     from OCP.BRep import BRep_Builder
     from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
-    from OCP.TopAbs import TopAbs_COMPOUND
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_VERTEX, TopAbs_WIRE
     from OCP.TopLoc import TopLoc_Location
-    from OCP.TopoDS import TopoDS_Compound, TopoDS_Iterator
+    from OCP.TopoDS import TopoDS_Iterator
 
     if _scales(shape.Location()):
         with quiet_stdout():
             baked = BRepBuilderAPI_Transform(shape.Located(TopLoc_Location()), shape.Location().Transformation(),
                                              True).Shape()
-        return rigid_locations(baked)
-    if shape.ShapeType() != TopAbs_COMPOUND:
+        return _baked(baked)
+    if shape.ShapeType() in (TopAbs_FACE, TopAbs_WIRE, TopAbs_EDGE, TopAbs_VERTEX):  # geometry, not containers
         return shape
     children = []
     iterator = TopoDS_Iterator(shape, False, False)  # each child with its own location and orientation
     while iterator.More():
         children.append(iterator.Value())
         iterator.Next()
-    rigid = [rigid_locations(child) for child in children]
+    rigid = [_baked(child) for child in children]
     if all(new is old for new, old in zip(rigid, children)):
         return shape
-    builder, compound = BRep_Builder(), TopoDS_Compound()
-    builder.MakeCompound(compound)
+    builder, copy = BRep_Builder(), shape.EmptyCopied()
     for child in rigid:
-        builder.Add(compound, child)
-    return compound.Located(shape.Location()).Oriented(shape.Orientation())
+        builder.Add(copy, child)
+    return copy
 
 
 def convert_shape(shape):
@@ -1271,6 +1284,10 @@ def read_faces(path: Path, shape, name: str, *, unit: str, unit_note: str, what:
     diagonal = float(np.linalg.norm(hi - lo))
     if not (np.isfinite(diagonal) and diagonal > 0):
         raise SceneError(path, "", f"the model's bounding box is empty or not finite ({lo.tolist()} .. {hi.tolist()})")
+    if MESH_DEFLECTION * diagonal < SMALLEST_DEFLECTION:
+        raise SceneError(path, "", f"the model is {diagonal:.3g} {unit} across, too small for Open CASCADE's mesher "
+                                   f"(its deflection, {MESH_DEFLECTION:g} of the model, must be at least "
+                                   f"{SMALLEST_DEFLECTION:g} {unit}): scale it up")
 
     faces, originals = [], []
     for whole, out in ((converted, faces), (shape, originals)):

@@ -7,7 +7,13 @@ of a coordinate's magnitude, so the BVH holds the mesh moved to its own centre
 (bounding-box centre) and every ray origin is moved likewise before conversion:
 a part 10⁵ units from the origin then intersects as precisely as one at the origin
 (in world coordinates, hits were 0.01 off on a 3-unit part and Newton gave up).
-Ray distances do not change under the move, so callers never see it.
+Ray distances do not change under the move, so callers never see it. Rays whose
+origins all lie far from the mesh (more than `FAR_RADII` of its bounding radii: a camera
+1e4 parts away) are moved along themselves, in float64, to just before the mesh's
+bounding sphere first: from 5e5 away float32 rounds a ray by 0.03–0.06 mm, and hits
+within that of a face's edge landed on the face behind (the seventeenth sweep, a block
+seen from 1e4 times its size: 7.99 mm behind Open CASCADE's first hit). Their distances
+are given back from the true origins.
 """
 
 from __future__ import annotations
@@ -20,6 +26,12 @@ from embreex.mesh_construction import TriangleMesh
 
 from ..geometry.tessellation import Tessellation
 from ..kernels.pixels import bvh_rays
+
+
+#: Rays whose origins all lie farther than this many of the mesh's bounding radii from its centre are moved along
+#: themselves to 2 radii before its bounding sphere (`Accelerator._local`): nearer, their float32 rounding is that of
+#: the part's own size times this at most (float32 keeps ~1e-7 of a magnitude: 1e-5 of the part).
+FAR_RADII = 100.0
 
 
 class MeshHits(NamedTuple):
@@ -45,6 +57,9 @@ class Accelerator:
         self._mesh = TriangleMesh(self.scene, self._vertices, self._faces)
         self._chord_error = tessellation.chord_error
         self._extent = tessellation.extent
+        # The bounding sphere about the centre, for rays from far away (`_local`).
+        self._radius = float(np.sqrt(np.max(np.einsum("ij,ij->i", vertices - self.centre, vertices - self.centre),
+                                            initial=0.0)))
 
     def surface_origins(self, R: np.ndarray, n: np.ndarray, patch: np.ndarray) -> np.ndarray:
         """Origins for rays leaving the surface at R on ``patch``'s side n (unit normal facing the ray's side).
@@ -56,38 +71,53 @@ class Accelerator:
         eps = 2.0 * self._chord_error[patch] + 1e-6 * (self._extent + np.abs(R - self.centre).max(axis=1))
         return R + eps[:, None] * n
 
-    def _local(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _local(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """Rays in the BVH's centred float32 coordinates: the origins moved in float64, then converted, and the
-        directions converted (one compiled pass, `kernels.pixels.bvh_rays`)."""
+        directions converted (one compiled pass, `kernels.pixels.bvh_rays`); and where every origin lies farther
+        than `FAR_RADII` bounding radii from the centre, each ray's move along itself (in its own distance unit) to 2
+        radii before the bounding sphere, else None (module doc)."""
         origins, directions = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
+        shift = None
+        if self._radius > 0 and len(origins):
+            # The nearest any origin can be: the distance from the centre to the origins' bounding box.
+            gap = np.maximum(np.maximum(origins.min(axis=0) - self.centre, self.centre - origins.max(axis=0)), 0.0)
+            if np.linalg.norm(gap) > FAR_RADII * self._radius:
+                speed = np.sqrt(np.einsum("ij,ij->i", directions, directions))
+                along = np.einsum("ij,ij->i", self.centre - origins, directions) / speed  # to the centre's foot
+                shift = np.maximum(along - 2.0 * self._radius, 0.0) / speed
+                origins = origins + shift[:, None] * directions
         local, directions32 = np.empty(origins.shape, dtype=np.float32), np.empty(directions.shape, dtype=np.float32)
         bvh_rays(origins, directions, np.ascontiguousarray(self.centre, dtype=np.float64), local, directions32)
-        return local, directions32
+        return local, directions32, shift
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray, max_distance: np.ndarray | None = None) -> MeshHits:
         """Nearest triangle hit of each ray (within ``max_distance`` along it, when given)."""
-        extra = {}
-        if max_distance is not None:
-            extra["dists"] = np.ascontiguousarray(np.minimum(max_distance, np.finfo(np.float32).max), dtype=np.float32)
         if len(origins) == 0:
             empty = np.zeros(0)
             return MeshHits(np.zeros(0, dtype=np.int64), empty, empty, empty)
-        result = self.scene.run(
-            *self._local(origins, directions),
-            query="INTERSECT",
-            output=1,
-            **extra,
-        )
+        local, directions32, shift = self._local(origins, directions)
+        extra = {}
+        if max_distance is not None:
+            extra["dists"] = self._dists(max_distance, shift)
+        result = self.scene.run(local, directions32, query="INTERSECT", output=1, **extra)
         prim = np.where(result["geomID"] >= 0, result["primID"], -1).astype(np.int64)
-        return MeshHits(prim, result["u"].astype(np.float64), result["v"].astype(np.float64), result["tfar"].astype(np.float64))
+        t = result["tfar"].astype(np.float64)
+        if shift is not None:  # from the true origins (a miss: its segment's end, as without the move)
+            t = t + shift
+        return MeshHits(prim, result["u"].astype(np.float64), result["v"].astype(np.float64), t)
+
+    @staticmethod
+    def _dists(max_distance: np.ndarray, shift: np.ndarray | None) -> np.ndarray:
+        """Embree's float32 segment ends: ``max_distance`` from the rays' moved origins (`_local`), at least 0 (a ray
+        moved past its end meets nothing there: the mesh lies beyond the move)."""
+        if shift is not None:
+            max_distance = np.maximum(max_distance - shift, 0.0)
+        return np.ascontiguousarray(np.minimum(max_distance, np.finfo(np.float32).max), dtype=np.float32)
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, max_distance: np.ndarray) -> np.ndarray:
         """True where a triangle lies on the segment from each origin to max_distance along its direction."""
         if len(origins) == 0:
             return np.zeros(0, dtype=bool)
-        result = self.scene.run(
-            *self._local(origins, directions),
-            dists=np.ascontiguousarray(np.minimum(max_distance, np.finfo(np.float32).max), dtype=np.float32),
-            query="OCCLUDED",
-        )
+        local, directions32, shift = self._local(origins, directions)
+        result = self.scene.run(local, directions32, dists=self._dists(max_distance, shift), query="OCCLUDED")
         return np.asarray(result) >= 0

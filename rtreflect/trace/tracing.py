@@ -1248,6 +1248,8 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     is refined from that vertex. Where that vertex is a corner where 3+ faces meet, every other face with a
     boundary vertex there is refined too (`_corner_faces`): the nearest other vertex is only one of them (at
     shelled_box.step's rim corner the wall's, tied to 1e-14 with the rim's, whose triangle was the skipped one).
+    A closed face's creased seam (`_seam_twins`) is such a rim too, the face across it the same face, refined from
+    the candidate's (u, v) carried across the seam.
     The nearest valid hit within its band of the mesh hit's distance (the skipped triangle's hit) and nearer
     than the kept one by more than float32 rounding replaces it (the same point on the shared edge does
     not: pixels there keep their face).
@@ -1294,15 +1296,18 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     cuv = cuv[at[row], col]
     # Across a creased seam of the hit's own face (`_seam_twins`): that face again, from the candidate's (u, v) taken
     # across the seam (its other coordinate kept: the vertex's may lie far along a sliver at the seam), else the twin's.
+    # The twin's face is the triangle's, which a seam restart may have left for another (then the twin's (u, v)).
     seam = np.flatnonzero(corner >= 0)
     seam = seam[twins[corner[seam], 2] >= 0]
-    seam = seam[edge_dist[seam] <= 2.0 * RIM_REACH_CHORDS * chord[pk[rays[seam]]] + skip]
+    own = tessellation.vertex_patch[corner[seam]]
+    keep = edge_dist[seam] <= RIM_REACH_CHORDS * 2.0 * chord[own] + skip  # `reach` above, both faces this one
+    seam, own = seam[keep], own[keep]
     twin = twins[corner[seam]]
     across_u = twin[:, 2] == 0
     tuv = np.stack([np.where(across_u, twin[:, 0], ur[rays[seam]]), np.where(across_u, vr[rays[seam]], twin[:, 1])], 1)
-    tuv = np.where(np.isfinite(tuv), tuv, twin[:, :2])
+    tuv = np.where(np.isfinite(tuv) & (pk[rays[seam]] == own)[:, None], tuv, twin[:, :2])
     rays, pn = (np.concatenate([rays[close], rays[near[row]], rays[seam]]),
-                np.concatenate([pn[close], cp[row, col], pk[rays[seam]]]))
+                np.concatenate([pn[close], cp[row, col], own]))
     un, vn = np.concatenate([un[close], cuv[:, 0], tuv[:, 0]]), np.concatenate([vn[close], cuv[:, 1], tuv[:, 1]])
     # A planar neighbour is met where the ray crosses its plane: rows whose crossing cannot win below are not refined.
     win_reach = _rim_reach(band, GRAZING_ALLOWANCE, skip)  # the reach test below at its largest allowance
