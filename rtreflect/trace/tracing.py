@@ -1208,6 +1208,12 @@ def _past_minimum(tessellation: Tessellation, surfaces: SurfaceSet, rows, O, D, 
     return won
 
 
+def _across_reach(chord: np.ndarray, other_chord: np.ndarray, skip: float) -> np.ndarray:
+    """How far from a face's mesh boundary `_rim_neighbours` looks across it: `RIM_REACH_CHORDS` times both faces'
+    chord errors, plus the next query's float32 skip."""
+    return RIM_REACH_CHORDS * (chord + other_chord) + skip
+
+
 def _rim_corner(tessellation: Tessellation, prim: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each point on its triangle ``prim``: the distance to its face's mesh boundary near the triangle (inf where
     it has none), the distance to its triangle's chords between two boundary vertices (inf: none), and the
@@ -1275,7 +1281,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     # lies within both meshes' chord errors of the edge (`RIM_REACH_CHORDS`), where the other mesh can be. Not the
     # face the hit is already on (a seam restart's, from another face's triangle): Newton found its root there.
     pn_ = np.maximum(pn, 0)
-    reach = RIM_REACH_CHORDS * (chord[pk[rays]] + chord[pn_]) + skip
+    reach = _across_reach(chord[pk[rays]], chord[pn_], skip)
     close = (pn >= 0) & (pn != pk[rays]) & (gap <= tessellation.edge_length[pn_])
     # Near a chord across the face (not its boundary) only where the neighbour's surface passes within that reach too.
     across = np.flatnonzero(close & (edge_dist > reach) & (chord_dist <= reach))
@@ -1289,7 +1295,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     at = slot[corner[near]]
     cp = cp[at]
     more = (cp >= 0) & (cp != pk[rays[near], None])
-    reach_more = RIM_REACH_CHORDS * (chord[pk[rays[near]], None] + chord[np.maximum(cp, 0)]) + skip
+    reach_more = _across_reach(chord[pk[rays[near]], None], chord[np.maximum(cp, 0)], skip)
     row, col = np.nonzero(more & (edge_dist[near, None] <= reach_more))
     passes = _within(cX[at[row], col], cn[at[row], col], ckappa[at[row], col], points[near[row]], reach_more[row, col])
     row, col = row[passes], col[passes]
@@ -1300,7 +1306,7 @@ def _rim_neighbours(tessellation: Tessellation, surfaces: SurfaceSet, O, D, prim
     seam = np.flatnonzero(corner >= 0)
     seam = seam[twins[corner[seam], 2] >= 0]
     own = tessellation.vertex_patch[corner[seam]]
-    keep = edge_dist[seam] <= RIM_REACH_CHORDS * 2.0 * chord[own] + skip  # `reach` above, both faces this one
+    keep = edge_dist[seam] <= _across_reach(chord[own], chord[own], skip)  # both faces this one
     seam, own = seam[keep], own[keep]
     twin = twins[corner[seam]]
     across_u = twin[:, 2] == 0
@@ -1606,7 +1612,7 @@ def _corner_faces(tessellation: Tessellation, surfaces: SurfaceSet) -> tuple[np.
         chord = tessellation.chord_error
         skip = float32_rounding(tessellation)
         keep = (other != own[:, None]) & (other != first[rows, None])
-        keep &= dist <= gap[rows, None] + RIM_REACH_CHORDS * (chord[own, None] + chord[other]) + skip
+        keep &= dist <= gap[rows, None] + _across_reach(chord[own, None], chord[other], skip)
         # One vertex per face, its nearest (the columns run by distance).
         for j in range(1, k):
             keep[:, j] &= ~np.any(keep[:, :j] & (other[:, :j] == other[:, j, None]), axis=1)
