@@ -424,8 +424,10 @@ def test_a_map_with_no_line_in_view_shows_its_colours_and_passes():
     assert report.passed, report.reasons
     assert report.colour_checked > 1000 and any("no iso-line in view" in note for note in report.notes)
     # Without bands the map has no levels: nothing to compare, a FAIL (the note is for levels crossed nowhere).
+    # The reason names the setting, not lines out of view (what it said before).
     plain = validate_scene(scene.replace(render={"bands": 0}), threads=1)
     assert not plain.passed and "no traced line centre was compared" in plain.reasons[0], plain.reasons
+    assert "bands = 2 or more" in plain.reasons[0] and "where the camera" not in plain.reasons[0], plain.reasons
 
 
 def test_a_line_mode_with_no_line_in_view_does_not_speak_of_maps(tmp_path):

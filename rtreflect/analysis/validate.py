@@ -1262,6 +1262,10 @@ def compare(renderer: Renderer, aovs: PixelAOVs, contours: ContourLines, toleran
                 for line in contours.lines for poly in line.polylines)
     if seen == 0:
         reasons.insert(0, "no traced line centre was compared (the camera sees no surface)")
+    elif len(c_k) == 0:
+        hint = ("a curvature map draws iso-lines only with [render] bands = 2 or more"
+                if renderer.scene.render.mode == "curvature" else "its levels are empty")
+        reasons.insert(0, f"no traced line centre was compared: the mode draws no lines ({hint})")
     elif len(deviations) == 0 and (renderer.scene.render.mode in LEGEND_MODES
                                    or (isinstance(renderer.mode, FaceRegions) and not shown and drawn == 0)) \
             and len(c_k) and not reasons and not notes and np.count_nonzero(checked):
