@@ -39,7 +39,8 @@ COMMENTS = {
         "view_height": "orthographic: height of the view in model units",
     },
     "lights": {
-        "auto": "true: choose the keys left out from where the reflections land (no [lights] at all: all of them)",
+        "auto": "true: choose the keys left out from where the reflections land (no [lights] at all: all of them); "
+                "fitted to [render] mode's lines: after changing mode, remove [lights] to fit them again",
         "point": "Q: a point of the light plane",
         "normal": "m: the light plane's normal",
         "direction": "c: the tubes' direction, in the plane",
