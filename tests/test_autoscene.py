@@ -204,6 +204,43 @@ def test_silent_cases_warn_and_strict_fails(case: str, tmp_path: Path) -> None:
     assert strict.exit_code == 1 and expected in strict.stderr
 
 
+@pytest.mark.parametrize("samples", ["analytic", "1", "2"])
+def test_the_eye_inside_a_closed_part_warns_that_every_line_is_blocked(samples: str, tmp_path: Path) -> None:
+    """The eye inside the filleted block looking at its floor: 1344 of 96×54 pixel centres see a tube within its
+    radius, and the block's ceiling blocks each reflected ray before it. The picture has no line; `render` said
+    nothing (the count of distinct lines took the blocked ones), now one warning says why (each render path: the
+    analytic one tests occlusion itself, an even sample grid traces the centre rays apart)."""
+    pytest.importorskip("OCP")
+    scene = tmp_path / "inside.toml"
+    scene.write_text(f"""
+[camera]
+eye = [20.0, 15.0, 10.0]
+look_at = [20.0, 25.0, 0.0]
+
+[lights]
+point = [20.0, 35.0, 60.5]
+normal = [0.0, 0.0, 1.0]
+direction = [1.0, 0.0, 0.0]
+spacing = 15.3
+count = 12
+radius = 1.53
+
+[[surface]]
+file = "{(ROOT / 'parts' / 'filleted_block.step').as_posix()}"
+""")
+    options = ["-o", str(tmp_path / "out"), "--width", "96", "--height", "54", "--samples", samples]
+    result = CliRunner().invoke(cli, ["render", str(scene), *options])
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("rtreflect: warning:")]
+    assert len(warnings) == 1 and "the part blocks every reflected ray that reaches a tube" in warnings[0], warnings
+    assert "eye inside the part" in warnings[0]
+    film = Renderer(resolve(load_scene(scene).with_image(96, 54, samples if samples == "analytic" else int(samples))))
+    pixels = film.render(threads=1).film
+    reaching = (pixels.channel("line.dist") <= 1.53) & (pixels.channel("A") > 0)
+    assert reaching.sum() > 500  # the tubes are reflected: it is the blocking that hides them
+    assert np.allclose(pixels.channel("R")[reaching], pixels.channel("R")[reaching].min(), atol=0.05)  # no line
+
+
 def test_a_picture_with_lines_warns_nothing(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["render", str(HOOD), "-o", str(tmp_path), "--width", "96", "--height", "54",
                                       "--samples", "1", "--strict"])

@@ -6,7 +6,10 @@ counters and a set of tube indices kept), so a streamed render needs no second p
 - no pixel sees the surface (alpha 0 everywhere);
 - no reflected ray reaches the light plane (Ulmet's f, eq. 5, is NaN at every surface pixel:
   the plane is behind the surface as seen through its reflections);
-- fewer than two distinct lines are drawn (tubes k with some pixel centre within the radius, eq. 4);
+- every pixel centre that sees a tube within its radius (eq. 4) has the reflected ray blocked by the part
+  (the eye inside a closed part): no line shows, however many tubes are reflected;
+- fewer than two distinct lines are drawn (tubes k with some pixel centre within the radius, eq. 4, and the
+  reflected ray not blocked: `Tile.blocked`);
 - most of the visible surface reflects past the tube bank: its reflected rays meet the light plane
   (f finite) more than one spacing beyond the outermost tubes at more than `PAST_BANK_SHARE` of the
   surface pixels (a wider bank would light them; rays leaving away from the plane it would not).
@@ -45,9 +48,11 @@ class ImageTally:
         self.reaching = 0  # of those, pixel centres whose reflected ray meets the light plane (f finite)
         self.in_bank = 0  # of those, f within the bank
         self.lines: set[int] = set()
+        self.towards_tubes = 0  # pixel centres that see a tube within its radius, blocked or not
+        self.blocked = 0  # of those, the reflected ray blocked by the part
 
-    def add(self, pixels: np.ndarray) -> None:
-        """Count a span of pixels, (N, len(CHANNELS)) in channel order."""
+    def add(self, pixels: np.ndarray, blocked: np.ndarray | None = None) -> None:
+        """Count a span of pixels, (N, len(CHANNELS)) in channel order; ``blocked``: `Tile.blocked` (None: none)."""
         seen = pixels[:, _A] > 0
         f = pixels[seen, _F].astype(np.float64)
         finite = np.isfinite(f)
@@ -55,6 +60,10 @@ class ImageTally:
         self.reaching += int(finite.sum())
         self.in_bank += int(np.count_nonzero((f[finite] >= self.bank[0]) & (f[finite] <= self.bank[1])))
         drawn = (pixels[:, _DIST] <= self.radius) & (pixels[:, _ID] >= 0)
+        self.towards_tubes += int(np.count_nonzero(drawn))
+        if blocked is not None:
+            self.blocked += int(np.count_nonzero(drawn & blocked))
+            drawn &= ~blocked
         self.lines.update(np.unique(pixels[drawn, _ID]).astype(int).tolist())
 
     def warnings(self) -> list[str]:
@@ -69,6 +78,9 @@ class ImageTally:
         if self.reaching == 0:
             return ["no reflected ray reaches the light plane (it lies behind the surface as the camera sees it): "
                     "no line can show (move [lights] to the camera's side, or remove it for the automatic rig)"]
+        if self.towards_tubes and self.blocked == self.towards_tubes:
+            return [f"the part blocks every reflected ray that reaches a tube ({self.blocked} pixels): no line shows "
+                    f"(is the eye inside the part? check [camera], or remove it to frame the part automatically)"]
         found = []
         if self.scene.lights.shape == "circles":  # the two counts below are of the tube bank (f, line.id)
             return found

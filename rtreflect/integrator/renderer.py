@@ -144,6 +144,9 @@ class Tile:
     fallbacks: int
     fallback_pixels: int
     supersampled: int = 0
+    # Per pixel: its centre ray sees a tube within its radius (line.dist) but the part blocks the reflected ray before
+    # it (reflection lines; None in another mode). The film has no channel for it: `checks.ImageTally` reads it here.
+    blocked: np.ndarray | None = None
 
 
 @dataclass
@@ -431,7 +434,16 @@ class Renderer:
             fell_back |= centre
         fallback_pixels = int(fell_back.sum())
         aov_planes(aovs, out[:, 4:])
-        return Tile(start, stop, out, rays, fallbacks, fallback_pixels)
+        return Tile(start, stop, out, rays, fallbacks, fallback_pixels, blocked=self._blocked_lines(aovs["shading"]))
+
+    def _blocked_lines(self, shading: Shading, blocked: np.ndarray | None = None) -> np.ndarray | None:
+        """`Tile.blocked` of pixel-centre rays: a tube within its radius and the reflected ray occluded (``blocked``
+        where the caller tested it, else not lit: in reflection mode 'lit' is the tube test and no occlusion)."""
+        if not isinstance(self.mode, ReflectionMode):
+            return None
+        with np.errstate(invalid="ignore"):
+            near = shading.hits.hit & (shading.line_dist <= self.lights.radius)
+        return near & (~shading.lit if blocked is None else blocked)
 
     def supersample(self, rows: np.ndarray, cols: np.ndarray, s: int,
                     out: np.ndarray | None = None) -> tuple[np.ndarray, Shading, int]:
@@ -611,7 +623,12 @@ class Renderer:
             out.reshape(-1, width, len(CHANNELS))[at:at + len(low), c0:c1] = block.reshape(len(low), c1 - c0, -1)
         elif not whole:
             out[pixels - start] = block
-        return Tile(start, stop, out, rays, fallbacks, int(fell_back.sum()), len(edges))
+        blocked = self._blocked_lines(mine, centre.blocked[own])
+        if blocked is not None:  # of the window's own pixels: to the tile's (none outside the window)
+            tile_blocked = np.zeros(stop - start, dtype=bool)
+            tile_blocked[pixels - start] = blocked
+            blocked = tile_blocked
+        return Tile(start, stop, out, rays, fallbacks, int(fell_back.sum()), len(edges), blocked)
 
     def _across_levels(self, shading: Shading, sigma: np.ndarray, crop: tuple[slice, slice], want: np.ndarray) -> None:
         """``want`` (a (rows, columns) grid of the window's pixels) cleared in place where a pixel that

@@ -56,7 +56,7 @@ def render_to_files(scene: Scene, outdir: Path, *, threads: int | None = None, m
 
     def sink(tile) -> None:
         writer.write(tile.start, tile.pixels)
-        tally.add(tile.pixels)
+        tally.add(tile.pixels, tile.blocked)
 
     with open_outputs(scene, outdir, png_filter, extra_files, remove_dead=remove_dead) as writer:
         stats = renderer.run(sink, threads, tile_rays, progress)
