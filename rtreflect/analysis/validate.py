@@ -900,7 +900,10 @@ def _unresolved(f: np.ndarray, step: np.ndarray, line_id: np.ndarray, levels: np
     not, and the colour bounds of one smooth line say nothing (the sweep's dense_net.step at 160×90: σ 33 at a pixel,
     −2 at its neighbour on the same line, φ 35 apart where the levels are 25 apart; 2 of its 16 samples on the
     stripe). Far from the bank (a cylinder's reflected rays running off along the light plane, φ ~1e5) the step
-    can be large with no stripe within reach: those pixels stay checked."""
+    can be large with no stripe within reach: those pixels stay checked. Half a spacing, not `_smooth_pairs`'
+    gap / `MIN_LINE_GAP_PX`: locating two lines' centres needs them pixels apart, checking a pixel's colour needs
+    only that no stripe hide between its centre and its neighbours' (the diagonal ones too: the colour bound reads all
+    eight)."""
     if len(levels) == 0:
         return np.zeros(len(f), dtype=bool)
     gap = np.where(line_id >= 0, neighbour_gaps(levels)[np.maximum(line_id, 0).astype(int)], np.inf)
