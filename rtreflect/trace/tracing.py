@@ -772,6 +772,8 @@ def _over_closed_seam(surfaces: SurfaceSet, patch, u, v, derivs: SurfaceDerivati
     """
     u0, u1, v0, v1 = surfaces.domains(patch)
     closed = surfaces.closed[np.asarray(patch, dtype=np.int64)]
+    # Equality: Newton's clamp stops a point exactly on the domain's end (`_seam_twins` matches mesh vertices, whose
+    # parameters a reader may round, within SEAM_MATCH instead).
     on_u, on_v = closed[:, 0] & ((u == u0) | (u == u1)), closed[:, 1] & ((v == v0) | (v == v1))
     rows = np.flatnonzero(~converged & edge & (on_u | on_v))
     if len(rows) == 0:
