@@ -106,6 +106,10 @@ Seventeenth round (a sweep of new kinds: high degrees, lofted skins, nested and 
   scaled_assembly.step the filleted block and an instance LOCATED at scale 0.5 and moved (an XCAF assembly)
   wing_skin.step       a tapered, swept, twisted wing's skin lofted as ONE face through closed NACA 2412 sections: closed
                        in u, its seam on the sharp trailing edge (a crease, a wedge of ~9°)
+Nineteenth round (loose exports):
+  loose_seam.step      the filleted block with an r 6 hole, converted to NURBS and written with every CARTESIAN_POINT
+                       moved by up to 2e-3 (seeded): its closed faces' seams left open by µm, which Open CASCADE reads
+                       damaged (the hole wall's seam pcurves swing across the domain)
 """
 
 from __future__ import annotations
@@ -1625,6 +1629,27 @@ def turned_band():
     return BRepBuilderAPI_MakeFace(band, 1e-7).Face()
 
 
+def write_loose_seam(path: Path, amplitude: float = 2e-3) -> None:
+    """The filleted block with a through hole of radius 6, converted to NURBS (its hole wall a face closed in u) and
+    written as STEP with every CARTESIAN_POINT moved by a uniform amount in [-amplitude, amplitude] per coordinate
+    (seed 19): a loose export whose closed faces' seams are open by µm, within their edges' tolerance."""
+    import random
+    import re
+
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Cut
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_NurbsConvert
+
+    block = BRepAlgoAPI_Cut(filleted_block(), _cylinder(20.0, 15.0, -1.0, (0.0, 0.0, 1.0), 6.0, 30.0)).Shape()
+    write_step(BRepBuilderAPI_NurbsConvert(block, True).Shape(), path)
+    moves = random.Random(19)
+
+    def moved(match) -> str:
+        coordinates = [float(x) + moves.uniform(-amplitude, amplitude) for x in match.group(2).split(",")]
+        return match.group(1) + ",".join(repr(x) for x in coordinates) + "))"
+
+    path.write_text(re.sub(r"(CARTESIAN_POINT\('[^']*',\()([^)]*)\)\)", moved, path.read_text()))
+
+
 def write_scaled_assembly(path: Path) -> None:
     """The filleted block as a STEP assembly (XCAF) of two instances, the second LOCATED at scale 0.5 and moved
     (-60, 0, 0): Open CASCADE's NURBS conversion of the whole shape halves that instance's planes' domains, their edges
@@ -1764,6 +1789,7 @@ PARTS = {
     "turned_band.step": lambda p: write_step(turned_band(), p),
     "scaled_assembly.step": write_scaled_assembly,
     "wing_skin.step": lambda p: write_step(wing_skin(), p),
+    "loose_seam.step": write_loose_seam,
 }
 
 
