@@ -1645,7 +1645,7 @@ def write_loose_seam(path: Path, amplitude: float = 2e-3) -> None:
 
     def moved(match) -> str:
         coordinates = [float(x) + moves.uniform(-amplitude, amplitude) for x in match.group(2).split(",")]
-        return match.group(1) + ",".join(repr(x) for x in coordinates) + "))"
+        return match.group(1) + ",".join("%.17E" % x for x in coordinates) + "))"  # ISO 10303-21 reals
 
     path.write_text(re.sub(r"(CARTESIAN_POINT\('[^']*',\()([^)]*)\)\)", moved, path.read_text()))
 

@@ -585,9 +585,12 @@ def _seam_follows_edge(edge, surface: NurbsSurface, ts: np.ndarray, uv: np.ndarr
     0.22 off the straight 3D edge): the trim zigzagged across a 2 mm band and cut it out of the wall (938 pixels at
     320×180 showed the fillet behind, 12-14 mm farther; `validate` passed; Open CASCADE's own check finds the face
     invalid). Where the trim cannot follow the face's edges the face is not read, as the issue's bad input asks:
-    named in one line, and ``--skip-bad-faces`` renders the others."""
+    named in one line, and ``--skip-bad-faces`` renders the others. Only where the pcurve and the 3D curve share their
+    parameter (SameParameter, SameRange): elsewhere a point of one at t is not the other's at t."""
     from OCP.BRep import BRep_Tool
 
+    if not (BRep_Tool.SameParameter_s(edge) and BRep_Tool.SameRange_s(edge)):
+        return
     off = _distance_from_edge(edge, surface, ts, uv)
     allowed = SEAM_STRAY_TOLERANCES * BRep_Tool.Tolerance_s(edge) + tolerance
     if off > allowed:

@@ -27,6 +27,9 @@ from .film import CHANNELS
 
 #: Share of the surface pixels reflecting past the bank above which the bank is said to miss most of it.
 PAST_BANK_SHARE = 0.5
+#: Share of the surface pixels seeing a tube, all blocked, from which the picture is said to show no line because the
+#: part blocks them (a few pixels in a groove, all blocked, are a line too few: the distinct-lines warning says so).
+MIN_BLOCKED_SHARE = 0.01
 #: Distinct lines below which the picture shows no pattern to read.
 MIN_LINES = 2
 
@@ -78,7 +81,7 @@ class ImageTally:
         if self.reaching == 0:
             return ["no reflected ray reaches the light plane (it lies behind the surface as the camera sees it): "
                     "no line can show (move [lights] to the camera's side, or remove it for the automatic rig)"]
-        if self.towards_tubes and self.blocked == self.towards_tubes:
+        if self.towards_tubes >= MIN_BLOCKED_SHARE * self.surface and self.blocked == self.towards_tubes:
             return [f"the part blocks every reflected ray that reaches a tube ({self.blocked} pixels): no line shows "
                     f"(is the eye inside the part? check [camera], or remove it to frame the part automatically)"]
         found = []
